@@ -1,0 +1,2 @@
+//! `scout`: the command-line tool.
+fn main() {}

@@ -1,0 +1,1 @@
+//! scout-clients: the client library of the scout-gateway.

@@ -1,0 +1,35 @@
+//! scout-protocol: the AgileX SCOUT chassis protocol v1, CAN and serial, without I/O.
+//!
+//! Sans-IO and `no_std`: bytes and frames go in, typed messages come out, and back. No clock
+//! (time comes in as an argument) and no allocation.
+//!
+//! - [`message`]: the typed payload of every frame, shared by both links.
+//! - [`fault`]: the 16 fault bits of the system status.
+//! - [`can`]: CAN frames (id, 8 bytes, rolling count, checksum).
+//! - [`serial`]: 13-byte RS232 frames and a streaming decoder.
+//! - [`slcan`]: the ASCII lines of serial-line CAN adapters.
+//! - [`candump`]: candump's text formats.
+//! - [`units`]: m/s and rad/s to whole percent and back.
+//! - [`sequence`]: rolling counters and gap tracking.
+//! - [`version`]: protocol v1 / v2 detection.
+#![cfg_attr(not(any(test, feature = "std")), no_std)]
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod can;
+pub mod candump;
+pub mod fault;
+pub mod message;
+pub mod sequence;
+pub mod serial;
+pub mod slcan;
+pub mod units;
+pub mod version;
+
+pub use can::CanFrame;
+pub use fault::{Fault, FaultBits, Severity};
+pub use message::{
+    ChassisState, ControlMode, Counted, Direction, FaultClear, Light, LightCommand, LightFeedback,
+    LightMode, Message, MessageKind, Motor, MotorFeedback, MotionCommand, MotionFeedback,
+    SystemStatus,
+};

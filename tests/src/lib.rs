@@ -1,0 +1,1 @@
+//! Helpers for the multi-process system tests: start the real binaries and talk to them.

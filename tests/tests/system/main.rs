@@ -1,0 +1,1 @@
+//! The multi-process system tests, one module per area.
