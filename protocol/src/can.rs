@@ -31,7 +31,11 @@ impl CanFrame {
         }
         let mut bytes = [0; 8];
         bytes[..data.len()].copy_from_slice(data);
-        Some(Self { id, len: data.len() as u8, data: bytes })
+        Some(Self {
+            id,
+            len: data.len() as u8,
+            data: bytes,
+        })
     }
 
     /// The 11-bit id.
@@ -51,9 +55,10 @@ impl CanFrame {
 pub fn checksum(id: u16, data_without_checksum: &[u8]) -> u8 {
     let dlc = data_without_checksum.len() as u8 + 1;
     let [id_high, id_low] = id.to_be_bytes();
-    data_without_checksum
-        .iter()
-        .fold(id_high.wrapping_add(id_low).wrapping_add(dlc), |sum, byte| sum.wrapping_add(*byte))
+    data_without_checksum.iter().fold(
+        id_high.wrapping_add(id_low).wrapping_add(dlc),
+        |sum, byte| sum.wrapping_add(*byte),
+    )
 }
 
 /// Why a CAN frame is not a SCOUT v1 message.
@@ -89,7 +94,11 @@ impl core::fmt::Display for CanError {
             Self::BadLength { id, found } => {
                 write!(f, "CAN id 0x{id:03X}: data length {found}, expected {DLC}")
             }
-            Self::Checksum { id, expected, found } => write!(
+            Self::Checksum {
+                id,
+                expected,
+                found,
+            } => write!(
                 f,
                 "CAN id 0x{id:03X}: checksum 0x{found:02X}, expected 0x{expected:02X}"
             ),
@@ -115,16 +124,26 @@ pub fn decode(frame: &CanFrame) -> Result<Counted, CanError> {
     let id = frame.id;
     let kind = MessageKind::from_can_id(id).ok_or(CanError::UnknownId { id })?;
     if frame.len != DLC {
-        return Err(CanError::BadLength { id, found: frame.len });
+        return Err(CanError::BadLength {
+            id,
+            found: frame.len,
+        });
     }
     let expected = checksum(id, &frame.data[..CHECKSUM]);
     let found = frame.data[CHECKSUM];
     if expected != found {
-        return Err(CanError::Checksum { id, expected, found });
+        return Err(CanError::Checksum {
+            id,
+            expected,
+            found,
+        });
     }
     let mut payload: Payload = [0; PAYLOAD_LEN];
     payload.copy_from_slice(&frame.data[..PAYLOAD_LEN]);
-    Ok(Counted { message: Message::parse(kind, &payload), count: frame.data[COUNT] })
+    Ok(Counted {
+        message: Message::parse(kind, &payload),
+        count: frame.data[COUNT],
+    })
 }
 
 #[cfg(test)]
@@ -134,7 +153,10 @@ mod tests {
     #[test]
     fn notes_checksum_example() {
         // 0x01 + 0x30 + 0x08 + 0x01 + 0x0A = 0x44
-        assert_eq!(checksum(0x130, &[0x01, 0x00, 0x0A, 0x00, 0x00, 0x00, 0x00]), 0x44);
+        assert_eq!(
+            checksum(0x130, &[0x01, 0x00, 0x0A, 0x00, 0x00, 0x00, 0x00]),
+            0x44
+        );
     }
 
     #[test]
@@ -148,11 +170,21 @@ mod tests {
         let unknown = CanFrame::new(0x221, &[0; 8]).expect("frame");
         assert_eq!(decode(&unknown), Err(CanError::UnknownId { id: 0x221 }));
         let short = CanFrame::new(0x131, &[0; 7]).expect("frame");
-        assert_eq!(decode(&short), Err(CanError::BadLength { id: 0x131, found: 7 }));
+        assert_eq!(
+            decode(&short),
+            Err(CanError::BadLength {
+                id: 0x131,
+                found: 7
+            })
+        );
         let bad = CanFrame::new(0x130, &[1, 0, 0x0A, 0, 0, 0, 0, 0x45]).expect("frame");
         assert_eq!(
             decode(&bad),
-            Err(CanError::Checksum { id: 0x130, expected: 0x44, found: 0x45 })
+            Err(CanError::Checksum {
+                id: 0x130,
+                expected: 0x44,
+                found: 0x45
+            })
         );
     }
 }

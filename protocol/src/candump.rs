@@ -89,11 +89,19 @@ pub fn parse(line: &str) -> Result<Record<'_>, CandumpError> {
     let mut tokens = rest.split_ascii_whitespace();
     let first = tokens.next().ok_or(CandumpError::UnknownFormat)?;
     if first.contains('#') {
-        return Ok(Record { timestamp, interface: None, frame: parse_compact(first)? });
+        return Ok(Record {
+            timestamp,
+            interface: None,
+            frame: parse_compact(first)?,
+        });
     }
     let second = tokens.next().ok_or(CandumpError::UnknownFormat)?;
     if second.contains('#') {
-        return Ok(Record { timestamp, interface: Some(first), frame: parse_compact(second)? });
+        return Ok(Record {
+            timestamp,
+            interface: Some(first),
+            frame: parse_compact(second)?,
+        });
     }
     let length = tokens.next().ok_or(CandumpError::UnknownFormat)?;
     let declared = parse_length(length)?;
@@ -102,7 +110,10 @@ pub fn parse(line: &str) -> Result<Record<'_>, CandumpError> {
     let mut found = 0;
     for token in tokens {
         if found == data.len() {
-            return Err(CandumpError::LengthMismatch { declared, found: found + 1 });
+            return Err(CandumpError::LengthMismatch {
+                declared,
+                found: found + 1,
+            });
         }
         data[found] = parse_byte(token)?;
         found += 1;
@@ -111,18 +122,28 @@ pub fn parse(line: &str) -> Result<Record<'_>, CandumpError> {
         return Err(CandumpError::LengthMismatch { declared, found });
     }
     let frame = CanFrame::new(id, &data[..found]).ok_or(CandumpError::BadId)?;
-    Ok(Record { timestamp, interface: Some(first), frame })
+    Ok(Record {
+        timestamp,
+        interface: Some(first),
+        frame,
+    })
 }
 
 fn parse_timestamp(text: &str) -> Result<Timestamp, CandumpError> {
-    let (seconds, fraction) = text.trim().split_once('.').ok_or(CandumpError::BadTimestamp)?;
+    let (seconds, fraction) = text
+        .trim()
+        .split_once('.')
+        .ok_or(CandumpError::BadTimestamp)?;
     let all_digits = |s: &str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit());
     if !all_digits(seconds) || !all_digits(fraction) || fraction.len() > 6 {
         return Err(CandumpError::BadTimestamp);
     }
     let seconds = seconds.parse().map_err(|_| CandumpError::BadTimestamp)?;
     let micros: u32 = fraction.parse().map_err(|_| CandumpError::BadTimestamp)?;
-    Ok(Timestamp { seconds, micros: micros * 10u32.pow(6 - fraction.len() as u32) })
+    Ok(Timestamp {
+        seconds,
+        micros: micros * 10u32.pow(6 - fraction.len() as u32),
+    })
 }
 
 fn parse_id(text: &str) -> Result<u16, CandumpError> {
@@ -183,7 +204,10 @@ pub struct Compact<'a>(pub &'a CanFrame);
 impl core::fmt::Display for Compact<'_> {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         write!(f, "{:03X}#", self.0.id())?;
-        self.0.data().iter().try_for_each(|byte| write!(f, "{byte:02X}"))
+        self.0
+            .data()
+            .iter()
+            .try_for_each(|byte| write!(f, "{byte:02X}"))
     }
 }
 
@@ -198,18 +222,41 @@ mod tests {
     #[test]
     fn parses_the_three_formats_of_the_notes() {
         let screen = parse("  can0  130   [8]  01 00 0A 00 00 00 00 44").expect("screen");
-        assert_eq!(screen, Record { timestamp: None, interface: Some("can0"), frame: manual_forward() });
+        assert_eq!(
+            screen,
+            Record {
+                timestamp: None,
+                interface: Some("can0"),
+                frame: manual_forward()
+            }
+        );
         let log = parse("(1554000000.123456) can0 130#01000A0000000044").expect("log");
-        assert_eq!(log.timestamp, Some(Timestamp { seconds: 1_554_000_000, micros: 123_456 }));
+        assert_eq!(
+            log.timestamp,
+            Some(Timestamp {
+                seconds: 1_554_000_000,
+                micros: 123_456
+            })
+        );
         assert_eq!(log.interface, Some("can0"));
         assert_eq!(log.frame, manual_forward());
         let compact = parse("130#01000A0000000044").expect("compact");
-        assert_eq!(compact, Record { timestamp: None, interface: None, frame: manual_forward() });
+        assert_eq!(
+            compact,
+            Record {
+                timestamp: None,
+                interface: None,
+                frame: manual_forward()
+            }
+        );
     }
 
     #[test]
     fn formats_compact() {
-        assert_eq!(Compact(&manual_forward()).to_string(), "130#01000A0000000044");
+        assert_eq!(
+            Compact(&manual_forward()).to_string(),
+            "130#01000A0000000044"
+        );
     }
 
     #[test]
@@ -218,7 +265,13 @@ mod tests {
         assert_eq!(parse("130#R"), Err(CandumpError::NotDataFrame));
         assert_eq!(parse("12345678#00"), Err(CandumpError::ExtendedId));
         assert_eq!(parse("130#0"), Err(CandumpError::BadData));
-        assert_eq!(parse("can0 130 [8] 01 02"), Err(CandumpError::LengthMismatch { declared: 8, found: 2 }));
+        assert_eq!(
+            parse("can0 130 [8] 01 02"),
+            Err(CandumpError::LengthMismatch {
+                declared: 8,
+                found: 2
+            })
+        );
         assert_eq!(parse("can0 130 [9] 01"), Err(CandumpError::BadLength));
         assert_eq!(parse("(12) can0 130#00"), Err(CandumpError::BadTimestamp));
         assert_eq!(parse("hello"), Err(CandumpError::UnknownFormat));

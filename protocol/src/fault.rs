@@ -148,12 +148,15 @@ impl FaultBits {
 
     /// The set faults, in [`Fault::ALL`] order.
     pub fn iter(self) -> impl Iterator<Item = Fault> {
-        Fault::ALL.into_iter().filter(move |fault| self.contains(*fault))
+        Fault::ALL
+            .into_iter()
+            .filter(move |fault| self.contains(*fault))
     }
 
     /// Whether any latched protection is set (the chassis ignores motion until it is cleared).
     pub fn any_protection(self) -> bool {
-        self.iter().any(|fault| fault.severity() == Severity::Protection)
+        self.iter()
+            .any(|fault| fault.severity() == Severity::Protection)
     }
 }
 
@@ -176,15 +179,28 @@ mod tests {
         let names: Vec<_> = FaultBits(0x003C).iter().map(Fault::name).collect();
         assert_eq!(
             names,
-            ["motor_1_comm_fault", "motor_2_comm_fault", "motor_3_comm_fault", "motor_4_comm_fault"]
+            [
+                "motor_1_comm_fault",
+                "motor_2_comm_fault",
+                "motor_3_comm_fault",
+                "motor_4_comm_fault"
+            ]
         );
     }
 
     #[test]
     fn protections_are_the_two_latched_bits() {
-        let latched: Vec<_> =
-            Fault::ALL.into_iter().filter(|f| f.severity() == Severity::Protection).collect();
-        assert_eq!(latched, [Fault::DriverOvertempProtection, Fault::MotorOvercurrentProtection]);
+        let latched: Vec<_> = Fault::ALL
+            .into_iter()
+            .filter(|f| f.severity() == Severity::Protection)
+            .collect();
+        assert_eq!(
+            latched,
+            [
+                Fault::DriverOvertempProtection,
+                Fault::MotorOvercurrentProtection
+            ]
+        );
         assert!(FaultBits(0x0080).any_protection());
         assert!(!FaultBits(0x0F3F).any_protection());
     }

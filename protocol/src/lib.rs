@@ -30,6 +30,6 @@ pub use can::CanFrame;
 pub use fault::{Fault, FaultBits, Severity};
 pub use message::{
     ChassisState, ControlMode, Counted, Direction, FaultClear, Light, LightCommand, LightFeedback,
-    LightMode, Message, MessageKind, Motor, MotorFeedback, MotionCommand, MotionFeedback,
+    LightMode, Message, MessageKind, MotionCommand, MotionFeedback, Motor, MotorFeedback,
     SystemStatus,
 };

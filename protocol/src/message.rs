@@ -180,7 +180,10 @@ impl FaultClear {
 
     /// The code for a name as printed by [`FaultClear::name`].
     pub fn from_name(name: &str) -> Option<Self> {
-        Self::ALL.into_iter().chain([Self::None]).find(|code| code.name() == name)
+        Self::ALL
+            .into_iter()
+            .chain([Self::None])
+            .find(|code| code.name() == name)
     }
 }
 
@@ -208,6 +211,7 @@ pub struct Light {
     pub brightness: u8,
 }
 
+#[allow(clippy::derivable_impls, reason = "the enum is declared by raw_enum!")]
 impl Default for LightMode {
     fn default() -> Self {
         Self::Off
@@ -673,7 +677,10 @@ mod tests {
         for (index, kind) in MessageKind::ALL.into_iter().enumerate() {
             assert_eq!(kind.index(), index);
             assert_eq!(MessageKind::from_can_id(kind.can_id()), Some(kind));
-            assert_eq!(MessageKind::from_serial(kind.direction(), kind.serial_id()), Some(kind));
+            assert_eq!(
+                MessageKind::from_serial(kind.direction(), kind.serial_id()),
+                Some(kind)
+            );
         }
     }
 

@@ -87,7 +87,14 @@ mod tests {
     #[test]
     fn counter_wraps() {
         let mut counter = RollingCounter::starting_at(254);
-        assert_eq!([counter.next_count(), counter.next_count(), counter.next_count()], [254, 255, 0]);
+        assert_eq!(
+            [
+                counter.next_count(),
+                counter.next_count(),
+                counter.next_count()
+            ],
+            [254, 255, 0]
+        );
     }
 
     #[test]

@@ -93,22 +93,33 @@ pub enum SerialError {
 impl core::fmt::Display for SerialError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match *self {
-            Self::BadStart { found: [first, second] } => write!(
+            Self::BadStart {
+                found: [first, second],
+            } => write!(
                 f,
                 "serial frame starts {first:02X} {second:02X}, expected 5A A5"
             ),
             Self::BadLength { found } => {
-                write!(f, "serial frame length 0x{found:02X}, expected 0x{LENGTH:02X}")
+                write!(
+                    f,
+                    "serial frame length 0x{found:02X}, expected 0x{LENGTH:02X}"
+                )
             }
             Self::UnknownType { found } => write!(
                 f,
                 "serial frame type 0x{found:02X}, expected 0x{TYPE_COMMAND:02X} or 0x{TYPE_FEEDBACK:02X}"
             ),
             Self::UnknownId { frame_type, id } => {
-                write!(f, "serial frame type 0x{frame_type:02X} has no id 0x{id:02X}")
+                write!(
+                    f,
+                    "serial frame type 0x{frame_type:02X} has no id 0x{id:02X}"
+                )
             }
             Self::Checksum { expected, found } => {
-                write!(f, "serial frame checksum 0x{found:02X}, expected 0x{expected:02X}")
+                write!(
+                    f,
+                    "serial frame checksum 0x{found:02X}, expected 0x{expected:02X}"
+                )
             }
         }
     }
@@ -122,7 +133,9 @@ pub fn decode(frame: &[u8; FRAME_LEN]) -> Result<Counted, SerialError> {
     match check_prefix(frame) {
         Prefix::Complete(counted) => Ok(counted),
         Prefix::Invalid(error) => Err(error),
-        Prefix::NotStart => Err(SerialError::BadStart { found: [frame[0], frame[1]] }),
+        Prefix::NotStart => Err(SerialError::BadStart {
+            found: [frame[0], frame[1]],
+        }),
         // check_prefix asks for more bytes only while it holds fewer than FRAME_LEN.
         Prefix::Incomplete => unreachable!("a whole frame is never incomplete"),
     }
@@ -159,7 +172,10 @@ fn check_prefix(bytes: &[u8]) -> Prefix {
         return Prefix::Incomplete;
     };
     let Some(kind) = MessageKind::from_serial(direction, id) else {
-        return Prefix::Invalid(SerialError::UnknownId { frame_type: bytes[field::TYPE], id });
+        return Prefix::Invalid(SerialError::UnknownId {
+            frame_type: bytes[field::TYPE],
+            id,
+        });
     };
     if bytes.len() < FRAME_LEN {
         return Prefix::Incomplete;
@@ -289,7 +305,10 @@ impl StreamDecoder {
     /// Drops the first buffered byte and everything up to the next possible start of frame.
     fn skip_to_next_start(&mut self) {
         let held = &self.buffer[1..self.buffered];
-        let skip = 1 + held.iter().position(|byte| *byte == SOF[0]).unwrap_or(held.len());
+        let skip = 1 + held
+            .iter()
+            .position(|byte| *byte == SOF[0])
+            .unwrap_or(held.len());
         self.buffer.copy_within(skip..self.buffered, 0);
         self.buffered -= skip;
         self.stats.discarded_bytes += skip as u64;
@@ -301,8 +320,9 @@ mod tests {
     use super::*;
     use crate::message::{ControlMode, MotionCommand};
 
-    const MANUAL_FORWARD: [u8; FRAME_LEN] =
-        [0x5A, 0xA5, 0x0A, 0x55, 0x01, 0x02, 0x00, 0x0A, 0x00, 0x00, 0x00, 0x00, 0x6B];
+    const MANUAL_FORWARD: [u8; FRAME_LEN] = [
+        0x5A, 0xA5, 0x0A, 0x55, 0x01, 0x02, 0x00, 0x0A, 0x00, 0x00, 0x00, 0x00, 0x6B,
+    ];
 
     fn frames(decoder: &mut StreamDecoder, bytes: &[u8]) -> Vec<Result<Counted, SerialError>> {
         decoder.push_all(bytes).collect()
@@ -313,7 +333,10 @@ mod tests {
         let mut decoder = StreamDecoder::new();
         assert_eq!(decoder.push(0x5A), Pull::NeedMore);
         assert_eq!(decoder.push(0xA5), Pull::NeedMore);
-        assert_eq!(decoder.push(0xFF), Pull::Rejected(SerialError::BadLength { found: 0xFF }));
+        assert_eq!(
+            decoder.push(0xFF),
+            Pull::Rejected(SerialError::BadLength { found: 0xFF })
+        );
         assert_eq!(decoder.stats().length_errors, 1);
         assert_eq!(decoder.stats().discarded_bytes, 3);
     }
@@ -343,7 +366,10 @@ mod tests {
         let mut bytes = MANUAL_FORWARD[..7].to_vec();
         bytes.extend_from_slice(&MANUAL_FORWARD);
         let decoded = frames(&mut decoder, &bytes);
-        assert!(matches!(decoded[0], Err(SerialError::Checksum { .. })), "{decoded:?}");
+        assert!(
+            matches!(decoded[0], Err(SerialError::Checksum { .. })),
+            "{decoded:?}"
+        );
         assert!(decoded[1..].iter().all(Result::is_ok), "{decoded:?}");
         assert_eq!(decoder.stats().frames, 1);
         assert_eq!(decoder.stats().checksum_errors, 1);
@@ -352,12 +378,18 @@ mod tests {
     #[test]
     fn unknown_type_and_id_are_rejected() {
         let mut decoder = StreamDecoder::new();
-        let decoded = frames(&mut decoder, &[0x5A, 0xA5, 0x0A, 0x11, 0x5A, 0xA5, 0x0A, 0x55, 0x09]);
+        let decoded = frames(
+            &mut decoder,
+            &[0x5A, 0xA5, 0x0A, 0x11, 0x5A, 0xA5, 0x0A, 0x55, 0x09],
+        );
         assert_eq!(
             decoded,
             [
                 Err(SerialError::UnknownType { found: 0x11 }),
-                Err(SerialError::UnknownId { frame_type: 0x55, id: 0x09 })
+                Err(SerialError::UnknownId {
+                    frame_type: 0x55,
+                    id: 0x09
+                })
             ]
         );
     }

@@ -23,8 +23,9 @@ impl Bitrate {
     /// The SCOUT's 500 kbit/s (`S6`).
     pub const SCOUT: Bitrate = Bitrate(6);
 
-    const RATES: [u32; 9] =
-        [10_000, 20_000, 50_000, 100_000, 125_000, 250_000, 500_000, 800_000, 1_000_000];
+    const RATES: [u32; 9] = [
+        10_000, 20_000, 50_000, 100_000, 125_000, 250_000, 500_000, 800_000, 1_000_000,
+    ];
 
     /// The rate of code `S<index>`, or `None` past 8.
     pub const fn from_index(index: u8) -> Option<Self> {
@@ -114,7 +115,10 @@ impl core::fmt::Display for SlcanError {
             Self::BadHex { position } => write!(f, "slcan: not a hex digit at position {position}"),
             Self::BadDlc { found } => write!(f, "slcan: data length {found} above 8"),
             Self::BadFrameLength { found } => {
-                write!(f, "slcan: frame line of {found} characters does not match its length")
+                write!(
+                    f,
+                    "slcan: frame line of {found} characters does not match its length"
+                )
             }
             Self::BadBitrate => f.write_str("slcan: bit rate command needs a digit 0..8"),
             Self::BadId => f.write_str("slcan: CAN id out of range"),
@@ -127,8 +131,14 @@ impl core::fmt::Display for SlcanError {
 impl std::error::Error for SlcanError {}
 
 fn hex_value(line: &[u8], position: usize) -> Result<u8, SlcanError> {
-    let digit = line.get(position).copied().ok_or(SlcanError::BadFrameLength { found: line.len() })?;
-    (digit as char).to_digit(16).map(|value| value as u8).ok_or(SlcanError::BadHex { position })
+    let digit = line
+        .get(position)
+        .copied()
+        .ok_or(SlcanError::BadFrameLength { found: line.len() })?;
+    (digit as char)
+        .to_digit(16)
+        .map(|value| value as u8)
+        .ok_or(SlcanError::BadHex { position })
 }
 
 fn hex_number(line: &[u8], positions: core::ops::Range<usize>) -> Result<u32, SlcanError> {
@@ -201,7 +211,10 @@ pub struct Line {
 
 impl Line {
     fn new() -> Self {
-        Self { bytes: [0; MAX_LINE], len: 0 }
+        Self {
+            bytes: [0; MAX_LINE],
+            len: 0,
+        }
     }
 
     fn push(&mut self, byte: u8) {
@@ -287,7 +300,11 @@ pub struct LineDecoder {
 
 impl Default for LineDecoder {
     fn default() -> Self {
-        Self { buffer: [0; MAX_LINE], len: 0, overflowed: false }
+        Self {
+            buffer: [0; MAX_LINE],
+            len: 0,
+            overflowed: false,
+        }
     }
 }
 
@@ -304,7 +321,11 @@ impl LineDecoder {
             b'\n' => None,
             CR => {
                 let line = &self.buffer[..self.len];
-                let result = if self.overflowed { Err(SlcanError::TooLong) } else { parse(line) };
+                let result = if self.overflowed {
+                    Err(SlcanError::TooLong)
+                } else {
+                    parse(line)
+                };
                 self.len = 0;
                 self.overflowed = false;
                 Some(result)
@@ -357,7 +378,10 @@ mod tests {
         assert_eq!(parse(b"C"), Ok(Slcan::Close));
         assert_eq!(parse(b"Z1"), Ok(Slcan::Timestamps(true)));
         assert_eq!(parse(b"V"), Ok(Slcan::Other { command: b'V' }));
-        assert_eq!(parse(b"T1234567880"), Ok(Slcan::ExtendedFrame { id: 0x1234_5678 }));
+        assert_eq!(
+            parse(b"T1234567880"),
+            Ok(Slcan::ExtendedFrame { id: 0x1234_5678 })
+        );
     }
 
     #[test]
@@ -365,19 +389,34 @@ mod tests {
         let expected = frame(0x151, &[1, 0, 0, 0xEF, 0, 0x3C, 0xE4, 0x6A]);
         assert_eq!(
             parse(b"t1518010000EF003CE46A"),
-            Ok(Slcan::Frame { frame: expected, timestamp: None })
+            Ok(Slcan::Frame {
+                frame: expected,
+                timestamp: None
+            })
         );
         assert_eq!(
             parse(b"t1518010000ef003ce46a1A2B"),
-            Ok(Slcan::Frame { frame: expected, timestamp: Some(0x1A2B) })
+            Ok(Slcan::Frame {
+                frame: expected,
+                timestamp: Some(0x1A2B)
+            })
         );
-        assert_eq!(parse(b"t1300"), Ok(Slcan::Frame { frame: frame(0x130, &[]), timestamp: None }));
+        assert_eq!(
+            parse(b"t1300"),
+            Ok(Slcan::Frame {
+                frame: frame(0x130, &[]),
+                timestamp: None
+            })
+        );
     }
 
     #[test]
     fn rejects_malformed_frames_with_the_reason() {
         assert_eq!(parse(b"t13090000"), Err(SlcanError::BadDlc { found: 9 }));
-        assert_eq!(parse(b"t1302AA"), Err(SlcanError::BadFrameLength { found: 7 }));
+        assert_eq!(
+            parse(b"t1302AA"),
+            Err(SlcanError::BadFrameLength { found: 7 })
+        );
         assert_eq!(parse(b"t13G1AA"), Err(SlcanError::BadHex { position: 3 }));
         assert_eq!(parse(b"t8001AA"), Err(SlcanError::BadId));
     }
@@ -385,16 +424,26 @@ mod tests {
     #[test]
     fn line_decoder_splits_on_cr_and_bel() {
         let mut decoder = LineDecoder::new();
-        let out: Vec<_> = b"\x07z\rt1300\r".iter().filter_map(|b| decoder.push(*b)).collect();
+        let out: Vec<_> = b"\x07z\rt1300\r"
+            .iter()
+            .filter_map(|b| decoder.push(*b))
+            .collect();
         assert_eq!(
             out,
             [
                 Ok(Slcan::Nack),
                 Ok(Slcan::TransmitAck { extended: false }),
-                Ok(Slcan::Frame { frame: frame(0x130, &[]), timestamp: None })
+                Ok(Slcan::Frame {
+                    frame: frame(0x130, &[]),
+                    timestamp: None
+                })
             ]
         );
-        let long: Vec<_> = [b'x'; 40].iter().chain(b"\rO\r").filter_map(|b| decoder.push(*b)).collect();
+        let long: Vec<_> = [b'x'; 40]
+            .iter()
+            .chain(b"\rO\r")
+            .filter_map(|b| decoder.push(*b))
+            .collect();
         assert_eq!(long, [Err(SlcanError::TooLong), Ok(Slcan::Open)]);
     }
 }

@@ -4,7 +4,8 @@
 pub const MAX_LINEAR_SPEED: f64 = 1.5;
 
 /// The default maximum angular speed, rad/s (100 % of 0x130 byte 3). Firmware differs: keep it
-/// configurable (protocol-notes 4.1).
+/// configurable (protocol-notes 4.1). The vendor's figure, not pi/6 (0.52360).
+#[allow(clippy::approx_constant)]
 pub const DEFAULT_MAX_ANGULAR_SPEED: f64 = 0.5235;
 
 /// A speed that cannot be encoded.
@@ -45,7 +46,11 @@ pub fn speed_to_percent(speed: f64, max: f64) -> Result<(i8, bool), UnitError> {
     }
     let percent = speed / max * 100.0;
     let clamped = percent.clamp(-100.0, 100.0);
-    let rounded = if clamped >= 0.0 { clamped + 0.5 } else { clamped - 0.5 };
+    let rounded = if clamped >= 0.0 {
+        clamped + 0.5
+    } else {
+        clamped - 0.5
+    };
     // `as` truncates toward zero, so adding one half first rounds half away from zero.
     Ok((rounded as i8, clamped != percent))
 }
@@ -72,15 +77,24 @@ mod tests {
     #[test]
     fn clamps_and_says_so() {
         assert_eq!(speed_to_percent(2.0, MAX_LINEAR_SPEED), Ok((100, true)));
-        assert_eq!(speed_to_percent(-9.0, DEFAULT_MAX_ANGULAR_SPEED), Ok((-100, true)));
+        assert_eq!(
+            speed_to_percent(-9.0, DEFAULT_MAX_ANGULAR_SPEED),
+            Ok((-100, true))
+        );
         assert_eq!(speed_to_percent(1.5, MAX_LINEAR_SPEED), Ok((100, false)));
     }
 
     #[test]
     fn rejects_what_is_not_a_speed() {
         assert_eq!(speed_to_percent(f64::NAN, 1.5), Err(UnitError::NotANumber));
-        assert_eq!(speed_to_percent(f64::INFINITY, 1.5), Err(UnitError::Infinite));
-        assert_eq!(speed_to_percent(f64::NEG_INFINITY, 1.5), Err(UnitError::Infinite));
+        assert_eq!(
+            speed_to_percent(f64::INFINITY, 1.5),
+            Err(UnitError::Infinite)
+        );
+        assert_eq!(
+            speed_to_percent(f64::NEG_INFINITY, 1.5),
+            Err(UnitError::Infinite)
+        );
         assert_eq!(speed_to_percent(1.0, 0.0), Err(UnitError::BadMaximum));
     }
 
