@@ -104,6 +104,9 @@ pub fn parse(line: &str) -> Result<Record<'_>, CandumpError> {
         });
     }
     let length = tokens.next().ok_or(CandumpError::UnknownFormat)?;
+    if !length.starts_with('[') {
+        return Err(CandumpError::UnknownFormat);
+    }
     let declared = parse_length(length)?;
     let id = parse_id(second)?;
     let mut data = [0u8; 8];
@@ -186,7 +189,7 @@ fn parse_compact(text: &str) -> Result<CanFrame, CandumpError> {
     }
     let id = parse_id(id)?;
     let hex = data.as_bytes();
-    if hex.len() % 2 != 0 || hex.len() > 16 {
+    if !hex.len().is_multiple_of(2) || hex.len() > 16 {
         return Err(CandumpError::BadData);
     }
     let mut bytes = [0u8; 8];
@@ -276,5 +279,6 @@ mod tests {
         assert_eq!(parse("(12) can0 130#00"), Err(CandumpError::BadTimestamp));
         assert_eq!(parse("hello"), Err(CandumpError::UnknownFormat));
         assert_eq!(parse("can0 XYZ [0]"), Err(CandumpError::BadId));
+        assert_eq!(parse("not a frame"), Err(CandumpError::UnknownFormat));
     }
 }

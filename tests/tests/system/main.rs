@@ -1,1 +1,4 @@
-//! The multi-process system tests, one module per area.
+//! The multi-process system tests, one module per area. Each runs the real binaries, with a
+//! deadline, on its own pseudo-terminals and names.
+
+mod decode;
