@@ -257,7 +257,10 @@ mod tests {
             let frames = decode_line(line).expect("valid");
             assert_eq!(frames.len(), 1);
             assert_eq!(frames[0].link, Link::Serial);
-            assert_eq!(frame_json(&frames[0], DEFAULT_MAX_ANGULAR_SPEED)["control_mode"], "serial");
+            assert_eq!(
+                frame_json(&frames[0], DEFAULT_MAX_ANGULAR_SPEED)["control_mode"],
+                "serial"
+            );
         }
     }
 
