@@ -1,0 +1,131 @@
+//! `scout-sim`: a simulated SCOUT chassis on a pseudo-terminal (serial or slcan) or a SocketCAN
+//! interface, with fault injection from stdin or a script.
+//!
+//! Exit codes: 0 normal exit (quit, Ctrl-C, SIGTERM), 1 runtime error (port could not be
+//! created or opened), 2 usage error.
+
+use std::io::BufRead;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{Sender, channel};
+
+use anyhow::Context;
+use clap::{ArgGroup, Parser};
+use scout_gateway::link::Transport;
+use scout_gateway::sim::SimParams;
+use scout_gateway::sim::run::{SimOptions, run};
+use scout_gateway::sim::script::{self, SimCommand};
+
+/// A simulated AgileX SCOUT chassis (protocol v1).
+///
+/// With --serial or --slcan it creates a pseudo-terminal and prints its path as the first line of
+/// standard output (`serial /dev/pts/N` or `slcan /dev/pts/N`); with --can it uses a SocketCAN
+/// interface. Fault injection commands are read from standard input (type `help`); a statistics
+/// JSON line is printed on `stats` and at exit.
+#[derive(Debug, Parser)]
+#[command(version, about, group(ArgGroup::new("transport").required(true)))]
+struct Cli {
+    /// Speak the RS232 protocol (13-byte frames) on a new pseudo-terminal.
+    #[arg(long, group = "transport")]
+    serial: bool,
+    /// Be a serial-line CAN adapter (slcan) with the chassis behind it, on a new pseudo-terminal.
+    #[arg(long, group = "transport")]
+    slcan: bool,
+    /// Use this SocketCAN interface (e.g. vcan0).
+    #[arg(long, group = "transport", value_name = "IFACE")]
+    can: Option<String>,
+    /// Keep a symbolic link at PATH pointing at the pseudo-terminal (stable across `unplug`).
+    #[arg(long, value_name = "PATH")]
+    link: Option<PathBuf>,
+    /// Run fault-injection commands from FILE (with `wait MS` lines) as well as from stdin.
+    #[arg(long, value_name = "FILE")]
+    script: Option<PathBuf>,
+    /// Chassis parameters (TOML; keys as in SimParams, e.g. `max_angular = 0.7853`).
+    #[arg(long, value_name = "FILE")]
+    params: Option<PathBuf>,
+    /// The maximum angular speed in rad/s (overrides the parameter file).
+    #[arg(long)]
+    max_angular: Option<f64>,
+    /// Seed for `garbage`.
+    #[arg(long, default_value_t = 0x5C07)]
+    seed: u64,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .init();
+    match simulate(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(error) => {
+            eprintln!("scout-sim: error: {error:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn simulate(cli: Cli) -> anyhow::Result<()> {
+    let transport = match (&cli.can, cli.slcan) {
+        (Some(_), _) => Transport::Can,
+        (None, true) => Transport::Slcan,
+        (None, false) => Transport::Serial,
+    };
+    let mut params = match &cli.params {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))?
+        }
+        None => SimParams::default(),
+    };
+    if let Some(max_angular) = cli.max_angular {
+        params.max_angular = max_angular;
+    }
+    let stop = Arc::new(AtomicBool::new(false));
+    let on_signal = Arc::clone(&stop);
+    ctrlc::set_handler(move || on_signal.store(true, Ordering::Relaxed))
+        .context("installing the Ctrl-C / SIGTERM handler")?;
+
+    let (commands, received) = channel();
+    let from_stdin = commands.clone();
+    std::thread::spawn(move || feed(std::io::stdin().lock(), &from_stdin));
+    if let Some(path) = &cli.script {
+        let file =
+            std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
+        std::thread::spawn(move || feed(std::io::BufReader::new(file), &commands));
+    }
+    let options = SimOptions {
+        transport,
+        can_interface: cli.can,
+        link: cli.link,
+        params,
+        seed: cli.seed,
+    };
+    run(options, &received, &stop, &mut std::io::stdout().lock())
+}
+
+/// Sends each command of `input` to the simulator, sleeping on `wait` lines.
+fn feed(input: impl BufRead, commands: &Sender<SimCommand>) {
+    for line in input.lines() {
+        let Ok(line) = line else { return };
+        match script::parse(&line) {
+            Ok(Some(SimCommand::Wait(duration))) => std::thread::sleep(duration),
+            Ok(Some(command)) => {
+                if commands.send(command).is_err() {
+                    return;
+                }
+            }
+            Ok(None) => {}
+            Err(error) => eprintln!("scout-sim: {error}"),
+        }
+    }
+}

@@ -1,0 +1,831 @@
+//! The simulated SCOUT chassis: commands and time in, feedback out. No clock, no I/O.
+//!
+//! It behaves as the manual and protocol-notes describe: feedback every 20 ms with a rolling count
+//! per id; motion commands only in the link's control mode; no valid command for 500 ms means
+//! speed 0; a bad command checksum sets the checksum error bit; latched protections stop the
+//! chassis until the matching fault-clear code; RC and e-stop override the host.
+
+use std::time::Duration;
+
+use scout_protocol::sequence::RollingCounter;
+use scout_protocol::{
+    ChassisState, ControlMode, Counted, Fault, FaultBits, FaultClear, Light, LightCommand,
+    LightMode, Message, MessageKind, MotionCommand, MotionFeedback, Motor, MotorFeedback,
+    SystemStatus, units,
+};
+use serde::Serialize;
+
+use crate::link::Transport;
+
+/// The chassis' physical parameters and firmware constants.
+#[derive(Debug, Clone, PartialEq, serde::Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SimParams {
+    /// rad/s at 100 % angular command (protocol-notes 4.1).
+    pub max_angular: f64,
+    /// Distance between the left and right wheels, m (vendor SDK value).
+    pub track_width: f64,
+    /// Wheel radius, m.
+    pub wheel_radius: f64,
+    /// Motor turns per wheel turn.
+    pub gear_ratio: f64,
+    /// Linear acceleration limit, m/s².
+    pub linear_acceleration: f64,
+    /// Angular acceleration limit, rad/s².
+    pub angular_acceleration: f64,
+    /// Battery voltage at start, V.
+    pub battery_voltage: f64,
+    /// Battery capacity, Ah (sets how fast the voltage falls with load).
+    pub battery_capacity_ah: f64,
+    /// Ambient temperature, deg C.
+    pub ambient_temperature: f64,
+    /// Feedback period.
+    #[serde(with = "millis")]
+    pub feedback_period: Duration,
+    /// Communication protection: speed 0 after this long without a valid motion command.
+    #[serde(with = "millis")]
+    pub command_timeout: Duration,
+    /// On serial, host light control lapses after this long without a light command.
+    #[serde(with = "millis")]
+    pub serial_light_timeout: Duration,
+}
+
+impl Default for SimParams {
+    fn default() -> Self {
+        Self {
+            max_angular: units::DEFAULT_MAX_ANGULAR_SPEED,
+            track_width: 0.583,
+            wheel_radius: 0.165,
+            gear_ratio: 32.0,
+            linear_acceleration: 1.0,
+            angular_acceleration: 1.5,
+            battery_voltage: 26.0,
+            battery_capacity_ah: 30.0,
+            ambient_temperature: 25.0,
+            feedback_period: Duration::from_millis(20),
+            command_timeout: Duration::from_millis(500),
+            serial_light_timeout: Duration::from_millis(500),
+        }
+    }
+}
+
+/// Durations as whole milliseconds in configuration files.
+mod millis {
+    use std::time::Duration;
+
+    pub fn serialize<S: serde::Serializer>(d: &Duration, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_u64(d.as_millis() as u64)
+    }
+
+    pub fn deserialize<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Duration, D::Error> {
+        Ok(Duration::from_millis(serde::Deserialize::deserialize(d)?))
+    }
+}
+
+/// Battery thresholds of the manual (section 2.1).
+const BATTERY_WARNING_VOLTS: f64 = 22.5;
+const BATTERY_CUTOFF_VOLTS: f64 = 22.0;
+const BATTERY_OVERVOLTAGE_VOLTS: f64 = 30.0;
+/// Driver temperature thresholds (fault table of 0x151).
+const OVERTEMP_WARNING_C: f64 = 55.0;
+const OVERTEMP_PROTECTION_C: f64 = 65.0;
+/// Motor current thresholds, A rms.
+const OVERCURRENT_WARNING_A: f64 = 15.0;
+const OVERCURRENT_PROTECTION_A: f64 = 20.0;
+/// Breathing lights step 1 % per feedback period, 0..100..0 (as in the real capture).
+const BREATH_STEPS: u32 = 200;
+/// Below this the chassis counts as standing still (for its own light logic).
+const STANDSTILL: f64 = 0.01;
+/// The simulation's integration step.
+const STEP: Duration = Duration::from_millis(5);
+
+/// A value of one motor that can be pinned by fault injection.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MotorValue {
+    /// Current, A.
+    Current,
+    /// Shaft speed, rpm.
+    Rpm,
+    /// Driver temperature, deg C.
+    DriverTemperature,
+    /// Motor temperature, deg C.
+    MotorTemperature,
+}
+
+/// A latched protection.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Protection {
+    /// Driver over-temperature (65 C).
+    DriverOvertemp,
+    /// Motor over-current (20 A).
+    MotorOvercurrent,
+}
+
+impl Protection {
+    fn fault(self) -> Fault {
+        match self {
+            Self::DriverOvertemp => Fault::DriverOvertempProtection,
+            Self::MotorOvercurrent => Fault::MotorOvercurrentProtection,
+        }
+    }
+}
+
+/// A self-clearing warning that can be forced on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Warning {
+    /// Driver over-temperature warning.
+    DriverOvertemp,
+    /// Motor over-current warning.
+    MotorOvercurrent,
+}
+
+impl Warning {
+    fn fault(self) -> Fault {
+        match self {
+            Self::DriverOvertemp => Fault::DriverOvertempWarning,
+            Self::MotorOvercurrent => Fault::MotorOvercurrentWarning,
+        }
+    }
+}
+
+/// A change of the chassis' condition, from the fault-injection language.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Injection {
+    /// Emergency stop pressed (true) or released.
+    EStop(bool),
+    /// RC transmitter on (control mode RC, host commands ignored) or off.
+    Rc(bool),
+    /// Latch a protection, as if the threshold had been crossed.
+    Protect(Protection),
+    /// Force a warning on, or back to automatic.
+    Warn(Warning, bool),
+    /// Motor communication fault on or off.
+    MotorCommFault(Motor, bool),
+    /// Set the battery voltage.
+    Battery(f64),
+    /// Pin one of a motor's values.
+    PinMotor(Motor, MotorValue, f64),
+    /// Unpin all of a motor's values.
+    UnpinMotor(Motor),
+}
+
+#[derive(Debug, Clone, Copy, Default)]
+struct MotorState {
+    current: f64,
+    rpm: f64,
+    driver_temperature: f64,
+    motor_temperature: f64,
+    pinned_current: Option<f64>,
+    pinned_rpm: Option<f64>,
+    pinned_driver_temperature: Option<f64>,
+    pinned_motor_temperature: Option<f64>,
+}
+
+impl MotorState {
+    fn current(&self) -> f64 {
+        self.pinned_current.unwrap_or(self.current)
+    }
+
+    fn rpm(&self) -> f64 {
+        self.pinned_rpm.unwrap_or(self.rpm)
+    }
+
+    fn driver_temperature(&self) -> f64 {
+        self.pinned_driver_temperature
+            .unwrap_or(self.driver_temperature)
+    }
+
+    fn motor_temperature(&self) -> f64 {
+        self.pinned_motor_temperature
+            .unwrap_or(self.motor_temperature)
+    }
+
+    fn pin(&mut self, value: MotorValue, to: f64) {
+        let slot = match value {
+            MotorValue::Current => &mut self.pinned_current,
+            MotorValue::Rpm => &mut self.pinned_rpm,
+            MotorValue::DriverTemperature => &mut self.pinned_driver_temperature,
+            MotorValue::MotorTemperature => &mut self.pinned_motor_temperature,
+        };
+        *slot = Some(to);
+    }
+
+    fn unpin(&mut self) {
+        self.pinned_current = None;
+        self.pinned_rpm = None;
+        self.pinned_driver_temperature = None;
+        self.pinned_motor_temperature = None;
+    }
+}
+
+/// The ground-truth pose, integrated from the actual speeds.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct Pose {
+    /// m, in the start frame.
+    pub x: f64,
+    /// m, in the start frame.
+    pub y: f64,
+    /// rad, counter-clockwise from the start heading.
+    pub yaw: f64,
+}
+
+/// Why a received motion command did not move the chassis.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Ignored {
+    /// Its control mode is not the link's (0x01 CAN, 0x02 serial).
+    WrongMode,
+    /// The RC transmitter has authority.
+    Rc,
+    /// A protection is latched, the battery is cut off or the e-stop is pressed.
+    Inhibited,
+}
+
+/// Statistics for tests and people: what the chassis received and did.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct SimStats {
+    /// Valid commands received, by CAN id (`"0x130"`, `"0x140"`).
+    pub commands: std::collections::BTreeMap<String, u64>,
+    /// Motion commands that did not move the chassis, by reason.
+    pub ignored: IgnoredCounts,
+    /// Command frames rejected for their checksum.
+    pub checksum_failures: u64,
+    /// Other rejected input (unknown ids, bad lengths, malformed lines).
+    pub rejected: u64,
+    /// Intervals between consecutive valid motion commands.
+    pub motion_command_intervals: IntervalStats,
+    /// The last valid motion command.
+    pub last_command: Option<LastCommand>,
+    /// The chassis' actual speeds.
+    pub actual: Speeds,
+    /// Ground-truth pose.
+    pub pose: Pose,
+    /// Battery voltage, V.
+    pub battery_voltage: f64,
+    /// The 0x151 fault names now set.
+    pub faults: Vec<&'static str>,
+}
+
+/// Counts of ignored motion commands.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+pub struct IgnoredCounts {
+    /// Wrong control mode byte.
+    pub wrong_mode: u64,
+    /// RC transmitter on.
+    pub rc: u64,
+    /// E-stop, latched protection or battery cut-off.
+    pub inhibited: u64,
+}
+
+/// Summary of the intervals between motion commands, in ms.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct IntervalStats {
+    /// Intervals measured.
+    pub count: u64,
+    /// Mean, ms.
+    pub mean_ms: f64,
+    /// Largest, ms.
+    pub max_ms: f64,
+    /// 99th percentile, ms.
+    pub p99_ms: f64,
+}
+
+/// The last valid motion command, in physical units.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct LastCommand {
+    /// m/s.
+    pub linear: f64,
+    /// rad/s.
+    pub angular: f64,
+    /// `rc`, `can`, `serial`.
+    pub control_mode: &'static str,
+    /// The fault-clear code's name.
+    pub fault_clear: &'static str,
+}
+
+/// A pair of speeds.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct Speeds {
+    /// m/s.
+    pub linear: f64,
+    /// rad/s.
+    pub angular: f64,
+}
+
+/// The simulated chassis.
+#[derive(Debug, Clone)]
+pub struct Chassis {
+    params: SimParams,
+    transport: Transport,
+    now: Duration,
+    next_feedback: Duration,
+    last_valid_motion: Option<Duration>,
+    last_motion_received: Option<Duration>,
+    target: Speeds,
+    actual: Speeds,
+    pose: Pose,
+    motors: [MotorState; 4],
+    battery_voltage: f64,
+    estop: bool,
+    rc: bool,
+    /// Latched bits: protections, battery faults, injected motor communication faults.
+    latched: FaultBits,
+    forced_warnings: FaultBits,
+    checksum_error: bool,
+    host_lights: Option<(LightCommand, Duration)>,
+    breath_tick: u32,
+    counters: [RollingCounter; MessageKind::COUNT],
+    stats: SimStats,
+    intervals_us: Vec<u32>,
+}
+
+/// The feedback frames of one period, in the order the real chassis sends them.
+pub type FeedbackBatch = [Counted; 7];
+
+impl Chassis {
+    /// A chassis at rest at time zero, on `transport`.
+    pub fn new(params: SimParams, transport: Transport) -> Self {
+        let ambient = params.ambient_temperature;
+        let motor = MotorState {
+            driver_temperature: ambient,
+            motor_temperature: ambient,
+            ..MotorState::default()
+        };
+        Self {
+            battery_voltage: params.battery_voltage,
+            params,
+            transport,
+            now: Duration::ZERO,
+            next_feedback: Duration::ZERO,
+            last_valid_motion: None,
+            last_motion_received: None,
+            target: Speeds::default(),
+            actual: Speeds::default(),
+            pose: Pose::default(),
+            motors: [motor; 4],
+            estop: false,
+            rc: false,
+            latched: FaultBits::NONE,
+            forced_warnings: FaultBits::NONE,
+            checksum_error: false,
+            host_lights: None,
+            breath_tick: 0,
+            counters: [RollingCounter::default(); MessageKind::COUNT],
+            stats: SimStats::default(),
+            intervals_us: Vec::new(),
+        }
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &SimParams {
+        &self.params
+    }
+
+    /// A valid (checksum-checked) message from the host, received at `now`. Returns why a
+    /// motion command was ignored, if it was.
+    pub fn handle_message(&mut self, now: Duration, counted: Counted) -> Option<Ignored> {
+        self.advance(now);
+        let kind = counted.message.kind();
+        *self
+            .stats
+            .commands
+            .entry(format!("0x{:03X}", kind.can_id()))
+            .or_default() += 1;
+        match counted.message {
+            Message::MotionCommand(command) => self.handle_motion(now, command),
+            Message::LightCommand(lights) => {
+                self.host_lights = Some((lights, now));
+                None
+            }
+            _ => {
+                self.stats.rejected += 1;
+                None
+            }
+        }
+    }
+
+    /// A command frame rejected for its checksum: ignored, and the checksum error bit is set.
+    pub fn handle_checksum_error(&mut self, now: Duration) {
+        self.advance(now);
+        self.stats.checksum_failures += 1;
+        self.checksum_error = true;
+    }
+
+    /// Any other rejected input: counted.
+    pub fn handle_rejected(&mut self, now: Duration) {
+        self.advance(now);
+        self.stats.rejected += 1;
+    }
+
+    fn handle_motion(&mut self, now: Duration, command: MotionCommand) -> Option<Ignored> {
+        if let Some(previous) = self.last_motion_received.replace(now) {
+            let micros = now.saturating_sub(previous).as_micros();
+            self.intervals_us
+                .push(u32::try_from(micros).unwrap_or(u32::MAX));
+        }
+        self.stats.last_command = Some(LastCommand {
+            linear: command.linear(),
+            angular: command.angular(self.params.max_angular),
+            control_mode: command.control_mode.name(),
+            fault_clear: command.fault_clear.name(),
+        });
+        if self.rc {
+            self.stats.ignored.rc += 1;
+            return Some(Ignored::Rc);
+        }
+        if command.control_mode != self.transport.control_mode() {
+            self.stats.ignored.wrong_mode += 1;
+            return Some(Ignored::WrongMode);
+        }
+        self.checksum_error = false;
+        self.clear_fault(command.fault_clear);
+        self.last_valid_motion = Some(now);
+        self.target = Speeds {
+            linear: command.linear(),
+            angular: command.angular(self.params.max_angular),
+        };
+        if self.drive_inhibited() {
+            self.stats.ignored.inhibited += 1;
+            return Some(Ignored::Inhibited);
+        }
+        None
+    }
+
+    fn clear_fault(&mut self, code: FaultClear) {
+        let fault = match code {
+            FaultClear::BatteryUnderVoltage if self.battery_voltage >= BATTERY_CUTOFF_VOLTS => {
+                Fault::BatteryUndervoltageFault
+            }
+            FaultClear::BatteryOverVoltage if self.battery_voltage <= BATTERY_OVERVOLTAGE_VOLTS => {
+                Fault::BatteryOvervoltageFault
+            }
+            FaultClear::Motor1Comm => Fault::Motor1CommFault,
+            FaultClear::Motor2Comm => Fault::Motor2CommFault,
+            FaultClear::Motor3Comm => Fault::Motor3CommFault,
+            FaultClear::Motor4Comm => Fault::Motor4CommFault,
+            FaultClear::DriverOverTemp => Fault::DriverOvertempProtection,
+            FaultClear::MotorOverCurrent => Fault::MotorOvercurrentProtection,
+            _ => return,
+        };
+        self.latched = self.latched.with(fault, false);
+    }
+
+    /// Applies a fault injection at `now`.
+    pub fn inject(&mut self, now: Duration, injection: Injection) {
+        self.advance(now);
+        match injection {
+            Injection::EStop(pressed) => {
+                self.estop = pressed;
+                if pressed {
+                    self.actual = Speeds::default();
+                }
+            }
+            Injection::Rc(on) => self.rc = on,
+            Injection::Protect(protection) => {
+                self.latched = self.latched.with(protection.fault(), true);
+            }
+            Injection::Warn(warning, on) => {
+                self.forced_warnings = self.forced_warnings.with(warning.fault(), on);
+            }
+            Injection::MotorCommFault(motor, on) => {
+                self.latched = self.latched.with(motor_comm_fault(motor), on);
+            }
+            Injection::Battery(volts) => self.battery_voltage = volts,
+            Injection::PinMotor(motor, value, to) => self.motors[motor.index()].pin(value, to),
+            Injection::UnpinMotor(motor) => self.motors[motor.index()].unpin(),
+        }
+        self.update_latches();
+    }
+
+    /// When [`Chassis::poll_feedback`] next has frames.
+    pub fn next_feedback_at(&self) -> Duration {
+        self.next_feedback
+    }
+
+    /// The feedback frames due at `now`, if a period has come. The schedule is absolute: a late
+    /// poll sends one batch and skips the periods it missed.
+    pub fn poll_feedback(&mut self, now: Duration) -> Option<FeedbackBatch> {
+        if now < self.next_feedback {
+            return None;
+        }
+        self.advance(now);
+        let period = self.params.feedback_period.max(Duration::from_millis(1));
+        while self.next_feedback <= now {
+            self.next_feedback += period;
+        }
+        self.breath_tick = (self.breath_tick + 1) % BREATH_STEPS;
+        let status = Message::SystemStatus(self.system_status());
+        let motion = Message::MotionFeedback(MotionFeedback {
+            linear_mm_s: to_i16(self.actual.linear * 1000.0),
+            angular_mrad_s: to_i16(self.actual.angular * 1000.0),
+        });
+        let motor = |n: usize| Message::MotorFeedback(self.motor_feedback(Motor::ALL[n]));
+        let messages = [
+            motion,
+            motor(0),
+            motor(1),
+            motor(2),
+            motor(3),
+            Message::LightFeedback(self.lights()),
+            status,
+        ];
+        Some(messages.map(|message| Counted {
+            message,
+            count: self.counters[message.kind().index()].next_count(),
+        }))
+    }
+
+    /// The speeds the chassis is driving toward at `now`: the last command, or zero when the
+    /// command is older than the timeout or driving is inhibited.
+    pub fn target_at(&self, now: Duration) -> Speeds {
+        let fresh = self
+            .last_valid_motion
+            .is_some_and(|at| now.saturating_sub(at) < self.params.command_timeout);
+        if fresh && !self.drive_inhibited() {
+            self.target
+        } else {
+            Speeds::default()
+        }
+    }
+
+    /// The actual speeds.
+    pub fn actual(&self) -> Speeds {
+        self.actual
+    }
+
+    /// The ground-truth pose.
+    pub fn pose(&self) -> Pose {
+        self.pose
+    }
+
+    /// The system status as 0x151 would report it now.
+    pub fn system_status(&self) -> SystemStatus {
+        SystemStatus {
+            state: if self.estop {
+                ChassisState::EStop
+            } else {
+                ChassisState::Normal
+            },
+            control_mode: if self.rc {
+                ControlMode::Rc
+            } else {
+                self.transport.control_mode()
+            },
+            battery_decivolts: (self.battery_voltage * 10.0).round().clamp(0.0, 65535.0) as u16,
+            faults: self.faults(),
+        }
+    }
+
+    /// The statistics at the current time.
+    pub fn stats(&self) -> SimStats {
+        let mut stats = self.stats.clone();
+        stats.motion_command_intervals = interval_stats(&self.intervals_us);
+        stats.actual = self.actual;
+        stats.pose = self.pose;
+        stats.battery_voltage = self.battery_voltage;
+        stats.faults = self.faults().iter().map(Fault::name).collect();
+        stats
+    }
+
+    fn drive_inhibited(&self) -> bool {
+        self.estop
+            || self.rc
+            || self.latched.any_protection()
+            || self.latched.contains(Fault::BatteryUndervoltageFault)
+    }
+
+    fn faults(&self) -> FaultBits {
+        let mut bits = FaultBits(self.latched.0 | self.forced_warnings.0);
+        let hottest = self
+            .motors
+            .iter()
+            .map(MotorState::driver_temperature)
+            .fold(f64::MIN, f64::max);
+        let highest = self
+            .motors
+            .iter()
+            .map(|m| m.current().abs())
+            .fold(0.0, f64::max);
+        bits = bits
+            .with(Fault::CommandChecksumError, self.checksum_error)
+            .with(
+                Fault::BatteryUndervoltageWarning,
+                self.battery_voltage < BATTERY_WARNING_VOLTS,
+            );
+        if hottest > OVERTEMP_WARNING_C {
+            bits = bits.with(Fault::DriverOvertempWarning, true);
+        }
+        if highest > OVERCURRENT_WARNING_A {
+            bits = bits.with(Fault::MotorOvercurrentWarning, true);
+        }
+        if self.estop {
+            // The drivers lose power with the e-stop: their communication fails (real capture).
+            for motor in Motor::ALL {
+                bits = bits.with(motor_comm_fault(motor), true);
+            }
+        }
+        bits
+    }
+
+    fn update_latches(&mut self) {
+        let hottest = self
+            .motors
+            .iter()
+            .map(MotorState::driver_temperature)
+            .fold(f64::MIN, f64::max);
+        let highest = self
+            .motors
+            .iter()
+            .map(|m| m.current().abs())
+            .fold(0.0, f64::max);
+        let mut latched = self.latched;
+        if hottest > OVERTEMP_PROTECTION_C {
+            latched = latched.with(Fault::DriverOvertempProtection, true);
+        }
+        if highest > OVERCURRENT_PROTECTION_A {
+            latched = latched.with(Fault::MotorOvercurrentProtection, true);
+        }
+        if self.battery_voltage < BATTERY_CUTOFF_VOLTS {
+            latched = latched.with(Fault::BatteryUndervoltageFault, true);
+        }
+        if self.battery_voltage > BATTERY_OVERVOLTAGE_VOLTS {
+            latched = latched.with(Fault::BatteryOvervoltageFault, true);
+        }
+        self.latched = latched;
+    }
+
+    /// Moves the simulation forward to `now` in small steps.
+    fn advance(&mut self, now: Duration) {
+        while self.now < now {
+            let step = (now - self.now).min(STEP);
+            self.step(self.now + step, step.as_secs_f64());
+        }
+    }
+
+    fn step(&mut self, at: Duration, dt: f64) {
+        self.now = at;
+        let target = self.target_at(at);
+        let previous = self.actual;
+        if self.estop {
+            self.actual = Speeds::default();
+        } else {
+            self.actual.linear += ramp(
+                target.linear - self.actual.linear,
+                self.params.linear_acceleration * dt,
+            );
+            self.actual.angular += ramp(
+                target.angular - self.actual.angular,
+                self.params.angular_acceleration * dt,
+            );
+        }
+        let Speeds { linear, angular } = self.actual;
+        let mid_yaw = self.pose.yaw + angular * dt / 2.0;
+        self.pose.x += linear * mid_yaw.cos() * dt;
+        self.pose.y += linear * mid_yaw.sin() * dt;
+        self.pose.yaw = wrap_angle(self.pose.yaw + angular * dt);
+        let acceleration = (linear - previous.linear) / dt;
+        self.step_motors(acceleration, dt);
+        self.update_latches();
+    }
+
+    fn step_motors(&mut self, acceleration: f64, dt: f64) {
+        let half_track = self.params.track_width / 2.0;
+        let Speeds { linear, angular } = self.actual;
+        let (left, right) = (linear - angular * half_track, linear + angular * half_track);
+        let rpm_per_mps =
+            60.0 / (2.0 * std::f64::consts::PI * self.params.wheel_radius) * self.params.gear_ratio;
+        let ambient = self.params.ambient_temperature;
+        let mut total_current = 0.5; // electronics
+        for motor in Motor::ALL {
+            // 1 front-right, 2 front-left, 3 rear-left, 4 rear-right; left shafts turn the other
+            // way for forward motion (vendor SDK; unverified on hardware).
+            let (wheel, shaft_sign) = match motor.number() {
+                1 | 4 => (right, 1.0),
+                _ => (left, -1.0),
+            };
+            let state = &mut self.motors[motor.index()];
+            state.rpm = shaft_sign * wheel * rpm_per_mps;
+            let moving = wheel.abs() > STANDSTILL || angular.abs() > STANDSTILL;
+            let load = if moving {
+                0.4 + 1.2 * wheel.abs() + 5.0 * angular.abs()
+            } else {
+                0.0
+            };
+            let torque = load * wheel.signum() + 4.0 * acceleration;
+            state.current = shaft_sign * torque;
+            total_current += state.current().abs();
+            let heat = 2.0 * state.current().abs();
+            state.driver_temperature += (ambient + heat - state.driver_temperature) * dt / 60.0;
+            state.motor_temperature +=
+                (ambient + 1.5 * heat - state.motor_temperature) * dt / 120.0;
+        }
+        let volts_per_amp_second = 8.0 / (self.params.battery_capacity_ah * 3600.0);
+        self.battery_voltage -= total_current * volts_per_amp_second * dt;
+    }
+
+    fn motor_feedback(&self, motor: Motor) -> MotorFeedback {
+        let state = &self.motors[motor.index()];
+        MotorFeedback {
+            motor,
+            current_deciamps: to_i16(state.current() * 10.0),
+            rpm: to_i16(state.rpm()),
+            driver_temperature: to_i8(state.driver_temperature()),
+            motor_temperature: to_i8(state.motor_temperature()),
+        }
+    }
+
+    fn lights(&self) -> LightCommand {
+        let breath = {
+            let step = self.breath_tick % BREATH_STEPS;
+            (if step <= 100 {
+                step
+            } else {
+                BREATH_STEPS - step
+            }) as u8
+        };
+        let shown = |light: Light| Light {
+            brightness: match light.mode {
+                LightMode::Off => 0,
+                LightMode::On => 100,
+                LightMode::Breath => breath,
+                LightMode::Custom | LightMode::Unknown(_) => light.brightness,
+            },
+            ..light
+        };
+        let host = self.host_lights.filter(|(lights, at)| {
+            lights.enabled
+                && (self.transport != Transport::Serial
+                    || self.now.saturating_sub(*at) < self.params.serial_light_timeout)
+        });
+        if let Some((lights, _)) = host {
+            return LightCommand {
+                enabled: true,
+                front: shown(lights.front),
+                rear: shown(lights.rear),
+            };
+        }
+        // The chassis' own logic (manual 2.5, "normally off"): standing still, front off and rear
+        // breathing; moving, front on and rear off.
+        let moving =
+            self.actual.linear.abs() > STANDSTILL || self.actual.angular.abs() > STANDSTILL;
+        let (front, rear) = if moving {
+            (LightMode::On, LightMode::Off)
+        } else {
+            (LightMode::Off, LightMode::Breath)
+        };
+        LightCommand {
+            enabled: false,
+            front: shown(Light {
+                mode: front,
+                brightness: 0,
+            }),
+            rear: shown(Light {
+                mode: rear,
+                brightness: 0,
+            }),
+        }
+    }
+}
+
+fn motor_comm_fault(motor: Motor) -> Fault {
+    [
+        Fault::Motor1CommFault,
+        Fault::Motor2CommFault,
+        Fault::Motor3CommFault,
+        Fault::Motor4CommFault,
+    ][motor.index()]
+}
+
+fn ramp(error: f64, limit: f64) -> f64 {
+    error.clamp(-limit, limit)
+}
+
+fn wrap_angle(angle: f64) -> f64 {
+    use std::f64::consts::PI;
+    (angle + PI).rem_euclid(2.0 * PI) - PI
+}
+
+fn to_i16(value: f64) -> i16 {
+    value
+        .round()
+        .clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16
+}
+
+fn to_i8(value: f64) -> i8 {
+    value.round().clamp(f64::from(i8::MIN), f64::from(i8::MAX)) as i8
+}
+
+fn interval_stats(intervals_us: &[u32]) -> IntervalStats {
+    if intervals_us.is_empty() {
+        return IntervalStats::default();
+    }
+    let mut sorted = intervals_us.to_vec();
+    sorted.sort_unstable();
+    let ms = |us: u32| f64::from(us) / 1000.0;
+    let p99_index = ((sorted.len() as f64 * 0.99).ceil() as usize).clamp(1, sorted.len()) - 1;
+    IntervalStats {
+        count: sorted.len() as u64,
+        mean_ms: sorted.iter().map(|&us| ms(us)).sum::<f64>() / sorted.len() as f64,
+        max_ms: sorted.last().copied().map_or(0.0, ms),
+        p99_ms: ms(sorted[p99_index]),
+    }
+}

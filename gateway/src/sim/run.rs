@@ -1,0 +1,444 @@
+//! The simulator's driver loop: the one place that touches the port and the clock. It feeds the
+//! chassis model, plays the slcan adapter, and carries out the link-level fault injections.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::Receiver;
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use scout_protocol::slcan::{self, Bitrate, Slcan};
+use scout_protocol::{Counted, can, serial};
+use serialport::{SerialPort, TTYPort};
+use tracing::{info, warn};
+
+use super::chassis::{Chassis, Injection, SimParams};
+use super::script::{HELP, SimCommand};
+use crate::link::{RxEvent, StreamFraming, Transport, decode_can};
+use crate::port::{Incoming, Port};
+
+/// How the simulator is reached and what it simulates.
+#[derive(Debug, Clone)]
+pub struct SimOptions {
+    /// The transport it speaks.
+    pub transport: Transport,
+    /// For [`Transport::Can`]: the SocketCAN interface.
+    pub can_interface: Option<String>,
+    /// A symbolic link kept pointing at the pseudo-terminal (stable across `unplug`).
+    pub link: Option<PathBuf>,
+    /// The chassis model's parameters.
+    pub params: SimParams,
+    /// Seed of the garbage generator.
+    pub seed: u64,
+}
+
+/// Counts of the link side, beside the model's statistics.
+#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+struct LinkStats {
+    frames_sent: u64,
+    bytes_dropped: u64,
+    garbage_bytes: u64,
+    corrupted_frames: u64,
+    unplugs: u64,
+}
+
+/// The open port and, for a pseudo-terminal, what keeps it alive.
+#[derive(Debug)]
+struct Endpoint {
+    port: Port,
+    /// The pty's slave side, held open so that the master never sees a hang-up between clients.
+    _slave: Option<TTYPort>,
+}
+
+/// The slcan adapter's state, when the simulator plays one.
+#[derive(Debug, Clone, Copy, Default)]
+struct Adapter {
+    bitrate: Option<Bitrate>,
+    open: bool,
+    timestamps: bool,
+}
+
+impl Adapter {
+    /// Whether chassis frames reach the host: channel open at the SCOUT's bit rate.
+    fn hears_chassis(&self) -> bool {
+        self.open && self.bitrate == Some(Bitrate::SCOUT)
+    }
+
+    /// The adapter's answer to a set-up command from the host.
+    fn answer(&mut self, command: Slcan) -> Option<Slcan> {
+        const OK: Option<Slcan> = Some(Slcan::Ack);
+        const ERROR: Option<Slcan> = Some(Slcan::Nack);
+        match command {
+            Slcan::SetBitrate(_) if self.open => ERROR,
+            Slcan::SetBitrate(rate) => {
+                self.bitrate = Some(rate);
+                OK
+            }
+            Slcan::Open if self.bitrate.is_none() || self.open => ERROR,
+            Slcan::Open => {
+                self.open = true;
+                OK
+            }
+            Slcan::Close => {
+                self.open = false;
+                OK
+            }
+            Slcan::Timestamps(on) => {
+                self.timestamps = on;
+                OK
+            }
+            Slcan::Ack | Slcan::Nack | Slcan::TransmitAck { .. } => None,
+            _ => ERROR,
+        }
+    }
+}
+
+/// A pseudo-random byte source for `garbage` (xorshift; reproducible from the seed).
+#[derive(Debug, Clone, Copy)]
+struct Garbage(u64);
+
+impl Garbage {
+    fn next_byte(&mut self) -> u8 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 24) as u8
+    }
+}
+
+/// The running simulator.
+struct Simulator<'a> {
+    options: SimOptions,
+    start: Instant,
+    chassis: Chassis,
+    framing: Option<StreamFraming>,
+    adapter: Adapter,
+    endpoint: Option<Endpoint>,
+    unplugged_until: Option<Duration>,
+    silent_until: Duration,
+    corrupt_remaining: u32,
+    garbage: Garbage,
+    stats: LinkStats,
+    out: &'a mut dyn Write,
+}
+
+/// Runs the simulator until `stop` is set or a `quit` command arrives; prints the port line first
+/// and the statistics JSON line last on `out`.
+pub fn run(
+    options: SimOptions,
+    commands: &Receiver<SimCommand>,
+    stop: &AtomicBool,
+    out: &mut dyn Write,
+) -> anyhow::Result<()> {
+    let mut simulator = Simulator {
+        start: Instant::now(),
+        chassis: Chassis::new(options.params.clone(), options.transport),
+        framing: StreamFraming::new(options.transport),
+        adapter: Adapter::default(),
+        endpoint: None,
+        unplugged_until: None,
+        silent_until: Duration::ZERO,
+        corrupt_remaining: 0,
+        garbage: Garbage(options.seed | 1),
+        stats: LinkStats::default(),
+        out,
+        options,
+    };
+    simulator.plug_in()?;
+    let result = simulator.run_loop(commands, stop);
+    simulator.print_stats()?;
+    if let Some(link) = &simulator.options.link {
+        let _ = std::fs::remove_file(link);
+    }
+    result
+}
+
+impl Simulator<'_> {
+    fn now(&self) -> Duration {
+        self.start.elapsed()
+    }
+
+    fn run_loop(
+        &mut self,
+        commands: &Receiver<SimCommand>,
+        stop: &AtomicBool,
+    ) -> anyhow::Result<()> {
+        let mut buffer = [0u8; 1024];
+        while !stop.load(Ordering::Relaxed) {
+            while let Ok(command) = commands.try_recv() {
+                if !self.apply(command)? {
+                    return Ok(());
+                }
+            }
+            if self
+                .unplugged_until
+                .is_some_and(|until| self.now() >= until)
+            {
+                self.plug_in()?;
+            }
+            let now = self.now();
+            if let Some(batch) = self.chassis.poll_feedback(now) {
+                self.send_feedback(&batch, now)?;
+            }
+            let wait = self
+                .chassis
+                .next_feedback_at()
+                .saturating_sub(self.now())
+                .min(Duration::from_millis(5));
+            let Some(endpoint) = self.endpoint.as_mut() else {
+                std::thread::sleep(wait.max(Duration::from_millis(1)));
+                continue;
+            };
+            match endpoint.port.read(&mut buffer, wait) {
+                Ok(Incoming::Timeout) => {}
+                Ok(Incoming::Bytes(n)) => self.receive_bytes(&buffer[..n])?,
+                Ok(Incoming::Frame(frame)) => self.receive(decode_can(&frame))?,
+                Ok(Incoming::Foreign(_)) => self.chassis.handle_rejected(self.now()),
+                Err(error) => {
+                    warn!("port read failed: {error}; unplugging for 1 s");
+                    self.unplug(Duration::from_secs(1));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Carries out one command; `false` to quit.
+    fn apply(&mut self, command: SimCommand) -> anyhow::Result<bool> {
+        let now = self.now();
+        match command {
+            SimCommand::Inject(injection) => {
+                self.chassis.inject(now, injection);
+                info!("{}", describe(injection));
+            }
+            SimCommand::Garbage(count) => {
+                let bytes: Vec<u8> = (0..count).map(|_| self.garbage.next_byte()).collect();
+                self.stats.garbage_bytes += count as u64;
+                self.write_bytes(&bytes)?;
+                info!("wrote {count} garbage bytes");
+            }
+            SimCommand::Corrupt(count) => {
+                self.corrupt_remaining = count;
+                info!("corrupting the checksum of the next {count} feedback frames");
+            }
+            SimCommand::Silence(duration) => {
+                self.silent_until = now + duration;
+                info!("silent for {} ms", duration.as_millis());
+            }
+            SimCommand::Unplug(duration) => self.unplug(duration),
+            SimCommand::Stats => self.print_stats()?,
+            SimCommand::Wait(_) => {}
+            SimCommand::Help => eprintln!("{HELP}"),
+            SimCommand::Quit => {
+                info!("quit");
+                return Ok(false);
+            }
+        }
+        Ok(true)
+    }
+
+    fn unplug(&mut self, duration: Duration) {
+        self.endpoint = None;
+        self.unplugged_until = Some(self.now() + duration);
+        self.stats.unplugs += 1;
+        if let Some(link) = &self.options.link {
+            let _ = std::fs::remove_file(link);
+        }
+        info!("unplugged; back in {} ms", duration.as_millis());
+    }
+
+    /// Opens the port (a new pseudo-terminal, or the CAN interface) and announces it.
+    fn plug_in(&mut self) -> anyhow::Result<()> {
+        self.unplugged_until = None;
+        self.adapter = Adapter::default();
+        if let Some(framing) = self.framing.as_mut() {
+            framing.reset();
+        }
+        let (endpoint, announced) = match self.options.transport {
+            Transport::Can => {
+                let interface = self
+                    .options
+                    .can_interface
+                    .clone()
+                    .context("--can needs an interface")?;
+                let port = Port::open_can(&interface)
+                    .with_context(|| format!("opening SocketCAN interface {interface}"))?;
+                (Endpoint { port, _slave: None }, interface)
+            }
+            Transport::Serial | Transport::Slcan => {
+                let (master, slave) =
+                    TTYPort::pair().context("creating a pseudo-terminal (is /dev/ptmx there?)")?;
+                let path = slave.name().context("the pseudo-terminal has no name")?;
+                if let Some(link) = &self.options.link {
+                    link_to(link, Path::new(&path))?;
+                }
+                (
+                    Endpoint {
+                        port: Port::Tty(master),
+                        _slave: Some(slave),
+                    },
+                    path,
+                )
+            }
+        };
+        self.endpoint = Some(endpoint);
+        writeln!(self.out, "{} {announced}", self.options.transport)?;
+        self.out.flush()?;
+        info!("{} chassis on {announced}", self.options.transport);
+        Ok(())
+    }
+
+    fn receive_bytes(&mut self, bytes: &[u8]) -> anyhow::Result<()> {
+        let mut events = Vec::new();
+        if let Some(framing) = self.framing.as_mut() {
+            framing.push(bytes, |event| events.push(event));
+        }
+        events.into_iter().try_for_each(|event| self.receive(event))
+    }
+
+    fn receive(&mut self, event: RxEvent) -> anyhow::Result<()> {
+        let now = self.now();
+        let slcan = self.options.transport == Transport::Slcan;
+        match event {
+            RxEvent::Slcan(command) => {
+                if let Some(answer) = self.adapter.answer(command) {
+                    self.write_bytes(slcan::encode(&answer).as_bytes())?;
+                }
+                return Ok(());
+            }
+            _ if slcan && !self.adapter.open => {
+                // A closed adapter refuses to transmit.
+                return self.write_bytes(slcan::encode(&Slcan::Nack).as_bytes());
+            }
+            RxEvent::Message(counted) => {
+                if !slcan || self.adapter.hears_chassis() {
+                    self.chassis.handle_message(now, counted);
+                }
+            }
+            RxEvent::Rejected(error) if error.is_checksum() => {
+                self.chassis.handle_checksum_error(now)
+            }
+            RxEvent::Rejected(_) => self.chassis.handle_rejected(now),
+        }
+        if slcan {
+            self.write_bytes(slcan::encode(&Slcan::TransmitAck { extended: false }).as_bytes())?;
+        }
+        Ok(())
+    }
+
+    fn send_feedback(&mut self, batch: &[Counted], now: Duration) -> anyhow::Result<()> {
+        let heard = match self.options.transport {
+            Transport::Slcan => self.adapter.hears_chassis(),
+            _ => true,
+        };
+        if now < self.silent_until || self.endpoint.is_none() || !heard {
+            return Ok(());
+        }
+        let timestamp = self
+            .adapter
+            .timestamps
+            .then_some((now.as_millis() % 60_000) as u16);
+        let mut bytes = Vec::with_capacity(batch.len() * 32);
+        for counted in batch {
+            let corrupt = self.corrupt_remaining > 0;
+            if corrupt {
+                self.corrupt_remaining -= 1;
+                self.stats.corrupted_frames += 1;
+            }
+            self.stats.frames_sent += 1;
+            let checksum_damage = if corrupt { 0x5A } else { 0 };
+            match self.options.transport {
+                Transport::Serial => {
+                    let mut frame = serial::encode(&counted.message, counted.count);
+                    frame[serial::FRAME_LEN - 1] ^= checksum_damage;
+                    bytes.extend_from_slice(&frame);
+                }
+                Transport::Slcan | Transport::Can => {
+                    let frame = can::encode(&counted.message, counted.count);
+                    let mut data = [0u8; 8];
+                    data.copy_from_slice(frame.data());
+                    data[can::CHECKSUM] ^= checksum_damage;
+                    let frame = scout_protocol::CanFrame::new(frame.id(), &data)
+                        .context("re-encoding a feedback frame")?;
+                    if let (Transport::Can, Some(endpoint)) =
+                        (self.options.transport, self.endpoint.as_mut())
+                    {
+                        if let Err(error) = endpoint.port.write_frame(&frame) {
+                            warn!("CAN write failed: {error}");
+                        }
+                    } else {
+                        bytes.extend_from_slice(
+                            slcan::encode(&Slcan::Frame { frame, timestamp }).as_bytes(),
+                        );
+                    }
+                }
+            }
+        }
+        self.write_bytes(&bytes)
+    }
+
+    /// Writes to the tty without waiting for a reader: what does not fit is lost, as on a wire.
+    fn write_bytes(&mut self, bytes: &[u8]) -> anyhow::Result<()> {
+        let Some(endpoint) = self.endpoint.as_mut() else {
+            return Ok(());
+        };
+        if bytes.is_empty() || matches!(endpoint.port, Port::Can(_)) {
+            return Ok(());
+        }
+        match endpoint.port.write_bytes(bytes, Duration::from_millis(1)) {
+            Ok(written) => self.stats.bytes_dropped += (bytes.len() - written) as u64,
+            Err(error) => {
+                warn!("port write failed: {error}");
+                self.stats.bytes_dropped += bytes.len() as u64;
+            }
+        }
+        Ok(())
+    }
+
+    fn print_stats(&mut self) -> anyhow::Result<()> {
+        let mut json = serde_json::to_value(self.chassis.stats())?;
+        if let serde_json::Value::Object(object) = &mut json {
+            object.insert("time_s".into(), self.now().as_secs_f64().into());
+            object.insert("transport".into(), self.options.transport.name().into());
+            object.insert("link".into(), serde_json::to_value(self.stats)?);
+        }
+        writeln!(self.out, "{json}")?;
+        self.out.flush()?;
+        Ok(())
+    }
+}
+
+/// Points the symbolic link `link` at `target`, replacing an old link.
+fn link_to(link: &Path, target: &Path) -> anyhow::Result<()> {
+    if link.symlink_metadata().is_ok() {
+        std::fs::remove_file(link).with_context(|| format!("replacing {}", link.display()))?;
+    }
+    std::os::unix::fs::symlink(target, link)
+        .with_context(|| format!("linking {} to {}", link.display(), target.display()))
+}
+
+fn describe(injection: Injection) -> String {
+    match injection {
+        Injection::EStop(true) => "emergency stop pressed".into(),
+        Injection::EStop(false) => "emergency stop released".into(),
+        Injection::Rc(on) => format!("RC transmitter {}", if on { "on" } else { "off" }),
+        Injection::Protect(protection) => format!("{protection:?} protection latched"),
+        Injection::Warn(warning, on) => {
+            format!(
+                "{warning:?} warning {}",
+                if on { "forced on" } else { "automatic" }
+            )
+        }
+        Injection::MotorCommFault(motor, on) => format!(
+            "motor {} communication fault {}",
+            motor.number(),
+            if on { "on" } else { "off" }
+        ),
+        Injection::Battery(volts) => format!("battery at {volts:.1} V"),
+        Injection::PinMotor(motor, value, to) => {
+            format!("motor {} {value:?} pinned at {to}", motor.number())
+        }
+        Injection::UnpinMotor(motor) => format!("motor {} values automatic", motor.number()),
+    }
+}
