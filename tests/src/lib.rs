@@ -44,7 +44,7 @@ pub fn bin(name: &str) -> PathBuf {
 /// A command for workspace binary `name`.
 pub fn command(name: &str) -> Command {
     let mut command = Command::new(bin(name));
-    command.env("RUST_LOG", "info").env_remove("RUST_BACKTRACE");
+    command.env("RUST_LOG", "warn").env_remove("RUST_BACKTRACE");
     command
 }
 
@@ -91,4 +91,109 @@ pub fn run_with_input(mut command: Command, stdin: &[u8], limit: Duration) -> Ou
         stdout: stdout.join().expect("stdout reader"),
         stderr: stderr.join().expect("stderr reader"),
     }
+}
+
+/// A running `scout-sim`, killed when dropped.
+#[derive(Debug)]
+pub struct Sim {
+    child: std::process::Child,
+    stdin: std::process::ChildStdin,
+    lines: std::sync::mpsc::Receiver<String>,
+    port: String,
+}
+
+/// How long a test waits for a line from a child process.
+pub const LINE_TIMEOUT: Duration = Duration::from_secs(10);
+
+impl Sim {
+    /// Starts `scout-sim` with `args` (e.g. `--serial`) and waits for its port line.
+    pub fn start(args: &[&str]) -> Sim {
+        let mut child = command("scout-sim")
+            .args(args)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("spawn scout-sim");
+        let stdin = child.stdin.take().expect("stdin");
+        let stdout = child.stdout.take().expect("stdout");
+        let (sender, lines) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            use std::io::BufRead;
+            for line in std::io::BufReader::new(stdout).lines() {
+                let Ok(line) = line else { return };
+                if sender.send(line).is_err() {
+                    return;
+                }
+            }
+        });
+        let mut sim = Sim {
+            child,
+            stdin,
+            lines,
+            port: String::new(),
+        };
+        sim.port = sim.next_port_line();
+        sim
+    }
+
+    /// Waits for the next `TRANSPORT PATH` line and returns the path.
+    pub fn next_port_line(&mut self) -> String {
+        let line = self.next_line(|line| !line.starts_with('{'));
+        line.split_once(' ')
+            .map(|(_, path)| path.to_owned())
+            .expect("`TRANSPORT PATH` line")
+    }
+
+    /// The path of the simulator's port.
+    pub fn port(&self) -> &str {
+        &self.port
+    }
+
+    /// Sends one fault-injection command.
+    pub fn send(&mut self, command: &str) {
+        use std::io::Write;
+        writeln!(self.stdin, "{command}").expect("write to scout-sim");
+        self.stdin.flush().expect("flush scout-sim stdin");
+    }
+
+    /// Asks for the statistics and returns them.
+    pub fn stats(&mut self) -> serde_json::Value {
+        self.send("stats");
+        let line = self.next_line(|line| line.starts_with('{'));
+        serde_json::from_str(&line).expect("statistics JSON")
+    }
+
+    fn next_line(&mut self, wanted: impl Fn(&str) -> bool) -> String {
+        let deadline = Instant::now() + LINE_TIMEOUT;
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match self.lines.recv_timeout(left) {
+                Ok(line) if wanted(&line) => return line,
+                Ok(_) => {}
+                Err(_) => panic!("scout-sim printed no expected line within {LINE_TIMEOUT:?}"),
+            }
+        }
+    }
+
+    /// Asks the simulator to quit and returns its final statistics.
+    pub fn quit(mut self) -> serde_json::Value {
+        self.send("quit");
+        let line = self.next_line(|line| line.starts_with('{'));
+        serde_json::from_str(&line).expect("statistics JSON")
+    }
+}
+
+impl Drop for Sim {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Reports a skipped test on the real stderr (not captured by the test harness), so the reason
+/// shows in every run's output.
+pub fn skip(test: &str, reason: &str) {
+    use std::io::Write;
+    let _ = writeln!(std::io::stderr(), "SKIPPED {test}: {reason}");
 }

@@ -2,3 +2,4 @@
 //! deadline, on its own pseudo-terminals and names.
 
 mod decode;
+mod sim;
