@@ -1,9 +1,19 @@
 //! scout-gateway: the process that owns a SCOUT chassis port, and the chassis simulator.
 //!
-//! - [`link`]: message framing per transport (serial, slcan, SocketCAN), shared by both.
+//! - [`control`]: the control loop, the one thread that touches the port and the clock.
+//! - [`state`]: the chassis state tracker (sans-IO).
+//! - [`device`]: the port or the in-process simulator, messages in and out.
+//! - [`config`]: the configuration file and its lookup.
+//! - [`lock`]: one gateway per robot name and device.
+//! - [`link`]: message framing per transport (serial, slcan, SocketCAN), shared with the simulator.
 //! - [`port`]: the port as an OS resource (tty or SocketCAN socket).
 //! - [`sim`]: the simulated chassis and the `scout-sim` driver loop.
 
+pub mod config;
+pub mod control;
+pub mod device;
 pub mod link;
+pub mod lock;
 pub mod port;
 pub mod sim;
+pub mod state;

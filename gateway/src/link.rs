@@ -54,9 +54,9 @@ pub enum RxError {
     /// A malformed slcan line.
     #[error("{0}")]
     Slcan(#[from] slcan::SlcanError),
-    /// An extended-id CAN frame (SCOUT v1 uses none).
-    #[error("extended CAN id 0x{0:08X} (SCOUT v1 uses standard ids)")]
-    ExtendedId(u32),
+    /// An extended-id, remote or error CAN frame (SCOUT v1 sends only standard data frames).
+    #[error("extended, remote or error CAN frame 0x{0:08X} (SCOUT v1 sends standard data frames)")]
+    ForeignFrame(u32),
 }
 
 impl RxError {
@@ -140,7 +140,7 @@ impl StreamFraming {
                         None => {}
                         Some(Ok(Slcan::Frame { frame, .. })) => on_event(decode_can(&frame)),
                         Some(Ok(Slcan::ExtendedFrame { id })) => {
-                            on_event(RxEvent::Rejected(RxError::ExtendedId(id)));
+                            on_event(RxEvent::Rejected(RxError::ForeignFrame(id)));
                         }
                         Some(Ok(other)) => on_event(RxEvent::Slcan(other)),
                         Some(Err(error)) => on_event(RxEvent::Rejected(error.into())),

@@ -1,0 +1,167 @@
+//! `scout echo`: the chassis state as a live terminal view, or one JSON object per update.
+
+use std::io::Write;
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+use crate::client::{ClientError, StateSubscriber};
+use crate::ipc::{StatePayload, monotonic_ns};
+use crate::state::state_json;
+
+/// How often the live view redraws.
+const REDRAW: Duration = Duration::from_millis(100);
+
+/// Prints `count` updates (or forever) as JSON lines; returns how many were printed.
+pub fn echo_json(
+    subscriber: &StateSubscriber,
+    count: Option<u64>,
+    idle_timeout: Duration,
+    out: &mut dyn Write,
+) -> Result<u64, EchoError> {
+    let mut printed = 0;
+    while count.is_none_or(|count| printed < count) {
+        let state = next(subscriber, idle_timeout)?;
+        writeln!(out, "{}", state_json(&state, monotonic_ns()))?;
+        out.flush()?;
+        printed += 1;
+    }
+    Ok(printed)
+}
+
+/// Redraws the state in place on a terminal until `count` updates or `stop` returns true.
+pub fn echo_live(
+    subscriber: &StateSubscriber,
+    count: Option<u64>,
+    idle_timeout: Duration,
+    stop: &dyn Fn() -> bool,
+    out: &mut dyn Write,
+) -> Result<u64, EchoError> {
+    let mut seen = 0;
+    let mut last_draw = Instant::now() - REDRAW;
+    let mut latest = None;
+    while !stop() && count.is_none_or(|count| seen < count) {
+        latest = Some(next(subscriber, idle_timeout)?);
+        seen += 1;
+        if last_draw.elapsed() >= REDRAW {
+            if let Some(state) = &latest {
+                draw(state, out)?;
+            }
+            last_draw = Instant::now();
+        }
+    }
+    if let Some(state) = &latest {
+        draw(state, out)?;
+    }
+    Ok(seen)
+}
+
+/// Why echo stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum EchoError {
+    /// The gateway connection failed.
+    #[error(transparent)]
+    Client(#[from] ClientError),
+    /// No state arrived in time.
+    #[error("no state from the gateway for {0:?}: is it stopped (SIGSTOP) or overloaded?")]
+    Idle(Duration),
+    /// Output failed.
+    #[error(transparent)]
+    Io(#[from] std::io::Error),
+}
+
+fn next(subscriber: &StateSubscriber, idle_timeout: Duration) -> Result<StatePayload, EchoError> {
+    subscriber
+        .next_timeout(idle_timeout)?
+        .ok_or(EchoError::Idle(idle_timeout))
+}
+
+fn number(value: &Value, decimals: usize) -> String {
+    value
+        .as_f64()
+        .map_or_else(|| "-".into(), |v| format!("{v:.decimals$}"))
+}
+
+fn draw(state: &StatePayload, out: &mut dyn Write) -> std::io::Result<()> {
+    let json = state_json(state, monotonic_ns());
+    let link = &json["link"];
+    let system = &json["system"];
+    let motion = &json["motion"];
+    let odometry = &json["odometry"];
+    let text = |v: &Value| v.as_str().unwrap_or("-").to_owned();
+    let faults = system["faults"]
+        .as_array()
+        .map(|f| {
+            f.iter()
+                .filter_map(Value::as_str)
+                .collect::<Vec<_>>()
+                .join(", ")
+        })
+        .filter(|f| !f.is_empty())
+        .unwrap_or_else(|| "none".into());
+    // Clear the screen and go home, then draw.
+    write!(out, "\x1b[2J\x1b[H")?;
+    writeln!(out, "robot {}   seq {}", text(&json["robot"]), json["seq"])?;
+    writeln!(
+        out,
+        "link  {} ({} {})  rx {}  tx {}  checksum errors {}  dropped {}  rejected {}  reconnects {}",
+        text(&link["state"]),
+        text(&link["transport"]),
+        text(&link["device"]),
+        link["rx_frames"],
+        link["tx_frames"],
+        link["checksum_errors"],
+        link["dropped_frames"],
+        link["rejected_frames"],
+        link["reconnects"],
+    )?;
+    writeln!(
+        out,
+        "chassis  {}  mode {}  battery {} V  faults: {faults}",
+        text(&system["state"]),
+        text(&system["control_mode"]),
+        number(&system["battery_voltage"], 1),
+    )?;
+    writeln!(
+        out,
+        "motion   linear {} m/s  angular {} rad/s   (commanded {} m/s, {} rad/s)",
+        number(&motion["linear"], 3),
+        number(&motion["angular"], 3),
+        number(&json["command"]["linear"], 3),
+        number(&json["command"]["angular"], 3),
+    )?;
+    writeln!(out, "motor  current A    rpm   driver C  motor C")?;
+    for motor in json["motors"].as_array().into_iter().flatten() {
+        writeln!(
+            out,
+            "  {}    {:>8} {:>7} {:>9} {:>8}",
+            motor["motor"],
+            number(&motor["current"], 1),
+            motor["rpm"],
+            motor["driver_temperature"],
+            motor["motor_temperature"],
+        )?;
+    }
+    let lights = &json["lights"];
+    let light = |l: &Value| format!("{} {}%", text(&l["mode"]), l["brightness"]);
+    writeln!(
+        out,
+        "lights   {}  front {}  rear {}",
+        if lights["enabled"].as_bool() == Some(true) {
+            "host"
+        } else {
+            "chassis"
+        },
+        light(&lights["front"]),
+        light(&lights["rear"]),
+    )?;
+    writeln!(
+        out,
+        "odometry x {} m  y {} m  yaw {} rad  distance {} m",
+        number(&odometry["x"], 3),
+        number(&odometry["y"], 3),
+        number(&odometry["yaw"], 3),
+        number(&odometry["distance"], 2),
+    )?;
+    out.flush()
+}

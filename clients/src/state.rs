@@ -1,0 +1,124 @@
+//! The public JSON form of the chassis state (`scout echo --json`, and zenoh later).
+
+use scout_protocol::{Message, Motor};
+use serde_json::{Value, json};
+
+use crate::decode::message_fields;
+use crate::ipc::{LinkState, Received, StatePayload, TransportKind};
+
+fn age_ms(at_ns: u64, now_ns: u64) -> f64 {
+    now_ns.saturating_sub(at_ns) as f64 / 1e6
+}
+
+/// The fields of a received message plus its `age_ms`, or `null` before the first one.
+fn received_fields(received: Received, message: Message, max_angular: f64, now_ns: u64) -> Value {
+    if !received.valid {
+        return Value::Null;
+    }
+    let mut fields = message_fields(&message, max_angular);
+    if let Value::Object(object) = &mut fields {
+        object.insert("age_ms".into(), age_ms(received.at_ns, now_ns).into());
+    }
+    fields
+}
+
+/// The state as the README documents it. `now_ns` (CLOCK_MONOTONIC) sets the ages.
+pub fn state_json(state: &StatePayload, now_ns: u64) -> Value {
+    let link = &state.link;
+    let max_angular = state.max_angular;
+    let motors: Vec<Value> = Motor::ALL
+        .into_iter()
+        .map(|motor| {
+            let payload = &state.motors[motor.index()];
+            let message = Message::MotorFeedback(payload.feedback(motor));
+            received_fields(payload.received, message, max_angular, now_ns)
+        })
+        .collect();
+    json!({
+        "robot": state.robot.as_str(),
+        "seq": state.seq,
+        "age_ms": age_ms(state.published_ns, now_ns),
+        "link": {
+            "state": LinkState::from_raw(link.state).name(),
+            "transport": TransportKind::from_raw(link.transport).map_or("unknown", TransportKind::name),
+            "device": link.device.as_str(),
+            "rx_frames": link.rx_frames,
+            "checksum_errors": link.checksum_errors,
+            "dropped_frames": link.dropped_frames,
+            "rejected_frames": link.rejected_frames,
+            "discarded_bytes": link.discarded_bytes,
+            "tx_frames": link.tx_frames,
+            "reconnects": link.reconnects,
+        },
+        "system": received_fields(
+            state.system.received,
+            Message::SystemStatus(state.system.status()),
+            max_angular,
+            now_ns,
+        ),
+        "motion": received_fields(
+            state.motion.received,
+            Message::MotionFeedback(state.motion.feedback()),
+            max_angular,
+            now_ns,
+        ),
+        "motors": motors,
+        "lights": received_fields(
+            state.lights.received,
+            Message::LightFeedback(state.lights.feedback()),
+            max_angular,
+            now_ns,
+        ),
+        "odometry": {
+            "x": state.odometry.x,
+            "y": state.odometry.y,
+            "yaw": state.odometry.yaw,
+            "distance": state.odometry.distance,
+            "resets": state.odometry.resets,
+        },
+        "command": { "linear": state.command.linear, "angular": state.command.angular },
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ipc::{FixedText, SystemPayload};
+    use scout_protocol::{ChassisState, ControlMode, FaultBits, SystemStatus};
+
+    #[test]
+    fn schema_has_the_documented_fields() {
+        let mut state = StatePayload {
+            seq: 7,
+            robot: FixedText::new("scout"),
+            ..Default::default()
+        };
+        state.system = SystemPayload::new(
+            &SystemStatus {
+                state: ChassisState::EStop,
+                control_mode: ControlMode::Rc,
+                battery_decivolts: 239,
+                faults: FaultBits(0x3C),
+            },
+            Received {
+                valid: true,
+                count: 1,
+                at_ns: 1_000_000,
+            },
+        );
+        let json = state_json(&state, 3_000_000);
+        assert_eq!(json["robot"], "scout");
+        assert_eq!(json["seq"], 7);
+        assert_eq!(json["link"]["state"], "ok");
+        assert_eq!(json["link"]["transport"], "serial");
+        assert_eq!(json["system"]["state"], "estop");
+        assert_eq!(json["system"]["control_mode"], "rc");
+        assert_eq!(json["system"]["battery_voltage"], 23.9);
+        assert_eq!(json["system"]["fault_bits"], 0x3C);
+        assert_eq!(json["system"]["faults"][0], "motor_1_comm_fault");
+        assert_eq!(json["system"]["age_ms"], 2.0);
+        assert_eq!(json["motion"], Value::Null, "not received yet");
+        assert_eq!(json["motors"].as_array().map(Vec::len), Some(4));
+        assert!(json["odometry"]["x"].is_number());
+    }
+}

@@ -1,0 +1,166 @@
+//! `scout-gateway`: the one process that owns a SCOUT chassis port.
+//!
+//! Exit codes: 0 stopped by Ctrl-C or SIGTERM (after sending zero speed), 1 runtime error,
+//! 2 usage or configuration error, or another gateway already owns the robot name or device.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use anyhow::Context;
+use clap::{ArgGroup, Parser};
+use scout_clients::ipc;
+use scout_gateway::config::{GatewayConfig, TransportChoice};
+use scout_gateway::control::ControlLoop;
+use scout_gateway::device::DeviceSpec;
+use scout_gateway::lock::Lock;
+use tracing::info;
+
+/// The one process that owns a SCOUT chassis port: it decodes the chassis' feedback, publishes
+/// the state to local processes (iceoryx2, zero-copy) and sends the motion command every 20 ms.
+#[derive(Debug, Parser)]
+#[command(version, about, group(ArgGroup::new("transport")))]
+struct Cli {
+    /// Use the simulated chassis, in-process.
+    #[arg(long, group = "transport")]
+    sim: bool,
+    /// An RS232 port (115200 8N1), e.g. /dev/ttyUSB0.
+    #[arg(long, group = "transport", value_name = "DEVICE")]
+    serial: Option<PathBuf>,
+    /// A serial-line CAN adapter (slcan), e.g. /dev/ttyACM0.
+    #[arg(long, group = "transport", value_name = "DEVICE")]
+    slcan: Option<PathBuf>,
+    /// A SocketCAN interface at 500 kbit/s, e.g. can0.
+    #[arg(long, group = "transport", value_name = "IFACE")]
+    can: Option<String>,
+    /// The robot's name: every iceoryx2 service and zenoh key carries it [default: scout].
+    #[arg(long, value_name = "ROBOT")]
+    name: Option<String>,
+    /// Configuration file (TOML); see config/scout-gateway.toml. Default: $SCOUT_GATEWAY_CONFIG.
+    #[arg(long, value_name = "FILE")]
+    config: Option<PathBuf>,
+    /// rad/s at 100 % angular command [default: 0.5235].
+    #[arg(long, value_name = "RAD_S")]
+    max_angular: Option<f64>,
+}
+
+/// The exit code for usage, configuration and ownership errors.
+const USAGE: u8 = 2;
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let _log = init_logging();
+    let config = match configure(&cli) {
+        Ok(config) => config,
+        Err(error) => {
+            eprintln!("scout-gateway: {error:#}");
+            return ExitCode::from(USAGE);
+        }
+    };
+    let (spec, _locks) = match config
+        .device()
+        .map_err(anyhow::Error::from)
+        .and_then(|spec| {
+            let locks = take_locks(&config.name, &spec)?;
+            Ok((spec, locks))
+        }) {
+        Ok(owned) => owned,
+        Err(error) => {
+            eprintln!("scout-gateway: {error:#}");
+            return ExitCode::from(USAGE);
+        }
+    };
+    match serve(config, spec) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(error) => {
+            eprintln!("scout-gateway: error: {error:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Logs go to stderr through a non-blocking writer: a slow terminal or pipe never holds up the
+/// control loop (lines are dropped instead).
+fn init_logging() -> tracing_appender::non_blocking::WorkerGuard {
+    let (writer, guard) = tracing_appender::non_blocking::NonBlockingBuilder::default()
+        .lossy(true)
+        .finish(std::io::stderr());
+    tracing_subscriber::fmt()
+        .with_writer(writer)
+        .with_target(false)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .init();
+    guard
+}
+
+fn configure(cli: &Cli) -> anyhow::Result<GatewayConfig> {
+    let mut config = GatewayConfig::load(cli.config.as_deref())?;
+    if let Some(name) = &cli.name {
+        config.name = name.clone();
+    }
+    if let Some(max_angular) = cli.max_angular {
+        config.max_angular = max_angular;
+    }
+    let device = |path: &PathBuf| Some(path.display().to_string());
+    let (transport, device) = match (cli.sim, &cli.serial, &cli.slcan, &cli.can) {
+        (true, ..) => (Some(TransportChoice::Sim), None),
+        (_, Some(path), ..) => (Some(TransportChoice::Serial), device(path)),
+        (_, _, Some(path), _) => (Some(TransportChoice::Slcan), device(path)),
+        (_, _, _, Some(interface)) => (Some(TransportChoice::Can), Some(interface.clone())),
+        _ => (config.transport, config.device.clone()),
+    };
+    config.transport = transport;
+    config.device = device;
+    Ok(config)
+}
+
+/// One gateway per robot name and per device.
+fn take_locks(robot: &str, spec: &DeviceSpec) -> anyhow::Result<Vec<Lock>> {
+    let mut locks = vec![Lock::acquire(
+        &format!("robot-{robot}"),
+        &format!("robot '{robot}'"),
+        ", or give this one another --name",
+    )?];
+    let device = match spec {
+        DeviceSpec::Serial(path) | DeviceSpec::Slcan(path) => Some(
+            std::fs::canonicalize(path)
+                .unwrap_or_else(|_| path.clone())
+                .display()
+                .to_string(),
+        ),
+        DeviceSpec::Can(interface) => Some(format!("can-{interface}")),
+        DeviceSpec::Sim(_) => None,
+    };
+    if let Some(device) = device {
+        locks.push(Lock::acquire(
+            &format!("device-{device}"),
+            &format!("device {}", spec.name()),
+            "",
+        )?);
+    }
+    Ok(locks)
+}
+
+fn serve(config: GatewayConfig, spec: DeviceSpec) -> anyhow::Result<()> {
+    ipc::quiet_iceoryx2_logs();
+    let stop = Arc::new(AtomicBool::new(false));
+    let on_signal = Arc::clone(&stop);
+    ctrlc::set_handler(move || on_signal.store(true, Ordering::Relaxed))
+        .context("installing the Ctrl-C / SIGTERM handler")?;
+    info!(
+        "scout-gateway {}: robot '{}', {} on {}, state on iceoryx2 service '{}' (up to {} subscribers)",
+        env!("CARGO_PKG_VERSION"),
+        config.name,
+        spec.kind().name(),
+        spec.name(),
+        ipc::state_service(&config.name),
+        ipc::MAX_SUBSCRIBERS,
+    );
+    let mut control = ControlLoop::new(config, spec)?;
+    control.run(&stop)
+}

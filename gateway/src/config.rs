@@ -1,0 +1,208 @@
+//! The gateway's configuration: one serde struct, read from TOML. Lookup: `--config FILE`, else
+//! `$SCOUT_GATEWAY_CONFIG`, else the defaults; command-line flags override the file.
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use scout_protocol::units::DEFAULT_MAX_ANGULAR_SPEED;
+use serde::{Deserialize, Serialize};
+
+use crate::device::DeviceSpec;
+use crate::sim::SimParams;
+
+/// How the chassis is reached.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TransportChoice {
+    /// RS232 (`device` is the tty).
+    Serial,
+    /// slcan adapter (`device` is the tty).
+    Slcan,
+    /// SocketCAN (`device` is the interface).
+    Can,
+    /// The simulated chassis in-process (`device` unused).
+    Sim,
+}
+
+/// The whole configuration.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GatewayConfig {
+    /// The robot's name: every iceoryx2 service and zenoh key carries it.
+    pub name: String,
+    /// How the chassis is reached.
+    pub transport: Option<TransportChoice>,
+    /// The tty or CAN interface.
+    pub device: Option<String>,
+    /// rad/s at 100 % angular command (protocol-notes 4.1; firmware differs).
+    pub max_angular: f64,
+    /// Periods and limits of the control loop.
+    pub timing: Timing,
+    /// The simulated chassis (`transport = "sim"`).
+    pub sim: SimParams,
+}
+
+/// Periods and limits of the control loop.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Timing {
+    /// The motion command period, ms (the chassis expects 20).
+    pub command_period_ms: u64,
+    /// The light command period on CAN and slcan, ms (the manual's 25).
+    pub can_light_period_ms: u64,
+    /// The light command period on serial, ms (well inside the chassis' 500 ms light timeout).
+    pub serial_light_period_ms: u64,
+    /// Zero-speed commands sent after Ctrl-C or SIGTERM before the port is released.
+    pub stop_cycles: u32,
+    /// The longest wait between attempts to reopen a failed port, ms.
+    pub reconnect_max_ms: u64,
+}
+
+impl Default for Timing {
+    fn default() -> Self {
+        Self {
+            command_period_ms: 20,
+            can_light_period_ms: 25,
+            serial_light_period_ms: 100,
+            stop_cycles: 5,
+            reconnect_max_ms: 1000,
+        }
+    }
+}
+
+impl Default for GatewayConfig {
+    fn default() -> Self {
+        Self {
+            name: "scout".into(),
+            transport: None,
+            device: None,
+            max_angular: DEFAULT_MAX_ANGULAR_SPEED,
+            timing: Timing::default(),
+            sim: SimParams::default(),
+        }
+    }
+}
+
+/// A configuration that cannot be used, with what to do.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("reading {path}: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The file is not valid TOML for this struct.
+    #[error("{path}: {source}")]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: Box<toml::de::Error>,
+    },
+    /// A value is out of range or missing.
+    #[error("{0}")]
+    Invalid(String),
+}
+
+impl GatewayConfig {
+    /// Reads `path`, or `$SCOUT_GATEWAY_CONFIG` when `path` is `None`, or the defaults.
+    pub fn load(path: Option<&Path>) -> Result<Self, ConfigError> {
+        let from_env = std::env::var_os("SCOUT_GATEWAY_CONFIG").map(PathBuf::from);
+        let Some(path) = path.map(Path::to_path_buf).or(from_env) else {
+            return Ok(Self::default());
+        };
+        let text = std::fs::read_to_string(&path).map_err(|source| ConfigError::Read {
+            path: path.clone(),
+            source,
+        })?;
+        toml::from_str(&text).map_err(|source| ConfigError::Parse {
+            path,
+            source: Box::new(source),
+        })
+    }
+
+    /// The device to open, after checking the configuration.
+    pub fn device(&self) -> Result<DeviceSpec, ConfigError> {
+        scout_clients::ipc::check_robot_name(&self.name).map_err(ConfigError::Invalid)?;
+        if !(self.max_angular.is_finite() && self.max_angular > 0.0) {
+            return Err(ConfigError::Invalid(format!(
+                "max_angular must be a positive number of rad/s, found {}",
+                self.max_angular
+            )));
+        }
+        if !(5..=100).contains(&self.timing.command_period_ms) {
+            return Err(ConfigError::Invalid(format!(
+                "timing.command_period_ms must be 5..100 (the chassis stops after 500 ms), found {}",
+                self.timing.command_period_ms
+            )));
+        }
+        let device = || {
+            self.device.clone().ok_or_else(|| {
+                ConfigError::Invalid("no device: give --serial, --slcan or --can with a device, or `device` in the config".into())
+            })
+        };
+        Ok(match self.transport {
+            None => {
+                return Err(ConfigError::Invalid(
+                    "no transport: use --sim, --serial DEVICE, --slcan DEVICE or --can IFACE (or `transport` in the config)".into(),
+                ));
+            }
+            Some(TransportChoice::Serial) => DeviceSpec::Serial(device()?.into()),
+            Some(TransportChoice::Slcan) => DeviceSpec::Slcan(device()?.into()),
+            Some(TransportChoice::Can) => DeviceSpec::Can(device()?),
+            Some(TransportChoice::Sim) => DeviceSpec::Sim(SimParams {
+                max_angular: self.max_angular,
+                ..self.sim.clone()
+            }),
+        })
+    }
+
+    /// The motion command period.
+    pub fn command_period(&self) -> Duration {
+        Duration::from_millis(self.timing.command_period_ms)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_example_config_parses() {
+        let text = include_str!("../../config/scout-gateway.toml");
+        let config: GatewayConfig = toml::from_str(text).expect("example config");
+        assert_eq!(config.name, "scout");
+        assert!(matches!(config.device(), Ok(DeviceSpec::Serial(_))));
+    }
+
+    #[test]
+    fn unknown_keys_and_bad_values_are_refused() {
+        assert!(toml::from_str::<GatewayConfig>("nmae = \"x\"").is_err());
+        let config = GatewayConfig {
+            transport: Some(TransportChoice::Sim),
+            max_angular: -1.0,
+            ..Default::default()
+        };
+        assert!(
+            config
+                .device()
+                .expect_err("negative")
+                .to_string()
+                .contains("max_angular")
+        );
+        let config = GatewayConfig {
+            transport: Some(TransportChoice::Serial),
+            ..Default::default()
+        };
+        assert!(
+            config
+                .device()
+                .expect_err("no device")
+                .to_string()
+                .contains("no device")
+        );
+    }
+}

@@ -1,0 +1,394 @@
+//! The control loop: the one thread that owns the port, the 20 ms command schedule and the state.
+//! It reads feedback until the next deadline, sends 0x130 on an absolute monotonic schedule,
+//! publishes the state zero-copy, and reopens the port when it fails.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use iceoryx2::node::Node;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::prelude::BackpressureStrategy;
+use scout_clients::ipc::{self, Ipc, LinkState, StatePayload, TransportKind};
+use scout_protocol::sequence::RollingCounter;
+use scout_protocol::{Counted, LightCommand, Message, MotionCommand};
+use tracing::{debug, error, info, warn};
+
+use crate::config::GatewayConfig;
+use crate::device::{Device, DeviceSpec};
+use crate::link::RxEvent;
+use crate::state::{Publish, StateTracker};
+
+/// The first wait before reopening a failed port; it doubles up to `reconnect_max_ms`.
+const FIRST_BACKOFF: Duration = Duration::from_millis(50);
+
+/// The iceoryx2 side: the node and the ports the gateway owns.
+struct Ports {
+    publisher: Publisher<Ipc, StatePayload, ()>,
+    notifier: Notifier<Ipc>,
+    reset_odometry: Listener<Ipc>,
+    // Dropped last: the ports above belong to it.
+    _node: Node<Ipc>,
+}
+
+impl Ports {
+    fn create(robot: &str) -> anyhow::Result<Self> {
+        let removed = ipc::remove_dead_nodes();
+        if removed > 0 {
+            info!("removed the stale iceoryx2 resources of {removed} dead process(es)");
+        }
+        let node =
+            ipc::node(&format!("scout-gateway-{robot}")).context("creating the iceoryx2 node")?;
+        let (state, events) = ipc::create_state_services(&node, robot)?;
+        let publisher = state
+            .publisher_builder()
+            .backpressure_strategy(BackpressureStrategy::DiscardData)
+            .max_loaned_samples(2)
+            .create()
+            .context("creating the state publisher")?;
+        let notifier = events
+            .notifier_builder()
+            .create()
+            .context("creating the state notifier")?;
+        let reset_odometry = ipc::reset_odometry_events(&node, robot)?
+            .listener_builder()
+            .create()
+            .context("creating the odometry-reset listener")?;
+        Ok(Self {
+            publisher,
+            notifier,
+            reset_odometry,
+            _node: node,
+        })
+    }
+
+    /// Publishes `state` into a loaned sample and wakes the subscribers. Never blocks: a full
+    /// subscriber queue drops its oldest sample.
+    fn publish(&self, state: &StatePayload) -> anyhow::Result<()> {
+        let sample = self
+            .publisher
+            .loan_uninit()
+            .context("loaning a state sample")?;
+        sample
+            .write_payload(*state)
+            .send()
+            .context("sending the state")?;
+        self.notifier
+            .notify()
+            .context("notifying the subscribers")?;
+        Ok(())
+    }
+
+    /// Whether a client asked for an odometry reset since the last call.
+    fn reset_requested(&self) -> bool {
+        let mut requested = false;
+        let _ = self.reset_odometry.try_wait(|_| requested = true);
+        requested
+    }
+}
+
+/// How the loop is doing, for the log at exit.
+#[derive(Debug, Default, Clone, Copy)]
+struct LoopStats {
+    commands_sent: u64,
+    /// Ticks whose deadline had passed by more than a period (skipped to stay on the grid).
+    missed_ticks: u64,
+    max_lateness: Duration,
+    publish_errors: u64,
+}
+
+/// The gateway's control loop.
+pub struct ControlLoop {
+    config: GatewayConfig,
+    spec: DeviceSpec,
+    start: Instant,
+    device: Option<Device>,
+    tracker: StateTracker,
+    ports: Ports,
+    motion_count: RollingCounter,
+    light_count: RollingCounter,
+    lights: Option<LightCommand>,
+    next_command: Duration,
+    next_light: Duration,
+    reopen_at: Duration,
+    backoff: Duration,
+    opened_before: bool,
+    last_open_error: Option<String>,
+    events: Vec<RxEvent>,
+    buffer: Box<[u8; 4096]>,
+    stats: LoopStats,
+}
+
+impl std::fmt::Debug for ControlLoop {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ControlLoop")
+            .field("spec", &self.spec)
+            .finish_non_exhaustive()
+    }
+}
+
+impl ControlLoop {
+    /// Sets up the iceoryx2 services for `config.name`; the port is opened by [`ControlLoop::run`].
+    pub fn new(config: GatewayConfig, spec: DeviceSpec) -> anyhow::Result<Self> {
+        let ports = Ports::create(&config.name)?;
+        let tracker =
+            StateTracker::new(&config.name, spec.kind(), &spec.name(), config.max_angular);
+        Ok(Self {
+            tracker,
+            ports,
+            spec,
+            start: Instant::now(),
+            device: None,
+            motion_count: RollingCounter::default(),
+            light_count: RollingCounter::default(),
+            lights: None,
+            next_command: Duration::ZERO,
+            next_light: Duration::ZERO,
+            reopen_at: Duration::ZERO,
+            backoff: FIRST_BACKOFF,
+            opened_before: false,
+            last_open_error: None,
+            events: Vec::with_capacity(64),
+            buffer: Box::new([0; 4096]),
+            stats: LoopStats::default(),
+            config,
+        })
+    }
+
+    fn now(&self) -> Duration {
+        self.start.elapsed()
+    }
+
+    fn light_period(&self) -> Duration {
+        Duration::from_millis(match self.spec.kind() {
+            TransportKind::Serial => self.config.timing.serial_light_period_ms,
+            _ => self.config.timing.can_light_period_ms,
+        })
+    }
+
+    /// Sets the lights the gateway repeats (or `None`: stop sending light commands).
+    pub fn set_lights(&mut self, lights: Option<LightCommand>) {
+        self.lights = lights;
+        self.next_light = self.now();
+    }
+
+    /// Runs until `stop` is set, then sends zero speed for `stop_cycles` more cycles and returns.
+    pub fn run(&mut self, stop: &AtomicBool) -> anyhow::Result<()> {
+        let period = self.config.command_period();
+        self.publish();
+        let mut stopping: Option<u32> = None;
+        loop {
+            let now = self.now();
+            if stopping.is_none() && stop.load(Ordering::Relaxed) {
+                let cycles = self.config.timing.stop_cycles;
+                info!("stopping: sending zero speed for {cycles} more cycles");
+                stopping = Some(cycles);
+            }
+            if self.device.is_none() && now >= self.reopen_at {
+                self.open(now);
+            }
+            if now >= self.next_command {
+                if stopping == Some(0) || (stopping.is_some() && self.device.is_none()) {
+                    break;
+                }
+                let command = self.motion_command(stopping.is_some());
+                self.send_motion(command, now);
+                self.advance_schedule(now, period);
+                if let Some(left) = stopping.as_mut() {
+                    *left -= 1;
+                }
+            }
+            if self.lights.is_some() && now >= self.next_light {
+                self.send_lights(now);
+            }
+            if self.ports.reset_requested() {
+                info!("odometry reset by a client");
+                let publish = self.tracker.reset_odometry();
+                self.publish_if(publish);
+            }
+            let publish = self.tracker.poll(ipc::monotonic_ns());
+            self.publish_if(publish);
+            let deadline = if self.lights.is_some() {
+                self.next_command.min(self.next_light)
+            } else {
+                self.next_command
+            };
+            self.wait_for_input(deadline);
+        }
+        self.device = None;
+        let stats = self.stats;
+        info!(
+            "stopped: {} motion commands sent, {} ticks missed, worst lateness {:?}, {} publish errors",
+            stats.commands_sent, stats.missed_ticks, stats.max_lateness, stats.publish_errors
+        );
+        Ok(())
+    }
+
+    /// The command for this tick: zero until the arbiter fills it (and always while stopping).
+    fn motion_command(&mut self, _stopping: bool) -> MotionCommand {
+        MotionCommand::stop(self.spec.control_mode())
+    }
+
+    /// Moves the deadline one period on, on the absolute grid; a deadline missed by more than a
+    /// period is skipped rather than sent late in a burst.
+    fn advance_schedule(&mut self, now: Duration, period: Duration) {
+        let lateness = now - self.next_command;
+        self.stats.max_lateness = self.stats.max_lateness.max(lateness);
+        self.next_command += period;
+        while self.next_command <= now {
+            self.next_command += period;
+            self.stats.missed_ticks += 1;
+        }
+    }
+
+    fn send_motion(&mut self, command: MotionCommand, now: Duration) {
+        if self.device.is_none() {
+            return;
+        }
+        let counted = Counted {
+            message: Message::MotionCommand(command),
+            count: self.motion_count.next_count(),
+        };
+        if self.send(&counted, now) {
+            self.stats.commands_sent += 1;
+            self.tracker
+                .handle_sent_motion(&command, ipc::monotonic_ns());
+        }
+    }
+
+    fn send_lights(&mut self, now: Duration) {
+        let period = self.light_period();
+        self.next_light += period;
+        if self.next_light <= now {
+            self.next_light = now + period;
+        }
+        let (Some(lights), Some(_)) = (self.lights, self.device.as_ref()) else {
+            return;
+        };
+        let counted = Counted {
+            message: Message::LightCommand(lights),
+            count: self.light_count.next_count(),
+        };
+        if self.send(&counted, now) {
+            self.tracker.handle_sent_other();
+        }
+    }
+
+    /// Sends on the open device; on failure, closes it. Returns whether it was sent.
+    fn send(&mut self, counted: &Counted, now: Duration) -> bool {
+        let Some(device) = self.device.as_mut() else {
+            return false;
+        };
+        match device.send(counted, now) {
+            Ok(()) => true,
+            Err(error) => {
+                self.fail(&format!("writing: {error}"));
+                false
+            }
+        }
+    }
+
+    /// Reads until `deadline` (or sleeps, while disconnected), handling every event.
+    fn wait_for_input(&mut self, deadline: Duration) {
+        let now = self.now();
+        let timeout = deadline.saturating_sub(now);
+        let Some(device) = self.device.as_mut() else {
+            std::thread::sleep(timeout.min(self.reopen_at.saturating_sub(now)));
+            return;
+        };
+        let start = self.start;
+        let mut events = std::mem::take(&mut self.events);
+        events.clear();
+        let result = device.receive(
+            &mut self.buffer[..],
+            timeout,
+            || start.elapsed(),
+            |event| {
+                events.push(event);
+            },
+        );
+        let discarded = device.discarded_bytes();
+        let now_ns = ipc::monotonic_ns();
+        for event in &events {
+            let publish = self.tracker.handle_rx(event, now_ns);
+            self.publish_if(publish);
+        }
+        self.tracker.set_discarded_bytes(discarded);
+        self.events = events;
+        if let Err(error) = result {
+            self.fail(&format!("reading: {error}"));
+        }
+    }
+
+    fn open(&mut self, now: Duration) {
+        match self.spec.open(now) {
+            Ok(device) => {
+                info!("{} {} open", self.spec.kind().name(), self.spec.name());
+                self.device = Some(device);
+                self.backoff = FIRST_BACKOFF;
+                self.last_open_error = None;
+                let reconnect = self.opened_before;
+                self.opened_before = true;
+                let publish = self.tracker.handle_connected(reconnect);
+                self.publish_if(publish);
+            }
+            Err(error) => {
+                let message = error.to_string();
+                if self.last_open_error.as_deref() != Some(message.as_str()) {
+                    warn!(
+                        "cannot open {} {}: {message}; retrying every {} ms at most",
+                        self.spec.kind().name(),
+                        self.spec.name(),
+                        self.config.timing.reconnect_max_ms
+                    );
+                    self.last_open_error = Some(message);
+                } else {
+                    debug!("still cannot open {}", self.spec.name());
+                }
+                self.reopen_at = now + self.backoff;
+                let max = Duration::from_millis(self.config.timing.reconnect_max_ms);
+                self.backoff = (self.backoff * 2).min(max);
+            }
+        }
+    }
+
+    fn fail(&mut self, what: &str) {
+        if self.device.take().is_some() {
+            warn!(
+                "{} {}: {what}; reopening",
+                self.spec.kind().name(),
+                self.spec.name()
+            );
+        }
+        self.reopen_at = self.now() + FIRST_BACKOFF;
+        self.backoff = FIRST_BACKOFF * 2;
+        let publish = self.tracker.handle_disconnected();
+        self.publish_if(publish);
+    }
+
+    fn publish_if(&mut self, publish: Publish) {
+        if publish == Publish::Yes {
+            self.publish();
+        }
+    }
+
+    fn publish(&mut self) {
+        let state = *self.tracker.stamp(ipc::monotonic_ns());
+        if let Err(error) = self.ports.publish(&state) {
+            self.stats.publish_errors += 1;
+            if self.stats.publish_errors.is_power_of_two() {
+                error!(
+                    "publishing the state failed ({} times): {error:#}",
+                    self.stats.publish_errors
+                );
+            }
+        }
+    }
+
+    /// The link state now.
+    pub fn link_state(&self) -> LinkState {
+        self.tracker.link_state()
+    }
+}
