@@ -114,10 +114,12 @@ impl Port {
     }
 }
 
+/// A read or write that ended without data but without a fault: a timeout, or a signal (Ctrl-C,
+/// SIGTERM) interrupting the wait.
 fn is_timeout(error: &io::Error) -> bool {
     matches!(
         error.kind(),
-        io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock
+        io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted
     )
 }
 

@@ -268,6 +268,7 @@ fn wrap_angle(angle: f64) -> f64 {
 mod tests {
     use super::*;
     use crate::link::RxError;
+    use scout_protocol::units::DEFAULT_MAX_ANGULAR_SPEED;
     use scout_protocol::{ChassisState, ControlMode, FaultBits, MotionFeedback, SystemStatus, can};
 
     const MS: u64 = 1_000_000;
@@ -295,7 +296,12 @@ mod tests {
     }
 
     fn connected() -> StateTracker {
-        let mut tracker = StateTracker::new("test", TransportKind::Can, "vcan0", 0.5235);
+        let mut tracker = StateTracker::new(
+            "test",
+            TransportKind::Can,
+            "vcan0",
+            DEFAULT_MAX_ANGULAR_SPEED,
+        );
         assert_eq!(tracker.handle_connected(false), Publish::Yes);
         tracker
     }

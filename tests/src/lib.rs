@@ -197,3 +197,125 @@ pub fn skip(test: &str, reason: &str) {
     use std::io::Write;
     let _ = writeln!(std::io::stderr(), "SKIPPED {test}: {reason}");
 }
+
+/// A unique name for one test's robot, so that tests never share iceoryx2 services or locks.
+pub fn robot_name(test: &str) -> String {
+    format!("{test}-{}", std::process::id())
+}
+
+/// A running `scout-gateway`, killed when dropped. Its stderr is collected for failure messages.
+#[derive(Debug)]
+pub struct Gateway {
+    child: std::process::Child,
+    log: std::sync::Arc<std::sync::Mutex<String>>,
+}
+
+impl Gateway {
+    /// Starts `scout-gateway` with `args`.
+    pub fn start(args: &[&str]) -> Gateway {
+        let mut child = command("scout-gateway")
+            .env("RUST_LOG", "info")
+            .args(args)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("spawn scout-gateway");
+        let stderr = child.stderr.take().expect("stderr");
+        let log = std::sync::Arc::new(std::sync::Mutex::new(String::new()));
+        let sink = std::sync::Arc::clone(&log);
+        std::thread::spawn(move || {
+            use std::io::BufRead;
+            for line in std::io::BufReader::new(stderr).lines() {
+                let Ok(line) = line else { return };
+                if let Ok(mut log) = sink.lock() {
+                    log.push_str(&line);
+                    log.push('\n');
+                }
+            }
+        });
+        Gateway { child, log }
+    }
+
+    /// Everything it logged so far.
+    pub fn log(&self) -> String {
+        self.log.lock().map(|log| log.clone()).unwrap_or_default()
+    }
+
+    /// Its process id.
+    pub fn pid(&self) -> nix::unistd::Pid {
+        nix::unistd::Pid::from_raw(self.child.id() as i32)
+    }
+
+    /// Sends `signal` to it.
+    pub fn signal(&self, signal: nix::sys::signal::Signal) {
+        nix::sys::signal::kill(self.pid(), signal).expect("signal the gateway");
+    }
+
+    /// Waits at most `limit` for it to exit and returns its exit code.
+    pub fn wait_exit(&mut self, limit: Duration) -> Option<i32> {
+        let deadline = Instant::now() + limit;
+        loop {
+            if let Some(status) = self.child.try_wait().expect("try_wait") {
+                return status.code();
+            }
+            assert!(
+                Instant::now() < deadline,
+                "gateway still running after {limit:?}:\n{}",
+                self.log()
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// Whether it still runs.
+    pub fn is_running(&mut self) -> bool {
+        matches!(self.child.try_wait(), Ok(None))
+    }
+}
+
+impl Drop for Gateway {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Connects to robot `name`, retrying until its gateway is up (at most `LINE_TIMEOUT`).
+pub fn connect(name: &str) -> scout_clients::client::Robot {
+    let deadline = Instant::now() + LINE_TIMEOUT;
+    loop {
+        match scout_clients::client::Robot::connect(name) {
+            Ok(robot) => return robot,
+            Err(error) => {
+                assert!(
+                    Instant::now() < deadline,
+                    "no gateway '{name}' after {LINE_TIMEOUT:?}: {error}"
+                );
+                std::thread::sleep(Duration::from_millis(50));
+            }
+        }
+    }
+}
+
+/// Waits for a state that satisfies `wanted`, at most `limit`; returns it as JSON.
+pub fn wait_for_state(
+    subscriber: &scout_clients::client::StateSubscriber,
+    limit: Duration,
+    wanted: impl Fn(&serde_json::Value) -> bool,
+) -> serde_json::Value {
+    let deadline = Instant::now() + limit;
+    let mut last = serde_json::Value::Null;
+    while Instant::now() < deadline {
+        if let Some(state) = subscriber
+            .next_timeout(Duration::from_millis(200))
+            .expect("receive state")
+        {
+            last = scout_clients::state::state_json(&state, scout_clients::ipc::monotonic_ns());
+            if wanted(&last) {
+                return last;
+            }
+        }
+    }
+    panic!("no wanted state within {limit:?}; last: {last}");
+}

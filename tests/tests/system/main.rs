@@ -2,4 +2,5 @@
 //! deadline, on its own pseudo-terminals and names.
 
 mod decode;
+mod gateway;
 mod sim;

@@ -1,0 +1,278 @@
+//! scout-gateway against scout-sim over pseudo-terminals: state end to end, the command cadence
+//! the chassis sees, ownership, shutdown, reconnect and garbage.
+
+use std::time::Duration;
+
+use nix::sys::signal::Signal;
+use scout_system_tests::{Gateway, Sim, connect, robot_name, wait_for_state};
+
+const STATE_LIMIT: Duration = Duration::from_secs(10);
+
+fn temp_link(test: &str) -> (std::path::PathBuf, String) {
+    let dir = std::env::temp_dir().join(format!("scout-{test}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let link = dir.join("chassis");
+    let text = link.to_str().expect("utf-8").to_owned();
+    (dir, text)
+}
+
+fn check_state_end_to_end(transport: &str) {
+    let name = robot_name(&format!("e2e-{transport}"));
+    let mut sim = Sim::start(&[&format!("--{transport}")]);
+    sim.send("battery 24.7");
+    let port = sim.port().to_owned();
+    let gateway = Gateway::start(&[&format!("--{transport}"), &port, "--name", &name]);
+    let robot = connect(&name);
+    let subscriber = robot.subscribe().expect("subscribe");
+    let state = wait_for_state(&subscriber, STATE_LIMIT, |s| {
+        s["link"]["state"] == "ok" && !s["system"].is_null() && !s["lights"].is_null()
+    });
+    assert_eq!(state["robot"], name.as_str());
+    assert_eq!(state["link"]["transport"], transport);
+    assert_eq!(state["link"]["device"], port.as_str());
+    let mode = if transport == "serial" {
+        "serial"
+    } else {
+        "can"
+    };
+    assert_eq!(state["system"]["control_mode"], mode);
+    assert_eq!(state["system"]["state"], "normal");
+    assert_eq!(state["system"]["battery_voltage"], 24.7);
+    assert_eq!(state["motors"].as_array().map(Vec::len), Some(4));
+    assert_eq!(state["lights"]["rear"]["mode"], "breath");
+    assert_eq!(state["link"]["checksum_errors"], 0, "{}", gateway.log());
+    // The e-stop reaches every subscriber.
+    sim.send("estop on");
+    let state = wait_for_state(&subscriber, STATE_LIMIT, |s| {
+        s["system"]["state"] == "estop"
+    });
+    assert!(
+        state["system"]["faults"]
+            .as_array()
+            .expect("faults")
+            .contains(&"motor_1_comm_fault".into())
+    );
+    // The chassis saw 0x130 every 20 ms with valid checksums and its link's control mode.
+    std::thread::sleep(Duration::from_secs(1));
+    let stats = sim.stats();
+    assert_eq!(stats["checksum_failures"], 0, "{stats}");
+    assert_eq!(stats["ignored"]["wrong_mode"], 0, "{stats}");
+    assert!(
+        stats["commands"]["0x130"].as_u64().expect("count") >= 40,
+        "{stats}"
+    );
+    let intervals = &stats["motion_command_intervals"];
+    let mean = intervals["mean_ms"].as_f64().expect("mean");
+    assert!(
+        (15.0..30.0).contains(&mean),
+        "0x130 every 20 ms on average: {stats}"
+    );
+    assert_eq!(stats["last_command"]["linear"], 0.0);
+}
+
+#[test]
+fn serial_state_end_to_end() {
+    check_state_end_to_end("serial");
+}
+
+#[test]
+fn slcan_state_end_to_end() {
+    check_state_end_to_end("slcan");
+}
+
+#[test]
+fn second_gateway_is_refused_and_the_first_keeps_running() {
+    let name = robot_name("second");
+    let sim = Sim::start(&["--serial"]);
+    let port = sim.port().to_owned();
+    let mut first = Gateway::start(&["--serial", &port, "--name", &name]);
+    let subscriber = connect(&name).subscribe().expect("subscribe");
+    wait_for_state(&subscriber, STATE_LIMIT, |s| s["link"]["state"] == "ok");
+    let mut same_name = Gateway::start(&["--sim", "--name", &name]);
+    assert_eq!(same_name.wait_exit(Duration::from_secs(10)), Some(2));
+    assert!(
+        same_name
+            .log()
+            .contains("already owned by another scout-gateway"),
+        "{}",
+        same_name.log()
+    );
+    let other_name = robot_name("second-other");
+    let mut same_device = Gateway::start(&["--serial", &port, "--name", &other_name]);
+    assert_eq!(same_device.wait_exit(Duration::from_secs(10)), Some(2));
+    assert!(
+        same_device.log().contains(&format!("device {port}")),
+        "{}",
+        same_device.log()
+    );
+    assert!(first.is_running());
+    let state = wait_for_state(&subscriber, STATE_LIMIT, |s| s["link"]["state"] == "ok");
+    assert_eq!(state["robot"], name.as_str());
+}
+
+#[test]
+fn sigterm_sends_zero_speed_then_exits_0() {
+    let name = robot_name("sigterm");
+    let mut sim = Sim::start(&["--serial"]);
+    let port = sim.port().to_owned();
+    let mut gateway = Gateway::start(&["--serial", &port, "--name", &name]);
+    let subscriber = connect(&name).subscribe().expect("subscribe");
+    wait_for_state(&subscriber, STATE_LIMIT, |s| s["link"]["state"] == "ok");
+    let before = sim.stats()["commands"]["0x130"].as_u64().expect("count");
+    gateway.signal(Signal::SIGTERM);
+    assert_eq!(
+        gateway.wait_exit(Duration::from_secs(10)),
+        Some(0),
+        "{}",
+        gateway.log()
+    );
+    let after = sim.stats();
+    let sent = after["commands"]["0x130"].as_u64().expect("count") - before;
+    assert!(
+        sent >= 3,
+        "at least 3 zero commands after SIGTERM, got {sent}: {after}"
+    );
+    assert_eq!(after["last_command"]["linear"], 0.0);
+    assert_eq!(after["last_command"]["angular"], 0.0);
+    assert!(
+        gateway.log().contains("stopping: sending zero speed"),
+        "{}",
+        gateway.log()
+    );
+}
+
+#[test]
+fn reconnects_after_the_chassis_is_unplugged() {
+    let name = robot_name("unplug");
+    let (dir, link) = temp_link("unplug");
+    let mut sim = Sim::start(&["--serial", "--link", &link]);
+    let _gateway = Gateway::start(&["--serial", &link, "--name", &name]);
+    let subscriber = connect(&name).subscribe().expect("subscribe");
+    wait_for_state(&subscriber, STATE_LIMIT, |s| s["link"]["state"] == "ok");
+    sim.send("unplug 700");
+    wait_for_state(&subscriber, STATE_LIMIT, |s| {
+        s["link"]["state"] == "disconnected"
+    });
+    let state = wait_for_state(&subscriber, STATE_LIMIT, |s| {
+        s["link"]["state"] == "ok" && s["link"]["reconnects"] == 1
+    });
+    assert_eq!(state["system"]["state"], "normal");
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn silence_is_published_and_the_link_resumes() {
+    let name = robot_name("silence");
+    let mut sim = Sim::start(&["--serial"]);
+    let port = sim.port().to_owned();
+    let _gateway = Gateway::start(&["--serial", &port, "--name", &name]);
+    let subscriber = connect(&name).subscribe().expect("subscribe");
+    wait_for_state(&subscriber, STATE_LIMIT, |s| s["link"]["state"] == "ok");
+    sim.send("silence 500");
+    wait_for_state(&subscriber, STATE_LIMIT, |s| s["link"]["state"] == "silent");
+    wait_for_state(&subscriber, STATE_LIMIT, |s| s["link"]["state"] == "ok");
+}
+
+#[test]
+fn garbage_and_corrupt_frames_are_counted_and_survived() {
+    let name = robot_name("garbage");
+    let mut sim = Sim::start(&["--serial"]);
+    let port = sim.port().to_owned();
+    let mut gateway = Gateway::start(&["--serial", &port, "--name", &name]);
+    let subscriber = connect(&name).subscribe().expect("subscribe");
+    wait_for_state(&subscriber, STATE_LIMIT, |s| s["link"]["state"] == "ok");
+    sim.send("garbage 3000");
+    sim.send("corrupt 7");
+    let state = wait_for_state(&subscriber, STATE_LIMIT, |s| {
+        s["link"]["checksum_errors"].as_u64() >= Some(7)
+            && s["link"]["discarded_bytes"].as_u64() >= Some(1000)
+    });
+    assert_eq!(state["link"]["state"], "ok");
+    let rx = state["link"]["rx_frames"].as_u64().expect("rx");
+    wait_for_state(&subscriber, STATE_LIMIT, |s| {
+        s["link"]["rx_frames"].as_u64() > Some(rx + 50)
+    });
+    assert!(gateway.is_running());
+}
+
+#[test]
+fn restart_after_sigkill_needs_no_manual_cleanup() {
+    let name = robot_name("sigkill");
+    let mut first = Gateway::start(&["--sim", "--name", &name]);
+    let subscriber = connect(&name).subscribe().expect("subscribe");
+    wait_for_state(&subscriber, STATE_LIMIT, |s| s["link"]["state"] == "ok");
+    drop(subscriber);
+    first.signal(Signal::SIGKILL);
+    first.wait_exit(Duration::from_secs(10));
+    let mut second = Gateway::start(&["--sim", "--name", &name]);
+    let subscriber = connect(&name).subscribe().expect("subscribe after restart");
+    let state = wait_for_state(&subscriber, STATE_LIMIT, |s| s["link"]["state"] == "ok");
+    assert_eq!(state["robot"], name.as_str());
+    assert!(second.is_running(), "{}", second.log());
+}
+
+#[test]
+fn echo_without_a_gateway_says_how_to_start_one() {
+    let name = robot_name("nobody");
+    let mut echo = scout_system_tests::command("scout");
+    echo.args(["echo", "--json", "--count", "1", "--name", &name]);
+    let output = scout_system_tests::run_with_input(echo, b"", Duration::from_secs(20));
+    assert_eq!(output.status.code(), Some(3));
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains(&format!("no gateway named '{name}' is running")),
+        "{stderr}"
+    );
+    assert!(stderr.contains("scout-gateway"), "{stderr}");
+}
+
+#[test]
+fn echo_json_prints_n_updates_then_exits() {
+    let name = robot_name("echo");
+    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    connect(&name);
+    let mut echo = scout_system_tests::command("scout");
+    echo.args(["echo", "--json", "--count", "5", "--name", &name]);
+    let output = scout_system_tests::run_with_input(echo, b"", Duration::from_secs(20));
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let lines: Vec<serde_json::Value> = String::from_utf8_lossy(&output.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("JSON line"))
+        .collect();
+    assert_eq!(lines.len(), 5);
+    for pair in lines.windows(2) {
+        assert!(pair[1]["seq"].as_u64() > pair[0]["seq"].as_u64());
+    }
+}
+
+#[test]
+fn odometry_reset_from_a_client() {
+    let name = robot_name("odometry");
+    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    let robot = connect(&name);
+    let subscriber = robot.subscribe().expect("subscribe");
+    wait_for_state(&subscriber, STATE_LIMIT, |s| s["link"]["state"] == "ok");
+    robot.reset_odometry().expect("reset");
+    wait_for_state(&subscriber, STATE_LIMIT, |s| s["odometry"]["resets"] == 1);
+}
+
+#[test]
+fn socketcan_gateway_on_vcan0() {
+    if !std::path::Path::new("/sys/class/net/vcan0").exists() {
+        scout_system_tests::skip(
+            "socketcan_gateway_on_vcan0",
+            "no vcan0 here (the kernel has no SocketCAN; `ip link add vcan0 type vcan`)",
+        );
+        return;
+    }
+    let name = robot_name("vcan");
+    let _sim = Sim::start(&["--can", "vcan0"]);
+    let _gateway = Gateway::start(&["--can", "vcan0", "--name", &name]);
+    let subscriber = connect(&name).subscribe().expect("subscribe");
+    let state = wait_for_state(&subscriber, STATE_LIMIT, |s| s["link"]["state"] == "ok");
+    assert_eq!(state["link"]["transport"], "can");
+}
