@@ -21,6 +21,10 @@ use crate::device::{Device, DeviceSpec};
 use crate::link::RxEvent;
 use crate::state::{Publish, StateTracker};
 
+/// The state is published at least this often, frames or not: a subscriber sees that the
+/// gateway lives while the chassis is silent, and a late subscriber gets the latest state fast.
+const HEARTBEAT: Duration = Duration::from_millis(100);
+
 /// The first wait before reopening a failed port; it doubles up to `reconnect_max_ms`.
 const FIRST_BACKOFF: Duration = Duration::from_millis(50);
 
@@ -118,6 +122,7 @@ pub struct ControlLoop {
     last_open_error: Option<String>,
     events: Vec<RxEvent>,
     buffer: Box<[u8; 4096]>,
+    last_publish: Duration,
     stats: LoopStats,
 }
 
@@ -152,6 +157,7 @@ impl ControlLoop {
             last_open_error: None,
             events: Vec::with_capacity(64),
             buffer: Box::new([0; 4096]),
+            last_publish: Duration::ZERO,
             stats: LoopStats::default(),
             config,
         })
@@ -210,6 +216,9 @@ impl ControlLoop {
             }
             let publish = self.tracker.poll(ipc::monotonic_ns());
             self.publish_if(publish);
+            if self.now().saturating_sub(self.last_publish) >= HEARTBEAT {
+                self.publish();
+            }
             let deadline = if self.lights.is_some() {
                 self.next_command.min(self.next_light)
             } else {
@@ -375,6 +384,7 @@ impl ControlLoop {
     }
 
     fn publish(&mut self) {
+        self.last_publish = self.now();
         let state = *self.tracker.stamp(ipc::monotonic_ns());
         if let Err(error) = self.ports.publish(&state) {
             self.stats.publish_errors += 1;

@@ -276,3 +276,52 @@ fn socketcan_gateway_on_vcan0() {
     let state = wait_for_state(&subscriber, STATE_LIMIT, |s| s["link"]["state"] == "ok");
     assert_eq!(state["link"]["transport"], "can");
 }
+
+#[test]
+fn a_late_subscriber_gets_the_latest_state_at_once() {
+    let name = robot_name("late");
+    let mut sim = Sim::start(&["--serial"]);
+    let port = sim.port().to_owned();
+    let _gateway = Gateway::start(&["--serial", &port, "--name", &name]);
+    let robot = connect(&name);
+    let early = robot.subscribe().expect("subscribe");
+    wait_for_state(&early, STATE_LIMIT, |s| s["link"]["state"] == "ok");
+    // A silent chassis: nothing is published after the change to `silent`.
+    sim.send("silence 60000");
+    let silent = wait_for_state(&early, STATE_LIMIT, |s| s["link"]["state"] == "silent");
+    let late = robot.subscribe().expect("late subscribe");
+    let state = late
+        .next_timeout(Duration::from_secs(1))
+        .expect("receive")
+        .expect("the latest state at once, though no frame arrives");
+    assert!(state.seq >= silent["seq"].as_u64().expect("seq"));
+    let json = scout_clients::state::state_json(&state, scout_clients::ipc::monotonic_ns());
+    assert_eq!(json["link"]["state"], "silent");
+}
+
+#[test]
+fn thirty_two_subscriber_processes_at_once() {
+    const PROCESSES: usize = 32;
+    let name = robot_name("many");
+    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    connect(&name);
+    let children: Vec<_> = (0..PROCESSES)
+        .map(|_| {
+            scout_system_tests::command("scout")
+                .args(["echo", "--json", "--count", "20", "--name", &name])
+                .stdout(std::process::Stdio::piped())
+                .stderr(std::process::Stdio::piped())
+                .spawn()
+                .expect("spawn scout echo")
+        })
+        .collect();
+    for child in children {
+        let output = child.wait_with_output().expect("scout echo output");
+        assert!(
+            output.status.success(),
+            "{}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        assert_eq!(String::from_utf8_lossy(&output.stdout).lines().count(), 20);
+    }
+}
