@@ -137,9 +137,9 @@ fn draw(state: &StatePayload, out: &mut dyn Write) -> std::io::Result<()> {
             "  {}    {:>8} {:>7} {:>9} {:>8}",
             motor["motor"],
             number(&motor["current"], 1),
-            motor["rpm"],
-            motor["driver_temperature"],
-            motor["motor_temperature"],
+            number(&motor["rpm"], 0),
+            number(&motor["driver_temperature"], 0),
+            number(&motor["motor_temperature"], 0),
         )?;
     }
     let lights = &json["lights"];
