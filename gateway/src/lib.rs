@@ -1,5 +1,6 @@
 //! scout-gateway: the process that owns a SCOUT chassis port, and the chassis simulator.
 //!
+//! - [`arbiter`]: who drives: safety stop > teleop > autonomy (sans-IO).
 //! - [`control`]: the control loop, the one thread that touches the port and the clock.
 //! - [`state`]: the chassis state tracker (sans-IO).
 //! - [`device`]: the port or the in-process simulator, messages in and out.
@@ -9,6 +10,7 @@
 //! - [`port`]: the port as an OS resource (tty or SocketCAN socket).
 //! - [`sim`]: the simulated chassis and the `scout-sim` driver loop.
 
+pub mod arbiter;
 pub mod config;
 pub mod control;
 pub mod device;
