@@ -53,12 +53,9 @@ impl Robot {
         &self.name
     }
 
-    /// Asks the gateway to reset its odometry to the origin (x, y, yaw 0).
-    pub fn reset_odometry(&self) -> Result<(), ClientError> {
-        let events = ipc::reset_odometry_events(&self.node, &self.name)?;
-        let notifier = events.notifier_builder().create().map_err(iceoryx)?;
-        notifier.notify().map_err(iceoryx)?;
-        Ok(())
+    /// The iceoryx2 node of this process.
+    pub fn node(&self) -> &Node<Ipc> {
+        &self.node
     }
 
     /// Subscribes to the chassis state. The latest state is available at once.

@@ -36,11 +36,6 @@ pub fn state_service(robot: &str) -> String {
     format!("{}/state", prefix(robot))
 }
 
-/// The event service a client notifies to reset the gateway's odometry.
-pub fn reset_odometry_service(robot: &str) -> String {
-    format!("{}/reset_odometry", prefix(robot))
-}
-
 /// A robot name is the key of every service: letters, digits, `-` and `_`, 1..=32 characters.
 pub fn check_robot_name(name: &str) -> Result<(), String> {
     let valid = !name.is_empty()
@@ -145,21 +140,6 @@ pub fn create_state_services(
         .open_or_create()
         .map_err(|e| iceoryx(e.to_string()))?;
     Ok((state, events))
-}
-
-/// Creates (gateway) or opens (client) the odometry-reset event service of `robot`.
-pub fn reset_odometry_events(node: &Node<Ipc>, robot: &str) -> Result<StateEvents, ServiceError> {
-    let name = reset_odometry_service(robot);
-    node.service_builder(&service_name(&name)?)
-        .event()
-        .max_notifiers(MAX_CONTROLLERS)
-        .max_listeners(2)
-        .max_nodes(MAX_NODES)
-        .open_or_create()
-        .map_err(|e| ServiceError::Iceoryx {
-            service: name,
-            reason: e.to_string(),
-        })
 }
 
 /// Opens (client) the state services of `robot`.
@@ -624,4 +604,361 @@ mod convert {
             }
         }
     }
+}
+
+/// The request-response service carrying [`ControlRequest`] and [`ControlResponse`], and the
+/// event service a client notifies after sending so that the gateway wakes at once.
+pub fn control_service(robot: &str) -> String {
+    format!("{}/control", prefix(robot))
+}
+
+/// The publish-subscribe service carrying [`StatusPayload`].
+pub fn status_service(robot: &str) -> String {
+    format!("{}/status", prefix(robot))
+}
+
+/// What a [`ControlRequest`] asks for (its `kind` byte).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum RequestKind {
+    /// Drive at `linear`, `angular` as `class` for `ttl_ms` (0: the class's maximum age).
+    Drive = 1,
+    /// Latch the safety stop (`reason`).
+    Stop = 2,
+    /// Release the latched stop and this client's control.
+    Release = 3,
+    /// Arm autonomy.
+    Resume = 4,
+    /// Set the lights (`lights`).
+    Lights = 5,
+    /// Clear a fault (`fault_clear`: a code 1..8, or [`CLEAR_ALL_FAULTS`]).
+    ClearFault = 6,
+    /// Register (`heartbeat_ms` > 0) or drop (0) a heartbeat stop source; also a beat.
+    Heartbeat = 7,
+    /// Reset the gateway's odometry.
+    ResetOdometry = 8,
+    /// Give up this client's control (never touches the stop).
+    Relinquish = 9,
+}
+
+impl RequestKind {
+    /// From the payload byte.
+    pub fn from_raw(raw: u8) -> Option<Self> {
+        Some(match raw {
+            1 => Self::Drive,
+            2 => Self::Stop,
+            3 => Self::Release,
+            4 => Self::Resume,
+            5 => Self::Lights,
+            6 => Self::ClearFault,
+            7 => Self::Heartbeat,
+            8 => Self::ResetOdometry,
+            9 => Self::Relinquish,
+            _ => return None,
+        })
+    }
+}
+
+/// `fault_clear` value asking for every fault-clear code in turn.
+pub const CLEAR_ALL_FAULTS: u8 = 0xFF;
+
+/// A controlling client's class.
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "snake_case")]
+#[repr(u8)]
+pub enum Class {
+    /// A person driving: overrides autonomy.
+    Teleop = 1,
+    /// A program driving.
+    Autonomy = 2,
+}
+
+impl Class {
+    /// From the payload byte (0 is "no class").
+    pub fn from_raw(raw: u8) -> Option<Self> {
+        match raw {
+            1 => Some(Self::Teleop),
+            2 => Some(Self::Autonomy),
+            _ => None,
+        }
+    }
+
+    /// The name in JSON, logs and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Teleop => "teleop",
+            Self::Autonomy => "autonomy",
+        }
+    }
+}
+
+impl std::str::FromStr for Class {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, String> {
+        match text {
+            "teleop" => Ok(Self::Teleop),
+            "autonomy" => Ok(Self::Autonomy),
+            other => Err(format!("unknown class `{other}`: teleop or autonomy")),
+        }
+    }
+}
+
+/// The lights of a request: `auto` hands them back to the chassis; otherwise the raw modes
+/// (0 off, 1 on, 2 breath, 3 custom) and brightness 0..100.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
+#[repr(C)]
+pub struct LightsRequest {
+    /// Hand the lights back to the chassis.
+    pub auto: bool,
+    /// Front light.
+    pub front: LightPayload,
+    /// Rear light.
+    pub rear: LightPayload,
+}
+
+/// A request from a client to the gateway's arbiter.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[type_name("scout::ControlRequest")]
+#[repr(C)]
+pub struct ControlRequest {
+    /// [`RequestKind`] as `u8`.
+    pub kind: u8,
+    /// [`Class`] byte (0: none), for drive.
+    pub class: u8,
+    /// Fault-clear code, for clear-fault.
+    pub fault_clear: u8,
+    /// Lights, for lights.
+    pub lights: LightsRequest,
+    /// The client's name (shown in the status and the audit log).
+    pub client: FixedText<32>,
+    /// The client's iceoryx2 node id, high and low 64 bits (dead-process detection).
+    pub node: [u64; 2],
+    /// The client's own request number.
+    pub seq: u64,
+    /// m/s, for drive.
+    pub linear: f64,
+    /// rad/s, for drive.
+    pub angular: f64,
+    /// The command's life, ms (0: the class's maximum age), for drive.
+    pub ttl_ms: u32,
+    /// The heartbeat period, ms, for heartbeat.
+    pub heartbeat_ms: u32,
+    /// Why, for stop.
+    pub reason: FixedText<64>,
+}
+
+/// The gateway's answer to one request.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
+#[type_name("scout::ControlResponse")]
+#[repr(C)]
+pub struct ControlResponse {
+    /// The request's `seq`.
+    pub seq: u64,
+    /// Accepted (true) or rejected.
+    pub accepted: bool,
+    /// Accepted, but a speed beyond the caps was clamped.
+    pub clamped: bool,
+    /// The rejection counter index (see the status' rejection names); 0xFF when accepted.
+    pub code: u8,
+    /// Why it was rejected.
+    pub reason: FixedText<160>,
+}
+
+/// One client in the arbiter's status.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+pub struct SourcePayload {
+    /// The client's name.
+    pub client: FixedText<32>,
+    /// [`Class`] byte of its last command (0: none).
+    pub class: u8,
+    /// Whether it holds its class now.
+    pub holding: bool,
+    /// Its heartbeat period, ms (0: none).
+    pub heartbeat_ms: u32,
+    /// Requests it sent.
+    pub requests: u64,
+    /// How long ago it last sent a request, ms.
+    pub age_ms: f64,
+}
+
+/// Most clients listed in a status.
+pub const MAX_STATUS_SOURCES: usize = 32;
+/// Rejection counters in a status.
+pub const REJECTION_COUNTERS: usize = 8;
+
+/// The arbiter's status, published on every change and at least once a second.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[type_name("scout::StatusPayload")]
+#[repr(C)]
+pub struct StatusPayload {
+    /// Rises by one with every publication.
+    pub seq: u64,
+    /// CLOCK_MONOTONIC time of publication, ns.
+    pub published_ns: u64,
+    /// The robot's name.
+    pub robot: FixedText<32>,
+    /// The safety stop is latched.
+    pub latched: bool,
+    /// Who latched it.
+    pub latched_by: FixedText<32>,
+    /// Why.
+    pub latched_reason: FixedText<64>,
+    /// How long ago, ms.
+    pub latched_age_ms: f64,
+    /// [`Class`] byte of the selected source (0: none).
+    pub selected_class: u8,
+    /// The selected client.
+    pub selected_client: FixedText<32>,
+    /// The output, m/s.
+    pub output_linear: f64,
+    /// The output, rad/s.
+    pub output_angular: f64,
+    /// The fault-clear code going out.
+    pub output_fault_clear: u8,
+    /// A cap or rate limit is active.
+    pub limited: bool,
+    /// Autonomy may drive.
+    pub autonomy_armed: bool,
+    /// Host light control: 0 never set, 1 auto, 2 manual.
+    pub lights: u8,
+    /// How many entries of `sources` are used.
+    pub source_count: u8,
+    /// The known clients.
+    pub sources: [SourcePayload; MAX_STATUS_SOURCES],
+    /// Rejections by reason.
+    pub rejections: [u64; REJECTION_COUNTERS],
+}
+
+/// The rejection counter names, in counter order (the same as the gateway's arbiter).
+pub const REJECTION_NAMES: [&str; REJECTION_COUNTERS] = [
+    "not_finite",
+    "unknown_class",
+    "unknown_request",
+    "malformed",
+    "latched",
+    "held",
+    "autonomy_disarmed",
+    "too_many_clients",
+];
+
+/// The control request-response service.
+pub type ControlService = iceoryx2::service::port_factory::request_response::PortFactory<
+    Ipc,
+    ControlRequest,
+    (),
+    ControlResponse,
+    (),
+>;
+
+/// The status service.
+pub type StatusService = publish_subscribe::PortFactory<Ipc, StatusPayload, ()>;
+
+/// Creates (gateway) or opens (client) the control services of `robot`: requests and the wake-up
+/// event. Sized for [`MAX_CONTROLLERS`] client processes.
+pub fn control_services(
+    node: &Node<Ipc>,
+    robot: &str,
+    create: bool,
+) -> Result<(ControlService, StateEvents), ServiceError> {
+    use iceoryx2::service::builder::event::EventOpenError;
+    use iceoryx2::service::builder::request_response::RequestResponseOpenError;
+    let name = control_service(robot);
+    let service_name = service_name(&name)?;
+    let no_gateway = || ServiceError::NoGateway {
+        robot: robot.to_owned(),
+    };
+    let iceoryx = |reason: String| ServiceError::Iceoryx {
+        service: name.clone(),
+        reason,
+    };
+    let builder = node
+        .service_builder(&service_name)
+        .request_response::<ControlRequest, ControlResponse>();
+    let requests = if create {
+        builder
+            .max_servers(2)
+            .max_clients(MAX_CONTROLLERS)
+            .max_nodes(MAX_NODES)
+            .max_active_requests_per_client(4)
+            .max_response_buffer_size(4)
+            .enable_safe_overflow_for_requests(true)
+            .enable_safe_overflow_for_responses(true)
+            .open_or_create()
+            .map_err(|e| iceoryx(e.to_string()))?
+    } else {
+        builder.open().map_err(|e| match e {
+            RequestResponseOpenError::DoesNotExist => no_gateway(),
+            other => iceoryx(other.to_string()),
+        })?
+    };
+    let events = node.service_builder(&service_name).event();
+    let events = if create {
+        events
+            .max_notifiers(MAX_CONTROLLERS)
+            .max_listeners(2)
+            .max_nodes(MAX_NODES)
+            .open_or_create()
+            .map_err(|e| iceoryx(e.to_string()))?
+    } else {
+        events.open().map_err(|e| match e {
+            EventOpenError::DoesNotExist => no_gateway(),
+            other => iceoryx(other.to_string()),
+        })?
+    };
+    Ok((requests, events))
+}
+
+/// Creates (gateway) or opens (client) the status service of `robot`.
+pub fn status_services(
+    node: &Node<Ipc>,
+    robot: &str,
+    create: bool,
+) -> Result<StatusService, ServiceError> {
+    use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError;
+    let name = status_service(robot);
+    let builder = node
+        .service_builder(&service_name(&name)?)
+        .publish_subscribe::<StatusPayload>();
+    let result = if create {
+        builder
+            .max_publishers(2)
+            .max_subscribers(MAX_SUBSCRIBERS)
+            .max_nodes(MAX_NODES)
+            .history_size(1)
+            .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
+            .enable_safe_overflow(true)
+            .open_or_create()
+            .map_err(|e| e.to_string())
+    } else {
+        builder.open().map_err(|e| match e {
+            PublishSubscribeOpenError::DoesNotExist => String::new(),
+            other => other.to_string(),
+        })
+    };
+    result.map_err(|reason| {
+        if reason.is_empty() {
+            ServiceError::NoGateway {
+                robot: robot.to_owned(),
+            }
+        } else {
+            ServiceError::Iceoryx {
+                service: name,
+                reason,
+            }
+        }
+    })
+}
+
+/// The node id as the two halves a [`ControlRequest`] carries.
+pub fn node_halves(node: u128) -> [u64; 2] {
+    [(node >> 64) as u64, node as u64]
+}
+
+/// The node id from a [`ControlRequest`]'s halves.
+pub fn node_from_halves(halves: [u64; 2]) -> u128 {
+    (u128::from(halves[0]) << 64) | u128::from(halves[1])
 }

@@ -1,10 +1,13 @@
-//! The public JSON form of the chassis state (`scout echo --json`, and zenoh later).
+//! The public JSON forms of the chassis state (`scout echo --json`) and of the arbiter's status
+//! (`scout status --json`); zenoh carries the same.
 
-use scout_protocol::{Message, Motor};
+use scout_protocol::{FaultClear, Message, Motor};
 use serde_json::{Value, json};
 
 use crate::decode::message_fields;
-use crate::ipc::{LinkState, Received, StatePayload, TransportKind};
+use crate::ipc::{
+    Class, LinkState, REJECTION_NAMES, Received, StatePayload, StatusPayload, TransportKind,
+};
 
 fn age_ms(at_ns: u64, now_ns: u64) -> f64 {
     now_ns.saturating_sub(at_ns) as f64 / 1e6
@@ -80,11 +83,100 @@ pub fn state_json(state: &StatePayload, now_ns: u64) -> Value {
     })
 }
 
+fn class_name(raw: u8) -> Value {
+    Class::from_raw(raw).map_or(Value::Null, |class| class.name().into())
+}
+
+/// The arbiter's status as the README documents it.
+pub fn status_json(status: &StatusPayload, now_ns: u64) -> Value {
+    let latched_by = if status.latched {
+        json!({
+            "client": status.latched_by.as_str(),
+            "reason": status.latched_reason.as_str(),
+            "age_ms": status.latched_age_ms,
+        })
+    } else {
+        Value::Null
+    };
+    let selected = match Class::from_raw(status.selected_class) {
+        Some(class) => json!({ "client": status.selected_client.as_str(), "class": class.name() }),
+        None => Value::Null,
+    };
+    let sources: Vec<Value> = status.sources
+        [..usize::from(status.source_count).min(status.sources.len())]
+        .iter()
+        .map(|source| {
+            json!({
+                "client": source.client.as_str(),
+                "class": class_name(source.class),
+                "holding": source.holding,
+                "heartbeat_ms": (source.heartbeat_ms > 0).then_some(source.heartbeat_ms),
+                "requests": source.requests,
+                "age_ms": source.age_ms,
+            })
+        })
+        .collect();
+    let rejections: serde_json::Map<String, Value> = REJECTION_NAMES
+        .iter()
+        .zip(status.rejections)
+        .map(|(name, count)| ((*name).to_owned(), count.into()))
+        .collect();
+    let lights = match status.lights {
+        1 => "auto",
+        2 => "manual",
+        _ => "chassis",
+    };
+    json!({
+        "robot": status.robot.as_str(),
+        "seq": status.seq,
+        "age_ms": age_ms(status.published_ns, now_ns),
+        "latched": status.latched,
+        "latched_by": latched_by,
+        "selected": selected,
+        "output": {
+            "linear": status.output_linear,
+            "angular": status.output_angular,
+            "fault_clear": FaultClear::from_raw(status.output_fault_clear).name(),
+            "limited": status.limited,
+        },
+        "autonomy_armed": status.autonomy_armed,
+        "lights": lights,
+        "sources": sources,
+        "rejections": rejections,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::ipc::{FixedText, SystemPayload};
     use scout_protocol::{ChassisState, ControlMode, FaultBits, SystemStatus};
+
+    #[test]
+    fn status_schema_has_the_documented_fields() {
+        let status = StatusPayload {
+            latched: true,
+            latched_by: FixedText::new("safety"),
+            selected_class: 0,
+            autonomy_armed: false,
+            ..StatusPayload::default()
+        };
+        let json = status_json(&status, 0);
+        assert_eq!(json["latched"], true);
+        assert_eq!(json["latched_by"]["client"], "safety");
+        assert_eq!(json["selected"], Value::Null);
+        assert_eq!(json["autonomy_armed"], false);
+        assert_eq!(json["rejections"]["not_finite"], 0);
+        let driving = StatusPayload {
+            selected_class: Class::Teleop as u8,
+            selected_client: FixedText::new("joy"),
+            ..StatusPayload::default()
+        };
+        assert_eq!(
+            status_json(&driving, 0)["selected"],
+            json!({"client": "joy", "class": "teleop"})
+        );
+    }
 
     #[test]
     fn schema_has_the_documented_fields() {

@@ -23,25 +23,7 @@ pub const FAULT_CLEAR_FRAMES: u8 = 3;
 /// The most clients the arbiter tracks at once.
 pub const MAX_SOURCES: usize = 32;
 
-/// A client's class.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Class {
-    /// A person driving: overrides autonomy.
-    Teleop,
-    /// A program driving.
-    Autonomy,
-}
-
-impl Class {
-    /// The name in JSON, logs and on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Teleop => "teleop",
-            Self::Autonomy => "autonomy",
-        }
-    }
-}
+pub use scout_clients::ipc::{Class, REJECTION_NAMES};
 
 /// Speed caps, m/s and rad/s.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -192,6 +174,8 @@ pub enum Request {
     },
     /// Release the latched stop and whatever control this client holds.
     Release,
+    /// Give up this client's control; the stop is left alone.
+    Relinquish,
     /// Arm autonomy.
     Resume,
     /// Set the lights (last writer wins).
@@ -234,18 +218,6 @@ pub enum Rejection {
     /// The arbiter tracks too many clients.
     TooManyClients,
 }
-
-/// The names of the rejection counters, in [`Rejection::code`] order.
-pub const REJECTION_NAMES: [&str; 8] = [
-    "not_finite",
-    "unknown_class",
-    "unknown_request",
-    "malformed",
-    "latched",
-    "held",
-    "autonomy_disarmed",
-    "too_many_clients",
-];
 
 impl Rejection {
     /// The counter index (see [`REJECTION_NAMES`]).
@@ -515,6 +487,19 @@ impl Arbiter {
                 }
                 source.command = None;
                 self.disarm_autonomy(now, "a release");
+                accepted
+            }
+            Request::Relinquish => {
+                let source = &mut self.sources[index];
+                if let Some(class) = source.holding.take() {
+                    info!(
+                        "{}: {} {} relinquished control",
+                        secs(now),
+                        class.name(),
+                        client.name
+                    );
+                }
+                source.command = None;
                 accepted
             }
             Request::Resume => {

@@ -419,6 +419,7 @@ fn any_step() -> impl Strategy<Value = (u8, Request, u64)> {
         ),
         1 => Just(Request::Stop { reason: "prop".into() }),
         1 => Just(Request::Release),
+        1 => Just(Request::Relinquish),
         1 => Just(Request::Resume),
     ];
     (0u8..4, request, 0u64..60)
@@ -495,4 +496,39 @@ proptest! {
             prop_assert!(next.signum() == current.signum(), "stops at zero before reversing");
         }
     }
+}
+
+#[test]
+fn relinquish_leaves_the_stop_alone() {
+    let mut arbiter = arbiter();
+    let (driver, safety) = (client("driver", 1), client("safety", 2));
+    arbiter
+        .handle_request(ms(0), &driver, drive(Class::Teleop, 0.5, 0.0))
+        .expect("drive");
+    arbiter
+        .handle_request(
+            ms(10),
+            &safety,
+            Request::Stop {
+                reason: "test".into(),
+            },
+        )
+        .expect("stop");
+    arbiter
+        .handle_request(ms(20), &driver, Request::Relinquish)
+        .expect("relinquish");
+    assert!(
+        arbiter.latch().is_some(),
+        "a client giving up control does not release the stop"
+    );
+    arbiter
+        .handle_request(ms(30), &safety, Request::Release)
+        .expect("release");
+    arbiter
+        .handle_request(ms(40), &driver, drive(Class::Teleop, 0.5, 0.0))
+        .expect("drive");
+    arbiter
+        .handle_request(ms(50), &driver, Request::Relinquish)
+        .expect("relinquish");
+    assert!(arbiter.selected(ms(50)).is_none());
 }

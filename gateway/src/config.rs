@@ -7,6 +7,7 @@ use std::time::Duration;
 use scout_protocol::units::DEFAULT_MAX_ANGULAR_SPEED;
 use serde::{Deserialize, Serialize};
 
+use crate::arbiter::ArbiterConfig;
 use crate::device::DeviceSpec;
 use crate::sim::SimParams;
 
@@ -38,6 +39,8 @@ pub struct GatewayConfig {
     pub max_angular: f64,
     /// Periods and limits of the control loop.
     pub timing: Timing,
+    /// Who drives: ages, caps, rate limits, autonomy re-arming.
+    pub arbiter: ArbiterConfig,
     /// The simulated chassis (`transport = "sim"`).
     pub sim: SimParams,
 }
@@ -78,6 +81,7 @@ impl Default for GatewayConfig {
             device: None,
             max_angular: DEFAULT_MAX_ANGULAR_SPEED,
             timing: Timing::default(),
+            arbiter: ArbiterConfig::default(),
             sim: SimParams::default(),
         }
     }
@@ -139,6 +143,7 @@ impl GatewayConfig {
                 self.timing.command_period_ms
             )));
         }
+        self.arbiter.validate().map_err(ConfigError::Invalid)?;
         let device = || {
             self.device.clone().ok_or_else(|| {
                 ConfigError::Invalid("no device: give --serial, --slcan or --can with a device, or `device` in the config".into())

@@ -5,20 +5,30 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+use std::collections::HashSet;
+
 use anyhow::Context;
 use iceoryx2::node::Node;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::server::Server;
 use iceoryx2::prelude::BackpressureStrategy;
-use scout_clients::ipc::{self, Ipc, LinkState, StatePayload, TransportKind};
+use scout_clients::ipc::{
+    self, ControlRequest, ControlResponse, Ipc, LinkState, StatePayload, StatusPayload,
+    TransportKind,
+};
 use scout_protocol::sequence::RollingCounter;
-use scout_protocol::{Counted, LightCommand, Message, MotionCommand};
+use scout_protocol::units::{self, MAX_LINEAR_SPEED};
+use scout_protocol::{Counted, FaultClear, LightCommand, Message, MotionCommand};
 use tracing::{debug, error, info, warn};
 
+use crate::arbiter::{Arbiter, LightsSetting, Output};
 use crate::config::GatewayConfig;
 use crate::device::{Device, DeviceSpec};
 use crate::link::RxEvent;
+use crate::monitor::NodeMonitor;
+use crate::requests::{self, Action};
 use crate::state::{Publish, StateTracker};
 
 /// The state is published at least this often, frames or not: a subscriber sees that the
@@ -28,11 +38,16 @@ const HEARTBEAT: Duration = Duration::from_millis(100);
 /// The first wait before reopening a failed port; it doubles up to `reconnect_max_ms`.
 const FIRST_BACKOFF: Duration = Duration::from_millis(50);
 
+/// The status is published at least this often, changes or not.
+const STATUS_HEARTBEAT: Duration = Duration::from_secs(1);
+
 /// The iceoryx2 side: the node and the ports the gateway owns.
 struct Ports {
     publisher: Publisher<Ipc, StatePayload, ()>,
     notifier: Notifier<Ipc>,
-    reset_odometry: Listener<Ipc>,
+    status: Publisher<Ipc, StatusPayload, ()>,
+    server: Server<Ipc, ControlRequest, (), ControlResponse, ()>,
+    wake: Listener<Ipc>,
     // Dropped last: the ports above belong to it.
     _node: Node<Ipc>,
 }
@@ -56,14 +71,26 @@ impl Ports {
             .notifier_builder()
             .create()
             .context("creating the state notifier")?;
-        let reset_odometry = ipc::reset_odometry_events(&node, robot)?
+        let status = ipc::status_services(&node, robot, true)?
+            .publisher_builder()
+            .backpressure_strategy(BackpressureStrategy::DiscardData)
+            .create()
+            .context("creating the status publisher")?;
+        let (control, control_events) = ipc::control_services(&node, robot, true)?;
+        let server = control
+            .server_builder()
+            .create()
+            .context("creating the control server")?;
+        let wake = control_events
             .listener_builder()
             .create()
-            .context("creating the odometry-reset listener")?;
+            .context("creating the control listener")?;
         Ok(Self {
             publisher,
             notifier,
-            reset_odometry,
+            status,
+            server,
+            wake,
             _node: node,
         })
     }
@@ -85,11 +112,16 @@ impl Ports {
         Ok(())
     }
 
-    /// Whether a client asked for an odometry reset since the last call.
-    fn reset_requested(&self) -> bool {
-        let mut requested = false;
-        let _ = self.reset_odometry.try_wait(|_| requested = true);
-        requested
+    fn publish_status(&self, status: &StatusPayload) -> anyhow::Result<()> {
+        let sample = self
+            .status
+            .loan_uninit()
+            .context("loaning a status sample")?;
+        sample
+            .write_payload(*status)
+            .send()
+            .context("sending the status")?;
+        Ok(())
     }
 }
 
@@ -101,6 +133,8 @@ struct LoopStats {
     missed_ticks: u64,
     max_lateness: Duration,
     publish_errors: u64,
+    requests: u64,
+    urgent_stops: u64,
 }
 
 /// The gateway's control loop.
@@ -110,7 +144,12 @@ pub struct ControlLoop {
     start: Instant,
     device: Option<Device>,
     tracker: StateTracker,
+    arbiter: Arbiter,
     ports: Ports,
+    monitor: NodeMonitor,
+    watched_nodes: HashSet<u128>,
+    status: StatusPayload,
+    last_status: Duration,
     motion_count: RollingCounter,
     light_count: RollingCounter,
     lights: Option<LightCommand>,
@@ -140,9 +179,16 @@ impl ControlLoop {
         let ports = Ports::create(&config.name)?;
         let tracker =
             StateTracker::new(&config.name, spec.kind(), &spec.name(), config.max_angular);
+        let arbiter = Arbiter::new(config.arbiter.clone(), config.max_angular);
+        let monitor = NodeMonitor::start().context("starting the client monitor thread")?;
         Ok(Self {
             tracker,
+            arbiter,
             ports,
+            monitor,
+            watched_nodes: HashSet::new(),
+            status: StatusPayload::default(),
+            last_status: Duration::ZERO,
             spec,
             start: Instant::now(),
             device: None,
@@ -174,12 +220,6 @@ impl ControlLoop {
         })
     }
 
-    /// Sets the lights the gateway repeats (or `None`: stop sending light commands).
-    pub fn set_lights(&mut self, lights: Option<LightCommand>) {
-        self.lights = lights;
-        self.next_light = self.now();
-    }
-
     /// Runs until `stop` is set, then sends zero speed for `stop_cycles` more cycles and returns.
     pub fn run(&mut self, stop: &AtomicBool) -> anyhow::Result<()> {
         let period = self.config.command_period();
@@ -195,25 +235,50 @@ impl ControlLoop {
             if self.device.is_none() && now >= self.reopen_at {
                 self.open(now);
             }
+            self.handle_requests(now);
+            while let Some(node) = self.monitor.try_gone() {
+                self.watched_nodes.remove(&node);
+                self.arbiter.handle_node_gone(now, node);
+            }
+            if self.arbiter.take_urgent_stop() {
+                // The stop goes on the wire now, not at the next tick.
+                self.stats.urgent_stops += 1;
+                self.send_motion(
+                    &Output {
+                        fault_clear: FaultClear::None,
+                        ..self.arbiter.output()
+                    },
+                    now,
+                );
+            }
             if now >= self.next_command {
                 if stopping == Some(0) || (stopping.is_some() && self.device.is_none()) {
                     break;
                 }
-                let command = self.motion_command(stopping.is_some());
-                self.send_motion(command, now);
+                let output = if stopping.is_some() {
+                    Output {
+                        linear: 0.0,
+                        angular: 0.0,
+                        fault_clear: FaultClear::None,
+                        limited: false,
+                    }
+                } else {
+                    self.arbiter.poll_output(now, period)
+                };
+                self.send_motion(&output, now);
                 self.advance_schedule(now, period);
                 if let Some(left) = stopping.as_mut() {
                     *left -= 1;
                 }
             }
+            self.lights = self.arbiter.lights().map(|setting| match setting {
+                LightsSetting::Manual(lights) => lights,
+                LightsSetting::Auto => LightCommand::default(),
+            });
             if self.lights.is_some() && now >= self.next_light {
                 self.send_lights(now);
             }
-            if self.ports.reset_requested() {
-                info!("odometry reset by a client");
-                let publish = self.tracker.reset_odometry();
-                self.publish_if(publish);
-            }
+            self.publish_status(now);
             let publish = self.tracker.poll(ipc::monotonic_ns());
             self.publish_if(publish);
             if self.now().saturating_sub(self.last_publish) >= HEARTBEAT {
@@ -229,15 +294,79 @@ impl ControlLoop {
         self.device = None;
         let stats = self.stats;
         info!(
-            "stopped: {} motion commands sent, {} ticks missed, worst lateness {:?}, {} publish errors",
-            stats.commands_sent, stats.missed_ticks, stats.max_lateness, stats.publish_errors
+            "stopped: {} motion commands sent ({} out of schedule for a stop), {} ticks missed, \
+             worst lateness {:?}, {} requests, {} publish errors",
+            stats.commands_sent,
+            stats.urgent_stops,
+            stats.missed_ticks,
+            stats.max_lateness,
+            stats.requests,
+            stats.publish_errors
         );
         Ok(())
     }
 
-    /// The command for this tick: zero until the arbiter fills it (and always while stopping).
-    fn motion_command(&mut self, _stopping: bool) -> MotionCommand {
-        MotionCommand::stop(self.spec.control_mode())
+    /// Answers every waiting request.
+    fn handle_requests(&mut self, now: Duration) {
+        let _ = self.ports.wake.try_wait(|_| {});
+        loop {
+            let active = match self.ports.server.receive() {
+                Ok(Some(active)) => active,
+                Ok(None) => break,
+                Err(error) => {
+                    warn!("receiving control requests failed: {error}");
+                    break;
+                }
+            };
+            self.stats.requests += 1;
+            let request = *active.payload();
+            let client = requests::client_key(&request);
+            if self.watched_nodes.insert(client.node) {
+                self.monitor.watch(client.node);
+            }
+            let answer = match requests::decode(&request) {
+                Ok(Action::Arbiter(decoded)) => self.arbiter.handle_request(now, &client, decoded),
+                Ok(Action::ResetOdometry) => {
+                    info!("odometry reset by {}", client.name);
+                    let publish = self.tracker.reset_odometry();
+                    self.publish_if(publish);
+                    Ok(crate::arbiter::Accepted { clamped: false })
+                }
+                Err(rejection) => {
+                    self.arbiter.count_rejection(&rejection);
+                    Err(rejection)
+                }
+            };
+            if let Err(rejection) = &answer {
+                debug!(
+                    "rejected {} from {}: {rejection}",
+                    request.kind, client.name
+                );
+            }
+            if let Err(error) = active.send_copy(requests::response(request.seq, &answer)) {
+                debug!("answering {} failed: {error}", client.name);
+            }
+        }
+    }
+
+    fn publish_status(&mut self, now: Duration) {
+        let status = requests::status(&self.arbiter, &self.config.name, now);
+        if !requests::changed(&status, &self.status)
+            && now.saturating_sub(self.last_status) < STATUS_HEARTBEAT
+        {
+            return;
+        }
+        self.last_status = now;
+        let seq = self.status.seq + 1;
+        self.status = StatusPayload {
+            seq,
+            published_ns: ipc::monotonic_ns(),
+            ..status
+        };
+        if let Err(error) = self.ports.publish_status(&self.status) {
+            self.stats.publish_errors += 1;
+            debug!("publishing the status failed: {error:#}");
+        }
     }
 
     /// Moves the deadline one period on, on the absolute grid; a deadline missed by more than a
@@ -252,10 +381,19 @@ impl ControlLoop {
         }
     }
 
-    fn send_motion(&mut self, command: MotionCommand, now: Duration) {
+    /// Sends `output` as a motion command in the link's control mode.
+    fn send_motion(&mut self, output: &Output, now: Duration) {
         if self.device.is_none() {
             return;
         }
+        let percent =
+            |speed: f64, max: f64| units::speed_to_percent(speed, max).map_or(0, |(p, _)| p);
+        let command = MotionCommand {
+            control_mode: self.spec.control_mode(),
+            fault_clear: output.fault_clear,
+            linear_percent: percent(output.linear, MAX_LINEAR_SPEED),
+            angular_percent: percent(output.angular, self.config.max_angular),
+        };
         let counted = Counted {
             message: Message::MotionCommand(command),
             count: self.motion_count.next_count(),
@@ -304,7 +442,11 @@ impl ControlLoop {
         let now = self.now();
         let timeout = deadline.saturating_sub(now);
         let Some(device) = self.device.as_mut() else {
-            std::thread::sleep(timeout.min(self.reopen_at.saturating_sub(now)));
+            let nap = timeout.min(self.reopen_at.saturating_sub(now));
+            if let Err(error) = crate::wait::wait(None, &self.ports.wake, nap) {
+                debug!("waiting failed: {error}");
+                std::thread::sleep(nap);
+            }
             return;
         };
         let start = self.start;
@@ -313,6 +455,7 @@ impl ControlLoop {
         let result = device.receive(
             &mut self.buffer[..],
             timeout,
+            &self.ports.wake,
             || start.elapsed(),
             |event| {
                 events.push(event);

@@ -9,9 +9,13 @@ use scout_clients::ipc::TransportKind;
 use scout_protocol::slcan::{self, Bitrate, Slcan};
 use scout_protocol::{ControlMode, Counted, can};
 
-use crate::link::{RxEvent, StreamFraming, Transport, decode_can, encode_stream};
+use iceoryx2::port::listener::Listener;
+use scout_clients::ipc::Ipc;
+
+use crate::link::{RxError, RxEvent, StreamFraming, Transport, decode_can, encode_stream};
 use crate::port::{Incoming, Port};
 use crate::sim::{Chassis, SimParams};
+use crate::wait::wait;
 
 /// Which device, before it is opened.
 #[derive(Debug, Clone, PartialEq)]
@@ -170,43 +174,44 @@ impl Device {
         }
     }
 
-    /// Waits at most `timeout` for input and hands every event it completes to `on_event`.
+    /// Waits at most `timeout` for input or a client's wake-up, and hands every event the input
+    /// completes to `on_event`. Returns whether a client woke it.
     pub fn receive(
         &mut self,
         buffer: &mut [u8],
         timeout: Duration,
+        wake: &Listener<Ipc>,
         now: impl Fn() -> Duration,
         mut on_event: impl FnMut(RxEvent),
-    ) -> io::Result<()> {
+    ) -> io::Result<bool> {
         match self {
             Self::Sim { chassis, epoch } => {
                 let due = chassis.next_feedback_at() + *epoch;
-                let wake = due.min(now() + timeout);
-                std::thread::sleep(wake.saturating_sub(now()));
+                let ready = wait(None, wake, due.min(now() + timeout).saturating_sub(now()))?;
                 if let Some(batch) = chassis.poll_feedback(now().saturating_sub(*epoch)) {
                     batch
                         .into_iter()
                         .for_each(|counted| on_event(RxEvent::Message(counted)));
                 }
-                Ok(())
+                Ok(ready.wake)
             }
-            Self::Port { port, framing, .. } => match port.read(buffer, timeout)? {
-                Incoming::Timeout => Ok(()),
-                Incoming::Bytes(n) => {
-                    if let Some(framing) = framing {
-                        framing.push(&buffer[..n], on_event);
+            Self::Port { port, framing, .. } => {
+                let ready = wait(Some(&*port), wake, timeout)?;
+                if !ready.port {
+                    return Ok(ready.wake);
+                }
+                match port.read(buffer, Duration::ZERO)? {
+                    Incoming::Timeout => {}
+                    Incoming::Bytes(n) => {
+                        if let Some(framing) = framing {
+                            framing.push(&buffer[..n], on_event);
+                        }
                     }
-                    Ok(())
+                    Incoming::Frame(frame) => on_event(decode_can(&frame)),
+                    Incoming::Foreign(id) => on_event(RxEvent::Rejected(RxError::ForeignFrame(id))),
                 }
-                Incoming::Frame(frame) => {
-                    on_event(decode_can(&frame));
-                    Ok(())
-                }
-                Incoming::Foreign(id) => {
-                    on_event(RxEvent::Rejected(crate::link::RxError::ForeignFrame(id)));
-                    Ok(())
-                }
-            },
+                Ok(ready.wake)
+            }
         }
     }
 

@@ -5,6 +5,9 @@
 //! - [`state`]: the chassis state tracker (sans-IO).
 //! - [`device`]: the port or the in-process simulator, messages in and out.
 //! - [`config`]: the configuration file and its lookup.
+//! - [`requests`]: control requests on the wire to the arbiter and back.
+//! - [`monitor`]: dead-process detection for clients.
+//! - [`wait`]: waiting on the port and the clients' wake-up event at once.
 //! - [`lock`]: one gateway per robot name and device.
 //! - [`link`]: message framing per transport (serial, slcan, SocketCAN), shared with the simulator.
 //! - [`port`]: the port as an OS resource (tty or SocketCAN socket).
@@ -16,6 +19,9 @@ pub mod control;
 pub mod device;
 pub mod link;
 pub mod lock;
+pub mod monitor;
 pub mod port;
+pub mod requests;
 pub mod sim;
 pub mod state;
+pub mod wait;

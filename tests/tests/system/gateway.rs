@@ -256,7 +256,11 @@ fn odometry_reset_from_a_client() {
     let robot = connect(&name);
     let subscriber = robot.subscribe().expect("subscribe");
     wait_for_state(&subscriber, STATE_LIMIT, |s| s["link"]["state"] == "ok");
-    robot.reset_odometry().expect("reset");
+    robot
+        .controller("odometer", None)
+        .expect("controller")
+        .reset_odometry()
+        .expect("reset");
     wait_for_state(&subscriber, STATE_LIMIT, |s| s["odometry"]["resets"] == 1);
 }
 

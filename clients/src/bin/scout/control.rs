@@ -1,0 +1,287 @@
+//! The control subcommands: drive, estop, release, resume, lights, clear-fault, status,
+//! reset-odometry.
+
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use clap::Args;
+use scout_clients::client::Robot;
+use scout_clients::control::{Accepted, ControlError, Controller, Lights};
+use scout_clients::ipc::{Class, monotonic_ns};
+use scout_clients::state::status_json;
+use scout_protocol::{FaultClear, Light, LightCommand, LightMode};
+
+use crate::RobotArgs;
+
+/// The drive loop's period: 50 Hz.
+const DRIVE_PERIOD: Duration = Duration::from_millis(20);
+
+/// A robot and this client's name.
+#[derive(Debug, Args)]
+pub struct ClientArgs {
+    #[command(flatten)]
+    robot: RobotArgs,
+    /// This client's name, shown in the status and the gateway's audit log.
+    #[arg(long, value_name = "NAME")]
+    client: Option<String>,
+}
+
+impl ClientArgs {
+    fn connect(&self, default_name: &str, class: Option<Class>) -> anyhow::Result<Controller> {
+        let robot = Robot::connect(&self.robot.name)?;
+        let name = self
+            .client
+            .clone()
+            .unwrap_or_else(|| format!("{default_name}-{}", std::process::id()));
+        Ok(robot.controller(&name, class)?)
+    }
+}
+
+#[derive(Debug, Args)]
+pub struct DriveArgs {
+    #[command(flatten)]
+    client: ClientArgs,
+    /// Linear speed, m/s (forward positive).
+    #[arg(long, allow_hyphen_values = true, default_value_t = 0.0)]
+    linear: f64,
+    /// Angular speed, rad/s (counter-clockwise positive).
+    #[arg(long, allow_hyphen_values = true, default_value_t = 0.0)]
+    angular: f64,
+    /// How long to drive, s (default: until Ctrl-C).
+    #[arg(long, value_name = "S")]
+    duration: Option<f64>,
+    /// The class to drive as.
+    #[arg(long, default_value = "teleop")]
+    class: Class,
+}
+
+/// One line per change of the gateway's answer, not one per message.
+fn describe(answer: &Result<Accepted, ControlError>) -> String {
+    match answer {
+        Ok(Accepted { clamped: false }) => "accepted".into(),
+        Ok(Accepted { clamped: true }) => "accepted (clamped to the speed caps)".into(),
+        Err(error) => error.to_string(),
+    }
+}
+
+pub fn drive(args: &DriveArgs) -> anyhow::Result<ExitCode> {
+    let duration = match args.duration {
+        Some(s) if s.is_finite() && s >= 0.0 => Some(Duration::from_secs_f64(s)),
+        Some(s) => anyhow::bail!("--duration must be a non-negative number of seconds, found {s}"),
+        None => None,
+    };
+    let mut controller = args.client.connect("drive", Some(args.class))?;
+    let stop = Arc::new(AtomicBool::new(false));
+    let on_signal = Arc::clone(&stop);
+    ctrlc::set_handler(move || on_signal.store(true, Ordering::Relaxed))
+        .context("installing the Ctrl-C handler")?;
+    let start = Instant::now();
+    let mut next = start;
+    let mut last: Option<String> = None;
+    let mut last_answer = Ok(Accepted { clamped: false });
+    while !stop.load(Ordering::Relaxed) && duration.is_none_or(|d| start.elapsed() < d) {
+        let answer = controller.drive(args.linear, args.angular);
+        if matches!(
+            answer,
+            Err(ControlError::NoAnswer { .. } | ControlError::Client(_))
+        ) {
+            return Err(answer.map(|_| ()).unwrap_err().into());
+        }
+        let text = describe(&answer);
+        if last.as_deref() != Some(text.as_str()) {
+            println!("{text}");
+            last = Some(text);
+        }
+        last_answer = answer;
+        next += DRIVE_PERIOD;
+        std::thread::sleep(next.saturating_duration_since(Instant::now()));
+    }
+    // Stop the robot before leaving: zero speed, then give the control back.
+    let _ = controller.drive(0.0, 0.0);
+    controller.relinquish().context("giving up control")?;
+    match last_answer {
+        Err(rejected @ ControlError::Rejected { .. }) => Err(rejected.into()),
+        _ => Ok(ExitCode::SUCCESS),
+    }
+}
+
+#[derive(Debug, Args)]
+pub struct EstopArgs {
+    #[command(flatten)]
+    client: ClientArgs,
+    /// Why (shown in the status and the audit log).
+    #[arg(long, default_value = "scout estop")]
+    reason: String,
+}
+
+pub fn estop(args: &EstopArgs) -> anyhow::Result<ExitCode> {
+    let mut controller = args.client.connect("estop", None)?;
+    controller.stop(&args.reason)?;
+    println!("stop latched: `scout release` to release it");
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Sends one request and prints the answer.
+pub fn one_shot(
+    args: &ClientArgs,
+    request: impl FnOnce(&mut Controller) -> Result<Accepted, ControlError>,
+) -> anyhow::Result<ExitCode> {
+    let mut controller = args.connect("cli", None)?;
+    let answer = request(&mut controller);
+    println!("{}", describe(&answer));
+    answer?;
+    Ok(ExitCode::SUCCESS)
+}
+
+#[derive(Debug, Args)]
+pub struct LightsArgs {
+    #[command(flatten)]
+    client: ClientArgs,
+    /// Front light: off, on, breath or custom, with `:BRIGHTNESS` 0..100 (default 100).
+    #[arg(long, value_name = "MODE[:BRIGHTNESS]", value_parser = parse_light)]
+    front: Option<Light>,
+    /// Rear light, as --front.
+    #[arg(long, value_name = "MODE[:BRIGHTNESS]", value_parser = parse_light)]
+    rear: Option<Light>,
+    /// `auto`: hand the lights back to the chassis.
+    #[arg(value_parser = ["auto"])]
+    auto: Option<String>,
+}
+
+fn parse_light(text: &str) -> Result<Light, String> {
+    let (mode, brightness) = text.split_once(':').unwrap_or((text, "100"));
+    let mode = match mode {
+        "off" => LightMode::Off,
+        "on" => LightMode::On,
+        "breath" => LightMode::Breath,
+        "custom" => LightMode::Custom,
+        other => return Err(format!("light mode `{other}`: off, on, breath or custom")),
+    };
+    let brightness = brightness
+        .parse::<u8>()
+        .ok()
+        .filter(|b| *b <= 100)
+        .ok_or_else(|| format!("brightness `{brightness}` is not 0..100"))?;
+    Ok(Light { mode, brightness })
+}
+
+pub fn lights(args: &LightsArgs) -> anyhow::Result<ExitCode> {
+    let lights = match (&args.auto, args.front, args.rear) {
+        (Some(_), None, None) => Lights::Auto,
+        (Some(_), ..) => anyhow::bail!("`auto` takes no --front or --rear"),
+        (None, None, None) => anyhow::bail!("give --front and/or --rear, or `auto`"),
+        (None, front, rear) => Lights::Manual(LightCommand {
+            enabled: true,
+            front: front.unwrap_or_default(),
+            rear: rear.unwrap_or_default(),
+        }),
+    };
+    one_shot(&args.client, |controller| controller.lights(lights))
+}
+
+#[derive(Debug, Args)]
+pub struct ClearFaultArgs {
+    #[command(flatten)]
+    client: ClientArgs,
+    /// battery_undervoltage, battery_overvoltage, motor_1_comm .. motor_4_comm,
+    /// driver_overtemp, motor_overcurrent, or all.
+    kind: String,
+}
+
+pub fn clear_fault(args: &ClearFaultArgs) -> anyhow::Result<ExitCode> {
+    let kind = args.kind.replace('-', "_");
+    let code = match kind.as_str() {
+        "all" => None,
+        name => Some(
+            FaultClear::from_name(name)
+                .filter(|c| *c != FaultClear::None)
+                .ok_or_else(|| {
+                    let names: Vec<_> = FaultClear::ALL.iter().map(|c| c.name()).collect();
+                    anyhow::anyhow!("unknown fault `{}`: {} or all", args.kind, names.join(", "))
+                })?,
+        ),
+    };
+    one_shot(&args.client, |controller| controller.clear_fault(code))
+}
+
+/// The gateway publishes no status.
+#[derive(Debug, thiserror::Error)]
+#[error("gateway '{0}' published no status within 2 s: is it running (not stopped)?")]
+pub struct Silent(pub String);
+
+#[derive(Debug, Args)]
+pub struct StatusArgs {
+    #[command(flatten)]
+    robot: RobotArgs,
+    /// The status as one JSON object (the schema in the README).
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn status(args: &StatusArgs) -> anyhow::Result<ExitCode> {
+    let robot = Robot::connect(&args.robot.name)?;
+    let status = robot
+        .status()?
+        .latest(Duration::from_secs(2))?
+        .ok_or_else(|| Silent(args.robot.name.clone()))?;
+    let json = status_json(&status, monotonic_ns());
+    if args.json {
+        println!("{json}");
+        return Ok(ExitCode::SUCCESS);
+    }
+    let latched = match &json["latched_by"] {
+        serde_json::Value::Null => "no".to_owned(),
+        by => format!(
+            "YES, by {} ({})",
+            by["client"].as_str().unwrap_or("?"),
+            by["reason"].as_str().unwrap_or("")
+        ),
+    };
+    let selected = match &json["selected"] {
+        serde_json::Value::Null => "nobody".to_owned(),
+        s => format!(
+            "{} {}",
+            s["class"].as_str().unwrap_or("?"),
+            s["client"].as_str().unwrap_or("?")
+        ),
+    };
+    let output = &json["output"];
+    println!("robot      {}", json["robot"].as_str().unwrap_or("?"));
+    println!("stop       {latched}");
+    println!("driving    {selected}");
+    println!(
+        "output     {:.3} m/s  {:.3} rad/s{}",
+        output["linear"].as_f64().unwrap_or(0.0),
+        output["angular"].as_f64().unwrap_or(0.0),
+        if output["limited"] == true {
+            "  (limited)"
+        } else {
+            ""
+        }
+    );
+    println!(
+        "autonomy   {}",
+        if json["autonomy_armed"] == true {
+            "armed"
+        } else {
+            "disarmed: `scout resume`"
+        }
+    );
+    for source in json["sources"].as_array().into_iter().flatten() {
+        println!(
+            "client     {} {}{}  last request {:.0} ms ago",
+            source["client"].as_str().unwrap_or("?"),
+            source["class"].as_str().unwrap_or("-"),
+            if source["holding"] == true {
+                " (holds)"
+            } else {
+                ""
+            },
+            source["age_ms"].as_f64().unwrap_or(0.0),
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}

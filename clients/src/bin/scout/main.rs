@@ -1,0 +1,117 @@
+//! `scout`: the command-line tool for a SCOUT chassis behind scout-gateway.
+//!
+//! Exit codes: 0 success; 1 something failed (a line `scout decode` could not decode, an I/O
+//! error); 2 usage error; 3 no gateway with that name runs, or it stopped answering; 4 the
+//! gateway rejected the request (the reason is printed).
+
+mod control;
+mod decode;
+mod echo;
+mod teleop;
+
+use std::io::ErrorKind;
+use std::process::ExitCode;
+
+use clap::{Args, Parser, Subcommand};
+use scout_clients::client::ClientError;
+use scout_clients::control::ControlError;
+use scout_clients::echo::EchoError;
+use scout_clients::ipc::ServiceError;
+
+/// Command-line tool for an AgileX SCOUT chassis.
+#[derive(Debug, Parser)]
+#[command(version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Decode candump lines (screen, log or compact format) or serial frames as hex.
+    ///
+    /// Reads the lines given as arguments, or standard input when there are none:
+    /// `candump can0 | scout decode`. Prints one line (or JSON object) per frame; a bad line is
+    /// reported on standard error with its line number and the rest is still decoded.
+    Decode(decode::DecodeArgs),
+    /// Show the chassis state a gateway publishes: a live view, or JSON lines with --json.
+    Echo(echo::EchoArgs),
+    /// Drive at a speed at 50 Hz for a duration (or until Ctrl-C), then give up control.
+    Drive(control::DriveArgs),
+    /// Keyboard teleop: arrows or WASD change speed, space stops, e latches the e-stop, q quits.
+    Teleop(teleop::TeleopArgs),
+    /// Latch the safety stop: zero speed at once, until `scout release`.
+    Estop(control::EstopArgs),
+    /// Release the latched stop (nothing moves until a new command; autonomy needs `resume`).
+    Release(control::ClientArgs),
+    /// Arm autonomy again after a teleop takeover, a stop or a release.
+    Resume(control::ClientArgs),
+    /// Set the lights: `--front MODE[:BRIGHTNESS] --rear MODE[:BRIGHTNESS]`, or `auto`.
+    Lights(control::LightsArgs),
+    /// Clear a chassis fault: send its code in the next 3 motion commands (`all`: every code).
+    ClearFault(control::ClearFaultArgs),
+    /// Show the arbiter's status: the stop, who drives, the output, autonomy, the clients.
+    Status(control::StatusArgs),
+    /// Reset the gateway's odometry to the origin.
+    ResetOdometry(control::ClientArgs),
+}
+
+/// The robot to talk to.
+#[derive(Debug, Args)]
+struct RobotArgs {
+    /// The robot (gateway) name.
+    #[arg(long, default_value = "scout", value_name = "ROBOT")]
+    name: String,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Decode(args) => decode::run(&args),
+        Command::Echo(args) => echo::run(&args),
+        Command::Drive(args) => control::drive(&args),
+        Command::Teleop(args) => teleop::run(&args),
+        Command::Estop(args) => control::estop(&args),
+        Command::Release(args) => control::one_shot(&args, |c| c.release()),
+        Command::Resume(args) => control::one_shot(&args, |c| c.resume()),
+        Command::Lights(args) => control::lights(&args),
+        Command::ClearFault(args) => control::clear_fault(&args),
+        Command::Status(args) => control::status(&args),
+        Command::ResetOdometry(args) => control::one_shot(&args, |c| c.reset_odometry()),
+    };
+    match result {
+        Ok(code) => code,
+        Err(error) if is_broken_pipe(&error) => ExitCode::SUCCESS,
+        Err(error) => {
+            eprintln!("scout: {error:#}");
+            ExitCode::from(exit_code(&error))
+        }
+    }
+}
+
+fn is_broken_pipe(error: &anyhow::Error) -> bool {
+    error
+        .downcast_ref::<std::io::Error>()
+        .is_some_and(|e| e.kind() == ErrorKind::BrokenPipe)
+}
+
+/// The exit code for `error` (see the module documentation).
+fn exit_code(error: &anyhow::Error) -> u8 {
+    for cause in error.chain() {
+        let no_gateway = matches!(cause.downcast_ref(), Some(ServiceError::NoGateway { .. }))
+            || matches!(
+                cause.downcast_ref(),
+                Some(ClientError::Service(ServiceError::NoGateway { .. }))
+            )
+            || matches!(cause.downcast_ref(), Some(EchoError::Idle(_)))
+            || matches!(cause.downcast_ref(), Some(ControlError::NoAnswer { .. }))
+            || matches!(cause.downcast_ref(), Some(control::Silent(_)));
+        if no_gateway {
+            return 3;
+        }
+        if matches!(cause.downcast_ref(), Some(ControlError::Rejected { .. })) {
+            return 4;
+        }
+    }
+    1
+}
