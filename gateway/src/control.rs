@@ -25,7 +25,7 @@ use tracing::{debug, error, info, warn};
 
 use crate::arbiter::{Arbiter, LightsSetting, Output};
 use crate::config::GatewayConfig;
-use crate::device::{Device, DeviceSpec};
+use crate::device::{Device, DeviceSpec, OpenError};
 use crate::link::RxEvent;
 use crate::monitor::NodeMonitor;
 use crate::requests::{self, Action};
@@ -233,7 +233,7 @@ impl ControlLoop {
                 stopping = Some(cycles);
             }
             if self.device.is_none() && now >= self.reopen_at {
-                self.open(now);
+                self.open(now)?;
             }
             self.handle_requests(now);
             while let Some(node) = self.monitor.try_gone() {
@@ -474,8 +474,11 @@ impl ControlLoop {
         }
     }
 
-    fn open(&mut self, now: Duration) {
+    /// Opens the device. Another gateway owning it at the first attempt is fatal (this one
+    /// should not have started); later, it is one more reason to retry.
+    fn open(&mut self, now: Duration) -> anyhow::Result<()> {
         match self.spec.open(now) {
+            Err(OpenError::Owned(owned)) if !self.opened_before => return Err(owned.into()),
             Ok(device) => {
                 info!("{} {} open", self.spec.kind().name(), self.spec.name());
                 self.device = Some(device);
@@ -504,6 +507,7 @@ impl ControlLoop {
                 self.backoff = (self.backoff * 2).min(max);
             }
         }
+        Ok(())
     }
 
     fn fail(&mut self, what: &str) {

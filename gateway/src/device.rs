@@ -13,6 +13,7 @@ use iceoryx2::port::listener::Listener;
 use scout_clients::ipc::Ipc;
 
 use crate::link::{RxError, RxEvent, StreamFraming, Transport, decode_can, encode_stream};
+use crate::lock::{Lock, LockError};
 use crate::port::{Incoming, Port};
 use crate::sim::{Chassis, SimParams};
 use crate::wait::wait;
@@ -66,9 +67,25 @@ impl DeviceSpec {
         }
     }
 
+    /// The lock that makes this gateway the device's only owner while it is open: keyed by what
+    /// the path resolves to now (a re-enumerated adapter is another device).
+    fn lock(&self) -> Result<Option<Lock>, OpenError> {
+        let key = match self {
+            Self::Serial(path) | Self::Slcan(path) => std::fs::canonicalize(path)
+                .unwrap_or_else(|_| path.clone())
+                .display()
+                .to_string(),
+            Self::Can(interface) => format!("can-{interface}"),
+            Self::Sim(_) => return Ok(None),
+        };
+        let what = format!("device {}", self.name());
+        Ok(Some(Lock::acquire(&format!("device-{key}"), &what, "")?))
+    }
+
     /// Opens the device; `now` is the gateway's clock (the simulator starts its time there).
-    pub fn open(&self, now: Duration) -> io::Result<Device> {
+    pub fn open(&self, now: Duration) -> Result<Device, OpenError> {
         let transport = self.link_transport();
+        let lock = self.lock()?;
         let port = match self {
             Self::Serial(path) | Self::Slcan(path) => {
                 Port::open_tty(path).map_err(io::Error::from)?
@@ -89,12 +106,24 @@ impl DeviceSpec {
             framing: StreamFraming::new(transport),
             transport,
             out: Vec::new(),
+            _lock: lock,
         };
         if transport == Transport::Slcan {
             device.set_up_slcan()?;
         }
         Ok(device)
     }
+}
+
+/// Why a device did not open.
+#[derive(Debug, thiserror::Error)]
+pub enum OpenError {
+    /// Another gateway owns it.
+    #[error(transparent)]
+    Owned(#[from] LockError),
+    /// The OS refused (missing, permissions, busy with another program...).
+    #[error(transparent)]
+    Io(#[from] io::Error),
 }
 
 /// An open device.
@@ -110,6 +139,8 @@ pub enum Device {
         transport: Transport,
         /// Bytes being encoded for one write.
         out: Vec<u8>,
+        /// Ownership of the device while open.
+        _lock: Option<Lock>,
     },
     /// The simulated chassis.
     Sim {

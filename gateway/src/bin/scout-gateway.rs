@@ -14,7 +14,7 @@ use scout_clients::ipc;
 use scout_gateway::config::{GatewayConfig, TransportChoice};
 use scout_gateway::control::ControlLoop;
 use scout_gateway::device::DeviceSpec;
-use scout_gateway::lock::Lock;
+use scout_gateway::lock::{Lock, LockError};
 use tracing::info;
 
 /// The one process that owns a SCOUT chassis port: it decodes the chassis' feedback, publishes
@@ -58,13 +58,11 @@ fn main() -> ExitCode {
             return ExitCode::from(USAGE);
         }
     };
-    let (spec, _locks) = match config
+    let (spec, _lock) = match config
         .device()
         .map_err(anyhow::Error::from)
-        .and_then(|spec| {
-            let locks = take_locks(&config.name, &spec)?;
-            Ok((spec, locks))
-        }) {
+        .and_then(|spec| Ok((spec, take_name_lock(&config.name)?)))
+    {
         Ok(owned) => owned,
         Err(error) => {
             eprintln!("scout-gateway: {error:#}");
@@ -73,6 +71,10 @@ fn main() -> ExitCode {
     };
     match serve(config, spec) {
         Ok(()) => ExitCode::SUCCESS,
+        Err(error) if error.downcast_ref::<LockError>().is_some() => {
+            eprintln!("scout-gateway: {error:#}");
+            ExitCode::from(USAGE)
+        }
         Err(error) => {
             eprintln!("scout-gateway: error: {error:#}");
             ExitCode::FAILURE
@@ -119,31 +121,13 @@ fn configure(cli: &Cli) -> anyhow::Result<GatewayConfig> {
     Ok(config)
 }
 
-/// One gateway per robot name and per device.
-fn take_locks(robot: &str, spec: &DeviceSpec) -> anyhow::Result<Vec<Lock>> {
-    let mut locks = vec![Lock::acquire(
+/// One gateway per robot name (the device is locked when it is opened).
+fn take_name_lock(robot: &str) -> anyhow::Result<Lock> {
+    Ok(Lock::acquire(
         &format!("robot-{robot}"),
         &format!("robot '{robot}'"),
         ", or give this one another --name",
-    )?];
-    let device = match spec {
-        DeviceSpec::Serial(path) | DeviceSpec::Slcan(path) => Some(
-            std::fs::canonicalize(path)
-                .unwrap_or_else(|_| path.clone())
-                .display()
-                .to_string(),
-        ),
-        DeviceSpec::Can(interface) => Some(format!("can-{interface}")),
-        DeviceSpec::Sim(_) => None,
-    };
-    if let Some(device) = device {
-        locks.push(Lock::acquire(
-            &format!("device-{device}"),
-            &format!("device {}", spec.name()),
-            "",
-        )?);
-    }
-    Ok(locks)
+    )?)
 }
 
 fn serve(config: GatewayConfig, spec: DeviceSpec) -> anyhow::Result<()> {
