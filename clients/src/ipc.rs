@@ -120,6 +120,15 @@ pub fn create_state_services(
         service: name.clone(),
         reason,
     };
+    // Events first: clients take the publish-subscribe service as the sign that all exist.
+    let events = node
+        .service_builder(&service_name)
+        .event()
+        .max_notifiers(2)
+        .max_listeners(MAX_SUBSCRIBERS)
+        .max_nodes(MAX_NODES)
+        .open_or_create()
+        .map_err(|e| iceoryx(e.to_string()))?;
     let state = node
         .service_builder(&service_name)
         .publish_subscribe::<StatePayload>()
@@ -129,14 +138,6 @@ pub fn create_state_services(
         .history_size(1)
         .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
         .enable_safe_overflow(true)
-        .open_or_create()
-        .map_err(|e| iceoryx(e.to_string()))?;
-    let events = node
-        .service_builder(&service_name)
-        .event()
-        .max_notifiers(2)
-        .max_listeners(MAX_SUBSCRIBERS)
-        .max_nodes(MAX_NODES)
         .open_or_create()
         .map_err(|e| iceoryx(e.to_string()))?;
     Ok((state, events))

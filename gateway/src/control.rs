@@ -60,17 +60,7 @@ impl Ports {
         }
         let node =
             ipc::node(&format!("scout-gateway-{robot}")).context("creating the iceoryx2 node")?;
-        let (state, events) = ipc::create_state_services(&node, robot)?;
-        let publisher = state
-            .publisher_builder()
-            .backpressure_strategy(BackpressureStrategy::DiscardData)
-            .max_loaned_samples(2)
-            .create()
-            .context("creating the state publisher")?;
-        let notifier = events
-            .notifier_builder()
-            .create()
-            .context("creating the state notifier")?;
+        // The state service last: once it exists, clients find every service.
         let status = ipc::status_services(&node, robot, true)?
             .publisher_builder()
             .backpressure_strategy(BackpressureStrategy::DiscardData)
@@ -85,6 +75,17 @@ impl Ports {
             .listener_builder()
             .create()
             .context("creating the control listener")?;
+        let (state, events) = ipc::create_state_services(&node, robot)?;
+        let publisher = state
+            .publisher_builder()
+            .backpressure_strategy(BackpressureStrategy::DiscardData)
+            .max_loaned_samples(2)
+            .create()
+            .context("creating the state publisher")?;
+        let notifier = events
+            .notifier_builder()
+            .create()
+            .context("creating the state notifier")?;
         Ok(Self {
             publisher,
             notifier,

@@ -319,3 +319,71 @@ pub fn wait_for_state(
     }
     panic!("no wanted state within {limit:?}; last: {last}");
 }
+
+/// Waits for an arbiter status that satisfies `wanted`, at most `limit`; returns it as JSON.
+pub fn wait_for_status(
+    reader: &scout_clients::control::StatusReader,
+    limit: Duration,
+    wanted: impl Fn(&serde_json::Value) -> bool,
+) -> serde_json::Value {
+    let deadline = Instant::now() + limit;
+    let mut last = serde_json::Value::Null;
+    while Instant::now() < deadline {
+        if let Some(status) = reader
+            .latest(Duration::from_millis(50))
+            .expect("read status")
+        {
+            last = scout_clients::state::status_json(&status, scout_clients::ipc::monotonic_ns());
+            if wanted(&last) {
+                return last;
+            }
+        }
+    }
+    panic!("no wanted status within {limit:?}; last: {last}");
+}
+
+/// A client process driving at 50 Hz in the background (`scout drive`), killed when dropped.
+#[derive(Debug)]
+pub struct Driver {
+    child: std::process::Child,
+}
+
+impl Driver {
+    /// Starts `scout drive` for robot `name` with `args` (e.g. `--linear 0.5 --class autonomy`).
+    pub fn start(name: &str, args: &[&str]) -> Driver {
+        let child = command("scout")
+            .args(["drive", "--name", name])
+            .args(args)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("spawn scout drive");
+        Driver { child }
+    }
+
+    /// Sends `signal` to it.
+    pub fn signal(&self, signal: nix::sys::signal::Signal) {
+        let pid = nix::unistd::Pid::from_raw(self.child.id() as i32);
+        nix::sys::signal::kill(pid, signal).expect("signal the driver");
+    }
+}
+
+impl Drop for Driver {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Runs `scout ARGS` to completion (bounded) and returns its exit code and output.
+pub fn scout(args: &[&str]) -> (Option<i32>, String, String) {
+    let mut scout = command("scout");
+    scout.args(args);
+    let output = run_with_input(scout, b"", Duration::from_secs(20));
+    (
+        output.status.code(),
+        String::from_utf8_lossy(&output.stdout).into_owned(),
+        String::from_utf8_lossy(&output.stderr).into_owned(),
+    )
+}

@@ -1,6 +1,7 @@
 //! The multi-process system tests, one module per area. Each runs the real binaries, with a
 //! deadline, on its own pseudo-terminals and names.
 
+mod arbiter;
 mod decode;
 mod gateway;
 mod sim;

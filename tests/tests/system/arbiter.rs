@@ -1,0 +1,317 @@
+//! The arbiter across processes: clients of each class, the stop from a third process, clients
+//! that die or stop, bad values; the chassis (scout-sim) sees the result.
+
+use std::time::Duration;
+
+use nix::sys::signal::Signal;
+use scout_clients::control::ControlError;
+use scout_clients::ipc::{Class, REJECTION_NAMES};
+use scout_system_tests::{
+    Driver, Gateway, Sim, connect, robot_name, scout, wait_for_state, wait_for_status,
+};
+
+const LIMIT: Duration = Duration::from_secs(10);
+
+fn selected_client(status: &serde_json::Value) -> Option<&str> {
+    status["selected"]["client"].as_str()
+}
+
+#[test]
+fn teleop_overrides_autonomy_at_once() {
+    let name = robot_name("override");
+    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    let robot = connect(&name);
+    let status = robot.status().expect("status");
+    let state = robot.subscribe().expect("state");
+    let _autonomy = Driver::start(
+        &name,
+        &[
+            "--linear", "0.4", "--class", "autonomy", "--client", "planner",
+        ],
+    );
+    wait_for_status(&status, LIMIT, |s| selected_client(s) == Some("planner"));
+    wait_for_state(&state, LIMIT, |s| {
+        s["command"]["linear"].as_f64() > Some(0.35)
+    });
+    let mut teleop = robot
+        .controller("joystick", Some(Class::Teleop))
+        .expect("teleop");
+    teleop.drive(0.0, 0.0).expect("teleop accepted");
+    let accepted_at = scout_clients::ipc::monotonic_ns();
+    // Every status published after the answer shows teleop driving.
+    let after = wait_for_status(&status, LIMIT, |s| {
+        let published =
+            scout_clients::ipc::monotonic_ns() as f64 - s["age_ms"].as_f64().unwrap_or(0.0) * 1e6;
+        published > accepted_at as f64
+    });
+    assert_eq!(selected_client(&after), Some("joystick"), "{after}");
+    assert_eq!(after["autonomy_armed"], false);
+    // The output ramps down from the autonomy speed at the deceleration limit.
+    let slowing = wait_for_state(&state, LIMIT, |s| {
+        s["command"]["linear"].as_f64() < Some(0.35)
+    });
+    assert!(
+        slowing["command"]["linear"].as_f64() > Some(0.0),
+        "ramps, does not jump: {slowing}"
+    );
+    // The autonomy client is refused from now on, with the reason.
+    let mut planner = robot
+        .controller("planner-2", Some(Class::Autonomy))
+        .expect("autonomy");
+    let Err(ControlError::Rejected { reason, .. }) = planner.drive(0.4, 0.0) else {
+        panic!("autonomy must be refused after a teleop takeover")
+    };
+    assert!(reason.contains("autonomy disarmed"), "{reason}");
+}
+
+#[test]
+fn estop_from_a_third_process_release_then_resume() {
+    let name = robot_name("estop");
+    let mut sim = Sim::start(&["--serial"]);
+    let port = sim.port().to_owned();
+    let _gateway = Gateway::start(&["--serial", &port, "--name", &name]);
+    let robot = connect(&name);
+    let status = robot.status().expect("status");
+    let state = robot.subscribe().expect("state");
+    let _autonomy = Driver::start(
+        &name,
+        &[
+            "--linear", "0.5", "--class", "autonomy", "--client", "planner",
+        ],
+    );
+    wait_for_state(&state, LIMIT, |s| {
+        s["motion"]["linear"].as_f64() > Some(0.3)
+    });
+    let (code, stdout, stderr) = scout(&[
+        "estop",
+        "--name",
+        &name,
+        "--client",
+        "safety",
+        "--reason",
+        "person ahead",
+    ]);
+    assert_eq!(code, Some(0), "{stdout}{stderr}");
+    // The zero command went out at once: the very next state shows it sent.
+    let stopped = wait_for_state(&state, LIMIT, |s| s["command"]["linear"] == 0.0);
+    assert_eq!(stopped["command"]["angular"], 0.0);
+    let latched = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
+    assert_eq!(latched["latched_by"]["client"], "safety");
+    assert_eq!(latched["latched_by"]["reason"], "person ahead");
+    assert_eq!(latched["selected"], serde_json::Value::Null);
+    std::thread::sleep(Duration::from_millis(300));
+    assert_eq!(
+        sim.stats()["last_command"]["linear"],
+        0.0,
+        "the chassis is told zero"
+    );
+    // Drive is refused while latched; the refusal says why and exits 4.
+    let (code, _, stderr) = scout(&[
+        "drive",
+        "--name",
+        &name,
+        "--linear",
+        "0.2",
+        "--duration",
+        "0.2",
+    ]);
+    assert_eq!(code, Some(4), "{stderr}");
+    assert!(stderr.contains("latched by safety"), "{stderr}");
+    // Release does not restart motion, and autonomy stays disarmed until resume.
+    let (code, ..) = scout(&["release", "--name", &name]);
+    assert_eq!(code, Some(0));
+    let released = wait_for_status(&status, LIMIT, |s| s["latched"] == false);
+    assert_eq!(released["autonomy_armed"], false);
+    assert_eq!(
+        released["selected"],
+        serde_json::Value::Null,
+        "no motion after release: {released}"
+    );
+    std::thread::sleep(Duration::from_millis(300));
+    let still = wait_for_state(&state, LIMIT, |_| true);
+    assert_eq!(still["command"]["linear"], 0.0, "{still}");
+    let (code, ..) = scout(&["resume", "--name", &name]);
+    assert_eq!(code, Some(0));
+    let resumed = wait_for_status(&status, LIMIT, |s| selected_client(s) == Some("planner"));
+    assert_eq!(resumed["autonomy_armed"], true);
+}
+
+#[test]
+fn a_killed_driver_is_released_at_once_a_stopped_one_when_stale() {
+    let name = robot_name("killed");
+    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    let robot = connect(&name);
+    let status = robot.status().expect("status");
+    let killed = Driver::start(
+        &name,
+        &[
+            "--linear", "0.3", "--class", "autonomy", "--client", "doomed",
+        ],
+    );
+    wait_for_status(&status, LIMIT, |s| selected_client(s) == Some("doomed"));
+    killed.signal(Signal::SIGKILL);
+    // Dead-process detection removes the client; it does not linger until its command ages out.
+    let gone = wait_for_status(&status, LIMIT, |s| {
+        s["sources"]
+            .as_array()
+            .is_some_and(|sources| sources.iter().all(|c| c["client"] != "doomed"))
+    });
+    assert_eq!(gone["selected"], serde_json::Value::Null);
+    // A stopped (SIGSTOP) process is alive: it loses control when its command goes stale.
+    let mut resume = robot.controller("operator", None).expect("controller");
+    resume.resume().expect("resume");
+    let stopped = Driver::start(
+        &name,
+        &[
+            "--linear", "0.3", "--class", "autonomy", "--client", "frozen",
+        ],
+    );
+    wait_for_status(&status, LIMIT, |s| selected_client(s) == Some("frozen"));
+    stopped.signal(Signal::SIGSTOP);
+    let stale = wait_for_status(&status, LIMIT, |s| s["selected"].is_null());
+    let frozen = stale["sources"]
+        .as_array()
+        .and_then(|a| a.iter().find(|c| c["client"] == "frozen").cloned());
+    let frozen = frozen.expect("a stopped client is still listed");
+    assert_eq!(frozen["holding"], false);
+    assert!(
+        frozen["age_ms"].as_f64() >= Some(400.0),
+        "stale after its command's age: {frozen}"
+    );
+    stopped.signal(Signal::SIGCONT);
+}
+
+#[test]
+fn nan_and_huge_values_are_rejected_or_clamped() {
+    let name = robot_name("values");
+    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    let robot = connect(&name);
+    let mut teleop = robot
+        .controller("fuzzy", Some(Class::Teleop))
+        .expect("teleop");
+    for (linear, angular) in [
+        (f64::NAN, 0.0),
+        (0.0, f64::INFINITY),
+        (f64::NEG_INFINITY, f64::NAN),
+    ] {
+        match teleop.drive(linear, angular) {
+            Err(ControlError::Rejected { reason, code }) => {
+                assert_eq!(REJECTION_NAMES[usize::from(code)], "not_finite");
+                assert!(reason.contains("NaN or infinite"), "{reason}");
+            }
+            other => panic!("{linear} {angular} accepted: {other:?}"),
+        }
+    }
+    let state = robot.subscribe().expect("state");
+    for _ in 0..150 {
+        let accepted = teleop
+            .drive(1e9, -1e9)
+            .expect("huge values are clamped, not refused");
+        assert!(accepted.clamped);
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let capped = wait_for_state(&state, LIMIT, |s| {
+        s["command"]["linear"].as_f64() > Some(1.4)
+    });
+    assert!(capped["command"]["linear"].as_f64() <= Some(1.5));
+    assert!(capped["command"]["angular"].as_f64() >= Some(-0.53));
+    let status = robot.status().expect("status");
+    let counted = wait_for_status(&status, LIMIT, |s| s["rejections"]["not_finite"] == 3);
+    assert_eq!(counted["output"]["limited"], true);
+}
+
+#[test]
+fn lights_are_repeated_and_fault_clear_reaches_the_chassis() {
+    let name = robot_name("lights");
+    let mut sim = Sim::start(&["--serial"]);
+    let port = sim.port().to_owned();
+    let _gateway = Gateway::start(&["--serial", &port, "--name", &name]);
+    let robot = connect(&name);
+    let state = robot.subscribe().expect("state");
+    let (code, _, stderr) = scout(&[
+        "lights",
+        "--name",
+        &name,
+        "--front",
+        "custom:40",
+        "--rear",
+        "on",
+    ]);
+    assert_eq!(code, Some(0), "{stderr}");
+    let lit = wait_for_state(&state, LIMIT, |s| s["lights"]["enabled"] == true);
+    assert_eq!(
+        lit["lights"]["front"],
+        serde_json::json!({"mode": "custom", "brightness": 40})
+    );
+    // Serial light commands time out after 500 ms on the chassis: the gateway repeats them.
+    std::thread::sleep(Duration::from_millis(1500));
+    let lights_sent = sim.stats()["commands"]["0x140"]
+        .as_u64()
+        .expect("0x140 count");
+    assert!(
+        lights_sent >= 10,
+        "repeated well inside 500 ms: {lights_sent}"
+    );
+    let still = wait_for_state(&state, LIMIT, |_| true);
+    assert_eq!(still["lights"]["enabled"], true);
+    let (code, ..) = scout(&["lights", "--name", &name, "auto"]);
+    assert_eq!(code, Some(0));
+    wait_for_state(&state, LIMIT, |s| s["lights"]["enabled"] == false);
+    // A latched protection, cleared by its code.
+    sim.send("protect overtemp");
+    wait_for_state(&state, LIMIT, |s| {
+        s["system"]["faults"]
+            .as_array()
+            .is_some_and(|f| f.contains(&"driver_overtemp_protection".into()))
+    });
+    let (code, _, stderr) = scout(&["clear-fault", "--name", &name, "driver_overtemp"]);
+    assert_eq!(code, Some(0), "{stderr}");
+    wait_for_state(&state, LIMIT, |s| {
+        s["system"]["faults"]
+            .as_array()
+            .is_some_and(|f| !f.contains(&"driver_overtemp_protection".into()))
+    });
+    let (code, _, stderr) = scout(&["clear-fault", "--name", &name, "everything"]);
+    assert_eq!(code, Some(1), "{stderr}");
+}
+
+#[test]
+fn status_json_and_errors_without_a_gateway() {
+    let name = robot_name("status");
+    let (code, _, stderr) = scout(&["status", "--name", &name]);
+    assert_eq!(code, Some(3), "{stderr}");
+    assert!(stderr.contains("no gateway named"), "{stderr}");
+    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    connect(&name);
+    let (code, stdout, stderr) = scout(&["status", "--name", &name, "--json"]);
+    assert_eq!(code, Some(0), "{stderr}");
+    let status: serde_json::Value = serde_json::from_str(&stdout).expect("one JSON object");
+    assert_eq!(status["latched"], false);
+    assert_eq!(status["selected"], serde_json::Value::Null);
+    assert_eq!(status["autonomy_armed"], true);
+}
+
+#[test]
+fn a_heartbeat_source_that_dies_latches_the_stop() {
+    let name = robot_name("deadman");
+    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    let robot = connect(&name);
+    let status = robot.status().expect("status");
+    let mut remote = robot.controller("handheld", None).expect("controller");
+    remote
+        .heartbeat(Duration::from_millis(200))
+        .expect("register");
+    for _ in 0..5 {
+        std::thread::sleep(Duration::from_millis(50));
+        remote.heartbeat(Duration::from_millis(200)).expect("beat");
+    }
+    assert_eq!(wait_for_status(&status, LIMIT, |_| true)["latched"], false);
+    // The handheld stops beating (its loop hung): the stop latches.
+    let latched = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
+    assert_eq!(latched["latched_by"]["client"], "handheld");
+    assert!(
+        latched["latched_by"]["reason"]
+            .as_str()
+            .is_some_and(|r| r.contains("heartbeat"))
+    );
+}
