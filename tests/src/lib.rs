@@ -22,14 +22,17 @@ fn ensure_built() {
     BUILT.get_or_init(|| {
         let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
         let mut command = Command::new(cargo);
-        command.args(["build", "--quiet", "--workspace", "--bins"]);
+        command.args(["build", "--quiet", "--workspace", "--bins", "--examples"]);
         if bin_dir().ends_with("release") {
             command.arg("--release");
         }
         let status = command
             .status()
             .expect("run cargo build for the system tests");
-        assert!(status.success(), "cargo build --workspace --bins failed");
+        assert!(
+            status.success(),
+            "cargo build --workspace --bins --examples failed"
+        );
     });
 }
 
@@ -39,6 +42,16 @@ pub fn bin(name: &str) -> PathBuf {
     let path = bin_dir().join(name);
     assert!(path.exists(), "{} was not built", path.display());
     path
+}
+
+/// A command for the example `name` of the workspace.
+pub fn example(name: &str) -> Command {
+    ensure_built();
+    let path = bin_dir().join("examples").join(name);
+    assert!(path.exists(), "{} was not built", path.display());
+    let mut command = Command::new(path);
+    command.env_remove("RUST_BACKTRACE");
+    command
 }
 
 /// A command for workspace binary `name`.

@@ -3,5 +3,6 @@
 
 mod arbiter;
 mod decode;
+mod examples;
 mod gateway;
 mod sim;
