@@ -8,6 +8,7 @@ use scout_protocol::units::DEFAULT_MAX_ANGULAR_SPEED;
 use serde::{Deserialize, Serialize};
 
 use crate::arbiter::ArbiterConfig;
+use crate::bridge::ZenohConfig;
 use crate::device::DeviceSpec;
 use crate::sim::SimParams;
 
@@ -41,6 +42,8 @@ pub struct GatewayConfig {
     pub timing: Timing,
     /// Who drives: ages, caps, rate limits, autonomy re-arming.
     pub arbiter: ArbiterConfig,
+    /// Remote peers through zenoh.
+    pub zenoh: ZenohConfig,
     /// The simulated chassis (`transport = "sim"`).
     pub sim: SimParams,
 }
@@ -82,6 +85,7 @@ impl Default for GatewayConfig {
             max_angular: DEFAULT_MAX_ANGULAR_SPEED,
             timing: Timing::default(),
             arbiter: ArbiterConfig::default(),
+            zenoh: ZenohConfig::default(),
             sim: SimParams::default(),
         }
     }
@@ -144,6 +148,7 @@ impl GatewayConfig {
             )));
         }
         self.arbiter.validate().map_err(ConfigError::Invalid)?;
+        self.zenoh.validate().map_err(ConfigError::Invalid)?;
         let device = || {
             self.device.clone().ok_or_else(|| {
                 ConfigError::Invalid("no device: give --serial, --slcan or --can with a device, or `device` in the config".into())

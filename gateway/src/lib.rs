@@ -1,6 +1,7 @@
 //! scout-gateway: the process that owns a SCOUT chassis port, and the chassis simulator.
 //!
 //! - [`arbiter`]: who drives: safety stop > teleop > autonomy (sans-IO).
+//! - [`bridge`]: zenoh for remote peers: state, status, liveliness, info, remote commands.
 //! - [`control`]: the control loop, the one thread that touches the port and the clock.
 //! - [`state`]: the chassis state tracker (sans-IO).
 //! - [`device`]: the port or the in-process simulator, messages in and out.
@@ -14,6 +15,7 @@
 //! - [`sim`]: the simulated chassis and the `scout-sim` driver loop.
 
 pub mod arbiter;
+pub mod bridge;
 pub mod config;
 pub mod control;
 pub mod device;

@@ -11,6 +11,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use anyhow::Context;
 use clap::{ArgGroup, Parser};
 use scout_clients::ipc;
+use scout_gateway::bridge::{self, Bridge};
 use scout_gateway::config::{GatewayConfig, TransportChoice};
 use scout_gateway::control::ControlLoop;
 use scout_gateway::device::DeviceSpec;
@@ -43,6 +44,23 @@ struct Cli {
     /// rad/s at 100 % angular command [default: 0.5235].
     #[arg(long, value_name = "RAD_S")]
     max_angular: Option<f64>,
+    /// Zenoh endpoint to listen on (repeatable) [default: tcp/127.0.0.1:7447].
+    #[arg(long, value_name = "ENDPOINT")]
+    zenoh_listen: Vec<String>,
+    /// Zenoh endpoint to connect to, e.g. a router (repeatable).
+    #[arg(long, value_name = "ENDPOINT")]
+    zenoh_connect: Vec<String>,
+    /// Zenoh configuration file (JSON5), for LAN, router, TLS and access control [default:
+    /// $ZENOH_CONFIG].
+    #[arg(long, value_name = "FILE")]
+    zenoh_config: Option<String>,
+    /// No zenoh: local clients only.
+    #[arg(long)]
+    no_zenoh: bool,
+    /// Accept remote commands of these kinds (comma-separated: estop, teleop, autonomy,
+    /// release, resume, lights, clear_fault).
+    #[arg(long, value_name = "LIST", value_delimiter = ',')]
+    remote_commands: Option<Vec<String>>,
 }
 
 /// The exit code for usage, configuration and ownership errors.
@@ -108,6 +126,22 @@ fn configure(cli: &Cli) -> anyhow::Result<GatewayConfig> {
     if let Some(max_angular) = cli.max_angular {
         config.max_angular = max_angular;
     }
+    if !cli.zenoh_listen.is_empty() {
+        config.zenoh.listen = cli.zenoh_listen.clone();
+    }
+    if !cli.zenoh_connect.is_empty() {
+        config.zenoh.connect = cli.zenoh_connect.clone();
+    }
+    if let Some(file) = &cli.zenoh_config {
+        config.zenoh.config_file = Some(file.clone());
+    }
+    if cli.no_zenoh {
+        config.zenoh.enabled = false;
+    }
+    if let Some(allowed) = &cli.remote_commands {
+        config.zenoh.remote_commands.enabled = true;
+        config.zenoh.remote_commands.allowed = allowed.clone();
+    }
     let device = |path: &PathBuf| Some(path.display().to_string());
     let (transport, device) = match (cli.sim, &cli.serial, &cli.slcan, &cli.can) {
         (true, ..) => (Some(TransportChoice::Sim), None),
@@ -145,6 +179,19 @@ fn serve(config: GatewayConfig, spec: DeviceSpec) -> anyhow::Result<()> {
         ipc::state_service(&config.name),
         ipc::MAX_SUBSCRIBERS,
     );
+    let bridge_config = config.zenoh.clone();
+    let info = bridge::info(&config.name, spec.kind().name(), &spec.name(), &config);
+    let robot = config.name.clone();
     let mut control = ControlLoop::new(config, spec)?;
+    // After the control loop's services exist; dropped (stopped and joined) after it ends.
+    let _bridge = if bridge_config.enabled {
+        Some(
+            Bridge::start(robot, bridge_config, info)
+                .context("starting the zenoh bridge thread")?,
+        )
+    } else {
+        info!("zenoh off: local clients only");
+        None
+    };
     control.run(&stop)
 }

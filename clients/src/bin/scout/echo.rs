@@ -10,6 +10,7 @@ use anyhow::Context;
 use clap::Args;
 use scout_clients::client::Robot;
 use scout_clients::echo::{echo_json, echo_live};
+use scout_clients::remote::{RemoteStates, SessionSettings};
 
 use crate::RobotArgs;
 
@@ -26,6 +27,13 @@ pub struct EchoArgs {
     /// Give up when no update arrives for this many seconds.
     #[arg(long, default_value_t = 3.0, value_name = "S")]
     timeout: f64,
+    /// Read through zenoh from this endpoint (a gateway or router, e.g. tcp/127.0.0.1:7447)
+    /// instead of iceoryx2; `--name '*'` then shows every robot.
+    #[arg(long, value_name = "ENDPOINT")]
+    remote: Option<String>,
+    /// Zenoh configuration file for --remote (TLS...) [default: $ZENOH_CONFIG].
+    #[arg(long, value_name = "FILE", requires = "remote")]
+    zenoh_config: Option<String>,
 }
 
 pub fn run(args: &EchoArgs) -> anyhow::Result<ExitCode> {
@@ -33,6 +41,9 @@ pub fn run(args: &EchoArgs) -> anyhow::Result<ExitCode> {
         anyhow::bail!("--timeout must be a positive number of seconds");
     }
     let timeout = Duration::from_secs_f64(args.timeout);
+    if let Some(endpoint) = &args.remote {
+        return remote(args, endpoint, timeout);
+    }
     let robot = Robot::connect(&args.robot.name)?;
     let subscriber = robot.subscribe()?;
     let stdout = std::io::stdout();
@@ -57,5 +68,57 @@ pub fn run(args: &EchoArgs) -> anyhow::Result<ExitCode> {
     write!(out, "\x1b[?25h")?;
     out.flush()?;
     result?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// No state through zenoh within the timeout.
+#[derive(Debug, thiserror::Error)]
+#[error(
+    "no state from robot '{robot}' through {endpoint} for {timeout:?}: is the gateway running with zenoh, and reachable?"
+)]
+pub struct RemoteSilent {
+    robot: String,
+    endpoint: String,
+    timeout: Duration,
+}
+
+/// `--remote`: the state JSON through zenoh, one line per update (the JSON itself with --json,
+/// a summary otherwise).
+fn remote(args: &EchoArgs, endpoint: &str, timeout: Duration) -> anyhow::Result<ExitCode> {
+    let settings = SessionSettings {
+        config_file: args.zenoh_config.clone(),
+        listen: Vec::new(),
+        connect: vec![endpoint.to_owned()],
+    };
+    let states = RemoteStates::connect(&settings, &args.robot.name)?;
+    let stdout = std::io::stdout();
+    let mut out = stdout.lock();
+    let mut printed = 0;
+    while args.count.is_none_or(|count| printed < count) {
+        let Some(state) = states.next_timeout(timeout)? else {
+            return Err(RemoteSilent {
+                robot: args.robot.name.clone(),
+                endpoint: endpoint.to_owned(),
+                timeout,
+            }
+            .into());
+        };
+        if args.json {
+            writeln!(out, "{state}")?;
+        } else {
+            writeln!(
+                out,
+                "{} seq {} link {} battery {} V linear {} m/s angular {} rad/s",
+                state["robot"].as_str().unwrap_or("?"),
+                state["seq"],
+                state["link"]["state"].as_str().unwrap_or("?"),
+                state["system"]["battery_voltage"],
+                state["motion"]["linear"],
+                state["motion"]["angular"],
+            )?;
+        }
+        out.flush()?;
+        printed += 1;
+    }
     Ok(ExitCode::SUCCESS)
 }

@@ -105,7 +105,8 @@ fn exit_code(error: &anyhow::Error) -> u8 {
             )
             || matches!(cause.downcast_ref(), Some(EchoError::Idle(_)))
             || matches!(cause.downcast_ref(), Some(ControlError::NoAnswer { .. }))
-            || matches!(cause.downcast_ref(), Some(control::Silent(_)));
+            || matches!(cause.downcast_ref(), Some(control::Silent(_)))
+            || matches!(cause.downcast_ref(), Some(echo::RemoteSilent { .. }));
         if no_gateway {
             return 3;
         }
