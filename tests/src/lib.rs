@@ -16,10 +16,29 @@ fn bin_dir() -> PathBuf {
         .to_path_buf()
 }
 
-/// Builds the workspace's binaries once per test process (cargo skips what is up to date).
+/// The binaries and examples the system tests run.
+const ARTIFACTS: [&str; 5] = [
+    "scout",
+    "scout-gateway",
+    "scout-sim",
+    "examples/square",
+    "examples/logger",
+];
+
+/// Makes sure the binaries exist. `cargo test --workspace` (the README's test command) builds
+/// them itself, with the same features as the tests, before any test runs: the gateway and
+/// clients packages have integration tests, and examples are always built. Run on its own
+/// (`cargo test -p scout-system-tests`), this builds whatever is missing, once per test process;
+/// it cannot tell an out-of-date binary, so after changing the gateway run the workspace tests.
 fn ensure_built() {
     static BUILT: OnceLock<()> = OnceLock::new();
     BUILT.get_or_init(|| {
+        if ARTIFACTS
+            .iter()
+            .all(|artifact| bin_dir().join(artifact).exists())
+        {
+            return;
+        }
         let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
         let mut command = Command::new(cargo);
         command.args(["build", "--quiet", "--workspace", "--bins", "--examples"]);
@@ -399,4 +418,53 @@ pub fn scout(args: &[&str]) -> (Option<i32>, String, String) {
         String::from_utf8_lossy(&output.stdout).into_owned(),
         String::from_utf8_lossy(&output.stderr).into_owned(),
     )
+}
+
+/// A TCP port on 127.0.0.1 that was free a moment ago.
+pub fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|listener| listener.local_addr())
+        .map(|address| address.port())
+        .expect("a free port on 127.0.0.1")
+}
+
+/// A zenoh session of this test process in `mode` (`router`, `peer`, `client`), multicast
+/// scouting off, listening on / connecting to loopback endpoints only.
+pub fn zenoh_session(mode: &str, listen: &[String], connect: &[String]) -> zenoh::Session {
+    use zenoh::Wait;
+    let settings = scout_clients::remote::SessionSettings {
+        config_file: Some(String::new()),
+        listen: listen.to_vec(),
+        connect: connect.to_vec(),
+    };
+    let config = settings.config(mode).expect("zenoh config");
+    zenoh::open(config).wait().expect("open a zenoh session")
+}
+
+/// Sends `payload` as a zenoh query to `key` and returns the replies' JSON (empty when none
+/// came within `timeout`, as when access control drops the query).
+pub fn zenoh_query(
+    session: &zenoh::Session,
+    key: &str,
+    payload: Option<&str>,
+    timeout: Duration,
+) -> Vec<serde_json::Value> {
+    use zenoh::Wait;
+    let mut get = session.get(key).timeout(timeout);
+    if let Some(payload) = payload {
+        get = get.payload(payload.to_owned());
+    }
+    let replies = get.wait().expect("send a zenoh query");
+    let mut answers = Vec::new();
+    while let Ok(reply) = replies.recv() {
+        if let Ok(sample) = reply.result() {
+            let text = sample
+                .payload()
+                .try_to_string()
+                .expect("UTF-8 reply")
+                .into_owned();
+            answers.push(serde_json::from_str(&text).expect("JSON reply"));
+        }
+    }
+    answers
 }

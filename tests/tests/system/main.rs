@@ -5,4 +5,5 @@ mod arbiter;
 mod decode;
 mod examples;
 mod gateway;
+mod remote;
 mod sim;
