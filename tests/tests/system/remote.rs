@@ -286,3 +286,167 @@ fn a_two_robot_fleet_through_a_router() {
         );
     }
 }
+
+/// Test certificates, made fresh for each run: a CA, the gateway, an operator the access control
+/// allows, and an intruder it does not (signed by the same CA, so TLS alone would let it in).
+struct Pki {
+    dir: std::path::PathBuf,
+}
+
+impl Pki {
+    fn new(test: &str) -> Pki {
+        use rcgen::{
+            BasicConstraints, CertificateParams, DnType, ExtendedKeyUsagePurpose, IsCa, Issuer,
+            KeyPair, KeyUsagePurpose,
+        };
+        let dir = std::env::temp_dir().join(format!("scout-pki-{test}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let ca_key = KeyPair::generate().expect("CA key");
+        let mut ca = CertificateParams::new(Vec::<String>::new()).expect("CA params");
+        ca.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
+        ca.distinguished_name
+            .push(DnType::CommonName, "scout test CA");
+        ca.key_usages = vec![
+            KeyUsagePurpose::KeyCertSign,
+            KeyUsagePurpose::CrlSign,
+            KeyUsagePurpose::DigitalSignature,
+        ];
+        let ca_cert = ca.self_signed(&ca_key).expect("CA certificate");
+        std::fs::write(dir.join("ca.pem"), ca_cert.pem()).expect("write CA");
+        let issuer = Issuer::new(ca, ca_key);
+        for name in ["gateway", "operator", "intruder"] {
+            let key = KeyPair::generate().expect("key");
+            let mut params =
+                CertificateParams::new(vec!["localhost".to_owned(), "127.0.0.1".to_owned()])
+                    .expect("params");
+            params.distinguished_name.push(DnType::CommonName, name);
+            params.extended_key_usages = vec![
+                ExtendedKeyUsagePurpose::ServerAuth,
+                ExtendedKeyUsagePurpose::ClientAuth,
+            ];
+            let cert = params.signed_by(&key, &issuer).expect("certificate");
+            std::fs::write(dir.join(format!("{name}.pem")), cert.pem()).expect("write certificate");
+            std::fs::write(dir.join(format!("{name}.key")), key.serialize_pem())
+                .expect("write key");
+        }
+        Pki { dir }
+    }
+
+    fn path(&self, file: &str) -> String {
+        self.dir.join(file).display().to_string()
+    }
+
+    /// A zenoh configuration: TLS with mutual authentication as `who`; `extra` is appended.
+    fn config(&self, who: &str, mode: &str, endpoints: &str, extra: &str) -> String {
+        let path = self.dir.join(format!("{who}-{mode}.json5"));
+        let text = format!(
+            r#"{{
+  mode: "{mode}",
+  {endpoints},
+  scouting: {{ multicast: {{ enabled: false }}, gossip: {{ enabled: false }} }},
+  transport: {{ link: {{ tls: {{
+    root_ca_certificate: "{ca}",
+    listen_certificate: "{cert}", listen_private_key: "{key}",
+    connect_certificate: "{cert}", connect_private_key: "{key}",
+    enable_mtls: true,
+  }} }} }},
+  {extra}
+}}"#,
+            ca = self.path("ca.pem"),
+            cert = self.path(&format!("{who}.pem")),
+            key = self.path(&format!("{who}.key")),
+        );
+        std::fs::write(&path, text).expect("write zenoh config");
+        path.display().to_string()
+    }
+}
+
+impl Drop for Pki {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+/// The access control of the documented set-up: only the operator's certificate may use the
+/// robot's keys; everyone else is denied everything.
+const OPERATOR_ONLY: &str = r#"access_control: {
+    enabled: true,
+    default_permission: "deny",
+    rules: [{
+      id: "operate",
+      messages: ["put", "delete", "declare_subscriber", "query", "reply", "declare_queryable",
+                 "liveliness_token", "liveliness_query", "declare_liveliness_subscriber"],
+      flows: ["ingress", "egress"],
+      permission: "allow",
+      key_exprs: ["scout/**"],
+    }],
+    subjects: [{ id: "operator", cert_common_names: ["operator"] }],
+    policies: [{ rules: ["operate"], subjects: ["operator"] }],
+  },"#;
+
+#[test]
+fn tls_with_mutual_authentication_and_access_control() {
+    let name = robot_name("tls");
+    let pki = Pki::new("tls");
+    let endpoint = format!("tls/127.0.0.1:{}", free_port());
+    let listen = format!(r#"listen: {{ endpoints: ["{endpoint}"] }}"#);
+    let connect_to = format!(r#"connect: {{ endpoints: ["{endpoint}"] }}"#);
+    let gateway_config = pki.config("gateway", "peer", &listen, OPERATOR_ONLY);
+    let mut gateway = Gateway::start(&[
+        "--sim",
+        "--name",
+        &name,
+        "--zenoh-config",
+        &gateway_config,
+        "--remote-commands",
+        "estop,teleop,release",
+    ]);
+    let robot = connect(&name);
+    let status = robot.status().expect("status");
+    let open = |who: &str| {
+        let settings = scout_clients::remote::SessionSettings {
+            config_file: Some(pki.config(who, "client", &connect_to, "")),
+            ..Default::default()
+        };
+        settings.open("client").expect("TLS session")
+    };
+    // The operator reads and commands.
+    let operator = open("operator");
+    let state = query_until_answered(&operator, &format!("scout/{name}/state"));
+    assert_eq!(state["robot"], name.as_str());
+    let estop = format!("scout/{name}/cmd/estop");
+    let answers = zenoh_query(
+        &operator,
+        &estop,
+        Some(r#"{"client":"operator","reason":"tls test"}"#),
+        QUERY,
+    );
+    assert_eq!(answers.len(), 1, "{answers:?}");
+    assert_eq!(answers[0]["accepted"], true);
+    let latched = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
+    assert_eq!(latched["latched_by"]["client"], "remote:operator");
+    let release = format!("scout/{name}/cmd/release");
+    assert_eq!(
+        zenoh_query(&operator, &release, Some(r#"{"client":"operator"}"#), QUERY)[0]["accepted"],
+        true
+    );
+    wait_for_status(&status, LIMIT, |s| s["latched"] == false);
+    // The intruder's certificate is valid, but the access control gives it nothing: its
+    // command never reaches the gateway, and nothing latches.
+    let intruder = open("intruder");
+    let answers = zenoh_query(&intruder, &estop, Some(r#"{"client":"intruder"}"#), QUERY);
+    assert!(answers.is_empty(), "the intruder was answered: {answers:?}");
+    assert!(zenoh_query(&intruder, &format!("scout/{name}/state"), None, QUERY).is_empty());
+    std::thread::sleep(Duration::from_millis(300));
+    assert_eq!(wait_for_status(&status, LIMIT, |_| true)["latched"], false);
+    // A peer without a certificate cannot even connect: the gateway only speaks mutual TLS.
+    let plain = scout_clients::remote::SessionSettings {
+        config_file: Some(String::new()),
+        connect: vec![endpoint.replace("tls/", "tcp/")],
+        ..Default::default()
+    };
+    if let Ok(session) = plain.open("client") {
+        assert!(zenoh_query(&session, &estop, Some(r#"{"client":"plain"}"#), QUERY).is_empty());
+    }
+    assert!(gateway.is_running(), "{}", gateway.log());
+}
