@@ -189,6 +189,16 @@ mod tests {
     }
 
     #[test]
+    fn the_example_zenoh_configs_parse() {
+        for file in ["zenoh-tls-gateway.json5", "zenoh-tls-operator.json5"] {
+            let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../config").join(file);
+            if let Err(error) = zenoh::Config::from_file(&path) {
+                panic!("{}: {error}", path.display());
+            }
+        }
+    }
+
+    #[test]
     fn unknown_keys_and_bad_values_are_refused() {
         assert!(toml::from_str::<GatewayConfig>("nmae = \"x\"").is_err());
         let config = GatewayConfig {

@@ -374,34 +374,43 @@ pub fn wait_for_status(
     panic!("no wanted status within {limit:?}; last: {last}");
 }
 
-/// A client process driving at 50 Hz in the background (`scout drive`), killed when dropped.
+/// A `scout` process in the background (a driver, a router), killed when dropped.
 #[derive(Debug)]
-pub struct Driver {
+pub struct Background {
     child: std::process::Child,
 }
 
-impl Driver {
+/// A client process driving at 50 Hz in the background (`scout drive`).
+pub type Driver = Background;
+
+impl Background {
     /// Starts `scout drive` for robot `name` with `args` (e.g. `--linear 0.5 --class autonomy`).
-    pub fn start(name: &str, args: &[&str]) -> Driver {
+    pub fn start(name: &str, args: &[&str]) -> Background {
+        let mut all = vec!["drive", "--name", name];
+        all.extend_from_slice(args);
+        Self::scout(&all)
+    }
+
+    /// Starts `scout ARGS`.
+    pub fn scout(args: &[&str]) -> Background {
         let child = command("scout")
-            .args(["drive", "--name", name])
             .args(args)
             .stdin(Stdio::null())
             .stdout(Stdio::null())
             .stderr(Stdio::null())
             .spawn()
-            .expect("spawn scout drive");
-        Driver { child }
+            .expect("spawn scout");
+        Background { child }
     }
 
     /// Sends `signal` to it.
     pub fn signal(&self, signal: nix::sys::signal::Signal) {
         let pid = nix::unistd::Pid::from_raw(self.child.id() as i32);
-        nix::sys::signal::kill(pid, signal).expect("signal the driver");
+        nix::sys::signal::kill(pid, signal).expect("signal the process");
     }
 }
 
-impl Drop for Driver {
+impl Drop for Background {
     fn drop(&mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();

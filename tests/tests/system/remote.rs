@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 
 use nix::sys::signal::Signal;
 use scout_system_tests::{
-    Gateway, Sim, connect, free_port, robot_name, scout, wait_for_status, zenoh_query,
+    Background, Gateway, Sim, connect, free_port, robot_name, scout, wait_for_status, zenoh_query,
     zenoh_session,
 };
 use serde_json::Value;
@@ -247,7 +247,7 @@ fn enabled_remote_commands_go_through_the_arbiter_and_bad_input_is_rejected() {
 #[test]
 fn a_two_robot_fleet_through_a_router() {
     let router_port = free_port();
-    let _router = zenoh_session("router", &[tcp(router_port)], &[]);
+    let _router = Background::scout(&["router", "--listen", &tcp(router_port)]);
     let names = [robot_name("fleet-a"), robot_name("fleet-b")];
     let _gateways: Vec<Gateway> = names
         .iter()

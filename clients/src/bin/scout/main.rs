@@ -7,6 +7,7 @@
 mod control;
 mod decode;
 mod echo;
+mod router;
 mod teleop;
 
 use std::io::ErrorKind;
@@ -54,6 +55,8 @@ enum Command {
     Status(control::StatusArgs),
     /// Reset the gateway's odometry to the origin.
     ResetOdometry(control::ClientArgs),
+    /// Run a zenoh router for a fleet: gateways connect to it, remote readers read through it.
+    Router(router::RouterArgs),
 }
 
 /// The robot to talk to.
@@ -78,6 +81,7 @@ fn main() -> ExitCode {
         Command::ClearFault(args) => control::clear_fault(&args),
         Command::Status(args) => control::status(&args),
         Command::ResetOdometry(args) => control::one_shot(&args, |c| c.reset_odometry()),
+        Command::Router(args) => router::run(&args),
     };
     match result {
         Ok(code) => code,
