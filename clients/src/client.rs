@@ -6,7 +6,7 @@ use iceoryx2::node::Node;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::subscriber::Subscriber;
 
-use crate::ipc::{self, Ipc, ServiceError, StatePayload};
+use crate::ipc::{self, Ipc, Role, ServiceError, StatePayload};
 
 /// What can go wrong talking to a gateway.
 #[derive(Debug, thiserror::Error)]
@@ -41,7 +41,7 @@ impl Robot {
         ipc::quiet_iceoryx2_logs();
         ipc::remove_dead_nodes();
         let node = ipc::node(&format!("scout-client-{name}")).map_err(iceoryx)?;
-        ipc::open_state_services(&node, name)?;
+        ipc::state_services(&node, name, Role::Client)?;
         Ok(Self {
             name: name.to_owned(),
             node,
@@ -60,7 +60,7 @@ impl Robot {
 
     /// Subscribes to the chassis state. The latest state is available at once.
     pub fn subscribe(&self) -> Result<StateSubscriber, ClientError> {
-        let (state, events) = ipc::open_state_services(&self.node, &self.name)?;
+        let (state, events) = ipc::state_services(&self.node, &self.name, Role::Client)?;
         let subscriber = state.subscriber_builder().create().map_err(iceoryx)?;
         let listener = events.listener_builder().create().map_err(iceoryx)?;
         Ok(StateSubscriber {

@@ -11,7 +11,7 @@ use scout_protocol::{FaultClear, LightCommand};
 use crate::client::{ClientError, Robot};
 use crate::ipc::{
     self, CLEAR_ALL_FAULTS, Class, ControlRequest, ControlResponse, FixedText, Ipc, LightPayload,
-    LightsRequest, RequestKind, StatusPayload,
+    LightsRequest, RequestKind, Role, StatusPayload,
 };
 
 /// How long a request waits for the gateway's answer.
@@ -82,7 +82,7 @@ impl Robot {
                 "client name `{name}` must be 1 to 32 bytes"
             )));
         }
-        let (requests, events) = ipc::control_services(self.node(), self.name(), false)?;
+        let (requests, events) = ipc::control_services(self.node(), self.name(), Role::Client)?;
         Ok(Controller {
             robot: self.name().to_owned(),
             name: FixedText::new(name),
@@ -96,7 +96,7 @@ impl Robot {
 
     /// Reads the arbiter's status.
     pub fn status(&self) -> Result<StatusReader, ClientError> {
-        let service = ipc::status_services(self.node(), self.name(), false)?;
+        let service = ipc::status_services(self.node(), self.name(), Role::Client)?;
         let subscriber = service.subscriber_builder().create().map_err(iceoryx)?;
         Ok(StatusReader { subscriber })
     }

@@ -109,72 +109,95 @@ fn service_name(name: &str) -> Result<ServiceName, ServiceError> {
     ServiceName::new(name).map_err(|_| ServiceError::Name(name.to_owned()))
 }
 
-/// Creates (gateway) the state services of `robot`, sized for [`MAX_SUBSCRIBERS`] processes.
-pub fn create_state_services(
-    node: &Node<Ipc>,
-    robot: &str,
-) -> Result<(StateService, StateEvents), ServiceError> {
-    let name = state_service(robot);
-    let service_name = service_name(&name)?;
-    let iceoryx = |reason: String| ServiceError::Iceoryx {
-        service: name.clone(),
-        reason,
-    };
-    // Events first: clients take the publish-subscribe service as the sign that all exist.
-    let events = node
-        .service_builder(&service_name)
-        .event()
-        .max_notifiers(2)
-        .max_listeners(MAX_SUBSCRIBERS)
-        .max_nodes(MAX_NODES)
-        .open_or_create()
-        .map_err(|e| iceoryx(e.to_string()))?;
-    let state = node
-        .service_builder(&service_name)
-        .publish_subscribe::<StatePayload>()
-        .max_publishers(2)
-        .max_subscribers(MAX_SUBSCRIBERS)
-        .max_nodes(MAX_NODES)
-        .history_size(1)
-        .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
-        .enable_safe_overflow(true)
-        .open_or_create()
-        .map_err(|e| iceoryx(e.to_string()))?;
-    Ok((state, events))
+/// Who calls a `*_services` function.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Role {
+    /// The gateway: creates the services, sized for all its clients.
+    Gateway,
+    /// A client: opens them; a missing service means no gateway runs.
+    Client,
 }
 
-/// Opens (client) the state services of `robot`.
-pub fn open_state_services(
+/// The error of creating or opening `service` of `robot`: a service that does not exist means
+/// that no gateway of that name runs.
+fn service_error(
+    robot: &str,
+    service: &str,
+    missing: bool,
+    reason: impl std::fmt::Display,
+) -> ServiceError {
+    if missing {
+        ServiceError::NoGateway {
+            robot: robot.to_owned(),
+        }
+    } else {
+        ServiceError::Iceoryx {
+            service: service.to_owned(),
+            reason: reason.to_string(),
+        }
+    }
+}
+
+/// Creates or opens the event service paired with `name`.
+fn event_service(
     node: &Node<Ipc>,
     robot: &str,
-) -> Result<(StateService, StateEvents), ServiceError> {
+    name: &str,
+    role: Role,
+    (notifiers, listeners): (usize, usize),
+) -> Result<StateEvents, ServiceError> {
     use iceoryx2::service::builder::event::EventOpenError;
+    let builder = node.service_builder(&service_name(name)?).event();
+    match role {
+        Role::Gateway => builder
+            .max_notifiers(notifiers)
+            .max_listeners(listeners)
+            .max_nodes(MAX_NODES)
+            .open_or_create()
+            .map_err(|e| service_error(robot, name, false, e)),
+        Role::Client => builder
+            .open()
+            .map_err(|e| service_error(robot, name, e == EventOpenError::DoesNotExist, e)),
+    }
+}
+
+/// Creates or opens a publish-subscribe service of `Payload` with one latest sample of history.
+fn latest_value_service<Payload: std::fmt::Debug + ZeroCopySend>(
+    node: &Node<Ipc>,
+    robot: &str,
+    name: &str,
+    role: Role,
+) -> Result<publish_subscribe::PortFactory<Ipc, Payload, ()>, ServiceError> {
     use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError;
+    let builder = node
+        .service_builder(&service_name(name)?)
+        .publish_subscribe::<Payload>();
+    match role {
+        Role::Gateway => builder
+            .max_publishers(2)
+            .max_subscribers(MAX_SUBSCRIBERS)
+            .max_nodes(MAX_NODES)
+            .history_size(1)
+            .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
+            .enable_safe_overflow(true)
+            .open_or_create()
+            .map_err(|e| service_error(robot, name, false, e)),
+        Role::Client => builder.open().map_err(|e| {
+            service_error(robot, name, e == PublishSubscribeOpenError::DoesNotExist, e)
+        }),
+    }
+}
+
+/// The state services of `robot`: publish-subscribe and its event service.
+pub fn state_services(
+    node: &Node<Ipc>,
+    robot: &str,
+    role: Role,
+) -> Result<(StateService, StateEvents), ServiceError> {
     let name = state_service(robot);
-    let service_name = service_name(&name)?;
-    let no_gateway = || ServiceError::NoGateway {
-        robot: robot.to_owned(),
-    };
-    let iceoryx = |reason: String| ServiceError::Iceoryx {
-        service: name.clone(),
-        reason,
-    };
-    let state = node
-        .service_builder(&service_name)
-        .publish_subscribe::<StatePayload>()
-        .open()
-        .map_err(|e| match e {
-            PublishSubscribeOpenError::DoesNotExist => no_gateway(),
-            other => iceoryx(other.to_string()),
-        })?;
-    let events = node
-        .service_builder(&service_name)
-        .event()
-        .open()
-        .map_err(|e| match e {
-            EventOpenError::DoesNotExist => no_gateway(),
-            other => iceoryx(other.to_string()),
-        })?;
+    // Events first: clients take the publish-subscribe service as the sign that all exist.
+    let events = event_service(node, robot, &name, role, (2, MAX_SUBSCRIBERS))?;
+    let state = latest_value_service(node, robot, &name, role)?;
     Ok((state, events))
 }
 
@@ -858,29 +881,20 @@ pub type ControlService = iceoryx2::service::port_factory::request_response::Por
 /// The status service.
 pub type StatusService = publish_subscribe::PortFactory<Ipc, StatusPayload, ()>;
 
-/// Creates (gateway) or opens (client) the control services of `robot`: requests and the wake-up
-/// event. Sized for [`MAX_CONTROLLERS`] client processes.
+/// The control services of `robot`: requests and the wake-up event. Sized for
+/// [`MAX_CONTROLLERS`] client processes.
 pub fn control_services(
     node: &Node<Ipc>,
     robot: &str,
-    create: bool,
+    role: Role,
 ) -> Result<(ControlService, StateEvents), ServiceError> {
-    use iceoryx2::service::builder::event::EventOpenError;
     use iceoryx2::service::builder::request_response::RequestResponseOpenError;
     let name = control_service(robot);
-    let service_name = service_name(&name)?;
-    let no_gateway = || ServiceError::NoGateway {
-        robot: robot.to_owned(),
-    };
-    let iceoryx = |reason: String| ServiceError::Iceoryx {
-        service: name.clone(),
-        reason,
-    };
     let builder = node
-        .service_builder(&service_name)
+        .service_builder(&service_name(&name)?)
         .request_response::<ControlRequest, ControlResponse>();
-    let requests = if create {
-        builder
+    let requests = match role {
+        Role::Gateway => builder
             .max_servers(2)
             .max_clients(MAX_CONTROLLERS)
             .max_nodes(MAX_NODES)
@@ -889,69 +903,22 @@ pub fn control_services(
             .enable_safe_overflow_for_requests(true)
             .enable_safe_overflow_for_responses(true)
             .open_or_create()
-            .map_err(|e| iceoryx(e.to_string()))?
-    } else {
-        builder.open().map_err(|e| match e {
-            RequestResponseOpenError::DoesNotExist => no_gateway(),
-            other => iceoryx(other.to_string()),
-        })?
+            .map_err(|e| service_error(robot, &name, false, e))?,
+        Role::Client => builder.open().map_err(|e| {
+            service_error(robot, &name, e == RequestResponseOpenError::DoesNotExist, e)
+        })?,
     };
-    let events = node.service_builder(&service_name).event();
-    let events = if create {
-        events
-            .max_notifiers(MAX_CONTROLLERS)
-            .max_listeners(2)
-            .max_nodes(MAX_NODES)
-            .open_or_create()
-            .map_err(|e| iceoryx(e.to_string()))?
-    } else {
-        events.open().map_err(|e| match e {
-            EventOpenError::DoesNotExist => no_gateway(),
-            other => iceoryx(other.to_string()),
-        })?
-    };
+    let events = event_service(node, robot, &name, role, (MAX_CONTROLLERS, 2))?;
     Ok((requests, events))
 }
 
-/// Creates (gateway) or opens (client) the status service of `robot`.
+/// The status service of `robot`.
 pub fn status_services(
     node: &Node<Ipc>,
     robot: &str,
-    create: bool,
+    role: Role,
 ) -> Result<StatusService, ServiceError> {
-    use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError;
-    let name = status_service(robot);
-    let builder = node
-        .service_builder(&service_name(&name)?)
-        .publish_subscribe::<StatusPayload>();
-    let result = if create {
-        builder
-            .max_publishers(2)
-            .max_subscribers(MAX_SUBSCRIBERS)
-            .max_nodes(MAX_NODES)
-            .history_size(1)
-            .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
-            .enable_safe_overflow(true)
-            .open_or_create()
-            .map_err(|e| e.to_string())
-    } else {
-        builder.open().map_err(|e| match e {
-            PublishSubscribeOpenError::DoesNotExist => String::new(),
-            other => other.to_string(),
-        })
-    };
-    result.map_err(|reason| {
-        if reason.is_empty() {
-            ServiceError::NoGateway {
-                robot: robot.to_owned(),
-            }
-        } else {
-            ServiceError::Iceoryx {
-                service: name,
-                reason,
-            }
-        }
-    })
+    latest_value_service(node, robot, &status_service(robot), role)
 }
 
 /// The node id as the two halves a [`ControlRequest`] carries.

@@ -191,7 +191,9 @@ mod tests {
     #[test]
     fn the_example_zenoh_configs_parse() {
         for file in ["zenoh-tls-gateway.json5", "zenoh-tls-operator.json5"] {
-            let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../config").join(file);
+            let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../config")
+                .join(file);
             if let Err(error) = zenoh::Config::from_file(&path) {
                 panic!("{}: {error}", path.display());
             }

@@ -15,7 +15,7 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::server::Server;
 use iceoryx2::prelude::BackpressureStrategy;
 use scout_clients::ipc::{
-    self, ControlRequest, ControlResponse, Ipc, LinkState, StatePayload, StatusPayload,
+    self, ControlRequest, ControlResponse, Ipc, LinkState, Role, StatePayload, StatusPayload,
     TransportKind,
 };
 use scout_protocol::sequence::RollingCounter;
@@ -61,12 +61,12 @@ impl Ports {
         let node =
             ipc::node(&format!("scout-gateway-{robot}")).context("creating the iceoryx2 node")?;
         // The state service last: once it exists, clients find every service.
-        let status = ipc::status_services(&node, robot, true)?
+        let status = ipc::status_services(&node, robot, Role::Gateway)?
             .publisher_builder()
             .backpressure_strategy(BackpressureStrategy::DiscardData)
             .create()
             .context("creating the status publisher")?;
-        let (control, control_events) = ipc::control_services(&node, robot, true)?;
+        let (control, control_events) = ipc::control_services(&node, robot, Role::Gateway)?;
         let server = control
             .server_builder()
             .create()
@@ -75,7 +75,7 @@ impl Ports {
             .listener_builder()
             .create()
             .context("creating the control listener")?;
-        let (state, events) = ipc::create_state_services(&node, robot)?;
+        let (state, events) = ipc::state_services(&node, robot, Role::Gateway)?;
         let publisher = state
             .publisher_builder()
             .backpressure_strategy(BackpressureStrategy::DiscardData)

@@ -9,6 +9,7 @@
 //! - [`requests`]: control requests on the wire to the arbiter and back.
 //! - [`monitor`]: dead-process detection for clients.
 //! - [`wait`]: waiting on the port and the clients' wake-up event at once.
+//! - [`logging`]: `tracing` to standard error, never blocking the caller.
 //! - [`lock`]: one gateway per robot name and device.
 //! - [`link`]: message framing per transport (serial, slcan, SocketCAN), shared with the simulator.
 //! - [`port`]: the port as an OS resource (tty or SocketCAN socket).
@@ -21,6 +22,7 @@ pub mod control;
 pub mod device;
 pub mod link;
 pub mod lock;
+pub mod logging;
 pub mod monitor;
 pub mod port;
 pub mod requests;

@@ -330,26 +330,42 @@ pub fn connect(name: &str) -> scout_clients::client::Robot {
     }
 }
 
+/// Polls `next` until it gives a JSON value that satisfies `wanted`, at most `limit`.
+fn wait_for(
+    what: &str,
+    limit: Duration,
+    mut next: impl FnMut() -> Option<serde_json::Value>,
+    wanted: impl Fn(&serde_json::Value) -> bool,
+) -> serde_json::Value {
+    let deadline = Instant::now() + limit;
+    let mut last = serde_json::Value::Null;
+    while Instant::now() < deadline {
+        if let Some(value) = next() {
+            if wanted(&value) {
+                return value;
+            }
+            last = value;
+        }
+    }
+    panic!("no wanted {what} within {limit:?}; last: {last}");
+}
+
 /// Waits for a state that satisfies `wanted`, at most `limit`; returns it as JSON.
 pub fn wait_for_state(
     subscriber: &scout_clients::client::StateSubscriber,
     limit: Duration,
     wanted: impl Fn(&serde_json::Value) -> bool,
 ) -> serde_json::Value {
-    let deadline = Instant::now() + limit;
-    let mut last = serde_json::Value::Null;
-    while Instant::now() < deadline {
-        if let Some(state) = subscriber
+    let next = || {
+        let state = subscriber
             .next_timeout(Duration::from_millis(200))
-            .expect("receive state")
-        {
-            last = scout_clients::state::state_json(&state, scout_clients::ipc::monotonic_ns());
-            if wanted(&last) {
-                return last;
-            }
-        }
-    }
-    panic!("no wanted state within {limit:?}; last: {last}");
+            .expect("receive state")?;
+        Some(scout_clients::state::state_json(
+            &state,
+            scout_clients::ipc::monotonic_ns(),
+        ))
+    };
+    wait_for("state", limit, next, wanted)
 }
 
 /// Waits for an arbiter status that satisfies `wanted`, at most `limit`; returns it as JSON.
@@ -358,20 +374,16 @@ pub fn wait_for_status(
     limit: Duration,
     wanted: impl Fn(&serde_json::Value) -> bool,
 ) -> serde_json::Value {
-    let deadline = Instant::now() + limit;
-    let mut last = serde_json::Value::Null;
-    while Instant::now() < deadline {
-        if let Some(status) = reader
+    let next = || {
+        let status = reader
             .latest(Duration::from_millis(50))
-            .expect("read status")
-        {
-            last = scout_clients::state::status_json(&status, scout_clients::ipc::monotonic_ns());
-            if wanted(&last) {
-                return last;
-            }
-        }
-    }
-    panic!("no wanted status within {limit:?}; last: {last}");
+            .expect("read status")?;
+        Some(scout_clients::state::status_json(
+            &status,
+            scout_clients::ipc::monotonic_ns(),
+        ))
+    };
+    wait_for("status", limit, next, wanted)
 }
 
 /// A `scout` process in the background (a driver, a router), killed when dropped.

@@ -68,7 +68,7 @@ const USAGE: u8 = 2;
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    let _log = init_logging();
+    let _log = scout_gateway::logging::init();
     let config = match configure(&cli) {
         Ok(config) => config,
         Err(error) => {
@@ -98,24 +98,6 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
-}
-
-/// Logs go to stderr through a non-blocking writer: a slow terminal or pipe never holds up the
-/// control loop (lines are dropped instead).
-fn init_logging() -> tracing_appender::non_blocking::WorkerGuard {
-    let (writer, guard) = tracing_appender::non_blocking::NonBlockingBuilder::default()
-        .lossy(true)
-        .finish(std::io::stderr());
-    tracing_subscriber::fmt()
-        .with_writer(writer)
-        .with_target(false)
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
-        )
-        .init();
-    guard
 }
 
 fn configure(cli: &Cli) -> anyhow::Result<GatewayConfig> {

@@ -593,8 +593,8 @@ impl Chassis {
             || self.latched.contains(Fault::BatteryUndervoltageFault)
     }
 
-    fn faults(&self) -> FaultBits {
-        let mut bits = FaultBits(self.latched.0 | self.forced_warnings.0);
+    /// The hottest driver temperature and the largest motor current (magnitude).
+    fn hottest_and_highest(&self) -> (f64, f64) {
         let hottest = self
             .motors
             .iter()
@@ -605,6 +605,12 @@ impl Chassis {
             .iter()
             .map(|m| m.current().abs())
             .fold(0.0, f64::max);
+        (hottest, highest)
+    }
+
+    fn faults(&self) -> FaultBits {
+        let mut bits = FaultBits(self.latched.0 | self.forced_warnings.0);
+        let (hottest, highest) = self.hottest_and_highest();
         bits = bits
             .with(Fault::CommandChecksumError, self.checksum_error)
             .with(
@@ -627,16 +633,7 @@ impl Chassis {
     }
 
     fn update_latches(&mut self) {
-        let hottest = self
-            .motors
-            .iter()
-            .map(MotorState::driver_temperature)
-            .fold(f64::MIN, f64::max);
-        let highest = self
-            .motors
-            .iter()
-            .map(|m| m.current().abs())
-            .fold(0.0, f64::max);
+        let (hottest, highest) = self.hottest_and_highest();
         let mut latched = self.latched;
         if hottest > OVERTEMP_PROTECTION_C {
             latched = latched.with(Fault::DriverOvertempProtection, true);

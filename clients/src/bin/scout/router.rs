@@ -30,13 +30,20 @@ pub fn run(args: &RouterArgs) -> anyhow::Result<ExitCode> {
     } else {
         args.listen.clone()
     };
-    let settings = SessionSettings { config_file: args.zenoh_config.clone(), listen, connect: args.connect.clone() };
+    let settings = SessionSettings {
+        config_file: args.zenoh_config.clone(),
+        listen,
+        connect: args.connect.clone(),
+    };
     let stop = Arc::new(AtomicBool::new(false));
     let on_signal = Arc::clone(&stop);
     ctrlc::set_handler(move || on_signal.store(true, Ordering::Relaxed))
         .context("installing the Ctrl-C handler")?;
     let _session = settings.open("router")?;
-    eprintln!("scout router: listening on {:?} (Ctrl-C to stop)", settings.listen);
+    eprintln!(
+        "scout router: listening on {:?} (Ctrl-C to stop)",
+        settings.listen
+    );
     while !stop.load(Ordering::Relaxed) {
         std::thread::sleep(Duration::from_millis(100));
     }
