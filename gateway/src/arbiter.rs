@@ -276,7 +276,8 @@ pub struct Output {
 }
 
 impl Output {
-    const STOP: Output = Output {
+    /// Zero speed, nothing to clear.
+    pub const STOP: Output = Output {
         linear: 0.0,
         angular: 0.0,
         fault_clear: FaultClear::None,

@@ -20,7 +20,7 @@ use scout_clients::ipc::{
 };
 use scout_protocol::sequence::RollingCounter;
 use scout_protocol::units::{self, MAX_LINEAR_SPEED};
-use scout_protocol::{Counted, FaultClear, LightCommand, Message, MotionCommand};
+use scout_protocol::{Counted, LightCommand, Message, MotionCommand};
 use tracing::{debug, error, info, warn};
 
 use crate::arbiter::{Arbiter, LightsSetting, Output};
@@ -153,7 +153,6 @@ pub struct ControlLoop {
     last_status: Duration,
     motion_count: RollingCounter,
     light_count: RollingCounter,
-    lights: Option<LightCommand>,
     next_command: Duration,
     next_light: Duration,
     reopen_at: Duration,
@@ -195,7 +194,6 @@ impl ControlLoop {
             device: None,
             motion_count: RollingCounter::default(),
             light_count: RollingCounter::default(),
-            lights: None,
             next_command: Duration::ZERO,
             next_light: Duration::ZERO,
             reopen_at: Duration::ZERO,
@@ -212,6 +210,15 @@ impl ControlLoop {
 
     fn now(&self) -> Duration {
         self.start.elapsed()
+    }
+
+    /// The light command to repeat: what clients asked for last (`auto`: host control off), or
+    /// none before anyone asked.
+    fn lights(&self) -> Option<LightCommand> {
+        self.arbiter.lights().map(|setting| match setting {
+            LightsSetting::Manual(lights) => lights,
+            LightsSetting::Auto => LightCommand::default(),
+        })
     }
 
     fn light_period(&self) -> Duration {
@@ -244,25 +251,14 @@ impl ControlLoop {
             if self.arbiter.take_urgent_stop() {
                 // The stop goes on the wire now, not at the next tick.
                 self.stats.urgent_stops += 1;
-                self.send_motion(
-                    &Output {
-                        fault_clear: FaultClear::None,
-                        ..self.arbiter.output()
-                    },
-                    now,
-                );
+                self.send_motion(&Output::STOP, now);
             }
             if now >= self.next_command {
                 if stopping == Some(0) || (stopping.is_some() && self.device.is_none()) {
                     break;
                 }
                 let output = if stopping.is_some() {
-                    Output {
-                        linear: 0.0,
-                        angular: 0.0,
-                        fault_clear: FaultClear::None,
-                        limited: false,
-                    }
+                    Output::STOP
                 } else {
                     self.arbiter.poll_output(now, period)
                 };
@@ -272,11 +268,7 @@ impl ControlLoop {
                     *left -= 1;
                 }
             }
-            self.lights = self.arbiter.lights().map(|setting| match setting {
-                LightsSetting::Manual(lights) => lights,
-                LightsSetting::Auto => LightCommand::default(),
-            });
-            if self.lights.is_some() && now >= self.next_light {
+            if self.lights().is_some() && now >= self.next_light {
                 self.send_lights(now);
             }
             self.publish_status(now);
@@ -285,7 +277,7 @@ impl ControlLoop {
             if self.now().saturating_sub(self.last_publish) >= HEARTBEAT {
                 self.publish();
             }
-            let deadline = if self.lights.is_some() {
+            let deadline = if self.lights().is_some() {
                 self.next_command.min(self.next_light)
             } else {
                 self.next_command
@@ -412,7 +404,7 @@ impl ControlLoop {
         if self.next_light <= now {
             self.next_light = now + period;
         }
-        let (Some(lights), Some(_)) = (self.lights, self.device.as_ref()) else {
+        let (Some(lights), Some(_)) = (self.lights(), self.device.as_ref()) else {
             return;
         };
         let counted = Counted {

@@ -246,7 +246,9 @@ impl Gateway {
     /// Starts `scout-gateway` with `args`; without zenoh unless `args` set it up (parallel tests
     /// would all want the default port).
     pub fn start(args: &[&str]) -> Gateway {
-        let zenoh = args.iter().any(|a| a.starts_with("--zenoh") || *a == "--remote-commands");
+        let zenoh = args
+            .iter()
+            .any(|a| a.starts_with("--zenoh") || *a == "--remote-commands");
         let mut child = command("scout-gateway")
             .env("RUST_LOG", "info")
             .args(args)
