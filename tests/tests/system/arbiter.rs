@@ -315,3 +315,28 @@ fn a_heartbeat_source_that_dies_latches_the_stop() {
             .is_some_and(|r| r.contains("heartbeat"))
     );
 }
+
+#[test]
+fn ctrl_c_stops_scout_drive_before_it_exits() {
+    let name = robot_name("ctrl-c");
+    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    let robot = connect(&name);
+    let status = robot.status().expect("status");
+    let mut driver = Driver::start(&name, &["--linear", "0.4", "--client", "keyboard"]);
+    wait_for_status(&status, LIMIT, |s| selected_client(s) == Some("keyboard"));
+    driver.signal(Signal::SIGINT);
+    assert_eq!(driver.wait_exit(LIMIT), Some(0));
+    // It sent zero and gave up control: nobody drives, and it is still listed (not dead).
+    let after = wait_for_status(&status, LIMIT, |s| s["selected"].is_null());
+    let keyboard = after["sources"]
+        .as_array()
+        .and_then(|a| a.iter().find(|c| c["client"] == "keyboard").cloned());
+    if let Some(keyboard) = keyboard {
+        assert_eq!(keyboard["holding"], false);
+    }
+    let stopped = wait_for_status(&status, LIMIT, |s| s["output"]["linear"] == 0.0);
+    assert_eq!(
+        stopped["latched"], false,
+        "Ctrl-C stops the drive, it does not latch the stop"
+    );
+}
