@@ -243,10 +243,12 @@ impl ControlLoop {
             if self.device.is_none() && now >= self.reopen_at {
                 self.open(now)?;
             }
-            self.handle_requests(now);
+            // The status can change with a request, a client's death or a tick, nothing else.
+            let mut status_due = self.handle_requests(now) > 0;
             while let Some(node) = self.monitor.try_gone() {
                 self.watched_nodes.remove(&node);
                 self.arbiter.handle_node_gone(now, node);
+                status_due = true;
             }
             if self.arbiter.take_urgent_stop() {
                 // The stop goes on the wire now, not at the next tick.
@@ -264,6 +266,7 @@ impl ControlLoop {
                 };
                 self.send_motion(&output, now);
                 self.advance_schedule(now, period);
+                status_due = true;
                 if let Some(left) = stopping.as_mut() {
                     *left -= 1;
                 }
@@ -271,7 +274,9 @@ impl ControlLoop {
             if self.lights().is_some() && now >= self.next_light {
                 self.send_lights(now);
             }
-            self.publish_status(now);
+            if status_due {
+                self.publish_status(now);
+            }
             let publish = self.tracker.poll(ipc::monotonic_ns());
             self.publish_if(publish);
             if self.now().saturating_sub(self.last_publish) >= HEARTBEAT {
@@ -300,8 +305,10 @@ impl ControlLoop {
     }
 
     /// Answers every waiting request.
-    fn handle_requests(&mut self, now: Duration) {
+    /// Answers every waiting request; returns how many there were.
+    fn handle_requests(&mut self, now: Duration) -> usize {
         let _ = self.ports.wake.try_wait(|_| {});
+        let mut handled = 0;
         loop {
             let active = match self.ports.server.receive() {
                 Ok(Some(active)) => active,
@@ -312,6 +319,7 @@ impl ControlLoop {
                 }
             };
             self.stats.requests += 1;
+            handled += 1;
             let request = *active.payload();
             let client = requests::client_key(&request);
             if self.watched_nodes.insert(client.node) {
@@ -340,6 +348,7 @@ impl ControlLoop {
                 debug!("answering {} failed: {error}", client.name);
             }
         }
+        handled
     }
 
     fn publish_status(&mut self, now: Duration) {
