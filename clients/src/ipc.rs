@@ -312,8 +312,9 @@ impl LinkState {
     }
 }
 
-/// How the gateway reaches the chassis.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+/// How the gateway reaches the chassis (also the `transport` key of its configuration).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 #[repr(u8)]
 pub enum TransportKind {
     /// RS232.

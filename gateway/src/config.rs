@@ -7,24 +7,12 @@ use std::time::Duration;
 use scout_protocol::units::DEFAULT_MAX_ANGULAR_SPEED;
 use serde::{Deserialize, Serialize};
 
+use scout_clients::ipc::TransportKind;
+
 use crate::arbiter::ArbiterConfig;
 use crate::bridge::ZenohConfig;
 use crate::device::DeviceSpec;
 use crate::sim::SimParams;
-
-/// How the chassis is reached.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum TransportChoice {
-    /// RS232 (`device` is the tty).
-    Serial,
-    /// slcan adapter (`device` is the tty).
-    Slcan,
-    /// SocketCAN (`device` is the interface).
-    Can,
-    /// The simulated chassis in-process (`device` unused).
-    Sim,
-}
 
 /// The whole configuration.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -33,7 +21,7 @@ pub struct GatewayConfig {
     /// The robot's name: every iceoryx2 service and zenoh key carries it.
     pub name: String,
     /// How the chassis is reached.
-    pub transport: Option<TransportChoice>,
+    pub transport: Option<TransportKind>,
     /// The tty or CAN interface.
     pub device: Option<String>,
     /// rad/s at 100 % angular command (protocol-notes 4.1; firmware differs).
@@ -160,10 +148,10 @@ impl GatewayConfig {
                     "no transport: use --sim, --serial DEVICE, --slcan DEVICE or --can IFACE (or `transport` in the config)".into(),
                 ));
             }
-            Some(TransportChoice::Serial) => DeviceSpec::Serial(device()?.into()),
-            Some(TransportChoice::Slcan) => DeviceSpec::Slcan(device()?.into()),
-            Some(TransportChoice::Can) => DeviceSpec::Can(device()?),
-            Some(TransportChoice::Sim) => DeviceSpec::Sim(SimParams {
+            Some(TransportKind::Serial) => DeviceSpec::Serial(device()?.into()),
+            Some(TransportKind::Slcan) => DeviceSpec::Slcan(device()?.into()),
+            Some(TransportKind::Can) => DeviceSpec::Can(device()?),
+            Some(TransportKind::Sim) => DeviceSpec::Sim(SimParams {
                 max_angular: self.max_angular,
                 ..self.sim.clone()
             }),
@@ -204,7 +192,7 @@ mod tests {
     fn unknown_keys_and_bad_values_are_refused() {
         assert!(toml::from_str::<GatewayConfig>("nmae = \"x\"").is_err());
         let config = GatewayConfig {
-            transport: Some(TransportChoice::Sim),
+            transport: Some(TransportKind::Sim),
             max_angular: -1.0,
             ..Default::default()
         };
@@ -216,7 +204,7 @@ mod tests {
                 .contains("max_angular")
         );
         let config = GatewayConfig {
-            transport: Some(TransportChoice::Serial),
+            transport: Some(TransportKind::Serial),
             ..Default::default()
         };
         assert!(

@@ -11,8 +11,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use anyhow::Context;
 use clap::{ArgGroup, Parser};
 use scout_clients::ipc;
+use scout_clients::ipc::TransportKind;
 use scout_gateway::bridge::{self, Bridge};
-use scout_gateway::config::{GatewayConfig, TransportChoice};
+use scout_gateway::config::GatewayConfig;
 use scout_gateway::control::ControlLoop;
 use scout_gateway::device::DeviceSpec;
 use scout_gateway::lock::{Lock, LockError};
@@ -126,10 +127,10 @@ fn configure(cli: &Cli) -> anyhow::Result<GatewayConfig> {
     }
     let device = |path: &PathBuf| Some(path.display().to_string());
     let (transport, device) = match (cli.sim, &cli.serial, &cli.slcan, &cli.can) {
-        (true, ..) => (Some(TransportChoice::Sim), None),
-        (_, Some(path), ..) => (Some(TransportChoice::Serial), device(path)),
-        (_, _, Some(path), _) => (Some(TransportChoice::Slcan), device(path)),
-        (_, _, _, Some(interface)) => (Some(TransportChoice::Can), Some(interface.clone())),
+        (true, ..) => (Some(TransportKind::Sim), None),
+        (_, Some(path), ..) => (Some(TransportKind::Serial), device(path)),
+        (_, _, Some(path), _) => (Some(TransportKind::Slcan), device(path)),
+        (_, _, _, Some(interface)) => (Some(TransportKind::Can), Some(interface.clone())),
         _ => (config.transport, config.device.clone()),
     };
     config.transport = transport;
