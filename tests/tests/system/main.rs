@@ -7,3 +7,4 @@ mod examples;
 mod gateway;
 mod remote;
 mod sim;
+mod teleop;

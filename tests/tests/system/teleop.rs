@@ -1,0 +1,87 @@
+//! `scout teleop` on a pseudo-terminal, as a person at a keyboard: keys drive, `e` latches the
+//! stop, `q` quits and restores the terminal.
+
+use std::io::{Read, Write};
+use std::time::{Duration, Instant};
+
+use scout_system_tests::{Gateway, command, connect, robot_name, wait_for_status};
+use serialport::{SerialPort, TTYPort};
+
+const LIMIT: Duration = Duration::from_secs(10);
+
+/// Reads what the program drew until `wanted` appears in it.
+fn read_until(master: &mut TTYPort, screen: &mut String, wanted: &str) {
+    let deadline = Instant::now() + LIMIT;
+    let mut buffer = [0u8; 4096];
+    while !screen.contains(wanted) {
+        assert!(
+            Instant::now() < deadline,
+            "`{wanted}` never appeared; screen: {screen:?}"
+        );
+        if let Ok(n) = master.read(&mut buffer) {
+            screen.push_str(&String::from_utf8_lossy(&buffer[..n]));
+        }
+    }
+}
+
+#[test]
+fn keyboard_teleop_drives_stops_and_restores_the_terminal() {
+    let name = robot_name("teleop");
+    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    let robot = connect(&name);
+    let status = robot.status().expect("status");
+    let (mut master, slave) = TTYPort::pair().expect("a pseudo-terminal");
+    master
+        .set_timeout(Duration::from_millis(50))
+        .expect("timeout");
+    let tty = slave.name().expect("pty path");
+    let open = || {
+        std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .open(&tty)
+            .expect("open the pty")
+    };
+    let mut teleop = command("scout")
+        .args(["teleop", "--name", &name, "--client", "keyboard"])
+        .stdin(open())
+        .stdout(open())
+        .stderr(open())
+        .spawn()
+        .expect("spawn scout teleop");
+    let mut screen = String::new();
+    read_until(&mut master, &mut screen, "scout teleop");
+    master.write_all(b"ww").expect("keys");
+    read_until(&mut master, &mut screen, "linear +0.20 m/s");
+    let driving = wait_for_status(&status, LIMIT, |s| s["selected"]["client"] == "keyboard");
+    assert_eq!(driving["selected"]["class"], "teleop");
+    master.write_all(b"e").expect("e-stop key");
+    let latched = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
+    assert_eq!(latched["latched_by"]["client"], "keyboard");
+    master.write_all(b"q").expect("quit key");
+    let deadline = Instant::now() + LIMIT;
+    let code = loop {
+        if let Some(status) = teleop.try_wait().expect("try_wait") {
+            break status.code();
+        }
+        assert!(Instant::now() < deadline, "teleop did not quit");
+        let mut buffer = [0u8; 4096];
+        if let Ok(n) = master.read(&mut buffer) {
+            screen.push_str(&String::from_utf8_lossy(&buffer[..n]));
+        }
+    };
+    assert_eq!(code, Some(0));
+    let mut buffer = [0u8; 4096];
+    while let Ok(n) = master.read(&mut buffer) {
+        if n == 0 {
+            break;
+        }
+        screen.push_str(&String::from_utf8_lossy(&buffer[..n]));
+    }
+    assert!(
+        screen.contains("\u{1b}[?1049l"),
+        "the alternate screen was left: {screen:?}"
+    );
+    assert!(screen.contains("\u{1b}[?25h"), "the cursor was shown again");
+    drop(slave);
+}
