@@ -494,13 +494,8 @@ fn remote_lights(command: &RemoteCommand) -> Result<Lights, String> {
         let Some(light) = light else {
             return Ok(Light::default());
         };
-        let mode = match light.mode.as_str() {
-            "off" => LightMode::Off,
-            "on" => LightMode::On,
-            "breath" => LightMode::Breath,
-            "custom" => LightMode::Custom,
-            other => return Err(format!("light mode `{other}`: off, on, breath or custom")),
-        };
+        let mode = LightMode::from_name(&light.mode)
+            .ok_or_else(|| format!("light mode `{}`: off, on, breath or custom", light.mode))?;
         if light.brightness > 100 {
             return Err(format!("brightness {} is above 100", light.brightness));
         }

@@ -201,6 +201,16 @@ raw_enum! {
     }
 }
 
+impl LightMode {
+    /// The four defined modes.
+    pub const ALL: [LightMode; 4] = [Self::Off, Self::On, Self::Breath, Self::Custom];
+
+    /// The mode for a name as printed by [`LightMode::name`] (`off`, `on`, `breath`, `custom`).
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|mode| mode.name() == name)
+    }
+}
+
 /// One light (front or rear): its mode and brightness (0..100, used in custom mode).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
@@ -710,6 +720,14 @@ mod tests {
         let mut payload = [0; PAYLOAD_LEN];
         command.emit(&mut payload);
         assert_eq!(payload, [0x07, 0x42, 0, 0, 0, 0]);
+    }
+
+    #[test]
+    fn light_mode_names_round_trip() {
+        for mode in LightMode::ALL {
+            assert_eq!(LightMode::from_name(mode.name()), Some(mode));
+        }
+        assert_eq!(LightMode::from_name("disco"), None);
     }
 
     #[test]

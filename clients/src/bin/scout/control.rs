@@ -58,8 +58,8 @@ pub struct DriveArgs {
     class: Class,
 }
 
-/// One line per change of the gateway's answer, not one per message.
-fn describe(answer: &Result<Accepted, ControlError>) -> String {
+/// The gateway's answer in words (`scout drive` prints it once per change, not per message).
+pub fn describe(answer: &Result<Accepted, ControlError>) -> String {
     match answer {
         Ok(Accepted { clamped: false }) => "accepted".into(),
         Ok(Accepted { clamped: true }) => "accepted (clamped to the speed caps)".into(),
@@ -153,13 +153,8 @@ pub struct LightsArgs {
 
 fn parse_light(text: &str) -> Result<Light, String> {
     let (mode, brightness) = text.split_once(':').unwrap_or((text, "100"));
-    let mode = match mode {
-        "off" => LightMode::Off,
-        "on" => LightMode::On,
-        "breath" => LightMode::Breath,
-        "custom" => LightMode::Custom,
-        other => return Err(format!("light mode `{other}`: off, on, breath or custom")),
-    };
+    let mode = LightMode::from_name(mode)
+        .ok_or_else(|| format!("light mode `{mode}`: off, on, breath or custom"))?;
     let brightness = brightness
         .parse::<u8>()
         .ok()

@@ -9,11 +9,12 @@ use clap::Args;
 use crossterm::event::{self, Event, KeyCode, KeyEvent, KeyEventKind, KeyModifiers};
 use crossterm::{cursor, execute, terminal};
 use scout_clients::client::Robot;
-use scout_clients::control::{Accepted, ControlError};
+use scout_clients::control::ControlError;
 use scout_clients::ipc::{Class, monotonic_ns};
 use scout_clients::state::{state_json, status_json};
 
 use crate::RobotArgs;
+use crate::control::describe;
 
 /// Commands go out at 50 Hz.
 const PERIOD: Duration = Duration::from_millis(20);
@@ -156,14 +157,6 @@ pub fn run(args: &TeleopArgs) -> anyhow::Result<ExitCode> {
             last_state.as_ref(),
             last_status.as_ref(),
         )?;
-    }
-}
-
-fn describe(answer: &Result<Accepted, ControlError>) -> String {
-    match answer {
-        Ok(Accepted { clamped: false }) => "accepted".into(),
-        Ok(Accepted { clamped: true }) => "accepted (clamped)".into(),
-        Err(error) => error.to_string(),
     }
 }
 
