@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use clap::Parser;
 use scout_clients::client::Robot;
-use scout_clients::ipc::{LinkState, monotonic_ns};
+use scout_clients::monotonic_ns;
 
 #[derive(Debug, Parser)]
 struct Args {
@@ -43,7 +43,7 @@ fn main() -> anyhow::Result<()> {
             out,
             "{},{latency_us},{},{:.1},{:.3},{:.3},{:.4},{:.4},{:.4},{},{},{}",
             state.seq,
-            LinkState::from_raw(state.link.state).name(),
+            state.link.state().name(),
             state.system.status().battery_voltage(),
             motion.linear(),
             motion.angular(),

@@ -13,7 +13,7 @@ use anyhow::{Context, bail};
 use clap::Parser;
 use scout_clients::client::{Robot, StateSubscriber};
 use scout_clients::control::Controller;
-use scout_clients::ipc::{Class, StatePayload};
+use scout_clients::{Class, StatePayload};
 
 #[derive(Debug, Parser)]
 struct Args {

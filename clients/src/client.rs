@@ -2,28 +2,42 @@
 
 use std::time::{Duration, Instant};
 
-use iceoryx2::node::Node;
+use iceoryx2::node::{Node, NodeCreationFailure};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::subscriber::Subscriber;
-
-use crate::ipc::{self, Ipc, Role, ServiceError, StatePayload};
+use scout_interface::StatePayload;
+use scout_interface::services::{self, BadRobotName, Ipc, Role, ServiceError};
 
 /// What can go wrong talking to a gateway.
 #[derive(Debug, thiserror::Error)]
 pub enum ClientError {
     /// The robot name is not valid.
-    #[error("{0}")]
-    BadName(String),
+    #[error(transparent)]
+    BadName(#[from] BadRobotName),
+    /// The client name is not valid.
+    #[error("client name `{0}` must be 1 to 32 bytes")]
+    BadClientName(String),
     /// The gateway's services could not be opened.
     #[error(transparent)]
     Service(#[from] ServiceError),
-    /// iceoryx2 failed.
-    #[error("iceoryx2: {0}")]
-    Iceoryx(String),
-}
-
-fn iceoryx(error: impl std::fmt::Display) -> ClientError {
-    ClientError::Iceoryx(error.to_string())
+    /// This process's iceoryx2 node could not be created.
+    #[error("creating this process's iceoryx2 node: {0:?} (is /dev/shm a writable tmpfs?)")]
+    Node(#[source] NodeCreationFailure),
+    /// A subscriber could not be created.
+    #[error("subscribing: {0:?}")]
+    Subscribe(#[source] iceoryx2::port::subscriber::SubscriberCreateError),
+    /// A listener could not be created.
+    #[error("listening for state events: {0:?}")]
+    Listen(#[source] iceoryx2::port::listener::ListenerCreateError),
+    /// Receiving failed.
+    #[error("receiving: {0:?}")]
+    Receive(#[source] iceoryx2::port::ReceiveError),
+    /// Waiting for a state event failed.
+    #[error("waiting for the state: {0:?}")]
+    Wait(#[source] iceoryx2::port::listener::ListenerWaitError),
+    /// A control port could not be created.
+    #[error(transparent)]
+    ControlPort(#[from] services::ControlPortError),
 }
 
 /// A connection to one robot's gateway.
@@ -35,13 +49,15 @@ pub struct Robot {
 
 impl Robot {
     /// Connects to the gateway serving robot `name`. Fails with [`ServiceError::NoGateway`]
-    /// when none runs.
+    /// when none runs, and with [`ServiceError::Incompatible`] when it was built from another
+    /// version of the interface.
     pub fn connect(name: &str) -> Result<Self, ClientError> {
-        ipc::check_robot_name(name).map_err(ClientError::BadName)?;
-        ipc::quiet_iceoryx2_logs();
-        ipc::remove_dead_nodes();
-        let node = ipc::node(&format!("scout-client-{name}")).map_err(iceoryx)?;
-        ipc::state_services(&node, name, Role::Client)?;
+        services::check_robot_name(name)?;
+        services::quiet_iceoryx2_logs();
+        // Best effort: a failed clean-up of dead processes' leftovers does not stop a client.
+        let _ = services::remove_dead_nodes();
+        let node = services::node(&format!("scout-client-{name}")).map_err(ClientError::Node)?;
+        services::state_services(&node, name, Role::Client)?;
         Ok(Self {
             name: name.to_owned(),
             node,
@@ -60,9 +76,15 @@ impl Robot {
 
     /// Subscribes to the chassis state. The latest state is available at once.
     pub fn subscribe(&self) -> Result<StateSubscriber, ClientError> {
-        let (state, events) = ipc::state_services(&self.node, &self.name, Role::Client)?;
-        let subscriber = state.subscriber_builder().create().map_err(iceoryx)?;
-        let listener = events.listener_builder().create().map_err(iceoryx)?;
+        let (state, events) = services::state_services(&self.node, &self.name, Role::Client)?;
+        let subscriber = state
+            .subscriber_builder()
+            .create()
+            .map_err(ClientError::Subscribe)?;
+        let listener = events
+            .listener_builder()
+            .create()
+            .map_err(ClientError::Listen)?;
         Ok(StateSubscriber {
             subscriber,
             listener,
@@ -80,11 +102,7 @@ pub struct StateSubscriber {
 impl StateSubscriber {
     /// The newest state received since the last call, without waiting; older ones are skipped.
     pub fn try_latest(&self) -> Result<Option<StatePayload>, ClientError> {
-        let mut latest = None;
-        while let Some(sample) = self.subscriber.receive().map_err(iceoryx)? {
-            latest = Some(*sample);
-        }
-        Ok(latest)
+        services::latest(&self.subscriber).map_err(ClientError::Receive)
     }
 
     /// The next state, in order, without waiting.
@@ -92,7 +110,7 @@ impl StateSubscriber {
         Ok(self
             .subscriber
             .receive()
-            .map_err(iceoryx)?
+            .map_err(ClientError::Receive)?
             .map(|sample| *sample))
     }
 
@@ -108,7 +126,9 @@ impl StateSubscriber {
             if left.is_zero() {
                 return Ok(None);
             }
-            self.listener.timed_wait(|_| {}, left).map_err(iceoryx)?;
+            self.listener
+                .timed_wait(|_| {}, left)
+                .map_err(ClientError::Wait)?;
         }
     }
 }

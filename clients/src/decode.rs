@@ -1,7 +1,7 @@
 //! `scout decode`: one input line (candump text or serial hex) to decoded frames, as text or JSON.
 
 use scout_protocol::serial::{Pull, StreamDecoder};
-use scout_protocol::{Counted, Light, Message, can, candump};
+use scout_protocol::{Counted, can, candump};
 use serde_json::{Value, json};
 
 /// Which link a line came from.
@@ -107,46 +107,7 @@ fn bytes_unused(line: &str, frames: &[DecodedFrame]) -> usize {
     (digits / 2).saturating_sub(frames.len() * scout_protocol::serial::FRAME_LEN)
 }
 
-fn light_json(light: &Light) -> Value {
-    json!({ "mode": light.mode.name(), "brightness": light.brightness })
-}
-
-/// The message's fields, named as the README documents, in physical units.
-pub fn message_fields(message: &Message, max_angular: f64) -> Value {
-    match message {
-        Message::MotionCommand(command) => json!({
-            "control_mode": command.control_mode.name(),
-            "fault_clear": command.fault_clear.name(),
-            "linear": command.linear(),
-            "angular": command.angular(max_angular),
-            "linear_percent": command.linear_percent,
-            "angular_percent": command.angular_percent,
-        }),
-        Message::LightCommand(lights) | Message::LightFeedback(lights) => json!({
-            "enabled": lights.enabled,
-            "front": light_json(&lights.front),
-            "rear": light_json(&lights.rear),
-        }),
-        Message::SystemStatus(status) => json!({
-            "state": status.state.name(),
-            "control_mode": status.control_mode.name(),
-            "battery_voltage": status.battery_voltage(),
-            "fault_bits": status.faults.0,
-            "faults": status.faults.iter().map(|f| f.name()).collect::<Vec<_>>(),
-        }),
-        Message::MotionFeedback(motion) => json!({
-            "linear": motion.linear(),
-            "angular": motion.angular(),
-        }),
-        Message::MotorFeedback(motor) => json!({
-            "motor": motor.motor.number(),
-            "current": motor.current(),
-            "rpm": motor.rpm,
-            "driver_temperature": motor.driver_temperature,
-            "motor_temperature": motor.motor_temperature,
-        }),
-    }
-}
+pub use scout_interface::json::message_fields;
 
 /// The JSON object of one frame: `id`, `name`, `count`, `link`, optional `interface` and
 /// `timestamp`, then the message's fields.

@@ -5,9 +5,11 @@ use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
+use scout_interface::StatePayload;
+use scout_interface::json::state_json;
+use scout_interface::services::monotonic_ns;
+
 use crate::client::{ClientError, StateSubscriber};
-use crate::ipc::{StatePayload, monotonic_ns};
-use crate::state::state_json;
 
 /// How often the live view redraws.
 const REDRAW: Duration = Duration::from_millis(100);
@@ -65,9 +67,15 @@ pub enum EchoError {
     /// No state arrived in time.
     #[error("no state from the gateway for {0:?}: is it stopped (SIGSTOP) or overloaded?")]
     Idle(Duration),
-    /// Output failed.
-    #[error(transparent)]
-    Io(#[from] std::io::Error),
+    /// Writing the output failed (a closed pipe is the reader's normal end, not an error).
+    #[error("writing the output: {0}")]
+    Io(#[source] std::io::Error),
+}
+
+impl From<std::io::Error> for EchoError {
+    fn from(error: std::io::Error) -> Self {
+        Self::Io(error)
+    }
 }
 
 fn next(subscriber: &StateSubscriber, idle_timeout: Duration) -> Result<StatePayload, EchoError> {

@@ -2,16 +2,20 @@
 //!
 //! - [`client`]: connect to a robot by name; subscribe to its state.
 //! - [`control`]: drive, stop, release, resume, lights, fault clear; the arbiter's status.
-//! - [`ipc`]: the iceoryx2 services and zero-copy payloads shared with the gateway.
-//! - [`remote`]: the zenoh keys, session settings, remote commands and a remote state reader.
-//! - [`state`]: the public JSON form of the chassis state.
+//! - [`remote`]: reading gateways through zenoh.
 //! - [`echo`]: `scout echo`, the state on a terminal or as JSON lines.
 //! - [`decode`]: candump text and serial hex to decoded frames (`scout decode`).
+//!
+//! The contract with the gateway (payloads, requests, JSON schemas, zenoh keys) is
+//! [`scout_interface`], re-exported here as [`interface`].
 
 pub mod client;
 pub mod control;
 pub mod decode;
 pub mod echo;
-pub mod ipc;
 pub mod remote;
-pub mod state;
+
+pub use scout_interface as interface;
+pub use scout_interface::control::{Accepted, Class, Rejected, RejectionKind, Request};
+pub use scout_interface::services::monotonic_ns;
+pub use scout_interface::{StatePayload, StatusPayload};

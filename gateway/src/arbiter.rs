@@ -11,8 +11,8 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
+use scout_protocol::FaultClear;
 use scout_protocol::units::{DEFAULT_MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED};
-use scout_protocol::{FaultClear, LightCommand};
 use serde::{Deserialize, Serialize};
 use tracing::info;
 
@@ -21,9 +21,11 @@ pub const MAX_COMMAND_AGE: Duration = Duration::from_millis(500);
 /// Motion commands that carry a requested fault-clear code.
 pub const FAULT_CLEAR_FRAMES: u8 = 3;
 /// The most clients the arbiter tracks at once.
-pub const MAX_SOURCES: usize = 32;
+pub use scout_interface::control::MAX_CLIENTS as MAX_SOURCES;
 
-pub use scout_clients::ipc::{Class, REJECTION_NAMES};
+pub use scout_interface::control::{
+    Accepted, Answer, Class, LightsSetting, REJECTION_COUNTERS, Rejection, Request,
+};
 
 /// Speed caps, m/s and rad/s.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -144,124 +146,6 @@ pub struct ClientKey {
     pub node: u128,
 }
 
-/// The lights a client asks for.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum LightsSetting {
-    /// Hand the lights back to the chassis' own logic.
-    Auto,
-    /// Host-controlled front and rear.
-    Manual(LightCommand),
-}
-
-/// What a client asks.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Request {
-    /// Drive at these speeds (m/s, rad/s) for at most `ttl` (`None`: the class's maximum age).
-    Drive {
-        /// The class the client drives as.
-        class: Class,
-        /// m/s.
-        linear: f64,
-        /// rad/s.
-        angular: f64,
-        /// The command's life.
-        ttl: Option<Duration>,
-    },
-    /// Latch the safety stop.
-    Stop {
-        /// Why, for the status and the audit log.
-        reason: String,
-    },
-    /// Release the latched stop and whatever control this client holds.
-    Release,
-    /// Give up this client's control; the stop is left alone.
-    Relinquish,
-    /// Arm autonomy.
-    Resume,
-    /// Set the lights (last writer wins).
-    Lights(LightsSetting),
-    /// Send these fault-clear codes, each in the next 3 motion commands.
-    ClearFault(Vec<FaultClear>),
-    /// Register (period > 0) or drop (zero) a heartbeat: a missed beat latches the stop. Every
-    /// request from the client is a beat.
-    Heartbeat {
-        /// The longest gap between two requests.
-        period: Duration,
-    },
-}
-
-/// Why a request was refused. Counted by [`Rejection::code`].
-#[derive(Debug, Clone, PartialEq)]
-pub enum Rejection {
-    /// A speed was NaN or infinite.
-    NotFinite,
-    /// The class byte names no class.
-    UnknownClass(u8),
-    /// The request kind byte names no request.
-    UnknownRequest(u8),
-    /// The request is malformed, with what is wrong.
-    Malformed(String),
-    /// The safety stop is latched.
-    Latched {
-        /// Who latched it.
-        by: String,
-    },
-    /// Another client holds the class.
-    Held {
-        /// The class.
-        class: Class,
-        /// Its holder.
-        holder: String,
-    },
-    /// Autonomy must be resumed first.
-    AutonomyDisarmed,
-    /// The arbiter tracks too many clients.
-    TooManyClients,
-}
-
-impl Rejection {
-    /// The counter index (see [`REJECTION_NAMES`]).
-    pub fn code(&self) -> usize {
-        match self {
-            Self::NotFinite => 0,
-            Self::UnknownClass(_) => 1,
-            Self::UnknownRequest(_) => 2,
-            Self::Malformed(_) => 3,
-            Self::Latched { .. } => 4,
-            Self::Held { .. } => 5,
-            Self::AutonomyDisarmed => 6,
-            Self::TooManyClients => 7,
-        }
-    }
-}
-
-impl std::fmt::Display for Rejection {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Self::NotFinite => f.write_str("speed is NaN or infinite"),
-            Self::UnknownClass(raw) => write!(f, "unknown class {raw} (teleop or autonomy)"),
-            Self::UnknownRequest(raw) => write!(f, "unknown request kind {raw}"),
-            Self::Malformed(what) => write!(f, "malformed request: {what}"),
-            Self::Latched { by } => write!(f, "safety stop latched by {by}: release it first"),
-            Self::Held { class, holder } => write!(f, "{} held by {holder}", class.name()),
-            Self::AutonomyDisarmed => f.write_str(
-                "autonomy disarmed (after a teleop takeover, stop or release): resume first",
-            ),
-            Self::TooManyClients => write!(f, "too many clients (at most {MAX_SOURCES})"),
-        }
-    }
-}
-
-/// The answer to an accepted request.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Accepted {
-    /// A speed was beyond the caps and was clamped.
-    pub clamped: bool,
-}
-
-/// Every request gets one.
-pub type Answer = Result<Accepted, Rejection>;
-
 /// The motion command for one tick.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Output {
@@ -348,7 +232,7 @@ pub struct Arbiter {
     output: Output,
     fault_clears: VecDeque<(FaultClear, u8)>,
     lights: Option<LightsSetting>,
-    rejections: [u64; REJECTION_NAMES.len()],
+    rejections: [u64; REJECTION_COUNTERS],
     urgent_stop: bool,
 }
 
@@ -367,7 +251,7 @@ impl Arbiter {
             output: Output::STOP,
             fault_clears: VecDeque::new(),
             lights: None,
-            rejections: [0; REJECTION_NAMES.len()],
+            rejections: [0; REJECTION_COUNTERS],
             urgent_stop: false,
         }
     }
@@ -387,8 +271,8 @@ impl Arbiter {
         &self.sources
     }
 
-    /// Rejections so far, by [`REJECTION_NAMES`].
-    pub fn rejections(&self) -> &[u64; REJECTION_NAMES.len()] {
+    /// Rejections so far, indexed by [`Rejection::kind`].
+    pub fn rejections(&self) -> &[u64; REJECTION_COUNTERS] {
         &self.rejections
     }
 
@@ -404,7 +288,7 @@ impl Arbiter {
 
     /// Counts a request refused before it reached the arbiter (malformed on the wire).
     pub fn count_rejection(&mut self, rejection: &Rejection) {
-        self.rejections[rejection.code()] += 1;
+        self.rejections[usize::from(rejection.kind().raw())] += 1;
     }
 
     /// Whether a stop latched since the last call: the caller sends zero at once, not at the
@@ -519,10 +403,14 @@ impl Arbiter {
                 self.lights = Some(setting);
                 accepted
             }
-            Request::ClearFault(codes) => {
-                if codes.is_empty() || codes.contains(&FaultClear::None) {
-                    return Err(Rejection::Malformed("no fault to clear".into()));
-                }
+            Request::ClearFault(code) => {
+                let codes = match code {
+                    None => FaultClear::ALL.to_vec(),
+                    Some(FaultClear::None) => {
+                        return Err(Rejection::Malformed("no fault to clear".into()));
+                    }
+                    Some(code) => vec![code],
+                };
                 info!("{}: {} clears faults {codes:?}", secs(now), client.name);
                 self.fault_clears = codes
                     .into_iter()
@@ -549,6 +437,8 @@ impl Arbiter {
                 }
                 accepted
             }
+            // The state tracker resets the odometry; to the arbiter it is a beat.
+            Request::ResetOdometry => accepted,
         }
     }
 

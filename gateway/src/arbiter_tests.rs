@@ -324,7 +324,10 @@ fn bad_values_are_rejected_and_counted_big_ones_clamped() {
             Err(Rejection::NotFinite)
         );
     }
-    assert_eq!(arbiter.rejections()[Rejection::NotFinite.code()], 3);
+    assert_eq!(
+        arbiter.rejections()[usize::from(Rejection::NotFinite.kind().raw())],
+        3
+    );
     assert_eq!(
         arbiter.handle_request(ms(0), &who, drive(Class::Teleop, 1e9, -1e9)),
         Ok(Accepted { clamped: true })
@@ -349,16 +352,22 @@ fn bad_values_are_rejected_and_counted_big_ones_clamped() {
 fn fault_clear_goes_out_in_three_commands_then_stops() {
     let mut arbiter = arbiter();
     let who = client("operator", 1);
-    let request = Request::ClearFault(vec![
-        FaultClear::DriverOverTemp,
-        FaultClear::MotorOverCurrent,
-    ]);
-    arbiter.handle_request(ms(0), &who, request).expect("clear");
-    let codes: Vec<FaultClear> = (0..8)
+    let one = Request::ClearFault(Some(FaultClear::DriverOverTemp));
+    arbiter.handle_request(ms(0), &who, one).expect("clear");
+    let codes: Vec<FaultClear> = (0..5)
         .map(|i| arbiter.poll_output(ms(i * 20), TICK).fault_clear)
         .collect();
-    use FaultClear::{DriverOverTemp as T, MotorOverCurrent as C, None as N};
-    assert_eq!(codes, [T, T, T, C, C, C, N, N]);
+    use FaultClear::{DriverOverTemp as T, None as N};
+    assert_eq!(codes, [T, T, T, N, N]);
+    arbiter
+        .handle_request(ms(100), &who, Request::ClearFault(None))
+        .expect("clear all");
+    let codes: Vec<FaultClear> = (0..26)
+        .map(|i| arbiter.poll_output(ms(120 + i * 20), TICK).fault_clear)
+        .collect();
+    let mut expected: Vec<FaultClear> = FaultClear::ALL.iter().flat_map(|c| [*c; 3]).collect();
+    expected.extend([N, N]);
+    assert_eq!(codes, expected);
 }
 
 #[test]

@@ -4,15 +4,15 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use scout_protocol::units::DEFAULT_MAX_ANGULAR_SPEED;
+use scout_bridge::ZenohConfig;
+use scout_interface::Transport;
+use scout_protocol::units::{DEFAULT_MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED};
+use scout_sim::SimParams;
 use serde::{Deserialize, Serialize};
-
-use scout_clients::ipc::TransportKind;
+use serde_json::{Value, json};
 
 use crate::arbiter::ArbiterConfig;
-use crate::bridge::ZenohConfig;
 use crate::device::DeviceSpec;
-use crate::sim::SimParams;
 
 /// The whole configuration.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -21,7 +21,7 @@ pub struct GatewayConfig {
     /// The robot's name: every iceoryx2 service and zenoh key carries it.
     pub name: String,
     /// How the chassis is reached.
-    pub transport: Option<TransportKind>,
+    pub transport: Option<Transport>,
     /// The tty or CAN interface.
     pub device: Option<String>,
     /// rad/s at 100 % angular command (protocol-notes 4.1; firmware differs).
@@ -120,9 +120,10 @@ impl GatewayConfig {
         })
     }
 
-    /// The device to open, after checking the configuration.
-    pub fn device(&self) -> Result<DeviceSpec, ConfigError> {
-        scout_clients::ipc::check_robot_name(&self.name).map_err(ConfigError::Invalid)?;
+    /// Checks every value; returns the device to open.
+    pub fn validate(&self) -> Result<DeviceSpec, ConfigError> {
+        scout_interface::services::check_robot_name(&self.name)
+            .map_err(|error| ConfigError::Invalid(error.to_string()))?;
         if !(self.max_angular.is_finite() && self.max_angular > 0.0) {
             return Err(ConfigError::Invalid(format!(
                 "max_angular must be a positive number of rad/s, found {}",
@@ -136,7 +137,9 @@ impl GatewayConfig {
             )));
         }
         self.arbiter.validate().map_err(ConfigError::Invalid)?;
-        self.zenoh.validate().map_err(ConfigError::Invalid)?;
+        self.zenoh
+            .validate()
+            .map_err(|error| ConfigError::Invalid(error.to_string()))?;
         let device = || {
             self.device.clone().ok_or_else(|| {
                 ConfigError::Invalid("no device: give --serial, --slcan or --can with a device, or `device` in the config".into())
@@ -148,10 +151,10 @@ impl GatewayConfig {
                     "no transport: use --sim, --serial DEVICE, --slcan DEVICE or --can IFACE (or `transport` in the config)".into(),
                 ));
             }
-            Some(TransportKind::Serial) => DeviceSpec::Serial(device()?.into()),
-            Some(TransportKind::Slcan) => DeviceSpec::Slcan(device()?.into()),
-            Some(TransportKind::Can) => DeviceSpec::Can(device()?),
-            Some(TransportKind::Sim) => DeviceSpec::Sim(SimParams {
+            Some(Transport::Serial) => DeviceSpec::Serial(device()?.into()),
+            Some(Transport::Slcan) => DeviceSpec::Slcan(device()?.into()),
+            Some(Transport::Can) => DeviceSpec::Can(device()?),
+            Some(Transport::Sim) => DeviceSpec::Sim(SimParams {
                 max_angular: self.max_angular,
                 ..self.sim.clone()
             }),
@@ -161,6 +164,24 @@ impl GatewayConfig {
     /// The motion command period.
     pub fn command_period(&self) -> Duration {
         Duration::from_millis(self.timing.command_period_ms)
+    }
+
+    /// What the zenoh `info` queryable tells about this gateway.
+    pub fn info(&self, transport: Transport, device: &str) -> Value {
+        json!({
+            "robot": self.name,
+            "version": env!("CARGO_PKG_VERSION"),
+            "transport": transport.name(),
+            "device": device,
+            "max_linear": MAX_LINEAR_SPEED,
+            "max_angular": self.max_angular,
+            "arbiter": self.arbiter,
+            "state_rate_hz": self.zenoh.state_rate_hz,
+            "remote_commands": {
+                "enabled": self.zenoh.remote_commands.enabled,
+                "allowed": self.zenoh.remote_commands.allowed,
+            },
+        })
     }
 }
 
@@ -173,43 +194,31 @@ mod tests {
         let text = include_str!("../../config/scout-gateway.toml");
         let config: GatewayConfig = toml::from_str(text).expect("example config");
         assert_eq!(config.name, "scout");
-        assert!(matches!(config.device(), Ok(DeviceSpec::Serial(_))));
-    }
-
-    #[test]
-    fn the_example_zenoh_configs_parse() {
-        for file in ["zenoh-tls-gateway.json5", "zenoh-tls-operator.json5"] {
-            let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("../config")
-                .join(file);
-            if let Err(error) = zenoh::Config::from_file(&path) {
-                panic!("{}: {error}", path.display());
-            }
-        }
+        assert!(matches!(config.validate(), Ok(DeviceSpec::Serial(_))));
     }
 
     #[test]
     fn unknown_keys_and_bad_values_are_refused() {
         assert!(toml::from_str::<GatewayConfig>("nmae = \"x\"").is_err());
         let config = GatewayConfig {
-            transport: Some(TransportKind::Sim),
+            transport: Some(Transport::Sim),
             max_angular: -1.0,
             ..Default::default()
         };
         assert!(
             config
-                .device()
+                .validate()
                 .expect_err("negative")
                 .to_string()
                 .contains("max_angular")
         );
         let config = GatewayConfig {
-            transport: Some(TransportKind::Serial),
+            transport: Some(Transport::Serial),
             ..Default::default()
         };
         assert!(
             config
-                .device()
+                .validate()
                 .expect_err("no device")
                 .to_string()
                 .contains("no device")

@@ -5,18 +5,16 @@ use std::io;
 use std::path::PathBuf;
 use std::time::Duration;
 
-use scout_clients::ipc::TransportKind;
-use scout_protocol::slcan::{self, Bitrate, Slcan};
-use scout_protocol::{ControlMode, Counted, can};
-
 use iceoryx2::port::listener::Listener;
-use scout_clients::ipc::Ipc;
+use scout_interface::Ipc;
+use scout_io::{Incoming, Port};
+use scout_protocol::link::{RxError, RxEvent, StreamFraming, decode_can, encode_stream};
+use scout_protocol::slcan::{self, Bitrate, Slcan};
+use scout_protocol::{Counted, Transport, can};
+use scout_sim::{Chassis, SimParams};
 
-use crate::link::{RxError, RxEvent, StreamFraming, Transport, decode_can, encode_stream};
 use crate::lock::{Lock, LockError};
-use crate::port::{Incoming, Port};
-use crate::sim::{Chassis, SimParams};
-use crate::wait::wait;
+use crate::wait::{Ready, wait};
 
 /// Which device, before it is opened.
 #[derive(Debug, Clone, PartialEq)]
@@ -32,13 +30,13 @@ pub enum DeviceSpec {
 }
 
 impl DeviceSpec {
-    /// The transport kind published in the state.
-    pub fn kind(&self) -> TransportKind {
+    /// The transport.
+    pub fn transport(&self) -> Transport {
         match self {
-            Self::Serial(_) => TransportKind::Serial,
-            Self::Slcan(_) => TransportKind::Slcan,
-            Self::Can(_) => TransportKind::Can,
-            Self::Sim(_) => TransportKind::Sim,
+            Self::Serial(_) => Transport::Serial,
+            Self::Slcan(_) => Transport::Slcan,
+            Self::Can(_) => Transport::Can,
+            Self::Sim(_) => Transport::Sim,
         }
     }
 
@@ -48,22 +46,6 @@ impl DeviceSpec {
             Self::Serial(path) | Self::Slcan(path) => path.display().to_string(),
             Self::Can(interface) => interface.clone(),
             Self::Sim(_) => "simulator".into(),
-        }
-    }
-
-    /// The control mode every motion command must carry on this device.
-    pub fn control_mode(&self) -> ControlMode {
-        match self {
-            Self::Serial(_) => ControlMode::Serial,
-            _ => ControlMode::Can,
-        }
-    }
-
-    fn link_transport(&self) -> Transport {
-        match self {
-            Self::Serial(_) => Transport::Serial,
-            Self::Slcan(_) => Transport::Slcan,
-            Self::Can(_) | Self::Sim(_) => Transport::Can,
         }
     }
 
@@ -84,7 +66,7 @@ impl DeviceSpec {
 
     /// Opens the device; `now` is the gateway's clock (the simulator starts its time there).
     pub fn open(&self, now: Duration) -> Result<Device, OpenError> {
-        let transport = self.link_transport();
+        let transport = self.transport();
         let lock = self.lock()?;
         let port = match self {
             Self::Serial(path) | Self::Slcan(path) => {
@@ -92,9 +74,8 @@ impl DeviceSpec {
             }
             Self::Can(interface) => Port::open_can(interface)?,
             Self::Sim(params) => {
-                let mut chassis = Box::new(Chassis::new(params.clone(), Transport::Can));
-                // The model's clock starts at zero: bring it to the gateway's time.
-                let _ = chassis.poll_feedback(now);
+                // The model's clock reads zero at `epoch`, the gateway's time of opening.
+                let chassis = Box::new(Chassis::new(params.clone(), Transport::Sim));
                 return Ok(Device::Sim {
                     chassis,
                     epoch: now,
@@ -205,31 +186,43 @@ impl Device {
         }
     }
 
-    /// Waits at most `timeout` for input or a client's wake-up, and hands every event the input
-    /// completes to `on_event`. Returns whether a client woke it.
-    pub fn receive(
-        &mut self,
-        buffer: &mut [u8],
-        timeout: Duration,
+    /// Waits until `deadline` at the latest for input or a client's wake-up; `now` is when the
+    /// caller last read the clock. The simulator's input is due at its feedback times.
+    pub fn wait(
+        &self,
+        now: Duration,
+        deadline: Duration,
         wake: &Listener<Ipc>,
-        now: impl Fn() -> Duration,
-        mut on_event: impl FnMut(RxEvent),
-    ) -> io::Result<bool> {
+    ) -> io::Result<Ready> {
         match self {
             Self::Sim { chassis, epoch } => {
                 let due = chassis.next_feedback_at() + *epoch;
-                let ready = wait(None, wake, due.min(now() + timeout).saturating_sub(now()))?;
-                if let Some(batch) = chassis.poll_feedback(now().saturating_sub(*epoch)) {
+                wait(None, wake, deadline.min(due).saturating_sub(now))
+            }
+            Self::Port { port, .. } => wait(Some(port), wake, deadline.saturating_sub(now)),
+        }
+    }
+
+    /// Reads what arrived by `now` (the port only when `readable`), handing every event it
+    /// completes to `on_event`.
+    pub fn receive(
+        &mut self,
+        now: Duration,
+        readable: bool,
+        buffer: &mut [u8],
+        mut on_event: impl FnMut(RxEvent),
+    ) -> io::Result<()> {
+        match self {
+            Self::Sim { chassis, epoch } => {
+                if let Some(batch) = chassis.poll_feedback(now.saturating_sub(*epoch)) {
                     batch
                         .into_iter()
                         .for_each(|counted| on_event(RxEvent::Message(counted)));
                 }
-                Ok(ready.wake)
             }
             Self::Port { port, framing, .. } => {
-                let ready = wait(Some(&*port), wake, timeout)?;
-                if !ready.port {
-                    return Ok(ready.wake);
+                if !readable {
+                    return Ok(());
                 }
                 match port.read(buffer, Duration::ZERO)? {
                     Incoming::Timeout => {}
@@ -241,9 +234,9 @@ impl Device {
                     Incoming::Frame(frame) => on_event(decode_can(&frame)),
                     Incoming::Foreign(id) => on_event(RxEvent::Rejected(RxError::ForeignFrame(id))),
                 }
-                Ok(ready.wake)
             }
         }
+        Ok(())
     }
 
     /// Bytes the stream decoder threw away so far.

@@ -1,31 +1,29 @@
-//! scout-gateway: the process that owns a SCOUT chassis port, and the chassis simulator.
+//! scout-gateway: the one process that owns a SCOUT chassis port.
 //!
-//! - [`arbiter`]: who drives: safety stop > teleop > autonomy (sans-IO).
-//! - [`bridge`]: zenoh for remote peers: state, status, liveliness, info, remote commands.
-//! - [`control`]: the control loop, the one thread that touches the port and the clock.
-//! - [`state`]: the chassis state tracker (sans-IO).
-//! - [`device`]: the port or the in-process simulator, messages in and out.
-//! - [`config`]: the configuration file and its lookup.
-//! - [`requests`]: control requests on the wire to the arbiter and back.
-//! - [`monitor`]: dead-process detection for clients.
+//! In the order data flows:
+//! - [`device`]: the port with its framing, or the simulated chassis in-process (`--sim`).
+//! - [`core`]: the sans-IO core: frames, requests, deaths and time in; frames to send, state and
+//!   status to publish and the next deadline out. It holds:
+//!   - [`state`]: the chassis state tracker (link state, statistics, odometry);
+//!   - [`arbiter`]: who drives: safety stop > teleop > autonomy.
+//! - [`driver`]: the one thread that does I/O around the core: port, iceoryx2, clock, `ppoll`.
 //! - [`wait`]: waiting on the port and the clients' wake-up event at once.
-//! - [`logging`]: `tracing` to standard error, never blocking the caller.
+//! - [`monitor`]: dead-process detection for clients.
+//! - [`config`]: the configuration file and its lookup.
 //! - [`lock`]: one gateway per robot name and device.
-//! - [`link`]: message framing per transport (serial, slcan, SocketCAN), shared with the simulator.
-//! - [`port`]: the port as an OS resource (tty or SocketCAN socket).
-//! - [`sim`]: the simulated chassis and the `scout-sim` driver loop.
+//!
+//! The zenoh bridge (`scout-bridge`) is an ordinary local client that the `scout-gateway` binary
+//! starts beside the driver; the contract with every client is `scout-interface`.
 
 pub mod arbiter;
-pub mod bridge;
 pub mod config;
-pub mod control;
+pub mod core;
 pub mod device;
-pub mod link;
+pub mod driver;
 pub mod lock;
-pub mod logging;
 pub mod monitor;
-pub mod port;
-pub mod requests;
-pub mod sim;
 pub mod state;
 pub mod wait;
+
+#[cfg(test)]
+mod core_tests;

@@ -8,8 +8,8 @@ use std::time::Duration;
 
 use iceoryx2::node::{Node, NodeState, NodeView};
 use iceoryx2::prelude::{CallbackProgression, Config};
-use scout_clients::ipc::Ipc;
-use tracing::debug;
+use scout_interface::Ipc;
+use tracing::{debug, error, warn};
 
 /// How often the node list is scanned.
 pub const SCAN_PERIOD: Duration = Duration::from_millis(50);
@@ -34,7 +34,11 @@ impl NodeMonitor {
 
     /// Watches the process of node `node`.
     pub fn watch(&self, node: u128) {
-        let _ = self.watch.send(node);
+        if self.watch.send(node).is_err() {
+            error!(
+                "the client monitor thread has stopped: a client that dies keeps its control until its command ages out"
+            );
+        }
     }
 
     /// A watched node that died since the last call, if any. Never blocks.
@@ -55,8 +59,9 @@ fn scan_loop(watched: &Receiver<u128>, report: &Sender<u128>) {
                 Err(std::sync::mpsc::TryRecvError::Disconnected) => return,
             }
         }
-        if !watching.is_empty() {
-            let alive = alive_nodes();
+        if !watching.is_empty()
+            && let Some(alive) = alive_nodes()
+        {
             for node in watching
                 .iter()
                 .copied()
@@ -74,16 +79,19 @@ fn scan_loop(watched: &Receiver<u128>, report: &Sender<u128>) {
     }
 }
 
-/// The ids of the nodes whose processes live; dead ones are cleaned up on the way.
-fn alive_nodes() -> HashSet<u128> {
+/// The ids of the nodes whose processes live; dead ones are cleaned up on the way. `None` when
+/// the nodes could not be listed: then nobody is declared dead.
+fn alive_nodes() -> Option<HashSet<u128>> {
     let mut alive = HashSet::new();
-    let _ = Node::<Ipc>::list(Config::global_config(), |state| {
+    let listed = Node::<Ipc>::list(Config::global_config(), |state| {
         match state {
             NodeState::Alive(view) => {
                 alive.insert(view.id().value());
             }
             NodeState::Dead(view) => {
-                let _ = view.try_remove_stale_resources();
+                if let Err(error) = view.try_remove_stale_resources() {
+                    debug!("removing a dead node's resources failed: {error:?}");
+                }
             }
             NodeState::Inaccessible(id) | NodeState::Undefined(id) => {
                 // Not provably dead: keep treating it as alive.
@@ -92,5 +100,13 @@ fn alive_nodes() -> HashSet<u128> {
         }
         CallbackProgression::Continue
     });
-    alive
+    match listed {
+        Ok(()) => Some(alive),
+        Err(failure) => {
+            warn!(
+                "listing iceoryx2 nodes failed ({failure:?}): no client is declared dead this scan"
+            );
+            None
+        }
+    }
 }

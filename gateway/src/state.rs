@@ -1,22 +1,26 @@
 //! The one chassis state: received feedback, link statistics and state, odometry. Sans-IO: events
-//! and CLOCK_MONOTONIC times (ns) in, the payload to publish out.
+//! and CLOCK_MONOTONIC times in, the payload to publish out.
 
-use scout_clients::ipc::{
-    CommandPayload, FixedText, LightsPayload, LinkState, MotionPayload, MotorPayload,
-    OdometryPayload, Received, StatePayload, SystemPayload, TransportKind,
-};
+use std::time::Duration;
+
+use scout_interface::state::{CommandPayload, LinkState, OdometryPayload, Received, StatePayload};
+use scout_interface::{FixedText, Transport};
+use scout_protocol::kinematics::Pose;
+use scout_protocol::link::RxEvent;
 use scout_protocol::sequence::{Continuity, SequenceTracker};
 use scout_protocol::slcan::Slcan;
 use scout_protocol::version::{ProtocolVersion, VersionDetector};
 use scout_protocol::{Counted, Direction, Message, MotionCommand};
 use tracing::{error, info, warn};
 
-use crate::link::RxEvent;
-
 /// No valid feedback for this long: the link is `silent`.
-pub const SILENT_AFTER_NS: u64 = 100_000_000;
+pub const SILENT_AFTER: Duration = Duration::from_millis(100);
 /// Odometry does not integrate across a gap longer than this (the speed over it is unknown).
-const MAX_ODOMETRY_STEP_NS: u64 = 100_000_000;
+const MAX_ODOMETRY_STEP: Duration = Duration::from_millis(100);
+
+fn nanos(time: Duration) -> u64 {
+    time.as_nanos() as u64
+}
 
 /// What the state tracker was told happened.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -34,27 +38,27 @@ pub struct StateTracker {
     sequence: SequenceTracker,
     version: VersionDetector,
     link_state: LinkState,
-    last_feedback_ns: Option<u64>,
+    last_feedback: Option<Duration>,
     foreign_commands_reported: bool,
 }
 
 impl StateTracker {
     /// A tracker for `robot` on `transport`/`device`, before the port is open.
-    pub fn new(robot: &str, transport: TransportKind, device: &str, max_angular: f64) -> Self {
+    pub fn new(robot: &str, transport: Transport, device: &str, max_angular: f64) -> Self {
         let mut state = StatePayload {
             robot: FixedText::new(robot),
             max_angular,
             ..StatePayload::default()
         };
-        state.link.transport = transport as u8;
+        state.link.transport = transport.raw();
         state.link.device = FixedText::new(device);
-        state.link.state = LinkState::Disconnected as u8;
+        state.link.state = LinkState::Disconnected.raw();
         Self {
             state,
             sequence: SequenceTracker::new(),
             version: VersionDetector::new(),
             link_state: LinkState::Disconnected,
-            last_feedback_ns: None,
+            last_feedback: None,
             foreign_commands_reported: false,
         }
     }
@@ -70,9 +74,9 @@ impl StateTracker {
     }
 
     /// Stamps the next sequence number and the time, and returns the state to publish.
-    pub fn stamp(&mut self, now_ns: u64) -> &StatePayload {
+    pub fn stamp(&mut self, now: Duration) -> &StatePayload {
         self.state.seq += 1;
-        self.state.published_ns = now_ns;
+        self.state.published_ns = nanos(now);
         &self.state
     }
 
@@ -82,7 +86,7 @@ impl StateTracker {
         }
         info!("link {} -> {}", self.link_state.name(), state.name());
         self.link_state = state;
-        self.state.link.state = state as u8;
+        self.state.link.state = state.raw();
         Publish::Yes
     }
 
@@ -90,7 +94,7 @@ impl StateTracker {
     pub fn handle_connected(&mut self, reconnect: bool) -> Publish {
         self.sequence.reset();
         self.version.reset();
-        self.last_feedback_ns = None;
+        self.last_feedback = None;
         if reconnect {
             self.state.link.reconnects += 1;
         }
@@ -108,12 +112,12 @@ impl StateTracker {
     }
 
     /// A motion command was sent.
-    pub fn handle_sent_motion(&mut self, command: &MotionCommand, now_ns: u64) {
+    pub fn handle_sent_motion(&mut self, command: &MotionCommand, now: Duration) {
         self.state.link.tx_frames += 1;
         self.state.command = CommandPayload {
             linear: command.linear(),
             angular: command.angular(self.state.max_angular),
-            at_ns: now_ns,
+            at_ns: nanos(now),
         };
     }
 
@@ -134,11 +138,11 @@ impl StateTracker {
 
     /// Time passes: the link goes silent after 100 ms without feedback, and a v2 chassis is
     /// recognised.
-    pub fn poll(&mut self, now_ns: u64) -> Publish {
+    pub fn poll(&mut self, now: Duration) -> Publish {
         if self.link_state == LinkState::Disconnected {
             return Publish::No;
         }
-        if self.version.version(ns_to_duration(now_ns)) == ProtocolVersion::V2 {
+        if self.version.version(now) == ProtocolVersion::V2 {
             if self.link_state != LinkState::ProtocolV2 {
                 error!(
                     "the chassis speaks protocol v2, not supported by this gateway (v1 only): \
@@ -148,21 +152,20 @@ impl StateTracker {
             return self.set_link_state(LinkState::ProtocolV2);
         }
         let silent = self
-            .last_feedback_ns
-            .is_none_or(|last| now_ns.saturating_sub(last) >= SILENT_AFTER_NS);
+            .last_feedback
+            .is_none_or(|last| now.saturating_sub(last) >= SILENT_AFTER);
         if silent && self.link_state == LinkState::Ok {
             return self.set_link_state(LinkState::Silent);
         }
         Publish::No
     }
 
-    /// One thing received from the port at `now_ns`.
-    pub fn handle_rx(&mut self, event: &RxEvent, now_ns: u64) -> Publish {
-        let now = ns_to_duration(now_ns);
+    /// One thing received from the port at `now`.
+    pub fn handle_rx(&mut self, event: &RxEvent, now: Duration) -> Publish {
         match event {
             RxEvent::Message(counted) => {
                 self.version.observe(counted.message.kind().can_id(), now);
-                self.handle_message(counted, now_ns)
+                self.handle_message(counted, now)
             }
             RxEvent::Rejected(rejected) => {
                 if let Some(id) = rejected.can_id() {
@@ -183,7 +186,7 @@ impl StateTracker {
         }
     }
 
-    fn handle_message(&mut self, counted: &Counted, now_ns: u64) -> Publish {
+    fn handle_message(&mut self, counted: &Counted, now: Duration) -> Publish {
         let kind = counted.message.kind();
         if kind.direction() == Direction::Command {
             if !self.foreign_commands_reported {
@@ -202,76 +205,60 @@ impl StateTracker {
         if let Continuity::Gap { lost } = self.sequence.observe(kind, counted.count) {
             self.state.link.dropped_frames += u64::from(lost);
         }
-        if self.version.version(ns_to_duration(now_ns)) != ProtocolVersion::V1 {
+        if self.version.version(now) != ProtocolVersion::V1 {
             // Until a 0x151 proves v1, ids that v2 shares (0x131, 0x141) may mean something else.
             return Publish::No;
         }
-        self.last_feedback_ns = Some(now_ns);
+        self.last_feedback = Some(now);
+        if let Message::MotionFeedback(motion) = &counted.message {
+            self.integrate_odometry(motion.linear(), motion.angular(), now);
+        }
         let received = Received {
             valid: true,
             count: counted.count,
-            at_ns: now_ns,
+            at_ns: nanos(now),
         };
-        match &counted.message {
-            Message::SystemStatus(status) => {
-                self.state.system = SystemPayload::new(status, received)
-            }
-            Message::MotionFeedback(motion) => {
-                self.integrate_odometry(motion.linear(), motion.angular(), now_ns);
-                self.state.motion = MotionPayload::new(motion, received);
-            }
-            Message::MotorFeedback(motor) => {
-                self.state.motors[motor.motor.index()] = MotorPayload::new(motor, received);
-            }
-            Message::LightFeedback(lights) => {
-                self.state.lights = LightsPayload::new(lights, received)
-            }
-            Message::MotionCommand(_) | Message::LightCommand(_) => {}
-        }
+        self.state.store(&counted.message, received);
         self.set_link_state(LinkState::Ok);
         Publish::Yes
     }
 
-    fn integrate_odometry(&mut self, linear: f64, angular: f64, now_ns: u64) {
+    fn integrate_odometry(&mut self, linear: f64, angular: f64, now: Duration) {
         let previous = self.state.motion;
         if !previous.received.valid {
             return;
         }
-        let step_ns = now_ns.saturating_sub(previous.received.at_ns);
-        if step_ns == 0 || step_ns > MAX_ODOMETRY_STEP_NS {
+        let step = now.saturating_sub(Duration::from_nanos(previous.received.at_ns));
+        if step.is_zero() || step > MAX_ODOMETRY_STEP {
             return;
         }
-        let dt = step_ns as f64 / 1e9;
+        let dt = step.as_secs_f64();
         // Trapezoid between the previous and this feedback.
         let prior = previous.feedback();
         let v = (prior.linear() + linear) / 2.0;
         let w = (prior.angular() + angular) / 2.0;
         let odometry = &mut self.state.odometry;
-        let mid_yaw = odometry.yaw + w * dt / 2.0;
-        odometry.x += v * mid_yaw.cos() * dt;
-        odometry.y += v * mid_yaw.sin() * dt;
-        odometry.yaw = wrap_angle(odometry.yaw + w * dt);
+        let mut pose = Pose {
+            x: odometry.x,
+            y: odometry.y,
+            yaw: odometry.yaw,
+        };
+        pose.step(v, w, dt);
+        (odometry.x, odometry.y, odometry.yaw) = (pose.x, pose.y, pose.yaw);
         odometry.distance += (v * dt).abs();
     }
-}
-
-fn ns_to_duration(ns: u64) -> std::time::Duration {
-    std::time::Duration::from_nanos(ns)
-}
-
-fn wrap_angle(angle: f64) -> f64 {
-    use std::f64::consts::PI;
-    (angle + PI).rem_euclid(2.0 * PI) - PI
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::link::RxError;
+    use scout_protocol::link::RxError;
     use scout_protocol::units::DEFAULT_MAX_ANGULAR_SPEED;
     use scout_protocol::{ChassisState, ControlMode, FaultBits, MotionFeedback, SystemStatus, can};
 
-    const MS: u64 = 1_000_000;
+    fn ms(n: u64) -> Duration {
+        Duration::from_millis(n)
+    }
 
     fn status(count: u8) -> RxEvent {
         RxEvent::Message(Counted {
@@ -296,12 +283,8 @@ mod tests {
     }
 
     fn connected() -> StateTracker {
-        let mut tracker = StateTracker::new(
-            "test",
-            TransportKind::Can,
-            "vcan0",
-            DEFAULT_MAX_ANGULAR_SPEED,
-        );
+        let mut tracker =
+            StateTracker::new("test", Transport::Can, "vcan0", DEFAULT_MAX_ANGULAR_SPEED);
         assert_eq!(tracker.handle_connected(false), Publish::Yes);
         tracker
     }
@@ -310,16 +293,16 @@ mod tests {
     fn link_goes_ok_then_silent_after_100_ms() {
         let mut tracker = connected();
         assert_eq!(tracker.link_state(), LinkState::Silent);
-        assert_eq!(tracker.handle_rx(&status(0), 10 * MS), Publish::Yes);
+        assert_eq!(tracker.handle_rx(&status(0), ms(10)), Publish::Yes);
         assert_eq!(tracker.link_state(), LinkState::Ok);
-        assert_eq!(tracker.poll(109 * MS), Publish::No);
-        assert_eq!(tracker.poll(110 * MS), Publish::Yes);
+        assert_eq!(tracker.poll(ms(109)), Publish::No);
+        assert_eq!(tracker.poll(ms(110)), Publish::Yes);
         assert_eq!(tracker.link_state(), LinkState::Silent);
-        tracker.handle_rx(&status(1), 200 * MS);
+        tracker.handle_rx(&status(1), ms(200));
         assert_eq!(tracker.link_state(), LinkState::Ok);
         assert_eq!(tracker.handle_disconnected(), Publish::Yes);
         assert_eq!(
-            tracker.poll(900 * MS),
+            tracker.poll(ms(900)),
             Publish::No,
             "disconnected stays disconnected"
         );
@@ -328,15 +311,15 @@ mod tests {
     #[test]
     fn counts_errors_and_gaps() {
         let mut tracker = connected();
-        tracker.handle_rx(&status(10), MS);
-        tracker.handle_rx(&status(13), 2 * MS);
+        tracker.handle_rx(&status(10), ms(1));
+        tracker.handle_rx(&status(13), ms(2));
         let bad = can::CanError::Checksum {
             id: 0x151,
             expected: 1,
             found: 2,
         };
-        tracker.handle_rx(&RxEvent::Rejected(RxError::Can(bad)), 3 * MS);
-        tracker.handle_rx(&RxEvent::Rejected(RxError::ForeignFrame(5)), 4 * MS);
+        tracker.handle_rx(&RxEvent::Rejected(RxError::Can(bad)), ms(3));
+        tracker.handle_rx(&RxEvent::Rejected(RxError::ForeignFrame(5)), ms(4));
         let link = tracker.state().link;
         assert_eq!((link.rx_frames, link.dropped_frames), (2, 2));
         assert_eq!((link.checksum_errors, link.rejected_frames), (1, 1));
@@ -345,10 +328,10 @@ mod tests {
     #[test]
     fn nothing_is_applied_before_a_status_proves_v1() {
         let mut tracker = connected();
-        assert_eq!(tracker.handle_rx(&motion(0, 500, 0), MS), Publish::No);
+        assert_eq!(tracker.handle_rx(&motion(0, 500, 0), ms(1)), Publish::No);
         assert!(!tracker.state().motion.received.valid);
-        tracker.handle_rx(&status(0), 2 * MS);
-        assert_eq!(tracker.handle_rx(&motion(1, 500, 0), 3 * MS), Publish::Yes);
+        tracker.handle_rx(&status(0), ms(2));
+        assert_eq!(tracker.handle_rx(&motion(1, 500, 0), ms(3)), Publish::Yes);
         assert!(tracker.state().motion.received.valid);
     }
 
@@ -356,10 +339,10 @@ mod tests {
     fn protocol_v2_is_recognised_and_not_published() {
         let mut tracker = connected();
         let v2 = can::CanError::UnknownId { id: 0x221 };
-        tracker.handle_rx(&RxEvent::Rejected(RxError::Can(v2)), 0);
-        assert_eq!(tracker.handle_rx(&motion(0, 500, 0), MS), Publish::No);
-        assert_eq!(tracker.poll(999 * MS), Publish::No);
-        assert_eq!(tracker.poll(1000 * MS), Publish::Yes);
+        tracker.handle_rx(&RxEvent::Rejected(RxError::Can(v2)), Duration::ZERO);
+        assert_eq!(tracker.handle_rx(&motion(0, 500, 0), ms(1)), Publish::No);
+        assert_eq!(tracker.poll(ms(999)), Publish::No);
+        assert_eq!(tracker.poll(ms(1000)), Publish::Yes);
         assert_eq!(tracker.link_state(), LinkState::ProtocolV2);
         assert!(!tracker.state().motion.received.valid);
     }
@@ -367,18 +350,18 @@ mod tests {
     #[test]
     fn odometry_integrates_motion_feedback_and_resets() {
         let mut tracker = connected();
-        tracker.handle_rx(&status(0), 0);
+        tracker.handle_rx(&status(0), Duration::ZERO);
         // 1 m/s for 1 s in 20 ms steps, then a quarter turn in place.
         for i in 0..=50u8 {
-            tracker.handle_rx(&motion(i, 1000, 0), u64::from(i) * 20 * MS);
+            tracker.handle_rx(&motion(i, 1000, 0), ms(u64::from(i) * 20));
         }
         let odometry = tracker.state().odometry;
         assert!((odometry.x - 1.0).abs() < 1e-9 && odometry.y.abs() < 1e-9);
         // A gap longer than 100 ms is not integrated.
-        tracker.handle_rx(&motion(51, 1000, 0), 2000 * MS);
+        tracker.handle_rx(&motion(51, 1000, 0), ms(2000));
         assert!((tracker.state().odometry.x - 1.0).abs() < 1e-9);
         for i in 1..=50u8 {
-            tracker.handle_rx(&motion(51 + i, 0, 1571), 2000 * MS + u64::from(i) * 20 * MS);
+            tracker.handle_rx(&motion(51 + i, 0, 1571), ms(2000 + u64::from(i) * 20));
         }
         assert!((tracker.state().odometry.yaw - 1.571).abs() < 0.02);
         tracker.reset_odometry();
@@ -396,7 +379,7 @@ mod tests {
             message: Message::MotionCommand(MotionCommand::stop(ControlMode::Can)),
             count: 0,
         });
-        assert_eq!(tracker.handle_rx(&command, MS), Publish::No);
+        assert_eq!(tracker.handle_rx(&command, ms(1)), Publish::No);
         assert_eq!(tracker.state().link.rejected_frames, 1);
     }
 }

@@ -14,7 +14,7 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::FileDescriptorBased;
 use nix::poll::{PollFd, PollFlags, ppoll};
 use nix::sys::time::TimeSpec;
-use scout_clients::ipc::Ipc;
+use scout_interface::Ipc;
 
 /// Which of the waited-on sources are readable.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]

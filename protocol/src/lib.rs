@@ -12,6 +12,8 @@
 //! - [`units`]: m/s and rad/s to whole percent and back.
 //! - [`sequence`]: rolling counters and gap tracking.
 //! - [`version`]: protocol v1 / v2 detection.
+//! - [`link`]: the transports and their framing, shared by the gateway and the simulator.
+//! - [`kinematics`]: the skid-steer pose step (with `std`).
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
@@ -19,6 +21,9 @@
 pub mod can;
 pub mod candump;
 pub mod fault;
+#[cfg(feature = "std")]
+pub mod kinematics;
+pub mod link;
 pub mod message;
 pub mod sequence;
 pub mod serial;
@@ -28,6 +33,7 @@ pub mod version;
 
 pub use can::CanFrame;
 pub use fault::{Fault, FaultBits, Severity};
+pub use link::Transport;
 pub use message::{
     ChassisState, ControlMode, Counted, Direction, FaultClear, Light, LightCommand, LightFeedback,
     LightMode, Message, MessageKind, MotionCommand, MotionFeedback, Motor, MotorFeedback,

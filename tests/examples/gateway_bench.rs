@@ -5,7 +5,7 @@
 
 use std::time::{Duration, Instant};
 
-use scout_clients::ipc::{Class, monotonic_ns};
+use scout_clients::{Class, monotonic_ns};
 use scout_system_tests::{Gateway, Sim, connect, robot_name};
 
 fn percentiles(mut samples: Vec<f64>) -> String {

@@ -365,9 +365,9 @@ pub fn wait_for_state(
         let state = subscriber
             .next_timeout(Duration::from_millis(200))
             .expect("receive state")?;
-        Some(scout_clients::state::state_json(
+        Some(scout_clients::interface::json::state_json(
             &state,
-            scout_clients::ipc::monotonic_ns(),
+            scout_clients::monotonic_ns(),
         ))
     };
     wait_for("state", limit, next, wanted)
@@ -383,9 +383,9 @@ pub fn wait_for_status(
         let status = reader
             .latest(Duration::from_millis(50))
             .expect("read status")?;
-        Some(scout_clients::state::status_json(
+        Some(scout_clients::interface::json::status_json(
             &status,
-            scout_clients::ipc::monotonic_ns(),
+            scout_clients::monotonic_ns(),
         ))
     };
     wait_for("status", limit, next, wanted)

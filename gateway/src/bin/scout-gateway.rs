@@ -10,13 +10,14 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::Context;
 use clap::{ArgGroup, Parser};
-use scout_clients::ipc;
-use scout_clients::ipc::TransportKind;
-use scout_gateway::bridge::{self, Bridge};
+use scout_bridge::Bridge;
 use scout_gateway::config::GatewayConfig;
-use scout_gateway::control::ControlLoop;
 use scout_gateway::device::DeviceSpec;
+use scout_gateway::driver::Driver;
 use scout_gateway::lock::{Lock, LockError};
+use scout_interface::Transport;
+use scout_interface::remote::Permission;
+use scout_interface::services;
 use tracing::info;
 
 /// The one process that owns a SCOUT chassis port: it decodes the chassis' feedback, publishes
@@ -61,7 +62,7 @@ struct Cli {
     /// Accept remote commands of these kinds (comma-separated: estop, teleop, autonomy,
     /// release, resume, lights, clear_fault).
     #[arg(long, value_name = "LIST", value_delimiter = ',')]
-    remote_commands: Option<Vec<String>>,
+    remote_commands: Option<Vec<Permission>>,
 }
 
 /// The exit code for usage, configuration and ownership errors.
@@ -69,7 +70,7 @@ const USAGE: u8 = 2;
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    let _log = scout_gateway::logging::init();
+    let _log = scout_io::logging::init();
     let config = match configure(&cli) {
         Ok(config) => config,
         Err(error) => {
@@ -78,7 +79,7 @@ fn main() -> ExitCode {
         }
     };
     let (spec, _lock) = match config
-        .device()
+        .validate()
         .map_err(anyhow::Error::from)
         .and_then(|spec| Ok((spec, take_name_lock(&config.name)?)))
     {
@@ -127,10 +128,10 @@ fn configure(cli: &Cli) -> anyhow::Result<GatewayConfig> {
     }
     let device = |path: &PathBuf| Some(path.display().to_string());
     let (transport, device) = match (cli.sim, &cli.serial, &cli.slcan, &cli.can) {
-        (true, ..) => (Some(TransportKind::Sim), None),
-        (_, Some(path), ..) => (Some(TransportKind::Serial), device(path)),
-        (_, _, Some(path), _) => (Some(TransportKind::Slcan), device(path)),
-        (_, _, _, Some(interface)) => (Some(TransportKind::Can), Some(interface.clone())),
+        (true, ..) => (Some(Transport::Sim), None),
+        (_, Some(path), ..) => (Some(Transport::Serial), device(path)),
+        (_, _, Some(path), _) => (Some(Transport::Slcan), device(path)),
+        (_, _, _, Some(interface)) => (Some(Transport::Can), Some(interface.clone())),
         _ => (config.transport, config.device.clone()),
     };
     config.transport = transport;
@@ -148,7 +149,7 @@ fn take_name_lock(robot: &str) -> anyhow::Result<Lock> {
 }
 
 fn serve(config: GatewayConfig, spec: DeviceSpec) -> anyhow::Result<()> {
-    ipc::quiet_iceoryx2_logs();
+    services::quiet_iceoryx2_logs();
     let stop = Arc::new(AtomicBool::new(false));
     let on_signal = Arc::clone(&stop);
     ctrlc::set_handler(move || on_signal.store(true, Ordering::Relaxed))
@@ -157,16 +158,16 @@ fn serve(config: GatewayConfig, spec: DeviceSpec) -> anyhow::Result<()> {
         "scout-gateway {}: robot '{}', {} on {}, state on iceoryx2 service '{}' (up to {} subscribers)",
         env!("CARGO_PKG_VERSION"),
         config.name,
-        spec.kind().name(),
+        spec.transport(),
         spec.name(),
-        ipc::state_service(&config.name),
-        ipc::MAX_SUBSCRIBERS,
+        services::state_service(&config.name),
+        services::MAX_SUBSCRIBERS,
     );
     let bridge_config = config.zenoh.clone();
-    let info = bridge::info(&config.name, spec.kind().name(), &spec.name(), &config);
+    let info = config.info(spec.transport(), &spec.name());
     let robot = config.name.clone();
-    let mut control = ControlLoop::new(config, spec)?;
-    // After the control loop's services exist; dropped (stopped and joined) after it ends.
+    let mut driver = Driver::new(&config, spec)?;
+    // After the driver's services exist; dropped (stopped and joined) after it ends.
     let _bridge = if bridge_config.enabled {
         Some(
             Bridge::start(robot, bridge_config, info)
@@ -176,5 +177,5 @@ fn serve(config: GatewayConfig, spec: DeviceSpec) -> anyhow::Result<()> {
         info!("zenoh off: local clients only");
         None
     };
-    control.run(&stop)
+    driver.run(&stop)
 }

@@ -5,7 +5,7 @@ use std::time::Duration;
 
 use nix::sys::signal::Signal;
 use scout_clients::control::ControlError;
-use scout_clients::ipc::{Class, REJECTION_NAMES};
+use scout_clients::{Class, RejectionKind};
 use scout_system_tests::{
     Driver, Gateway, Sim, connect, robot_name, scout, wait_for_state, wait_for_status,
 };
@@ -37,11 +37,11 @@ fn teleop_overrides_autonomy_at_once() {
         .controller("joystick", Some(Class::Teleop))
         .expect("teleop");
     teleop.drive(0.0, 0.0).expect("teleop accepted");
-    let accepted_at = scout_clients::ipc::monotonic_ns();
+    let accepted_at = scout_clients::monotonic_ns();
     // Every status published after the answer shows teleop driving.
     let after = wait_for_status(&status, LIMIT, |s| {
         let published =
-            scout_clients::ipc::monotonic_ns() as f64 - s["age_ms"].as_f64().unwrap_or(0.0) * 1e6;
+            scout_clients::monotonic_ns() as f64 - s["age_ms"].as_f64().unwrap_or(0.0) * 1e6;
         published > accepted_at as f64
     });
     assert_eq!(selected_client(&after), Some("joystick"), "{after}");
@@ -58,10 +58,11 @@ fn teleop_overrides_autonomy_at_once() {
     let mut planner = robot
         .controller("planner-2", Some(Class::Autonomy))
         .expect("autonomy");
-    let Err(ControlError::Rejected { reason, .. }) = planner.drive(0.4, 0.0) else {
+    let Err(ControlError::Rejected(rejected)) = planner.drive(0.4, 0.0) else {
         panic!("autonomy must be refused after a teleop takeover")
     };
-    assert!(reason.contains("autonomy disarmed"), "{reason}");
+    assert_eq!(rejected.kind, Some(RejectionKind::AutonomyDisarmed));
+    assert!(rejected.reason.contains("autonomy disarmed"), "{rejected}");
 }
 
 #[test]
@@ -195,9 +196,9 @@ fn nan_and_huge_values_are_rejected_or_clamped() {
         (f64::NEG_INFINITY, f64::NAN),
     ] {
         match teleop.drive(linear, angular) {
-            Err(ControlError::Rejected { reason, code }) => {
-                assert_eq!(REJECTION_NAMES[usize::from(code)], "not_finite");
-                assert!(reason.contains("NaN or infinite"), "{reason}");
+            Err(ControlError::Rejected(rejected)) => {
+                assert_eq!(rejected.kind, Some(RejectionKind::NotFinite));
+                assert!(rejected.reason.contains("NaN or infinite"), "{rejected}");
             }
             other => panic!("{linear} {angular} accepted: {other:?}"),
         }

@@ -299,7 +299,7 @@ fn a_late_subscriber_gets_the_latest_state_at_once() {
         .expect("receive")
         .expect("the latest state at once, though no frame arrives");
     assert!(state.seq >= silent["seq"].as_u64().expect("seq"));
-    let json = scout_clients::state::state_json(&state, scout_clients::ipc::monotonic_ns());
+    let json = scout_clients::interface::json::state_json(&state, scout_clients::monotonic_ns());
     assert_eq!(json["link"]["state"], "silent");
 }
 

@@ -9,10 +9,11 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use clap::Args;
 use scout_clients::client::Robot;
-use scout_clients::control::{Accepted, ControlError, Controller, Lights};
-use scout_clients::ipc::{Class, monotonic_ns};
-use scout_clients::state::status_json;
-use scout_protocol::{FaultClear, Light, LightCommand, LightMode};
+use scout_clients::control::{ControlError, Controller, Lights};
+use scout_clients::interface::control::{parse_fault_clear, parse_light};
+use scout_clients::interface::json::status_json;
+use scout_clients::{Accepted, Class, monotonic_ns};
+use scout_protocol::{Light, LightCommand};
 
 use crate::RobotArgs;
 
@@ -103,7 +104,7 @@ pub fn drive(args: &DriveArgs) -> anyhow::Result<ExitCode> {
     let _ = controller.drive(0.0, 0.0);
     controller.relinquish().context("giving up control")?;
     match last_answer {
-        Err(rejected @ ControlError::Rejected { .. }) => Err(rejected.into()),
+        Err(rejected @ ControlError::Rejected(_)) => Err(rejected.into()),
         _ => Ok(ExitCode::SUCCESS),
     }
 }
@@ -141,26 +142,22 @@ pub struct LightsArgs {
     #[command(flatten)]
     client: ClientArgs,
     /// Front light: off, on, breath or custom, with `:BRIGHTNESS` 0..100 (default 100).
-    #[arg(long, value_name = "MODE[:BRIGHTNESS]", value_parser = parse_light)]
+    #[arg(long, value_name = "MODE[:BRIGHTNESS]", value_parser = parse_light_arg)]
     front: Option<Light>,
     /// Rear light, as --front.
-    #[arg(long, value_name = "MODE[:BRIGHTNESS]", value_parser = parse_light)]
+    #[arg(long, value_name = "MODE[:BRIGHTNESS]", value_parser = parse_light_arg)]
     rear: Option<Light>,
     /// `auto`: hand the lights back to the chassis.
     #[arg(value_parser = ["auto"])]
     auto: Option<String>,
 }
 
-fn parse_light(text: &str) -> Result<Light, String> {
+fn parse_light_arg(text: &str) -> Result<Light, String> {
     let (mode, brightness) = text.split_once(':').unwrap_or((text, "100"));
-    let mode = LightMode::from_name(mode)
-        .ok_or_else(|| format!("light mode `{mode}`: off, on, breath or custom"))?;
     let brightness = brightness
         .parse::<u8>()
-        .ok()
-        .filter(|b| *b <= 100)
-        .ok_or_else(|| format!("brightness `{brightness}` is not 0..100"))?;
-    Ok(Light { mode, brightness })
+        .map_err(|_| format!("brightness `{brightness}` is not 0..100"))?;
+    parse_light(mode, brightness)
 }
 
 pub fn lights(args: &LightsArgs) -> anyhow::Result<ExitCode> {
@@ -187,18 +184,7 @@ pub struct ClearFaultArgs {
 }
 
 pub fn clear_fault(args: &ClearFaultArgs) -> anyhow::Result<ExitCode> {
-    let kind = args.kind.replace('-', "_");
-    let code = match kind.as_str() {
-        "all" => None,
-        name => Some(
-            FaultClear::from_name(name)
-                .filter(|c| *c != FaultClear::None)
-                .ok_or_else(|| {
-                    let names: Vec<_> = FaultClear::ALL.iter().map(|c| c.name()).collect();
-                    anyhow::anyhow!("unknown fault `{}`: {} or all", args.kind, names.join(", "))
-                })?,
-        ),
-    };
+    let code = parse_fault_clear(&args.kind).map_err(anyhow::Error::msg)?;
     one_shot(&args.client, |controller| controller.clear_fault(code))
 }
 

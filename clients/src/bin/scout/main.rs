@@ -17,7 +17,7 @@ use clap::{Args, Parser, Subcommand};
 use scout_clients::client::ClientError;
 use scout_clients::control::ControlError;
 use scout_clients::echo::EchoError;
-use scout_clients::ipc::ServiceError;
+use scout_clients::interface::services::ServiceError;
 
 /// Command-line tool for an AgileX SCOUT chassis.
 #[derive(Debug, Parser)]
@@ -93,10 +93,13 @@ fn main() -> ExitCode {
     }
 }
 
+/// Whether the error is a closed output pipe (`scout echo | head`): the reader's normal end.
 fn is_broken_pipe(error: &anyhow::Error) -> bool {
-    error
-        .downcast_ref::<std::io::Error>()
-        .is_some_and(|e| e.kind() == ErrorKind::BrokenPipe)
+    error.chain().any(|cause| {
+        cause
+            .downcast_ref::<std::io::Error>()
+            .is_some_and(|e| e.kind() == ErrorKind::BrokenPipe)
+    })
 }
 
 /// The exit code for `error` (see the module documentation).
@@ -114,7 +117,7 @@ fn exit_code(error: &anyhow::Error) -> u8 {
         if no_gateway {
             return 3;
         }
-        if matches!(cause.downcast_ref(), Some(ControlError::Rejected { .. })) {
+        if matches!(cause.downcast_ref(), Some(ControlError::Rejected(_))) {
             return 4;
         }
     }

@@ -10,8 +10,8 @@ use crossterm::event::{self, Event, KeyCode, KeyEvent, KeyEventKind, KeyModifier
 use crossterm::{cursor, execute, terminal};
 use scout_clients::client::Robot;
 use scout_clients::control::ControlError;
-use scout_clients::ipc::{Class, monotonic_ns};
-use scout_clients::state::{state_json, status_json};
+use scout_clients::interface::json::{state_json, status_json};
+use scout_clients::{Class, monotonic_ns};
 
 use crate::RobotArgs;
 use crate::control::describe;
@@ -165,8 +165,8 @@ fn draw(
     linear: f64,
     angular: f64,
     [answer, action]: [&str; 2],
-    state: Option<&scout_clients::ipc::StatePayload>,
-    status: Option<&scout_clients::ipc::StatusPayload>,
+    state: Option<&scout_clients::StatePayload>,
+    status: Option<&scout_clients::StatusPayload>,
 ) -> std::io::Result<()> {
     let now = monotonic_ns();
     let mut lines = vec![

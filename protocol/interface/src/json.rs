@@ -1,23 +1,80 @@
-//! The public JSON forms of the chassis state (`scout echo --json`) and of the arbiter's status
-//! (`scout status --json`); zenoh carries the same.
+//! The public JSON forms of the chassis state (`scout echo --json`, zenoh `scout/ROBOT/state`)
+//! and of the arbiter's status (`scout status --json`, zenoh `scout/ROBOT/status`), and of one
+//! decoded message (`scout decode --json`): the schema the README documents, in one place.
 
-use scout_protocol::{FaultClear, Message, Motor};
-use serde_json::{Value, json};
+use scout_protocol::{FaultClear, Light, Message, MessageKind, Motor};
+use serde_json::{Map, Value, json};
 
-use crate::decode::message_fields;
-use crate::ipc::{
-    Class, LinkState, REJECTION_NAMES, Received, StatePayload, StatusPayload, TransportKind,
-};
+use crate::control::{Class, LightsControl, RejectionKind, StatusPayload};
+use crate::state::{Received, StatePayload};
 
 fn age_ms(at_ns: u64, now_ns: u64) -> f64 {
     now_ns.saturating_sub(at_ns) as f64 / 1e6
 }
 
-/// The fields of a received message plus its `age_ms`, or `null` before the first one.
-fn received_fields(received: Received, message: Message, max_angular: f64, now_ns: u64) -> Value {
-    if !received.valid {
-        return Value::Null;
+fn light_json(light: &Light) -> Value {
+    json!({ "mode": light.mode.name(), "brightness": light.brightness })
+}
+
+/// The message's fields, named as the README documents, in physical units.
+pub fn message_fields(message: &Message, max_angular: f64) -> Value {
+    match message {
+        Message::MotionCommand(command) => json!({
+            "control_mode": command.control_mode.name(),
+            "fault_clear": command.fault_clear.name(),
+            "linear": command.linear(),
+            "angular": command.angular(max_angular),
+            "linear_percent": command.linear_percent,
+            "angular_percent": command.angular_percent,
+        }),
+        Message::LightCommand(lights) | Message::LightFeedback(lights) => json!({
+            "enabled": lights.enabled,
+            "front": light_json(&lights.front),
+            "rear": light_json(&lights.rear),
+        }),
+        Message::SystemStatus(status) => json!({
+            "state": status.state.name(),
+            "control_mode": status.control_mode.name(),
+            "battery_voltage": status.battery_voltage(),
+            "fault_bits": status.faults.0,
+            "faults": status.faults.iter().map(|f| f.name()).collect::<Vec<_>>(),
+        }),
+        Message::MotionFeedback(motion) => json!({
+            "linear": motion.linear(),
+            "angular": motion.angular(),
+        }),
+        Message::MotorFeedback(motor) => json!({
+            "motor": motor.motor.number(),
+            "current": motor.current(),
+            "rpm": motor.rpm,
+            "driver_temperature": motor.driver_temperature,
+            "motor_temperature": motor.motor_temperature,
+        }),
     }
+}
+
+/// Where a feedback message stands in the state JSON: a key, or an entry of the `motors` list.
+/// `None` for host-to-chassis commands.
+enum StateKey {
+    Key(&'static str),
+    Motor(Motor),
+}
+
+fn state_key(kind: MessageKind) -> Option<StateKey> {
+    match kind {
+        MessageKind::SystemStatus => Some(StateKey::Key("system")),
+        MessageKind::MotionFeedback => Some(StateKey::Key("motion")),
+        MessageKind::LightFeedback => Some(StateKey::Key("lights")),
+        MessageKind::MotorFeedback(motor) => Some(StateKey::Motor(motor)),
+        MessageKind::MotionCommand | MessageKind::LightCommand => None,
+    }
+}
+
+/// The fields of a received message plus its `age_ms`, or `null` before the first one.
+fn received_json(received: Option<(Received, Message)>, max_angular: f64, now_ns: u64) -> Value {
+    let Some((received, message)) = received else {
+        return Value::Null;
+    };
     let mut fields = message_fields(&message, max_angular);
     if let Value::Object(object) = &mut fields {
         object.insert("age_ms".into(), age_ms(received.at_ns, now_ns).into());
@@ -28,22 +85,13 @@ fn received_fields(received: Received, message: Message, max_angular: f64, now_n
 /// The state as the README documents it. `now_ns` (CLOCK_MONOTONIC) sets the ages.
 pub fn state_json(state: &StatePayload, now_ns: u64) -> Value {
     let link = &state.link;
-    let max_angular = state.max_angular;
-    let motors: Vec<Value> = Motor::ALL
-        .into_iter()
-        .map(|motor| {
-            let payload = &state.motors[motor.index()];
-            let message = Message::MotorFeedback(payload.feedback(motor));
-            received_fields(payload.received, message, max_angular, now_ns)
-        })
-        .collect();
-    json!({
+    let mut object = json!({
         "robot": state.robot.as_str(),
         "seq": state.seq,
         "age_ms": age_ms(state.published_ns, now_ns),
         "link": {
-            "state": LinkState::from_raw(link.state).name(),
-            "transport": TransportKind::from_raw(link.transport).map_or("unknown", TransportKind::name),
+            "state": link.state().name(),
+            "transport": link.transport().map_or("unknown", |t| t.name()),
             "device": link.device.as_str(),
             "rx_frames": link.rx_frames,
             "checksum_errors": link.checksum_errors,
@@ -53,34 +101,36 @@ pub fn state_json(state: &StatePayload, now_ns: u64) -> Value {
             "tx_frames": link.tx_frames,
             "reconnects": link.reconnects,
         },
-        "system": received_fields(
-            state.system.received,
-            Message::SystemStatus(state.system.status()),
-            max_angular,
-            now_ns,
-        ),
-        "motion": received_fields(
-            state.motion.received,
-            Message::MotionFeedback(state.motion.feedback()),
-            max_angular,
-            now_ns,
-        ),
-        "motors": motors,
-        "lights": received_fields(
-            state.lights.received,
-            Message::LightFeedback(state.lights.feedback()),
-            max_angular,
-            now_ns,
-        ),
-        "odometry": {
-            "x": state.odometry.x,
-            "y": state.odometry.y,
-            "yaw": state.odometry.yaw,
-            "distance": state.odometry.distance,
-            "resets": state.odometry.resets,
-        },
-        "command": { "linear": state.command.linear, "angular": state.command.angular },
-    })
+    });
+    let mut motors = vec![Value::Null; Motor::ALL.len()];
+    if let Value::Object(fields) = &mut object {
+        for kind in MessageKind::ALL {
+            let value = received_json(state.received(kind), state.max_angular, now_ns);
+            match state_key(kind) {
+                Some(StateKey::Key(key)) => {
+                    fields.insert(key.into(), value);
+                }
+                Some(StateKey::Motor(motor)) => motors[motor.index()] = value,
+                None => {}
+            }
+        }
+        fields.insert("motors".into(), motors.into());
+        fields.insert(
+            "odometry".into(),
+            json!({
+                "x": state.odometry.x,
+                "y": state.odometry.y,
+                "yaw": state.odometry.yaw,
+                "distance": state.odometry.distance,
+                "resets": state.odometry.resets,
+            }),
+        );
+        fields.insert(
+            "command".into(),
+            json!({ "linear": state.command.linear, "angular": state.command.angular }),
+        );
+    }
+    object
 }
 
 fn class_name(raw: u8) -> Value {
@@ -102,8 +152,8 @@ pub fn status_json(status: &StatusPayload, now_ns: u64) -> Value {
         Some(class) => json!({ "client": status.selected_client.as_str(), "class": class.name() }),
         None => Value::Null,
     };
-    let sources: Vec<Value> = status.sources
-        [..usize::from(status.source_count).min(status.sources.len())]
+    let sources: Vec<Value> = status
+        .sources()
         .iter()
         .map(|source| {
             json!({
@@ -116,16 +166,14 @@ pub fn status_json(status: &StatusPayload, now_ns: u64) -> Value {
             })
         })
         .collect();
-    let rejections: serde_json::Map<String, Value> = REJECTION_NAMES
+    let rejections: Map<String, Value> = RejectionKind::ALL
         .iter()
-        .zip(status.rejections)
-        .map(|(name, count)| ((*name).to_owned(), count.into()))
+        .map(|kind| {
+            let count = status.rejections[usize::from(kind.raw())];
+            (kind.name().to_owned(), count.into())
+        })
         .collect();
-    let lights = match status.lights {
-        1 => "auto",
-        2 => "manual",
-        _ => "chassis",
-    };
+    let lights = LightsControl::from_raw(status.lights).unwrap_or(LightsControl::Chassis);
     json!({
         "robot": status.robot.as_str(),
         "seq": status.seq,
@@ -140,7 +188,7 @@ pub fn status_json(status: &StatusPayload, now_ns: u64) -> Value {
             "limited": status.limited,
         },
         "autonomy_armed": status.autonomy_armed,
-        "lights": lights,
+        "lights": lights.name(),
         "sources": sources,
         "rejections": rejections,
     })
@@ -149,7 +197,7 @@ pub fn status_json(status: &StatusPayload, now_ns: u64) -> Value {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ipc::{FixedText, SystemPayload};
+    use crate::text::FixedText;
     use scout_protocol::{ChassisState, ControlMode, FaultBits, SystemStatus};
 
     #[test]
@@ -166,9 +214,11 @@ mod tests {
         assert_eq!(json["latched_by"]["client"], "safety");
         assert_eq!(json["selected"], Value::Null);
         assert_eq!(json["autonomy_armed"], false);
+        assert_eq!(json["lights"], "chassis");
         assert_eq!(json["rejections"]["not_finite"], 0);
+        assert_eq!(json["rejections"].as_object().map(Map::len), Some(8));
         let driving = StatusPayload {
-            selected_class: Class::Teleop as u8,
+            selected_class: Class::Teleop.raw(),
             selected_client: FixedText::new("joy"),
             ..StatusPayload::default()
         };
@@ -179,19 +229,19 @@ mod tests {
     }
 
     #[test]
-    fn schema_has_the_documented_fields() {
+    fn state_schema_has_the_documented_fields() {
         let mut state = StatePayload {
             seq: 7,
             robot: FixedText::new("scout"),
             ..Default::default()
         };
-        state.system = SystemPayload::new(
-            &SystemStatus {
+        state.store(
+            &Message::SystemStatus(SystemStatus {
                 state: ChassisState::EStop,
                 control_mode: ControlMode::Rc,
                 battery_decivolts: 239,
                 faults: FaultBits(0x3C),
-            },
+            }),
             Received {
                 valid: true,
                 count: 1,
@@ -210,7 +260,9 @@ mod tests {
         assert_eq!(json["system"]["faults"][0], "motor_1_comm_fault");
         assert_eq!(json["system"]["age_ms"], 2.0);
         assert_eq!(json["motion"], Value::Null, "not received yet");
+        assert_eq!(json["lights"], Value::Null, "not received yet");
         assert_eq!(json["motors"].as_array().map(Vec::len), Some(4));
         assert!(json["odometry"]["x"].is_number());
+        assert!(json["command"]["linear"].is_number());
     }
 }

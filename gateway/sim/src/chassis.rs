@@ -15,7 +15,7 @@ use scout_protocol::{
 };
 use serde::Serialize;
 
-use crate::link::Transport;
+use scout_protocol::Transport;
 
 /// The chassis' physical parameters and firmware constants.
 #[derive(Debug, Clone, PartialEq, serde::Deserialize, Serialize)]
@@ -218,16 +218,9 @@ impl MotorState {
     }
 }
 
-/// The ground-truth pose, integrated from the actual speeds.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
-pub struct Pose {
-    /// m, in the start frame.
-    pub x: f64,
-    /// m, in the start frame.
-    pub y: f64,
-    /// rad, counter-clockwise from the start heading.
-    pub yaw: f64,
-}
+/// The ground-truth pose, integrated from the actual speeds: m in the start frame, rad
+/// counter-clockwise from the start heading.
+pub use scout_protocol::kinematics::Pose;
 
 /// Why a received motion command did not move the chassis.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -285,7 +278,7 @@ pub struct IntervalStats {
     pub mean_ms: f64,
     /// Largest, ms.
     pub max_ms: f64,
-    /// 99th percentile, ms.
+    /// 99th percentile of the latest 65536, ms.
     pub p99_ms: f64,
 }
 
@@ -335,7 +328,9 @@ pub struct Chassis {
     breath_tick: u32,
     counters: [RollingCounter; MessageKind::COUNT],
     stats: SimStats,
-    intervals_us: Vec<u32>,
+    intervals: IntervalRecorder,
+    /// Valid commands received, by [`MessageKind::index`].
+    commands: [u64; MessageKind::COUNT],
 }
 
 /// The feedback frames of one period, in the order the real chassis sends them.
@@ -371,7 +366,8 @@ impl Chassis {
             breath_tick: 0,
             counters: [RollingCounter::default(); MessageKind::COUNT],
             stats: SimStats::default(),
-            intervals_us: Vec::new(),
+            intervals: IntervalRecorder::default(),
+            commands: [0; MessageKind::COUNT],
         }
     }
 
@@ -384,12 +380,7 @@ impl Chassis {
     /// motion command was ignored, if it was.
     pub fn handle_message(&mut self, now: Duration, counted: Counted) -> Option<Ignored> {
         self.advance(now);
-        let kind = counted.message.kind();
-        *self
-            .stats
-            .commands
-            .entry(format!("0x{:03X}", kind.can_id()))
-            .or_default() += 1;
+        self.commands[counted.message.kind().index()] += 1;
         match counted.message {
             Message::MotionCommand(command) => self.handle_motion(now, command),
             Message::LightCommand(lights) => {
@@ -418,9 +409,7 @@ impl Chassis {
 
     fn handle_motion(&mut self, now: Duration, command: MotionCommand) -> Option<Ignored> {
         if let Some(previous) = self.last_motion_received.replace(now) {
-            let micros = now.saturating_sub(previous).as_micros();
-            self.intervals_us
-                .push(u32::try_from(micros).unwrap_or(u32::MAX));
+            self.intervals.record(now.saturating_sub(previous));
         }
         self.stats.last_command = Some(LastCommand {
             linear: command.linear(),
@@ -578,7 +567,17 @@ impl Chassis {
     /// The statistics at the current time.
     pub fn stats(&self) -> SimStats {
         let mut stats = self.stats.clone();
-        stats.motion_command_intervals = interval_stats(&self.intervals_us);
+        stats.motion_command_intervals = self.intervals.stats();
+        stats.commands = MessageKind::ALL
+            .iter()
+            .filter(|kind| self.commands[kind.index()] > 0)
+            .map(|kind| {
+                (
+                    format!("0x{:03X}", kind.can_id()),
+                    self.commands[kind.index()],
+                )
+            })
+            .collect();
         stats.actual = self.actual;
         stats.pose = self.pose;
         stats.battery_voltage = self.battery_voltage;
@@ -675,10 +674,7 @@ impl Chassis {
             );
         }
         let Speeds { linear, angular } = self.actual;
-        let mid_yaw = self.pose.yaw + angular * dt / 2.0;
-        self.pose.x += linear * mid_yaw.cos() * dt;
-        self.pose.y += linear * mid_yaw.sin() * dt;
-        self.pose.yaw = wrap_angle(self.pose.yaw + angular * dt);
+        self.pose.step(linear, angular, dt);
         let acceleration = (linear - previous.linear) / dt;
         self.step_motors(acceleration, dt);
         self.update_latches();
@@ -796,11 +792,6 @@ fn ramp(error: f64, limit: f64) -> f64 {
     error.clamp(-limit, limit)
 }
 
-fn wrap_angle(angle: f64) -> f64 {
-    use std::f64::consts::PI;
-    (angle + PI).rem_euclid(2.0 * PI) - PI
-}
-
 fn to_i16(value: f64) -> i16 {
     value
         .round()
@@ -811,18 +802,46 @@ fn to_i8(value: f64) -> i8 {
     value.round().clamp(f64::from(i8::MIN), f64::from(i8::MAX)) as i8
 }
 
-fn interval_stats(intervals_us: &[u32]) -> IntervalStats {
-    if intervals_us.is_empty() {
-        return IntervalStats::default();
+/// The intervals between motion commands in bounded memory: count, mean and maximum over all
+/// of them, the 99th percentile over the latest [`IntervalRecorder::WINDOW`].
+#[derive(Debug, Clone, Default)]
+struct IntervalRecorder {
+    count: u64,
+    total: Duration,
+    max: Duration,
+    latest_us: Vec<u32>,
+    next: usize,
+}
+
+impl IntervalRecorder {
+    /// Intervals kept for the percentile: 22 minutes at 50 Hz.
+    const WINDOW: usize = 1 << 16;
+
+    fn record(&mut self, interval: Duration) {
+        self.count += 1;
+        self.total += interval;
+        self.max = self.max.max(interval);
+        let micros = u32::try_from(interval.as_micros()).unwrap_or(u32::MAX);
+        if self.latest_us.len() < Self::WINDOW {
+            self.latest_us.push(micros);
+        } else {
+            self.latest_us[self.next] = micros;
+        }
+        self.next = (self.next + 1) % Self::WINDOW;
     }
-    let mut sorted = intervals_us.to_vec();
-    sorted.sort_unstable();
-    let ms = |us: u32| f64::from(us) / 1000.0;
-    let p99_index = ((sorted.len() as f64 * 0.99).ceil() as usize).clamp(1, sorted.len()) - 1;
-    IntervalStats {
-        count: sorted.len() as u64,
-        mean_ms: sorted.iter().map(|&us| ms(us)).sum::<f64>() / sorted.len() as f64,
-        max_ms: sorted.last().copied().map_or(0.0, ms),
-        p99_ms: ms(sorted[p99_index]),
+
+    fn stats(&self) -> IntervalStats {
+        if self.count == 0 {
+            return IntervalStats::default();
+        }
+        let mut sorted = self.latest_us.clone();
+        sorted.sort_unstable();
+        let p99_index = ((sorted.len() as f64 * 0.99).ceil() as usize).clamp(1, sorted.len()) - 1;
+        IntervalStats {
+            count: self.count,
+            mean_ms: self.total.as_secs_f64() * 1000.0 / self.count as f64,
+            max_ms: self.max.as_secs_f64() * 1000.0,
+            p99_ms: f64::from(sorted[p99_index]) / 1000.0,
+        }
     }
 }

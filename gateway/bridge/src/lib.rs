@@ -1,23 +1,22 @@
-//! The zenoh bridge: the gateway's state, status, liveliness and information for remote peers,
-//! and (opt-in) remote commands. It runs on a thread of its own as an ordinary local client of
-//! the gateway (iceoryx2 subscriber and controller), so nothing on the network can slow the
-//! control thread: it reads the latest state when it publishes, and older states are dropped.
+//! scout-bridge: the gateway's zenoh bridge. State, status, liveliness and information for
+//! remote peers, and (opt-in) remote commands. It runs on a thread of its own as an ordinary
+//! local client of the gateway (iceoryx2 subscriber and control ports, nothing more), so nothing
+//! on the network can slow the control thread: it reads the latest state when it publishes, and
+//! older states are dropped.
 
-use std::collections::HashMap;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use scout_clients::client::Robot;
-use scout_clients::control::{Accepted, ControlError, Controller, Lights};
-use scout_clients::ipc::{Class, StatusPayload, monotonic_ns};
-use scout_clients::remote::{
-    self, MAX_COMMAND_BYTES, RemoteAnswer, RemoteCommand, RemoteLight, SessionSettings,
+use scout_interface::control::{Accepted, StatusPayload};
+use scout_interface::json::{state_json, status_json};
+use scout_interface::remote::{
+    self, DEFAULT_LISTEN, MAX_COMMAND_BYTES, Permission, REMOTE_PREFIX, RemoteAnswer,
+    RemoteCommand, RemoteKind, SessionSettings,
 };
-use scout_clients::state::{state_json, status_json};
-use scout_protocol::{FaultClear, Light, LightCommand, LightMode};
+use scout_interface::services::{self, ControlPort, Role, monotonic_ns};
 use serde::{Deserialize, Serialize};
-use serde_json::{Value, json};
+use serde_json::Value;
 use tracing::{error, info, warn};
 use zenoh::Wait;
 use zenoh::bytes::Encoding;
@@ -51,25 +50,14 @@ pub struct RemoteCommands {
     pub enabled: bool,
     /// What remote peers may do: `estop`, `teleop`, `autonomy` (drive as that class),
     /// `release`, `resume`, `lights`, `clear_fault`.
-    pub allowed: Vec<String>,
+    pub allowed: Vec<Permission>,
 }
-
-/// The names `allowed` may hold.
-pub const REMOTE_PERMISSIONS: [&str; 7] = [
-    "estop",
-    "teleop",
-    "autonomy",
-    "release",
-    "resume",
-    "lights",
-    "clear_fault",
-];
 
 impl Default for RemoteCommands {
     fn default() -> Self {
         Self {
             enabled: false,
-            allowed: vec!["estop".into()],
+            allowed: vec![Permission::Estop],
         }
     }
 }
@@ -87,34 +75,26 @@ impl Default for ZenohConfig {
     }
 }
 
+/// A `[zenoh]` value out of range.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("zenoh.state_rate_hz must be 0.1..1000, found {0}")]
+pub struct BadStateRate(pub f64);
+
 impl ZenohConfig {
     /// Checks the values.
-    pub fn validate(&self) -> Result<(), String> {
-        if !(self.state_rate_hz.is_finite() && (0.1..=1000.0).contains(&self.state_rate_hz)) {
-            return Err(format!(
-                "zenoh.state_rate_hz must be 0.1..1000, found {}",
-                self.state_rate_hz
-            ));
+    pub fn validate(&self) -> Result<(), BadStateRate> {
+        if self.state_rate_hz.is_finite() && (0.1..=1000.0).contains(&self.state_rate_hz) {
+            Ok(())
+        } else {
+            Err(BadStateRate(self.state_rate_hz))
         }
-        if let Some(unknown) = self
-            .remote_commands
-            .allowed
-            .iter()
-            .find(|a| !REMOTE_PERMISSIONS.contains(&a.as_str()))
-        {
-            return Err(format!(
-                "zenoh.remote_commands.allowed: unknown `{unknown}` (one of {})",
-                REMOTE_PERMISSIONS.join(", ")
-            ));
-        }
-        Ok(())
     }
 
     /// The session settings, with the gateway's default listen endpoint.
     pub fn session(&self) -> SessionSettings {
         let no_file = self.config_file.is_none() && std::env::var_os("ZENOH_CONFIG").is_none();
         let listen = if self.listen.is_empty() && no_file {
-            vec![remote::DEFAULT_LISTEN.to_owned()]
+            vec![DEFAULT_LISTEN.to_owned()]
         } else {
             self.listen.clone()
         };
@@ -123,6 +103,16 @@ impl ZenohConfig {
             listen,
             connect: self.connect.clone(),
         }
+    }
+
+    fn allowed_names(&self) -> String {
+        let names: Vec<&str> = self
+            .remote_commands
+            .allowed
+            .iter()
+            .map(|p| p.name())
+            .collect();
+        names.join(", ")
     }
 }
 
@@ -191,9 +181,17 @@ fn run(
             settings.listen
         )
     })?;
-    let robot = Robot::connect(robot_name)?;
-    let states = robot.subscribe()?;
-    let statuses = robot.status()?;
+    let node = services::node(&format!("scout-bridge-{robot_name}"))
+        .map_err(|e| anyhow::anyhow!("creating the bridge's iceoryx2 node: {e:?}"))?;
+    let (state_service, _) = services::state_services(&node, robot_name, Role::Client)?;
+    let states = state_service
+        .subscriber_builder()
+        .create()
+        .map_err(|e| anyhow::anyhow!("subscribing to the state: {e:?}"))?;
+    let statuses = services::status_services(&node, robot_name, Role::Client)?
+        .subscriber_builder()
+        .create()
+        .map_err(|e| anyhow::anyhow!("subscribing to the status: {e:?}"))?;
     let json_publisher = |key: String| {
         session
             .declare_publisher(key)
@@ -229,13 +227,13 @@ fn run(
         "zenoh: publishing scout/{robot_name}/{{state,status,alive,info}}, listening on {:?}, remote commands {}",
         settings.listen,
         if config.remote_commands.enabled {
-            format!("on ({})", config.remote_commands.allowed.join(", "))
+            format!("on ({})", config.allowed_names())
         } else {
             "off".into()
         }
     );
     let period = Duration::from_secs_f64(1.0 / config.state_rate_hz);
-    let mut commands = RemoteControl::new(&robot, &config.remote_commands);
+    let mut commands = RemoteControl::new(&node, robot_name, config);
     let mut counters = Counters::default();
     let mut latest_state: Option<String> = None;
     let mut last_status: Option<StatusPayload> = None;
@@ -247,7 +245,9 @@ fn run(
             if next_state < now {
                 next_state = now + period;
             }
-            if let Some(state) = states.try_latest()? {
+            if let Some(state) = services::latest(&states)
+                .map_err(|e| anyhow::anyhow!("receiving the state: {e:?}"))?
+            {
                 let json = state_json(&state, monotonic_ns()).to_string();
                 if let Err(error) = state_publisher.put(json.clone()).wait() {
                     warn!("zenoh: publishing the state failed: {error}");
@@ -255,7 +255,8 @@ fn run(
                 latest_state = Some(json);
             }
         }
-        if let Some(status) = statuses.latest(Duration::ZERO)?
+        if let Some(status) = services::latest(&statuses)
+            .map_err(|e| anyhow::anyhow!("receiving the status: {e:?}"))?
             && last_status.is_none_or(|last| last.seq != status.seq)
         {
             if let Err(error) = status_publisher
@@ -308,45 +309,61 @@ fn reply(query: &Query, payload: String) {
     }
 }
 
-/// Remote commands: each remote client gets a controller of its own, named `remote:CLIENT`, so
+/// Remote commands: each remote client gets a control port of its own, named `remote:CLIENT`, so
 /// the arbiter treats it like a local one (freshness, limits, priority).
 struct RemoteControl<'a> {
-    robot: &'a Robot,
-    config: &'a RemoteCommands,
-    controllers: HashMap<(String, Option<Class>), Controller>,
+    node: &'a iceoryx2::node::Node<services::Ipc>,
+    robot: &'a str,
+    config: &'a ZenohConfig,
+    /// The ports of the clients heard from, with the request count when each was last used.
+    ports: Vec<(String, ControlPort, u64)>,
+    used: u64,
 }
 
-/// Remote clients kept at once; the oldest is forgotten past this.
+/// Remote clients kept at once; the least recently used is forgotten past this.
 const MAX_REMOTE_CLIENTS: usize = 16;
 
 impl<'a> RemoteControl<'a> {
-    fn new(robot: &'a Robot, config: &'a RemoteCommands) -> Self {
+    fn new(
+        node: &'a iceoryx2::node::Node<services::Ipc>,
+        robot: &'a str,
+        config: &'a ZenohConfig,
+    ) -> Self {
         Self {
+            node,
             robot,
             config,
-            controllers: HashMap::new(),
+            ports: Vec::new(),
+            used: 0,
         }
     }
 
-    fn allowed(&self, permission: &str) -> Result<(), String> {
-        if self.config.allowed.iter().any(|a| a == permission) {
+    fn allowed(&self, permission: Permission) -> Result<(), String> {
+        if self.config.remote_commands.allowed.contains(&permission) {
             Ok(())
         } else {
             Err(format!(
                 "remote `{permission}` is not allowed on this gateway (zenoh.remote_commands.allowed: {})",
-                self.config.allowed.join(", ")
+                self.config.allowed_names()
             ))
         }
     }
 
     fn handle(&mut self, query: &Query, counters: &mut Counters) -> RemoteAnswer {
-        if !self.config.enabled {
+        if !self.config.remote_commands.enabled {
             counters.commands_ignored_disabled += 1;
             return RemoteAnswer::rejected(
                 "remote commands are disabled on this gateway (zenoh.remote_commands.enabled)",
             );
         }
-        let answer = self.decide(query);
+        let answer = match self.decide(query) {
+            Ok(Accepted { clamped }) => RemoteAnswer {
+                accepted: true,
+                clamped,
+                reason: None,
+            },
+            Err(reason) => RemoteAnswer::rejected(reason),
+        };
         if answer.accepted {
             counters.commands_accepted += 1;
         } else {
@@ -355,181 +372,100 @@ impl<'a> RemoteControl<'a> {
         answer
     }
 
-    fn decide(&mut self, query: &Query) -> RemoteAnswer {
-        let kind = query
-            .key_expr()
-            .as_str()
-            .rsplit('/')
-            .next()
-            .unwrap_or("")
-            .to_owned();
-        let Some(payload) = query.payload() else {
-            return RemoteAnswer::rejected("no payload: send the command as JSON");
-        };
+    fn decide(&mut self, query: &Query) -> Result<Accepted, String> {
+        let key = query.key_expr().as_str();
+        let last = key.rsplit('/').next().unwrap_or("");
+        let kind: RemoteKind =
+            last.parse()
+                .map_err(|e: scout_interface::control::UnknownName| {
+                    format!(
+                        "unknown command `{}`: one of {}",
+                        e.found,
+                        e.expected.join(", ")
+                    )
+                })?;
+        let payload = query
+            .payload()
+            .ok_or("no payload: send the command as JSON")?;
         if payload.len() > MAX_COMMAND_BYTES {
-            return RemoteAnswer::rejected(format!(
+            return Err(format!(
                 "payload of {} bytes exceeds {MAX_COMMAND_BYTES}",
                 payload.len()
             ));
         }
-        let command: RemoteCommand = match serde_json::from_slice(&payload.to_bytes()) {
-            Ok(command) => command,
-            Err(error) => return RemoteAnswer::rejected(format!("invalid JSON: {error}")),
+        let command: RemoteCommand = serde_json::from_slice(&payload.to_bytes())
+            .map_err(|error| format!("invalid JSON: {error}"))?;
+        let (permission, request) = command.request(kind)?;
+        self.allowed(permission)?;
+        self.port(&command.client)?
+            .request(&request)
+            .map_err(|error| error.to_string())
+    }
+
+    fn port(&mut self, client: &str) -> Result<&mut ControlPort, String> {
+        self.used += 1;
+        let used = self.used;
+        let index = match self.ports.iter().position(|(name, ..)| name == client) {
+            Some(index) => index,
+            None => {
+                if self.ports.len() >= MAX_REMOTE_CLIENTS
+                    && let Some(oldest) = (0..self.ports.len()).min_by_key(|&i| self.ports[i].2)
+                {
+                    self.ports.swap_remove(oldest);
+                }
+                let name = format!("{REMOTE_PREFIX}{client}");
+                let port = ControlPort::open(self.node, self.robot, &name)
+                    .map_err(|error| error.to_string())?;
+                self.ports.push((client.to_owned(), port, used));
+                self.ports.len() - 1
+            }
         };
-        if command.client.is_empty() || command.client.len() > 24 {
-            return RemoteAnswer::rejected("`client` must be 1 to 24 bytes");
-        }
-        match self.execute(&kind, &command) {
-            Ok(Accepted { clamped }) => RemoteAnswer {
-                accepted: true,
-                clamped,
-                reason: None,
-            },
-            Err(reason) => RemoteAnswer::rejected(reason),
-        }
-    }
-
-    fn execute(&mut self, kind: &str, command: &RemoteCommand) -> Result<Accepted, String> {
-        let rejected = |e: ControlError| e.to_string();
-        match kind {
-            "drive" => {
-                let class_name = command
-                    .class
-                    .as_deref()
-                    .ok_or("drive needs `class`: teleop or autonomy")?;
-                let class: Class = class_name.parse()?;
-                self.allowed(class.name())?;
-                let (Some(linear), Some(angular)) = (command.linear, command.angular) else {
-                    return Err("drive needs `linear` and `angular` numbers".into());
-                };
-                let ttl = command
-                    .ttl_ms
-                    .map(|ms| Duration::from_millis(u64::from(ms)));
-                self.controller(&command.client, Some(class))?
-                    .drive_for(linear, angular, ttl)
-                    .map_err(rejected)
-            }
-            "estop" => {
-                self.allowed("estop")?;
-                let reason = command
-                    .reason
-                    .clone()
-                    .unwrap_or_else(|| "remote estop".into());
-                self.controller(&command.client, None)?
-                    .stop(&reason)
-                    .map_err(rejected)
-            }
-            "release" => {
-                self.allowed("release")?;
-                self.controller(&command.client, None)?
-                    .release()
-                    .map_err(rejected)
-            }
-            "resume" => {
-                self.allowed("resume")?;
-                self.controller(&command.client, None)?
-                    .resume()
-                    .map_err(rejected)
-            }
-            "lights" => {
-                self.allowed("lights")?;
-                let lights = remote_lights(command)?;
-                self.controller(&command.client, None)?
-                    .lights(lights)
-                    .map_err(rejected)
-            }
-            "clear-fault" => {
-                self.allowed("clear_fault")?;
-                let fault = command
-                    .fault
-                    .as_deref()
-                    .ok_or("clear-fault needs `fault`")?;
-                let code = match fault {
-                    "all" => None,
-                    name => Some(
-                        FaultClear::from_name(name)
-                            .filter(|c| *c != FaultClear::None)
-                            .ok_or_else(|| format!("unknown fault `{name}`"))?,
-                    ),
-                };
-                self.controller(&command.client, None)?
-                    .clear_fault(code)
-                    .map_err(rejected)
-            }
-            other => Err(format!(
-                "unknown command `{other}`: drive, estop, release, resume, lights or clear-fault"
-            )),
-        }
-    }
-
-    fn controller(
-        &mut self,
-        client: &str,
-        class: Option<Class>,
-    ) -> Result<&mut Controller, String> {
-        let key = (client.to_owned(), class);
-        if !self.controllers.contains_key(&key) {
-            if self.controllers.len() >= MAX_REMOTE_CLIENTS
-                && let Some(oldest) = self.controllers.keys().next().cloned()
-            {
-                self.controllers.remove(&oldest);
-            }
-            let controller = self
-                .robot
-                .controller(&format!("remote:{client}"), class)
-                .map_err(|e| e.to_string())?;
-            self.controllers.insert(key.clone(), controller);
-        }
-        self.controllers
-            .get_mut(&key)
-            .ok_or_else(|| "controller vanished".into())
+        let entry = &mut self.ports[index];
+        entry.2 = used;
+        Ok(&mut entry.1)
     }
 }
 
-fn remote_lights(command: &RemoteCommand) -> Result<Lights, String> {
-    if command.auto == Some(true) {
-        return Ok(Lights::Auto);
-    }
-    let light = |light: &Option<RemoteLight>| -> Result<Light, String> {
-        let Some(light) = light else {
-            return Ok(Light::default());
-        };
-        let mode = LightMode::from_name(&light.mode)
-            .ok_or_else(|| format!("light mode `{}`: off, on, breath or custom", light.mode))?;
-        if light.brightness > 100 {
-            return Err(format!("brightness {} is above 100", light.brightness));
-        }
-        Ok(Light {
-            mode,
-            brightness: light.brightness,
-        })
-    };
-    Ok(Lights::Manual(LightCommand {
-        enabled: true,
-        front: light(&command.front)?,
-        rear: light(&command.rear)?,
-    }))
-}
+#[cfg(test)]
+mod tests {
+    use super::*;
 
-/// The static part of the information queryable.
-pub fn info(
-    robot: &str,
-    transport: &str,
-    device: &str,
-    config: &crate::config::GatewayConfig,
-) -> Value {
-    json!({
-        "robot": robot,
-        "version": env!("CARGO_PKG_VERSION"),
-        "transport": transport,
-        "device": device,
-        "max_linear": scout_protocol::units::MAX_LINEAR_SPEED,
-        "max_angular": config.max_angular,
-        "arbiter": config.arbiter,
-        "state_rate_hz": config.zenoh.state_rate_hz,
-        "remote_commands": {
-            "enabled": config.zenoh.remote_commands.enabled,
-            "allowed": config.zenoh.remote_commands.allowed,
-        },
-    })
+    #[test]
+    fn the_example_zenoh_configs_parse() {
+        for file in ["zenoh-tls-gateway.json5", "zenoh-tls-operator.json5"] {
+            let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../../config")
+                .join(file);
+            if let Err(error) = zenoh::Config::from_file(&path) {
+                panic!("{}: {error}", path.display());
+            }
+        }
+    }
+
+    #[test]
+    fn permissions_are_checked_when_the_config_is_read() {
+        let config: ZenohConfig = serde_json::from_str(
+            r#"{"remote_commands":{"enabled":true,"allowed":["estop","clear_fault"]}}"#,
+        )
+        .expect("valid");
+        assert_eq!(
+            config.remote_commands.allowed,
+            [Permission::Estop, Permission::ClearFault]
+        );
+        let error =
+            serde_json::from_str::<ZenohConfig>(r#"{"remote_commands":{"allowed":["fly"]}}"#)
+                .expect_err("unknown permission");
+        assert!(
+            error.to_string().contains("unknown variant `fly`"),
+            "{error}"
+        );
+        assert!(
+            ZenohConfig {
+                state_rate_hz: 0.0,
+                ..Default::default()
+            }
+            .validate()
+            .is_err()
+        );
+    }
 }

@@ -13,10 +13,11 @@ use scout_protocol::{Counted, can, serial};
 use serialport::{SerialPort, TTYPort};
 use tracing::{info, warn};
 
-use super::chassis::{Chassis, Injection, SimParams};
-use super::script::{HELP, SimCommand};
-use crate::link::{RxEvent, StreamFraming, Transport, decode_can};
-use crate::port::{Incoming, Port};
+use crate::chassis::{Chassis, Injection, SimParams};
+use crate::script::{HELP, SimCommand};
+use scout_io::{Incoming, Port};
+use scout_protocol::Transport;
+use scout_protocol::link::{RxEvent, StreamFraming, decode_can};
 
 /// How the simulator is reached and what it simulates.
 #[derive(Debug, Clone)]
@@ -266,6 +267,9 @@ impl Simulator<'_> {
                     .with_context(|| format!("opening SocketCAN interface {interface}"))?;
                 (Endpoint { port, _slave: None }, interface)
             }
+            Transport::Sim => anyhow::bail!(
+                "scout-sim speaks serial, slcan or SocketCAN (the in-process chassis is scout-gateway --sim)"
+            ),
             Transport::Serial | Transport::Slcan => {
                 let (master, slave) =
                     TTYPort::pair().context("creating a pseudo-terminal (is /dev/ptmx there?)")?;
@@ -354,7 +358,7 @@ impl Simulator<'_> {
                     frame[serial::FRAME_LEN - 1] ^= checksum_damage;
                     bytes.extend_from_slice(&frame);
                 }
-                Transport::Slcan | Transport::Can => {
+                Transport::Slcan | Transport::Can | Transport::Sim => {
                     let frame = can::encode(&counted.message, counted.count);
                     let mut data = [0u8; 8];
                     data.copy_from_slice(frame.data());

@@ -13,10 +13,10 @@ use std::sync::mpsc::{Sender, channel};
 
 use anyhow::Context;
 use clap::{ArgGroup, Parser};
-use scout_gateway::link::Transport;
-use scout_gateway::sim::SimParams;
-use scout_gateway::sim::run::{SimOptions, run};
-use scout_gateway::sim::script::{self, SimCommand};
+use scout_protocol::Transport;
+use scout_sim::SimParams;
+use scout_sim::run::{SimOptions, run};
+use scout_sim::script::{self, SimCommand};
 
 /// A simulated AgileX SCOUT chassis (protocol v1).
 ///
@@ -55,7 +55,7 @@ struct Cli {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    let _log = scout_gateway::logging::init();
+    let _log = scout_io::logging::init();
     match simulate(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(error) => {

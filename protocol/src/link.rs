@@ -1,13 +1,16 @@
-//! Link framing shared by the gateway and the simulator: messages to the bytes or CAN frames of
-//! each transport (serial, slcan, SocketCAN) and received bytes back to messages.
+//! How messages travel on each transport (serial, slcan, SocketCAN, the in-process simulator):
+//! messages to bytes or CAN frames, and received bytes back to messages. Shared by the gateway
+//! and the simulator; fixed buffers, no allocation.
 
-use scout_protocol::serial::{self, StreamDecoder};
-use scout_protocol::slcan::{self, LineDecoder, Slcan};
-use scout_protocol::{CanFrame, ControlMode, Counted, Message, can};
+use crate::serial::{self, StreamDecoder};
+use crate::slcan::{self, LineDecoder, Slcan};
+use crate::{CanFrame, ControlMode, Counted, Message, can};
 
-/// How the chassis is reached.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
+/// How the chassis is reached: the one transport enum of the project (configuration, state,
+/// framing, control mode).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "snake_case"))]
 pub enum Transport {
     /// RS232, 13-byte frames.
     Serial,
@@ -15,14 +18,20 @@ pub enum Transport {
     Slcan,
     /// A SocketCAN interface.
     Can,
+    /// The simulated chassis in the same process: messages are handed over unframed, in CAN's
+    /// control mode.
+    Sim,
 }
 
 impl Transport {
+    /// Every transport, in raw-value order.
+    pub const ALL: [Transport; 4] = [Self::Serial, Self::Slcan, Self::Can, Self::Sim];
+
     /// The control mode every motion command on this transport must carry.
     pub const fn control_mode(self) -> ControlMode {
         match self {
             Self::Serial => ControlMode::Serial,
-            Self::Slcan | Self::Can => ControlMode::Can,
+            Self::Slcan | Self::Can | Self::Sim => ControlMode::Can,
         }
     }
 
@@ -32,31 +41,83 @@ impl Transport {
             Self::Serial => "serial",
             Self::Slcan => "slcan",
             Self::Can => "can",
+            Self::Sim => "sim",
+        }
+    }
+
+    /// The byte that stands for it in shared memory.
+    pub const fn raw(self) -> u8 {
+        match self {
+            Self::Serial => 0,
+            Self::Slcan => 1,
+            Self::Can => 2,
+            Self::Sim => 3,
+        }
+    }
+
+    /// The transport of a byte from [`Transport::raw`].
+    pub const fn from_raw(raw: u8) -> Option<Self> {
+        match raw {
+            0 => Some(Self::Serial),
+            1 => Some(Self::Slcan),
+            2 => Some(Self::Can),
+            3 => Some(Self::Sim),
+            _ => None,
         }
     }
 }
 
-impl std::fmt::Display for Transport {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+impl core::fmt::Display for Transport {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         f.write_str(self.name())
     }
 }
 
 /// Why received bytes or a frame were rejected.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RxError {
     /// A CAN frame (SocketCAN or slcan) that is not a valid SCOUT v1 frame.
-    #[error("{0}")]
-    Can(#[from] can::CanError),
+    Can(can::CanError),
     /// A rejected serial frame.
-    #[error("{0}")]
-    Serial(#[from] serial::SerialError),
+    Serial(serial::SerialError),
     /// A malformed slcan line.
-    #[error("{0}")]
-    Slcan(#[from] slcan::SlcanError),
+    Slcan(slcan::SlcanError),
     /// An extended-id, remote or error CAN frame (SCOUT v1 sends only standard data frames).
-    #[error("extended, remote or error CAN frame 0x{0:08X} (SCOUT v1 sends standard data frames)")]
     ForeignFrame(u32),
+}
+
+impl core::fmt::Display for RxError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Can(error) => error.fmt(f),
+            Self::Serial(error) => error.fmt(f),
+            Self::Slcan(error) => error.fmt(f),
+            Self::ForeignFrame(id) => write!(
+                f,
+                "extended, remote or error CAN frame 0x{id:08X} (SCOUT v1 sends standard data frames)"
+            ),
+        }
+    }
+}
+
+impl core::error::Error for RxError {}
+
+impl From<can::CanError> for RxError {
+    fn from(error: can::CanError) -> Self {
+        Self::Can(error)
+    }
+}
+
+impl From<serial::SerialError> for RxError {
+    fn from(error: serial::SerialError) -> Self {
+        Self::Serial(error)
+    }
+}
+
+impl From<slcan::SlcanError> for RxError {
+    fn from(error: slcan::SlcanError) -> Self {
+        Self::Slcan(error)
+    }
 }
 
 impl RxError {
@@ -117,12 +178,13 @@ pub enum StreamFraming {
 }
 
 impl StreamFraming {
-    /// The decoder for `transport`, or `None` for SocketCAN (which carries whole frames).
+    /// The decoder for `transport`, or `None` for SocketCAN and the simulator (which carry
+    /// whole frames or messages).
     pub fn new(transport: Transport) -> Option<Self> {
         match transport {
             Transport::Serial => Some(Self::Serial(StreamDecoder::new())),
             Transport::Slcan => Some(Self::Slcan(LineDecoder::new())),
-            Transport::Can => None,
+            Transport::Can | Transport::Sim => None,
         }
     }
 
@@ -167,19 +229,23 @@ impl StreamFraming {
     }
 }
 
-/// Appends the bytes that carry `message` with `count` on a byte-stream transport.
-pub fn encode_stream(transport: Transport, message: &Message, count: u8, out: &mut Vec<u8>) {
+/// Appends the bytes that carry `message` with `count` on a byte-stream transport: a serial
+/// frame on serial, an slcan line on every CAN transport.
+pub fn encode_stream(
+    transport: Transport,
+    message: &Message,
+    count: u8,
+    out: &mut impl Extend<u8>,
+) {
     match transport {
-        Transport::Serial => out.extend_from_slice(&serial::encode(message, count)),
-        Transport::Slcan | Transport::Can => {
+        Transport::Serial => out.extend(serial::encode(message, count)),
+        Transport::Slcan | Transport::Can | Transport::Sim => {
             let frame = can::encode(message, count);
-            out.extend_from_slice(
-                slcan::encode(&Slcan::Frame {
-                    frame,
-                    timestamp: None,
-                })
-                .as_bytes(),
-            );
+            let line = slcan::encode(&Slcan::Frame {
+                frame,
+                timestamp: None,
+            });
+            out.extend(line.as_bytes().iter().copied());
         }
     }
 }
@@ -187,7 +253,8 @@ pub fn encode_stream(transport: Transport, message: &Message, count: u8, out: &m
 #[cfg(test)]
 mod tests {
     use super::*;
-    use scout_protocol::MotionCommand;
+    use crate::MotionCommand;
+    use std::vec::Vec;
 
     fn round_trip(transport: Transport) -> Vec<RxEvent> {
         let message = Message::MotionCommand(MotionCommand {
@@ -201,6 +268,14 @@ mod tests {
         framing.push(&bytes, |event| events.push(event));
         assert_eq!(events, [RxEvent::Message(Counted { message, count: 7 })]);
         events
+    }
+
+    #[test]
+    fn raw_values_round_trip() {
+        for transport in Transport::ALL {
+            assert_eq!(Transport::from_raw(transport.raw()), Some(transport));
+        }
+        assert_eq!(Transport::from_raw(4), None);
     }
 
     #[test]

@@ -4,7 +4,7 @@ use std::time::Duration;
 
 use scout_protocol::Motor;
 
-use super::chassis::{Injection, MotorValue, Protection, Warning};
+use crate::chassis::{Injection, MotorValue, Protection, Warning};
 
 /// The language's reference, printed by `help` and on a parse error.
 pub const HELP: &str = "\

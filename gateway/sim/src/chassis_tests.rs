@@ -7,8 +7,8 @@ use scout_protocol::{
     MessageKind, MotionCommand, Motor, can, candump, serial,
 };
 
-use super::chassis::{Chassis, Ignored, Injection, MotorValue, Protection, SimParams};
-use crate::link::Transport;
+use crate::chassis::{Chassis, Ignored, Injection, MotorValue, Protection, SimParams};
+use scout_protocol::Transport;
 
 const fn ms(millis: u64) -> Duration {
     Duration::from_millis(millis)

@@ -1,0 +1,483 @@
+//! The gateway's sans-IO core: everything the gateway decides, with no port, no shared memory
+//! and no clock. Events come in with the time they happened (`handle_*`: frames received, the
+//! link opening or failing, client requests and deaths, shutdown); what to do comes out
+//! (`poll_*`: frames to send, state and status to publish, when to open the port, the next
+//! deadline). The driver ([`crate::driver`]) is the one piece that touches the port, iceoryx2 and
+//! the clock, reading the clock once per iteration; tests drive the core on a virtual clock.
+//!
+//! Time is CLOCK_MONOTONIC as a [`Duration`] (the clock of every `*_ns` field).
+
+use std::collections::HashSet;
+use std::time::Duration;
+
+use scout_interface::control::{
+    ControlRequest, ControlResponse, LightsControl, Request, SourcePayload, StatusPayload,
+    node_from_halves,
+};
+use scout_interface::state::{LinkState, StatePayload};
+use scout_interface::{FixedText, Transport};
+use scout_protocol::link::RxEvent;
+use scout_protocol::sequence::RollingCounter;
+use scout_protocol::units::{self, MAX_LINEAR_SPEED};
+use scout_protocol::{Counted, LightCommand, Message, MotionCommand};
+use tracing::{debug, info, warn};
+
+use crate::arbiter::{Arbiter, ClientKey, LightsSetting, Output};
+use crate::config::GatewayConfig;
+use crate::state::{Publish, StateTracker};
+
+/// The state is published at least this often, frames or not: a subscriber sees that the
+/// gateway lives while the chassis is silent, and a late subscriber gets the latest state fast.
+pub const STATE_HEARTBEAT: Duration = Duration::from_millis(100);
+
+/// The status is published at least this often, changes or not.
+pub const STATUS_HEARTBEAT: Duration = Duration::from_secs(1);
+
+/// The first wait before reopening a failed port; it doubles up to `reconnect_max_ms`.
+pub const FIRST_BACKOFF: Duration = Duration::from_millis(50);
+
+/// Something to publish, borrowed from the core (the payloads are copied once, into shared
+/// memory).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Publication<'a> {
+    /// The chassis state, stamped with its sequence number and time.
+    State(&'a StatePayload),
+    /// The arbiter's status, stamped.
+    Status(&'a StatusPayload),
+}
+
+/// The port, as far as the core knows.
+#[derive(Debug, Clone, PartialEq)]
+enum Link {
+    /// Open: frames go out.
+    Open,
+    /// Closed or never opened: open again at `reopen_at`.
+    Closed {
+        reopen_at: Duration,
+        backoff: Duration,
+        last_error: Option<String>,
+    },
+}
+
+/// How the core is doing, for the log at exit and the benchmarks.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct CoreStats {
+    /// Motion commands handed to the port.
+    pub commands_sent: u64,
+    /// Ticks whose deadline had passed by more than a period (skipped to stay on the grid).
+    pub missed_ticks: u64,
+    /// The latest a tick was handled after its deadline.
+    pub max_lateness: Duration,
+    /// Requests handled.
+    pub requests: u64,
+    /// Stops sent at once, out of the 20 ms schedule.
+    pub urgent_stops: u64,
+}
+
+/// The gateway's decisions.
+#[derive(Debug)]
+pub struct Core {
+    robot: String,
+    transport: Transport,
+    max_angular: f64,
+    period: Duration,
+    light_period: Duration,
+    stop_cycles: u32,
+    reconnect_max: Duration,
+    tracker: StateTracker,
+    arbiter: Arbiter,
+    link: Link,
+    opened_before: bool,
+    motion_count: RollingCounter,
+    light_count: RollingCounter,
+    next_command: Duration,
+    next_light: Duration,
+    state_due: bool,
+    last_state: Option<Duration>,
+    status_due: bool,
+    status: StatusPayload,
+    last_status: Option<Duration>,
+    /// Zero-speed cycles left before exit, once shutdown began.
+    shutdown: Option<u32>,
+    watched: HashSet<u128>,
+    new_clients: Vec<u128>,
+    stats: CoreStats,
+}
+
+impl Core {
+    /// The core for `config`, talking to `device` over `transport`, starting at `now`.
+    pub fn new(config: &GatewayConfig, transport: Transport, device: &str, now: Duration) -> Self {
+        let timing = &config.timing;
+        let light_period_ms = match transport {
+            Transport::Serial => timing.serial_light_period_ms,
+            Transport::Slcan | Transport::Can | Transport::Sim => timing.can_light_period_ms,
+        };
+        Self {
+            robot: config.name.clone(),
+            transport,
+            max_angular: config.max_angular,
+            period: config.command_period(),
+            light_period: Duration::from_millis(light_period_ms),
+            stop_cycles: timing.stop_cycles,
+            reconnect_max: Duration::from_millis(timing.reconnect_max_ms),
+            tracker: StateTracker::new(&config.name, transport, device, config.max_angular),
+            arbiter: Arbiter::new(config.arbiter.clone(), config.max_angular),
+            link: Link::Closed {
+                reopen_at: now,
+                backoff: FIRST_BACKOFF,
+                last_error: None,
+            },
+            opened_before: false,
+            motion_count: RollingCounter::default(),
+            light_count: RollingCounter::default(),
+            next_command: now,
+            next_light: now,
+            state_due: true,
+            last_state: None,
+            status_due: true,
+            status: StatusPayload::default(),
+            last_status: None,
+            shutdown: None,
+            watched: HashSet::new(),
+            new_clients: Vec::new(),
+            stats: CoreStats::default(),
+        }
+    }
+
+    /// The link state now.
+    pub fn link_state(&self) -> LinkState {
+        self.tracker.link_state()
+    }
+
+    /// How the core is doing.
+    pub fn stats(&self) -> CoreStats {
+        self.stats
+    }
+
+    /// The arbiter, for inspection.
+    pub fn arbiter(&self) -> &Arbiter {
+        &self.arbiter
+    }
+
+    /// Whether the port was ever open (a first open refused is fatal, a later one is retried).
+    pub fn has_opened(&self) -> bool {
+        self.opened_before
+    }
+
+    /// Whether the driver should try to open the port now.
+    pub fn poll_open(&self, now: Duration) -> bool {
+        matches!(self.link, Link::Closed { reopen_at, .. } if now >= reopen_at)
+            && self.shutdown.is_none()
+    }
+
+    /// The port opened.
+    pub fn handle_opened(&mut self, now: Duration) {
+        info!("{} {} open", self.transport, self.device());
+        self.link = Link::Open;
+        let reconnect = std::mem::replace(&mut self.opened_before, true);
+        let publish = self.tracker.handle_connected(reconnect);
+        self.publish_if(publish);
+        self.next_command = self.next_command.max(now);
+    }
+
+    /// Opening the port failed with `error`: try again after the backoff.
+    pub fn handle_open_failed(&mut self, now: Duration, error: &str) {
+        let Link::Closed {
+            reopen_at,
+            backoff,
+            last_error,
+        } = &mut self.link
+        else {
+            return;
+        };
+        if last_error.as_deref() == Some(error) {
+            debug!(
+                "still cannot open {}",
+                self.tracker.state().link.device.as_str()
+            );
+        } else {
+            warn!(
+                "cannot open {} {}: {error}; retrying every {:?} at most",
+                self.transport,
+                self.tracker.state().link.device.as_str(),
+                self.reconnect_max
+            );
+            *last_error = Some(error.to_owned());
+        }
+        *reopen_at = now + *backoff;
+        *backoff = (*backoff * 2).min(self.reconnect_max);
+    }
+
+    /// The port failed (`what`: reading or writing, and why): it is closed and reopened soon.
+    pub fn handle_link_failed(&mut self, now: Duration, what: &str) {
+        if self.link == Link::Open {
+            warn!("{} {}: {what}; reopening", self.transport, self.device());
+        }
+        self.link = Link::Closed {
+            reopen_at: now + FIRST_BACKOFF,
+            backoff: FIRST_BACKOFF * 2,
+            last_error: None,
+        };
+        let publish = self.tracker.handle_disconnected();
+        self.publish_if(publish);
+    }
+
+    /// Something arrived from the port.
+    pub fn handle_rx(&mut self, now: Duration, event: &RxEvent) {
+        let publish = self.tracker.handle_rx(event, now);
+        self.publish_if(publish);
+    }
+
+    /// The stream decoder has thrown away this many bytes so far.
+    pub fn handle_discarded_bytes(&mut self, total: u64) {
+        self.tracker.set_discarded_bytes(total);
+    }
+
+    /// A client's request; every request gets an answer.
+    pub fn handle_request(&mut self, now: Duration, wire: &ControlRequest) -> ControlResponse {
+        self.stats.requests += 1;
+        self.status_due = true;
+        let client = ClientKey {
+            name: wire.client.as_str().to_owned(),
+            node: node_from_halves(wire.node),
+        };
+        if self.watched.insert(client.node) {
+            self.new_clients.push(client.node);
+        }
+        let answer = match Request::decode(wire) {
+            Ok(request) => {
+                let reset_odometry = request == Request::ResetOdometry;
+                let answer = self.arbiter.handle_request(now, &client, request);
+                if reset_odometry && answer.is_ok() {
+                    info!("odometry reset by {}", client.name);
+                    let publish = self.tracker.reset_odometry();
+                    self.publish_if(publish);
+                }
+                answer
+            }
+            Err(rejection) => {
+                self.arbiter.count_rejection(&rejection);
+                Err(rejection)
+            }
+        };
+        if let Err(rejection) = &answer {
+            debug!("rejected {} from {}: {rejection}", wire.kind, client.name);
+        }
+        ControlResponse::new(wire.seq, &answer)
+    }
+
+    /// A client process died.
+    pub fn handle_client_gone(&mut self, now: Duration, node: u128) {
+        self.watched.remove(&node);
+        self.arbiter.handle_node_gone(now, node);
+        self.status_due = true;
+    }
+
+    /// Ctrl-C or SIGTERM: send zero speed for the configured cycles, then finish.
+    pub fn handle_shutdown(&mut self) {
+        if self.shutdown.is_none() {
+            info!(
+                "stopping: sending zero speed for {} more cycles",
+                self.stop_cycles
+            );
+            self.shutdown = Some(self.stop_cycles);
+        }
+    }
+
+    /// Whether shutdown is complete: the zero cycles went out, or there is no port to send on.
+    pub fn is_finished(&self) -> bool {
+        match self.shutdown {
+            None => false,
+            Some(left) => left == 0 || self.link != Link::Open,
+        }
+    }
+
+    /// A client process the driver should watch for death.
+    pub fn poll_new_client(&mut self) -> Option<u128> {
+        self.new_clients.pop()
+    }
+
+    /// The next frame to send now, if any: a stop at once, the motion command when its tick is
+    /// due, the light command when its period is due. Call until `None`; a frame that fails to
+    /// go out is reported with [`Core::handle_link_failed`].
+    pub fn poll_transmit(&mut self, now: Duration) -> Option<Counted> {
+        if self.arbiter.take_urgent_stop() {
+            self.stats.urgent_stops += 1;
+            if let Some(frame) = self.motion(&Output::STOP, now) {
+                return Some(frame);
+            }
+        }
+        if now >= self.next_command {
+            let output = match self.shutdown.as_mut() {
+                Some(left) => {
+                    *left = left.saturating_sub(1);
+                    Output::STOP
+                }
+                None => self.arbiter.poll_output(now, self.period),
+            };
+            self.advance_schedule(now);
+            self.status_due = true;
+            if let Some(frame) = self.motion(&output, now) {
+                return Some(frame);
+            }
+        }
+        if let Some(lights) = self.lights()
+            && now >= self.next_light
+        {
+            self.next_light += self.light_period;
+            if self.next_light <= now {
+                self.next_light = now + self.light_period;
+            }
+            if self.link == Link::Open {
+                self.tracker.handle_sent_other();
+                return Some(Counted {
+                    message: Message::LightCommand(lights),
+                    count: self.light_count.next_count(),
+                });
+            }
+        }
+        None
+    }
+
+    /// The next state or status to publish now, if any. Call until `None`.
+    pub fn poll_publish(&mut self, now: Duration) -> Option<Publication<'_>> {
+        let publish = self.tracker.poll(now);
+        self.publish_if(publish);
+        let heartbeat = self
+            .last_state
+            .is_none_or(|last| now.saturating_sub(last) >= STATE_HEARTBEAT);
+        if self.state_due || heartbeat {
+            self.state_due = false;
+            self.last_state = Some(now);
+            return Some(Publication::State(self.tracker.stamp(now)));
+        }
+        if std::mem::take(&mut self.status_due) {
+            let status = self.status(now);
+            let heartbeat = self
+                .last_status
+                .is_none_or(|last| now.saturating_sub(last) >= STATUS_HEARTBEAT);
+            if status.differs_from(&self.status) || heartbeat {
+                self.last_status = Some(now);
+                self.status = StatusPayload {
+                    seq: self.status.seq + 1,
+                    published_ns: now.as_nanos() as u64,
+                    ..status
+                };
+                return Some(Publication::Status(&self.status));
+            }
+        }
+        None
+    }
+
+    /// When the core next has something to do, if nothing comes in before.
+    pub fn poll_timeout(&self) -> Duration {
+        let mut deadline = self.next_command;
+        if self.lights().is_some() {
+            deadline = deadline.min(self.next_light);
+        }
+        if let Link::Closed { reopen_at, .. } = self.link
+            && self.shutdown.is_none()
+        {
+            deadline = deadline.min(reopen_at);
+        }
+        if let Some(last) = self.last_state {
+            deadline = deadline.min(last + STATE_HEARTBEAT);
+        }
+        deadline
+    }
+
+    fn device(&self) -> &str {
+        self.tracker.state().link.device.as_str()
+    }
+
+    fn publish_if(&mut self, publish: Publish) {
+        if publish == Publish::Yes {
+            self.state_due = true;
+        }
+    }
+
+    /// Moves the deadline one period on, on the absolute grid; a deadline missed by more than a
+    /// period is skipped rather than sent late in a burst.
+    fn advance_schedule(&mut self, now: Duration) {
+        let lateness = now - self.next_command;
+        self.stats.max_lateness = self.stats.max_lateness.max(lateness);
+        self.next_command += self.period;
+        while self.next_command <= now {
+            self.next_command += self.period;
+            self.stats.missed_ticks += 1;
+        }
+    }
+
+    /// `output` as a motion command in the link's control mode, if the port is open.
+    fn motion(&mut self, output: &Output, now: Duration) -> Option<Counted> {
+        if self.link != Link::Open {
+            return None;
+        }
+        let percent =
+            |speed: f64, max: f64| units::speed_to_percent(speed, max).map_or(0, |(p, _)| p);
+        let command = MotionCommand {
+            control_mode: self.transport.control_mode(),
+            fault_clear: output.fault_clear,
+            linear_percent: percent(output.linear, MAX_LINEAR_SPEED),
+            angular_percent: percent(output.angular, self.max_angular),
+        };
+        self.stats.commands_sent += 1;
+        self.tracker.handle_sent_motion(&command, now);
+        Some(Counted {
+            message: Message::MotionCommand(command),
+            count: self.motion_count.next_count(),
+        })
+    }
+
+    /// The light command to repeat: what clients asked for last (`auto`: host control off), or
+    /// none before anyone asked.
+    fn lights(&self) -> Option<LightCommand> {
+        self.arbiter.lights().map(|setting| match setting {
+            LightsSetting::Manual(lights) => lights,
+            LightsSetting::Auto => LightCommand::default(),
+        })
+    }
+
+    /// The arbiter's status at `now`, without the sequence number and publication time.
+    fn status(&self, now: Duration) -> StatusPayload {
+        let arbiter = &self.arbiter;
+        let mut status = StatusPayload {
+            robot: FixedText::new(&self.robot),
+            ..StatusPayload::default()
+        };
+        if let Some(latch) = arbiter.latch() {
+            status.latched = true;
+            status.latched_by = FixedText::new(&latch.by);
+            status.latched_reason = FixedText::new(&latch.reason);
+            status.latched_age_ms = millis(now.saturating_sub(latch.at));
+        }
+        if let Some((source, class)) = arbiter.selected(now) {
+            status.selected_class = class.raw();
+            status.selected_client = FixedText::new(&source.key.name);
+        }
+        let output = arbiter.output();
+        status.output_linear = output.linear;
+        status.output_angular = output.angular;
+        status.output_fault_clear = output.fault_clear.raw();
+        status.limited = output.limited;
+        status.autonomy_armed = arbiter.autonomy_armed();
+        status.lights = LightsControl::of(arbiter.lights()).raw();
+        for (slot, source) in status.sources.iter_mut().zip(arbiter.sources()) {
+            *slot = SourcePayload {
+                client: FixedText::new(&source.key.name),
+                class: source.class().map_or(0, |class| class.raw()),
+                holding: source.holding.is_some(),
+                heartbeat_ms: source.heartbeat().map_or(0, |p| p.as_millis() as u32),
+                requests: source.requests,
+                age_ms: millis(now.saturating_sub(source.last_seen)),
+            };
+            status.source_count += 1;
+        }
+        status.rejections = *arbiter.rejections();
+        status
+    }
+}
+
+fn millis(duration: Duration) -> f64 {
+    duration.as_secs_f64() * 1000.0
+}

@@ -1,0 +1,569 @@
+//! The gateway core wired to the simulator's chassis model on a virtual clock (after quinn-proto's
+//! test `Pair`): both sans-IO, so minutes of robot time run in milliseconds, deterministically.
+//! These are the control loop's behaviour tests: the 20 ms grid and skipped ticks, the stop sent
+//! out of schedule, light repetition, reconnect backoff, state and status publication, shutdown.
+
+use std::time::Duration;
+
+use proptest::prelude::*;
+use scout_interface::control::{Accepted, ControlRequest, Rejected, Request};
+use scout_interface::state::LinkState;
+use scout_interface::{Class, LightsSetting, StatePayload, StatusPayload, Transport};
+use scout_protocol::link::RxEvent;
+use scout_protocol::{Counted, Light, LightCommand, LightMode, Message, MotionCommand};
+use scout_sim::{Chassis, SimParams};
+
+use crate::config::GatewayConfig;
+use crate::core::{Core, FIRST_BACKOFF, Publication, STATE_HEARTBEAT, STATUS_HEARTBEAT};
+
+const TICK: Duration = Duration::from_millis(20);
+
+const fn ms(millis: u64) -> Duration {
+    Duration::from_millis(millis)
+}
+
+/// A client of the core: its name and node id.
+#[derive(Debug, Clone, Copy)]
+struct Client(&'static str, u128);
+
+const TELEOP: Client = Client("joystick", 1);
+const AUTONOMY: Client = Client("planner", 2);
+const OFFICER: Client = Client("officer", 3);
+
+/// The core and a simulated chassis on one virtual clock.
+struct Pair {
+    /// The time of the next step.
+    now: Duration,
+    core: Core,
+    chassis: Chassis,
+    /// The virtual time at which the chassis model's clock reads zero.
+    epoch: Duration,
+    /// Whether opening the port succeeds.
+    plugged: bool,
+    /// Whether the port is open.
+    open: bool,
+    /// Whether the chassis' feedback reaches the core (off: a silent chassis).
+    feedback: bool,
+    /// Frames that reached the chassis, with when.
+    sent: Vec<(Duration, Counted)>,
+    states: Vec<(Duration, StatePayload)>,
+    statuses: Vec<(Duration, StatusPayload)>,
+    open_attempts: Vec<Duration>,
+    seq: u64,
+}
+
+impl Pair {
+    fn new(transport: Transport) -> Self {
+        Self::with_config(transport, &GatewayConfig::default())
+    }
+
+    fn with_config(transport: Transport, config: &GatewayConfig) -> Self {
+        // Far from zero, as CLOCK_MONOTONIC is: nothing may assume time starts at zero.
+        let start = Duration::from_secs(1000);
+        let mut chassis = Chassis::new(SimParams::default(), transport);
+        let _ = chassis.poll_feedback(Duration::ZERO);
+        let mut pair = Self {
+            now: start,
+            core: Core::new(config, transport, "simulator", start),
+            chassis,
+            epoch: start,
+            plugged: true,
+            open: false,
+            feedback: true,
+            sent: Vec::new(),
+            states: Vec::new(),
+            statuses: Vec::new(),
+            open_attempts: Vec::new(),
+            seq: 0,
+        };
+        pair.step();
+        pair
+    }
+
+    /// One driver iteration at `now`, then the clock moves to the next event.
+    fn step(&mut self) {
+        let now = self.now;
+        if self.open
+            && let Some(batch) = self.chassis.poll_feedback(now - self.epoch)
+            && self.feedback
+        {
+            for counted in batch {
+                self.core.handle_rx(now, &RxEvent::Message(counted));
+            }
+        }
+        if self.core.poll_open(now) {
+            self.open_attempts.push(now);
+            if self.plugged {
+                self.open = true;
+                self.core.handle_opened(now);
+            } else {
+                self.core.handle_open_failed(now, "no such device");
+            }
+        }
+        while let Some(frame) = self.core.poll_transmit(now) {
+            assert!(self.open, "a frame while the port is closed: {frame:?}");
+            self.chassis.handle_message(now - self.epoch, frame);
+            self.sent.push((now, frame));
+        }
+        while let Some(publication) = self.core.poll_publish(now) {
+            match publication {
+                Publication::State(state) => self.states.push((now, *state)),
+                Publication::Status(status) => self.statuses.push((now, *status)),
+            }
+        }
+        let mut next = self.core.poll_timeout();
+        if self.open {
+            next = next.min(self.chassis.next_feedback_at() + self.epoch);
+        }
+        self.now = next.max(now + Duration::from_micros(1));
+    }
+
+    /// Runs every step up to and including `time` from now.
+    fn run(&mut self, time: Duration) {
+        let end = self.now + time;
+        while self.now <= end {
+            self.step();
+        }
+    }
+
+    /// Steps until `done` holds, for at most `limit` of robot time.
+    fn run_until(&mut self, limit: Duration, done: impl Fn(&Self) -> bool) {
+        let end = self.now + limit;
+        while !done(self) {
+            assert!(self.now <= end, "not within {limit:?}");
+            self.step();
+        }
+    }
+
+    /// Moves the clock on without stepping, as a stalled driver would.
+    fn stall(&mut self, time: Duration) {
+        self.now += time;
+    }
+
+    /// A request from `client` at the current time, answered at once; the next step (at the
+    /// same time) carries out what it caused.
+    fn request(&mut self, client: Client, request: &Request) -> Result<Accepted, Rejected> {
+        self.seq += 1;
+        let mut wire: ControlRequest = request.encode(self.seq);
+        wire.client = scout_interface::FixedText::new(client.0);
+        wire.node = scout_interface::control::node_halves(client.1);
+        let answer = self.core.handle_request(self.now, &wire).answer();
+        self.step();
+        answer
+    }
+
+    fn drive(&mut self, client: Client, class: Class, linear: f64) -> Result<Accepted, Rejected> {
+        self.request(
+            client,
+            &Request::Drive {
+                class,
+                linear,
+                angular: 0.0,
+                ttl: None,
+            },
+        )
+    }
+
+    /// Drives as `client` every 20 ms for `time`.
+    fn stream(&mut self, client: Client, class: Class, linear: f64, time: Duration) {
+        let end = self.now + time;
+        while self.now < end {
+            self.drive(client, class, linear).expect("drive accepted");
+            let next = self.now + TICK;
+            while self.now < next {
+                self.step();
+            }
+        }
+    }
+
+    fn unplug(&mut self) {
+        self.plugged = false;
+        self.open = false;
+        self.core
+            .handle_link_failed(self.now, "reading: device disconnected");
+        self.step();
+    }
+
+    fn motion_commands(&self) -> Vec<(Duration, MotionCommand)> {
+        self.sent
+            .iter()
+            .filter_map(|(at, counted)| match counted.message {
+                Message::MotionCommand(command) => Some((*at, command)),
+                _ => None,
+            })
+            .collect()
+    }
+
+    fn light_commands(&self) -> Vec<Duration> {
+        self.sent
+            .iter()
+            .filter(|(_, counted)| matches!(counted.message, Message::LightCommand(_)))
+            .map(|(at, _)| *at)
+            .collect()
+    }
+
+    fn states(&self) -> Vec<(Duration, StatePayload)> {
+        self.states.clone()
+    }
+
+    fn statuses(&self) -> Vec<(Duration, StatusPayload)> {
+        self.statuses.clone()
+    }
+
+    fn last_state(&self) -> StatePayload {
+        self.states().last().expect("a state was published").1
+    }
+}
+
+fn intervals(times: &[Duration]) -> Vec<Duration> {
+    times.windows(2).map(|pair| pair[1] - pair[0]).collect()
+}
+
+#[test]
+fn motion_commands_go_out_on_the_20_ms_grid_for_ten_minutes() {
+    let mut pair = Pair::new(Transport::Sim);
+    pair.run(Duration::from_secs(600));
+    let times: Vec<Duration> = pair.motion_commands().iter().map(|(at, _)| *at).collect();
+    assert!(times.len() > 30_000, "{}", times.len());
+    assert!(intervals(&times).iter().all(|gap| *gap == TICK));
+    assert_eq!(pair.core.stats().missed_ticks, 0);
+    let chassis = pair.chassis.stats().motion_command_intervals;
+    assert_eq!(chassis.max_ms, 20.0);
+    assert_eq!(pair.last_state().link.state(), LinkState::Ok);
+}
+
+#[test]
+fn a_late_tick_is_sent_once_and_the_missed_ones_are_skipped() {
+    let mut pair = Pair::new(Transport::Sim);
+    pair.run(ms(100));
+    let grid = pair.core.poll_timeout();
+    pair.now = grid;
+    pair.stall(ms(75));
+    pair.step();
+    pair.run(ms(100));
+    let times: Vec<Duration> = pair.motion_commands().iter().map(|(at, _)| *at).collect();
+    let late = times
+        .iter()
+        .position(|at| *at == grid + ms(75))
+        .expect("sent late");
+    // One command for the late tick, then back on the grid: no burst.
+    assert_eq!(times[late + 1], grid + ms(80));
+    assert_eq!(times[late - 1], grid - TICK);
+    let stats = pair.core.stats();
+    assert_eq!((stats.missed_ticks, stats.max_lateness), (3, ms(75)));
+}
+
+#[test]
+fn a_stop_goes_on_the_wire_at_once_not_at_the_next_tick() {
+    let mut pair = Pair::new(Transport::Sim);
+    pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(2));
+    pair.run(ms(7));
+    let asked = pair.now;
+    pair.request(
+        OFFICER,
+        &Request::Stop {
+            reason: "person ahead".into(),
+        },
+    )
+    .expect("a stop is accepted");
+    let (at, command) = pair
+        .motion_commands()
+        .into_iter()
+        .find(|(at, _)| *at >= asked)
+        .expect("a command after the stop");
+    assert_eq!(at, asked, "sent in the same iteration as the request");
+    assert_eq!((command.linear_percent, command.angular_percent), (0, 0));
+    assert_eq!(pair.core.stats().urgent_stops, 1);
+    let status = pair.statuses().last().expect("status").1;
+    assert!(status.latched);
+    assert_eq!(status.latched_by.as_str(), "officer");
+}
+
+#[test]
+fn teleop_drives_the_chassis_and_a_stale_stream_ramps_to_zero() {
+    let mut pair = Pair::new(Transport::Sim);
+    pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(3));
+    let moving = pair.chassis.actual().linear;
+    assert!((moving - 0.5).abs() < 0.02, "{moving}");
+    assert!((pair.last_state().motion.feedback().linear() - 0.5).abs() < 0.02);
+    // No more commands: the command ages out (teleop 250 ms) and the output ramps down.
+    pair.run(Duration::from_secs(2));
+    assert_eq!(pair.chassis.actual().linear, 0.0);
+    let (_, last) = *pair.motion_commands().last().expect("commands");
+    assert_eq!(last.linear_percent, 0);
+}
+
+#[test]
+fn a_dead_client_loses_control_at_once() {
+    let mut pair = Pair::new(Transport::Sim);
+    pair.request(AUTONOMY, &Request::Resume).expect("resume");
+    pair.stream(AUTONOMY, Class::Autonomy, 0.4, Duration::from_secs(2));
+    let dead_at = pair.now;
+    pair.core.handle_client_gone(dead_at, AUTONOMY.1);
+    pair.run(ms(40));
+    let status = pair.statuses().last().expect("status").1;
+    assert_eq!(status.selected_class, 0, "nobody selected after the death");
+    pair.run(Duration::from_secs(1));
+    assert_eq!(pair.chassis.actual().linear, 0.0);
+}
+
+#[test]
+fn lights_repeat_every_25_ms_on_can_and_every_100_ms_on_serial() {
+    let lights = Request::Lights(LightsSetting::Manual(LightCommand {
+        enabled: true,
+        front: Light {
+            mode: LightMode::On,
+            brightness: 100,
+        },
+        rear: Light::default(),
+    }));
+    for (transport, period) in [(Transport::Can, ms(25)), (Transport::Serial, ms(100))] {
+        let mut pair = Pair::new(transport);
+        pair.run(ms(200));
+        assert!(
+            pair.light_commands().is_empty(),
+            "none before a client asks"
+        );
+        pair.request(OFFICER, &lights).expect("lights");
+        pair.run(Duration::from_secs(2));
+        let times = pair.light_commands();
+        assert!(times.len() >= 19, "{transport}: {}", times.len());
+        assert!(
+            intervals(&times).iter().all(|gap| *gap == period),
+            "{transport}"
+        );
+        assert_eq!(
+            pair.last_state().lights.feedback().front.mode,
+            LightMode::On
+        );
+    }
+}
+
+#[test]
+fn a_failed_port_is_reopened_with_a_doubling_backoff() {
+    let mut config = GatewayConfig::default();
+    config.timing.reconnect_max_ms = 400;
+    let mut pair = Pair::with_config(Transport::Sim, &config);
+    pair.run(ms(100));
+    assert_eq!(pair.last_state().link.state(), LinkState::Ok);
+    let failed = pair.now;
+    pair.unplug();
+    assert_eq!(pair.last_state().link.state(), LinkState::Disconnected);
+    pair.run(Duration::from_secs(2));
+    let attempts: Vec<Duration> = pair.open_attempts[1..]
+        .iter()
+        .map(|at| *at - failed)
+        .collect();
+    assert_eq!(
+        &attempts[..6],
+        [ms(50), ms(150), ms(350), ms(750), ms(1150), ms(1550)],
+        "50 ms, then doubling up to the 400 ms maximum"
+    );
+    assert!(pair.motion_commands().iter().all(|(at, _)| *at < failed));
+    pair.plugged = true;
+    pair.run(Duration::from_secs(1));
+    let state = pair.last_state();
+    assert_eq!(state.link.state(), LinkState::Ok);
+    assert_eq!(state.link.reconnects, 1);
+    assert_eq!(FIRST_BACKOFF, ms(50));
+}
+
+#[test]
+fn state_is_published_per_feedback_on_link_changes_and_every_100_ms_while_silent() {
+    let mut pair = Pair::new(Transport::Sim);
+    pair.run(Duration::from_secs(1));
+    let frames = pair.last_state().link.rx_frames;
+    assert!(frames >= 7 * 49, "{frames}");
+    // The chassis sends its 7 frames together every 20 ms: one publication carries them.
+    let times: Vec<Duration> = pair.states().iter().map(|(at, _)| *at).collect();
+    assert!(times.len() >= 50, "{}", times.len());
+    assert!(intervals(&times[1..]).iter().all(|gap| *gap == TICK));
+    // The chassis goes quiet: `silent` after 100 ms, then the state every 100 ms.
+    pair.feedback = false;
+    let quiet = pair.now;
+    pair.run(Duration::from_secs(1));
+    let after: Vec<(Duration, StatePayload)> = pair
+        .states()
+        .into_iter()
+        .filter(|(at, _)| *at > quiet)
+        .collect();
+    let silent_at = after
+        .iter()
+        .find(|(_, s)| s.link.state() == LinkState::Silent)
+        .expect("silent")
+        .0;
+    assert!(silent_at - quiet <= ms(120), "{:?}", silent_at - quiet);
+    let times: Vec<Duration> = after.iter().map(|(at, _)| *at).collect();
+    assert!(intervals(&times).iter().all(|gap| *gap <= STATE_HEARTBEAT));
+    assert!(times.len() >= 9, "{}", times.len());
+    let seqs: Vec<u64> = after.iter().map(|(_, s)| s.seq).collect();
+    assert!(seqs.windows(2).all(|w| w[1] == w[0] + 1));
+}
+
+#[test]
+fn status_is_published_on_change_and_once_a_second() {
+    let mut pair = Pair::new(Transport::Sim);
+    pair.run(Duration::from_secs(5));
+    let idle = pair.statuses();
+    let times: Vec<Duration> = idle.iter().map(|(at, _)| *at).collect();
+    assert!((5..=7).contains(&times.len()), "{}", times.len());
+    assert!(
+        intervals(&times)
+            .iter()
+            .all(|gap| *gap >= STATUS_HEARTBEAT - TICK)
+    );
+    let asked = pair.now;
+    pair.request(
+        OFFICER,
+        &Request::Stop {
+            reason: "test".into(),
+        },
+    )
+    .expect("stop");
+    let changed = pair
+        .statuses()
+        .into_iter()
+        .find(|(at, s)| *at >= asked && s.latched);
+    assert_eq!(
+        changed.map(|(at, _)| at),
+        Some(asked),
+        "published with the change"
+    );
+}
+
+#[test]
+fn odometry_reset_is_answered_and_published() {
+    let mut pair = Pair::new(Transport::Sim);
+    pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(2));
+    assert!(pair.last_state().odometry.x > 0.5);
+    pair.request(OFFICER, &Request::ResetOdometry)
+        .expect("reset");
+    let state = pair.last_state();
+    assert_eq!(state.odometry.resets, 1);
+    assert!(
+        state.odometry.x < 0.011,
+        "at most one 20 ms step at 0.5 m/s since"
+    );
+}
+
+#[test]
+fn shutdown_sends_zero_for_the_configured_cycles_then_finishes() {
+    let mut pair = Pair::new(Transport::Sim);
+    pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(1));
+    pair.core.handle_shutdown();
+    let began = pair.now;
+    pair.run_until(Duration::from_secs(1), |pair| pair.core.is_finished());
+    let after: Vec<MotionCommand> = pair
+        .motion_commands()
+        .into_iter()
+        .filter(|(at, _)| *at >= began)
+        .map(|(_, command)| command)
+        .collect();
+    assert_eq!(after.len(), 5);
+    assert!(
+        after
+            .iter()
+            .all(|c| c.linear_percent == 0 && c.angular_percent == 0)
+    );
+}
+
+#[test]
+fn malformed_requests_are_answered_and_counted() {
+    let mut pair = Pair::new(Transport::Sim);
+    let mut wire = ControlRequest {
+        kind: 200,
+        ..ControlRequest::default()
+    };
+    wire.client = scout_interface::FixedText::new("fuzzer");
+    let answer = pair.core.handle_request(pair.now, &wire).answer();
+    assert!(
+        answer
+            .expect_err("refused")
+            .reason
+            .contains("unknown request kind 200")
+    );
+    pair.step();
+    let status = pair.statuses().last().expect("status").1;
+    let unknown = scout_interface::RejectionKind::UnknownRequest;
+    assert_eq!(status.rejections[usize::from(unknown.raw())], 1);
+}
+
+/// Something that happens to a running gateway.
+#[derive(Debug, Clone)]
+enum Event {
+    Wait(u64),
+    Drive(usize, f64),
+    Stop(usize),
+    Release(usize),
+    Resume(usize),
+    Dies(usize),
+    Stall(u64),
+}
+
+const CLIENTS: [(Client, Class); 3] = [
+    (Client("teleop", 11), Class::Teleop),
+    (Client("autonomy", 12), Class::Autonomy),
+    (Client("safety", 13), Class::Teleop),
+];
+
+fn event() -> impl Strategy<Value = Event> {
+    prop_oneof![
+        (1u64..200).prop_map(Event::Wait),
+        (0usize..3, -1.5f64..1.5).prop_map(|(c, v)| Event::Drive(c, v)),
+        (0usize..3).prop_map(Event::Stop),
+        (0usize..3).prop_map(Event::Release),
+        (0usize..3).prop_map(Event::Resume),
+        (0usize..3).prop_map(Event::Dies),
+        (1u64..80).prop_map(Event::Stall),
+    ]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    /// Whatever clients do: commands stay on the 20 ms grid (a late tick is sent once and the
+    /// grid resumes), a stop is on the wire in the iteration that took it, and nothing moves
+    /// while the stop is latched.
+    #[test]
+    fn the_schedule_and_the_stop_hold_under_any_requests(events in prop::collection::vec(event(), 1..60)) {
+        let mut pair = Pair::new(Transport::Sim);
+        let mut stops = Vec::new();
+        let mut stalls = Vec::new();
+        for event in events {
+            match event {
+                Event::Wait(millis) => pair.run(ms(millis)),
+                Event::Drive(c, linear) => {
+                    let (client, class) = CLIENTS[c];
+                    let _ = pair.drive(client, class, linear);
+                }
+                Event::Stop(c) => {
+                    stops.push(pair.now);
+                    pair.request(CLIENTS[c].0, &Request::Stop { reason: "p".into() }).expect("a stop is never refused");
+                }
+                Event::Release(c) => { let _ = pair.request(CLIENTS[c].0, &Request::Release); }
+                Event::Resume(c) => { let _ = pair.request(CLIENTS[c].0, &Request::Resume); }
+                Event::Dies(c) => pair.core.handle_client_gone(pair.now, CLIENTS[c].0.1),
+                Event::Stall(millis) => {
+                    stalls.push(pair.now);
+                    pair.stall(ms(millis));
+                }
+            }
+        }
+        pair.run(ms(100));
+        let commands = pair.motion_commands();
+        for stop in &stops {
+            let zero = commands.iter().find(|(at, c)| at == stop && c.linear_percent == 0);
+            prop_assert!(zero.is_some(), "no zero command at the stop's time {stop:?}");
+        }
+        // Stops between ticks only shorten the gaps: every gap is at most a tick, or has a stall.
+        let mut ticks: Vec<Duration> = commands.iter().map(|(at, _)| *at).collect();
+        ticks.dedup();
+        for pair in ticks.windows(2) {
+            let stalled = stalls.iter().any(|at| *at >= pair[0] && *at < pair[1]);
+            prop_assert!(pair[1] - pair[0] <= TICK || stalled, "gap {:?} at {:?}", pair[1] - pair[0], pair[0]);
+        }
+        for status in pair.statuses().iter().map(|(_, s)| s).filter(|s| s.latched) {
+            prop_assert_eq!(status.output_linear, 0.0);
+        }
+    }
+}

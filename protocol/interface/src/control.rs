@@ -1,0 +1,793 @@
+//! Control: what a client asks of the gateway's arbiter and what it answers, typed
+//! ([`Request`], [`Accepted`], [`Rejection`]) and on the wire ([`ControlRequest`],
+//! [`ControlResponse`]); and the arbiter's status ([`StatusPayload`]). [`Request::encode`] and
+//! [`Request::decode`] are the one place a request kind meets its bytes: both match every kind.
+
+use std::time::Duration;
+
+use iceoryx2::prelude::ZeroCopySend;
+use scout_protocol::{FaultClear, Light, LightCommand, LightMode};
+
+use crate::state::LightPayload;
+use crate::text::FixedText;
+
+/// The most clients the arbiter tracks at once, and so the most its status lists.
+pub const MAX_CLIENTS: usize = 32;
+
+/// The longest client name, bytes.
+pub const MAX_CLIENT_NAME: usize = 32;
+
+/// The longest stop reason, bytes (longer is cut).
+pub const MAX_REASON: usize = 64;
+
+/// A name that is not one of an enum's names.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown {what} `{found}`: one of {}", expected.join(", "))]
+pub struct UnknownName {
+    /// The enum.
+    pub what: &'static str,
+    /// What was given.
+    pub found: String,
+    /// The names it knows.
+    pub expected: Vec<&'static str>,
+}
+
+wire_enum! {
+    /// What a [`ControlRequest`] asks for (its `kind` byte).
+    RequestKind {
+        /// Drive at `linear`, `angular` as `class` for `ttl_ms` (0: the class's maximum age).
+        Drive = 1 => "drive",
+        /// Latch the safety stop (`reason`).
+        Stop = 2 => "stop",
+        /// Release the latched stop and this client's control.
+        Release = 3 => "release",
+        /// Arm autonomy.
+        Resume = 4 => "resume",
+        /// Set the lights (`lights`).
+        Lights = 5 => "lights",
+        /// Clear a fault (`fault_clear`: a code 1..8, or [`CLEAR_ALL_FAULTS`]).
+        ClearFault = 6 => "clear_fault",
+        /// Register (`heartbeat_ms` > 0) or drop (0) a heartbeat stop source; also a beat.
+        Heartbeat = 7 => "heartbeat",
+        /// Reset the gateway's odometry.
+        ResetOdometry = 8 => "reset_odometry",
+        /// Give up this client's control (never touches the stop).
+        Relinquish = 9 => "relinquish",
+    }
+}
+
+wire_enum! {
+    /// A controlling client's class: teleop overrides autonomy.
+    Class {
+        /// A person driving: overrides autonomy.
+        Teleop = 1 => "teleop",
+        /// A program driving.
+        Autonomy = 2 => "autonomy",
+    }
+}
+
+/// `fault_clear` value asking for every fault-clear code in turn.
+pub const CLEAR_ALL_FAULTS: u8 = 0xFF;
+
+/// The lights a client asks for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LightsSetting {
+    /// Hand the lights back to the chassis' own logic.
+    Auto,
+    /// Host-controlled front and rear (brightness 0..100 matters in custom mode).
+    Manual(LightCommand),
+}
+
+/// What a client asks of the gateway.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Request {
+    /// Drive at these speeds (m/s, rad/s) for at most `ttl` (`None`: the class's maximum age).
+    Drive {
+        /// The class the client drives as.
+        class: Class,
+        /// m/s.
+        linear: f64,
+        /// rad/s.
+        angular: f64,
+        /// The command's life.
+        ttl: Option<Duration>,
+    },
+    /// Latch the safety stop.
+    Stop {
+        /// Why, for the status and the audit log.
+        reason: String,
+    },
+    /// Release the latched stop and whatever control this client holds.
+    Release,
+    /// Give up this client's control; the stop is left alone.
+    Relinquish,
+    /// Arm autonomy.
+    Resume,
+    /// Set the lights (last writer wins).
+    Lights(LightsSetting),
+    /// Send this fault-clear code (`None`: every code in turn), each in 3 motion commands.
+    ClearFault(Option<FaultClear>),
+    /// Register (period > 0) or drop (zero) a heartbeat: a missed beat latches the stop. Every
+    /// request from the client is a beat.
+    Heartbeat {
+        /// The longest gap between two requests.
+        period: Duration,
+    },
+    /// Reset the gateway's odometry to the origin.
+    ResetOdometry,
+}
+
+impl Request {
+    /// Its kind.
+    pub fn kind(&self) -> RequestKind {
+        match self {
+            Self::Drive { .. } => RequestKind::Drive,
+            Self::Stop { .. } => RequestKind::Stop,
+            Self::Release => RequestKind::Release,
+            Self::Relinquish => RequestKind::Relinquish,
+            Self::Resume => RequestKind::Resume,
+            Self::Lights(_) => RequestKind::Lights,
+            Self::ClearFault(_) => RequestKind::ClearFault,
+            Self::Heartbeat { .. } => RequestKind::Heartbeat,
+            Self::ResetOdometry => RequestKind::ResetOdometry,
+        }
+    }
+
+    /// The request on the wire, numbered `seq` (the client and node fields are the sender's to
+    /// fill).
+    pub fn encode(&self, seq: u64) -> ControlRequest {
+        let mut wire = ControlRequest {
+            kind: self.kind().raw(),
+            seq,
+            ..ControlRequest::default()
+        };
+        match self {
+            Self::Drive {
+                class,
+                linear,
+                angular,
+                ttl,
+            } => {
+                wire.class = class.raw();
+                wire.linear = *linear;
+                wire.angular = *angular;
+                wire.ttl_ms = ttl.map_or(0, |ttl| {
+                    ttl.as_millis().clamp(1, u128::from(u32::MAX)) as u32
+                });
+            }
+            Self::Stop { reason } => wire.reason = FixedText::new(reason),
+            Self::Lights(LightsSetting::Auto) => wire.lights.auto = true,
+            Self::Lights(LightsSetting::Manual(command)) => {
+                wire.lights.front = LightPayload::new(command.front);
+                wire.lights.rear = LightPayload::new(command.rear);
+            }
+            Self::ClearFault(code) => {
+                wire.fault_clear = code.map_or(CLEAR_ALL_FAULTS, FaultClear::raw);
+            }
+            Self::Heartbeat { period } => {
+                wire.heartbeat_ms = period.as_millis().min(u128::from(u32::MAX)) as u32;
+            }
+            Self::Release | Self::Relinquish | Self::Resume | Self::ResetOdometry => {}
+        }
+        wire
+    }
+
+    /// Checks a request from the wire; the rejection says what is wrong.
+    pub fn decode(wire: &ControlRequest) -> Result<Self, Rejection> {
+        let kind = RequestKind::from_raw(wire.kind).ok_or(Rejection::UnknownRequest(wire.kind))?;
+        Ok(match kind {
+            RequestKind::Drive => Self::Drive {
+                class: Class::from_raw(wire.class).ok_or(Rejection::UnknownClass(wire.class))?,
+                linear: wire.linear,
+                angular: wire.angular,
+                ttl: (wire.ttl_ms > 0).then(|| Duration::from_millis(u64::from(wire.ttl_ms))),
+            },
+            RequestKind::Stop => Self::Stop {
+                reason: match wire.reason.as_str() {
+                    "" => "no reason given".to_owned(),
+                    reason => reason.to_owned(),
+                },
+            },
+            RequestKind::Release => Self::Release,
+            RequestKind::Relinquish => Self::Relinquish,
+            RequestKind::Resume => Self::Resume,
+            RequestKind::Lights => Self::Lights(decode_lights(&wire.lights)?),
+            RequestKind::ClearFault => Self::ClearFault(match wire.fault_clear {
+                CLEAR_ALL_FAULTS => None,
+                raw => match FaultClear::from_raw(raw) {
+                    FaultClear::None | FaultClear::Unknown(_) => {
+                        return Err(Rejection::Malformed(format!(
+                            "fault-clear code {raw} is not 1..8"
+                        )));
+                    }
+                    code => Some(code),
+                },
+            }),
+            RequestKind::Heartbeat => Self::Heartbeat {
+                period: Duration::from_millis(u64::from(wire.heartbeat_ms)),
+            },
+            RequestKind::ResetOdometry => Self::ResetOdometry,
+        })
+    }
+}
+
+/// A light as a client may ask for it: a known mode and brightness 0..100.
+pub fn check_light(which: &str, mode: LightMode, brightness: u8) -> Result<(), Rejection> {
+    if let LightMode::Unknown(raw) = mode {
+        return Err(Rejection::Malformed(format!(
+            "{which} light mode {raw} is not 0..3"
+        )));
+    }
+    if brightness > 100 {
+        return Err(Rejection::Malformed(format!(
+            "{which} brightness {brightness} is above 100"
+        )));
+    }
+    Ok(())
+}
+
+/// A light from its mode's name (`off`, `on`, `breath`, `custom`) and brightness 0..100.
+pub fn parse_light(mode: &str, brightness: u8) -> Result<Light, String> {
+    let mode = LightMode::from_name(mode)
+        .ok_or_else(|| format!("light mode `{mode}`: off, on, breath or custom"))?;
+    check_light("the", mode, brightness).map_err(|rejection| match rejection {
+        Rejection::Malformed(why) => why,
+        other => other.to_string(),
+    })?;
+    Ok(Light { mode, brightness })
+}
+
+/// A fault-clear request from a name: a fault-clear code's name (`driver_overtemp`, `-` or `_`)
+/// or `all` (`None`).
+pub fn parse_fault_clear(name: &str) -> Result<Option<FaultClear>, String> {
+    let name = name.replace('-', "_");
+    if name == "all" {
+        return Ok(None);
+    }
+    FaultClear::from_name(&name)
+        .filter(|code| *code != FaultClear::None)
+        .map(Some)
+        .ok_or_else(|| {
+            let names: Vec<_> = FaultClear::ALL.iter().map(|c| c.name()).collect();
+            format!("unknown fault `{name}`: {} or all", names.join(", "))
+        })
+}
+
+fn decode_lights(wire: &LightsRequest) -> Result<LightsSetting, Rejection> {
+    if wire.auto {
+        return Ok(LightsSetting::Auto);
+    }
+    let front = wire.front.light();
+    let rear = wire.rear.light();
+    check_light("front", front.mode, front.brightness)?;
+    check_light("rear", rear.mode, rear.brightness)?;
+    Ok(LightsSetting::Manual(LightCommand {
+        enabled: true,
+        front,
+        rear,
+    }))
+}
+
+wire_enum! {
+    /// The kinds of rejection, each a counter in the status.
+    RejectionKind {
+        /// A speed was NaN or infinite.
+        NotFinite = 0 => "not_finite",
+        /// The class byte names no class.
+        UnknownClass = 1 => "unknown_class",
+        /// The request kind byte names no request.
+        UnknownRequest = 2 => "unknown_request",
+        /// The request is malformed.
+        Malformed = 3 => "malformed",
+        /// The safety stop is latched.
+        Latched = 4 => "latched",
+        /// Another client holds the class.
+        Held = 5 => "held",
+        /// Autonomy must be resumed first.
+        AutonomyDisarmed = 6 => "autonomy_disarmed",
+        /// The arbiter tracks too many clients.
+        TooManyClients = 7 => "too_many_clients",
+    }
+}
+
+/// Rejection counters in a status: one per [`RejectionKind`].
+pub const REJECTION_COUNTERS: usize = 8;
+const _: () = assert!(RejectionKind::ALL.len() == REJECTION_COUNTERS);
+
+/// Why a request was refused.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Rejection {
+    /// A speed was NaN or infinite.
+    NotFinite,
+    /// The class byte names no class.
+    UnknownClass(u8),
+    /// The request kind byte names no request.
+    UnknownRequest(u8),
+    /// The request is malformed, with what is wrong.
+    Malformed(String),
+    /// The safety stop is latched.
+    Latched {
+        /// Who latched it.
+        by: String,
+    },
+    /// Another client holds the class.
+    Held {
+        /// The class.
+        class: Class,
+        /// Its holder.
+        holder: String,
+    },
+    /// Autonomy must be resumed first.
+    AutonomyDisarmed,
+    /// The arbiter tracks too many clients.
+    TooManyClients,
+}
+
+impl Rejection {
+    /// Its kind: the counter it counts in.
+    pub fn kind(&self) -> RejectionKind {
+        match self {
+            Self::NotFinite => RejectionKind::NotFinite,
+            Self::UnknownClass(_) => RejectionKind::UnknownClass,
+            Self::UnknownRequest(_) => RejectionKind::UnknownRequest,
+            Self::Malformed(_) => RejectionKind::Malformed,
+            Self::Latched { .. } => RejectionKind::Latched,
+            Self::Held { .. } => RejectionKind::Held,
+            Self::AutonomyDisarmed => RejectionKind::AutonomyDisarmed,
+            Self::TooManyClients => RejectionKind::TooManyClients,
+        }
+    }
+}
+
+impl std::fmt::Display for Rejection {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::NotFinite => f.write_str("speed is NaN or infinite"),
+            Self::UnknownClass(raw) => write!(f, "unknown class {raw} (teleop or autonomy)"),
+            Self::UnknownRequest(raw) => write!(f, "unknown request kind {raw}"),
+            Self::Malformed(what) => write!(f, "malformed request: {what}"),
+            Self::Latched { by } => write!(f, "safety stop latched by {by}: release it first"),
+            Self::Held { class, holder } => write!(f, "{class} held by {holder}"),
+            Self::AutonomyDisarmed => f.write_str(
+                "autonomy disarmed (after a teleop takeover, stop or release): resume first",
+            ),
+            Self::TooManyClients => write!(f, "too many clients (at most {MAX_CLIENTS})"),
+        }
+    }
+}
+
+/// The answer to an accepted request.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Accepted {
+    /// A speed was beyond the caps and was clamped.
+    pub clamped: bool,
+}
+
+/// Every request gets one.
+pub type Answer = Result<Accepted, Rejection>;
+
+/// A rejection as the client sees it: its kind and the gateway's wording.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{reason}")]
+pub struct Rejected {
+    /// The kind (`None`: a kind this client version does not know).
+    pub kind: Option<RejectionKind>,
+    /// Why, as the gateway words it.
+    pub reason: String,
+}
+
+impl ControlResponse {
+    /// The answer to request `seq` on the wire.
+    pub fn new(seq: u64, answer: &Answer) -> Self {
+        match answer {
+            Ok(accepted) => Self {
+                seq,
+                accepted: true,
+                clamped: accepted.clamped,
+                code: 0xFF,
+                reason: FixedText::empty(),
+            },
+            Err(rejection) => Self {
+                seq,
+                accepted: false,
+                clamped: false,
+                code: rejection.kind().raw(),
+                reason: FixedText::new(&rejection.to_string()),
+            },
+        }
+    }
+
+    /// The answer it carries.
+    pub fn answer(&self) -> Result<Accepted, Rejected> {
+        if self.accepted {
+            Ok(Accepted {
+                clamped: self.clamped,
+            })
+        } else {
+            Err(Rejected {
+                kind: RejectionKind::from_raw(self.code),
+                reason: self.reason.as_str().to_owned(),
+            })
+        }
+    }
+}
+
+/// The lights of a request: `auto` hands them back to the chassis; otherwise the raw modes
+/// (0 off, 1 on, 2 breath, 3 custom) and brightness 0..100.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
+#[repr(C)]
+pub struct LightsRequest {
+    /// Hand the lights back to the chassis.
+    pub auto: bool,
+    /// Front light.
+    pub front: LightPayload,
+    /// Rear light.
+    pub rear: LightPayload,
+}
+
+/// A request from a client to the gateway's arbiter.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[type_name("scout::ControlRequest.v2")]
+#[repr(C)]
+pub struct ControlRequest {
+    /// [`RequestKind`] as `u8`.
+    pub kind: u8,
+    /// [`Class`] byte (0: none), for drive.
+    pub class: u8,
+    /// Fault-clear code, for clear-fault.
+    pub fault_clear: u8,
+    /// Lights, for lights.
+    pub lights: LightsRequest,
+    /// The client's name (shown in the status and the audit log).
+    pub client: FixedText<MAX_CLIENT_NAME>,
+    /// The client's iceoryx2 node id, high and low 64 bits (dead-process detection).
+    pub node: [u64; 2],
+    /// The client's own request number.
+    pub seq: u64,
+    /// m/s, for drive.
+    pub linear: f64,
+    /// rad/s, for drive.
+    pub angular: f64,
+    /// The command's life, ms (0: the class's maximum age), for drive.
+    pub ttl_ms: u32,
+    /// The heartbeat period, ms, for heartbeat.
+    pub heartbeat_ms: u32,
+    /// Why, for stop.
+    pub reason: FixedText<MAX_REASON>,
+}
+
+/// The gateway's answer to one request.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
+#[type_name("scout::ControlResponse.v2")]
+#[repr(C)]
+pub struct ControlResponse {
+    /// The request's `seq`.
+    pub seq: u64,
+    /// Accepted (true) or rejected.
+    pub accepted: bool,
+    /// Accepted, but a speed beyond the caps was clamped.
+    pub clamped: bool,
+    /// The [`RejectionKind`] byte; 0xFF when accepted.
+    pub code: u8,
+    /// Why it was rejected.
+    pub reason: FixedText<160>,
+}
+
+/// The node id as the two halves a [`ControlRequest`] carries.
+pub fn node_halves(node: u128) -> [u64; 2] {
+    [(node >> 64) as u64, node as u64]
+}
+
+/// The node id from a [`ControlRequest`]'s halves.
+pub fn node_from_halves(halves: [u64; 2]) -> u128 {
+    (u128::from(halves[0]) << 64) | u128::from(halves[1])
+}
+
+wire_enum! {
+    /// Who controls the lights, as the status reports it.
+    LightsControl {
+        /// No client has asked: the chassis' own logic.
+        Chassis = 0 => "chassis",
+        /// A client handed them back to the chassis.
+        Auto = 1 => "auto",
+        /// A client set them.
+        Manual = 2 => "manual",
+    }
+}
+
+impl LightsControl {
+    /// The control of a client's setting (`None`: nobody asked).
+    pub fn of(setting: Option<LightsSetting>) -> Self {
+        match setting {
+            None => Self::Chassis,
+            Some(LightsSetting::Auto) => Self::Auto,
+            Some(LightsSetting::Manual(_)) => Self::Manual,
+        }
+    }
+}
+
+/// One client in the arbiter's status.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+pub struct SourcePayload {
+    /// The client's name.
+    pub client: FixedText<MAX_CLIENT_NAME>,
+    /// [`Class`] byte of its last command (0: none).
+    pub class: u8,
+    /// Whether it holds its class now.
+    pub holding: bool,
+    /// Its heartbeat period, ms (0: none).
+    pub heartbeat_ms: u32,
+    /// Requests it sent.
+    pub requests: u64,
+    /// How long ago it last sent a request, ms.
+    pub age_ms: f64,
+}
+
+/// The arbiter's status, published on every change and at least once a second.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[type_name("scout::StatusPayload.v2")]
+#[repr(C)]
+pub struct StatusPayload {
+    /// Rises by one with every publication.
+    pub seq: u64,
+    /// CLOCK_MONOTONIC time of publication, ns.
+    pub published_ns: u64,
+    /// The robot's name.
+    pub robot: FixedText<32>,
+    /// The safety stop is latched.
+    pub latched: bool,
+    /// Who latched it.
+    pub latched_by: FixedText<MAX_CLIENT_NAME>,
+    /// Why.
+    pub latched_reason: FixedText<MAX_REASON>,
+    /// How long ago, ms.
+    pub latched_age_ms: f64,
+    /// [`Class`] byte of the selected source (0: none).
+    pub selected_class: u8,
+    /// The selected client.
+    pub selected_client: FixedText<MAX_CLIENT_NAME>,
+    /// The output, m/s.
+    pub output_linear: f64,
+    /// The output, rad/s.
+    pub output_angular: f64,
+    /// The fault-clear code going out.
+    pub output_fault_clear: u8,
+    /// A cap or rate limit is active.
+    pub limited: bool,
+    /// Autonomy may drive.
+    pub autonomy_armed: bool,
+    /// [`LightsControl`] byte.
+    pub lights: u8,
+    /// How many entries of `sources` are used.
+    pub source_count: u8,
+    /// The known clients.
+    pub sources: [SourcePayload; MAX_CLIENTS],
+    /// Rejections, indexed by [`RejectionKind::raw`].
+    pub rejections: [u64; REJECTION_COUNTERS],
+}
+
+impl StatusPayload {
+    /// Whether two statuses differ in more than the passing of time and request counts.
+    pub fn differs_from(&self, other: &StatusPayload) -> bool {
+        let timeless = |s: &StatusPayload| {
+            let mut s = *s;
+            s.seq = 0;
+            s.published_ns = 0;
+            s.latched_age_ms = 0.0;
+            for source in &mut s.sources {
+                source.age_ms = 0.0;
+                source.requests = 0;
+            }
+            s
+        };
+        timeless(self) != timeless(other)
+    }
+
+    /// The listed clients.
+    pub fn sources(&self) -> &[SourcePayload] {
+        &self.sources[..usize::from(self.source_count).min(MAX_CLIENTS)]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn wire(kind: u8) -> ControlRequest {
+        ControlRequest {
+            kind,
+            ..ControlRequest::default()
+        }
+    }
+
+    #[test]
+    fn malformed_requests_are_rejected_with_the_reason() {
+        assert_eq!(
+            Request::decode(&wire(99)),
+            Err(Rejection::UnknownRequest(99))
+        );
+        let drive = ControlRequest {
+            class: 7,
+            ..wire(RequestKind::Drive.raw())
+        };
+        assert_eq!(Request::decode(&drive), Err(Rejection::UnknownClass(7)));
+        let clear = ControlRequest {
+            fault_clear: 9,
+            ..wire(RequestKind::ClearFault.raw())
+        };
+        assert!(matches!(
+            Request::decode(&clear),
+            Err(Rejection::Malformed(_))
+        ));
+        let mut lights = wire(RequestKind::Lights.raw());
+        lights.lights.front = LightPayload {
+            mode: 1,
+            brightness: 101,
+        };
+        let Err(Rejection::Malformed(why)) = Request::decode(&lights) else {
+            panic!("bad brightness accepted")
+        };
+        assert_eq!(why, "front brightness 101 is above 100");
+    }
+
+    #[test]
+    fn an_empty_stop_reason_is_named() {
+        let stop = Request::Stop {
+            reason: String::new(),
+        }
+        .encode(1);
+        assert_eq!(
+            Request::decode(&stop),
+            Ok(Request::Stop {
+                reason: "no reason given".into()
+            })
+        );
+    }
+
+    fn light() -> impl Strategy<Value = Light> {
+        (0u8..4, 0u8..=100).prop_map(|(mode, brightness)| Light {
+            mode: LightMode::from_raw(mode),
+            brightness,
+        })
+    }
+
+    fn request() -> impl Strategy<Value = Request> {
+        let class = prop::sample::select(Class::ALL.to_vec());
+        let speed = -10.0f64..10.0;
+        prop_oneof![
+            (class, speed.clone(), speed, prop::option::of(1u64..100_000)).prop_map(
+                |(class, linear, angular, ttl)| Request::Drive {
+                    class,
+                    linear,
+                    angular,
+                    ttl: ttl.map(Duration::from_millis),
+                }
+            ),
+            "[a-z ]{1,64}".prop_map(|reason| Request::Stop { reason }),
+            Just(Request::Release),
+            Just(Request::Relinquish),
+            Just(Request::Resume),
+            Just(Request::Lights(LightsSetting::Auto)),
+            (light(), light()).prop_map(|(front, rear)| Request::Lights(LightsSetting::Manual(
+                LightCommand {
+                    enabled: true,
+                    front,
+                    rear
+                }
+            ))),
+            prop::option::of(prop::sample::select(FaultClear::ALL.to_vec()))
+                .prop_map(Request::ClearFault),
+            (0u64..100_000).prop_map(|ms| Request::Heartbeat {
+                period: Duration::from_millis(ms)
+            }),
+            Just(Request::ResetOdometry),
+        ]
+    }
+
+    proptest! {
+        #[test]
+        fn every_request_round_trips(request in request(), seq in any::<u64>()) {
+            let wire = request.encode(seq);
+            prop_assert_eq!(wire.seq, seq);
+            prop_assert_eq!(Request::decode(&wire), Ok(request));
+        }
+
+        #[test]
+        fn any_bytes_decode_or_are_rejected_with_a_reason(
+            kind in any::<u8>(), class in any::<u8>(), fault in any::<u8>(),
+            front in any::<(u8, u8)>(), auto in any::<bool>(),
+        ) {
+            let mut wire = wire(kind);
+            wire.class = class;
+            wire.fault_clear = fault;
+            wire.lights.auto = auto;
+            wire.lights.front = LightPayload { mode: front.0, brightness: front.1 };
+            if let Err(rejection) = Request::decode(&wire) {
+                prop_assert!(!rejection.to_string().is_empty());
+            }
+        }
+    }
+
+    #[test]
+    fn every_kind_has_a_request() {
+        // Request::kind is exhaustive over Request; this checks the other way round.
+        let kinds: Vec<RequestKind> = [
+            Request::Drive {
+                class: Class::Teleop,
+                linear: 0.0,
+                angular: 0.0,
+                ttl: None,
+            },
+            Request::Stop { reason: "x".into() },
+            Request::Release,
+            Request::Relinquish,
+            Request::Resume,
+            Request::Lights(LightsSetting::Auto),
+            Request::ClearFault(None),
+            Request::Heartbeat {
+                period: Duration::ZERO,
+            },
+            Request::ResetOdometry,
+        ]
+        .iter()
+        .map(Request::kind)
+        .collect();
+        for kind in RequestKind::ALL {
+            assert!(kinds.contains(kind), "{kind} has no request");
+        }
+    }
+
+    #[test]
+    fn rejections_carry_their_kind_to_the_client() {
+        let answer: Answer = Err(Rejection::Held {
+            class: Class::Teleop,
+            holder: "joy".into(),
+        });
+        let wire = ControlResponse::new(5, &answer);
+        assert_eq!(
+            wire.answer(),
+            Err(Rejected {
+                kind: Some(RejectionKind::Held),
+                reason: "teleop held by joy".into()
+            })
+        );
+        assert_eq!(
+            ControlResponse::new(6, &Ok(Accepted { clamped: true })).answer(),
+            Ok(Accepted { clamped: true })
+        );
+    }
+
+    #[test]
+    fn lights_and_fault_names_parse() {
+        assert_eq!(
+            parse_light("custom", 40),
+            Ok(Light {
+                mode: LightMode::Custom,
+                brightness: 40
+            })
+        );
+        assert_eq!(
+            parse_light("on", 101),
+            Err("the brightness 101 is above 100".into())
+        );
+        assert!(parse_light("disco", 1).is_err());
+        assert_eq!(parse_fault_clear("all"), Ok(None));
+        assert_eq!(
+            parse_fault_clear("driver-overtemp"),
+            Ok(Some(FaultClear::DriverOverTemp))
+        );
+        assert!(parse_fault_clear("none").is_err());
+    }
+
+    #[test]
+    fn names_parse_back() {
+        assert_eq!("autonomy".parse::<Class>(), Ok(Class::Autonomy));
+        let error = "pilot".parse::<Class>().unwrap_err();
+        assert_eq!(
+            error.to_string(),
+            "unknown Class `pilot`: one of teleop, autonomy"
+        );
+    }
+}

@@ -1,0 +1,38 @@
+//! scout-interface: the contract between scout-gateway and everything that talks to it, in one
+//! crate that both sides use and neither owns (the gateway does not depend on its client library,
+//! nor the clients on the gateway).
+//!
+//! - [`services`]: the iceoryx2 services of a robot, their names and sizing, created by the
+//!   gateway and opened by clients; the request round trip.
+//! - [`state`]: the zero-copy chassis state payload, one field per feedback message.
+//! - [`control`]: control requests and answers, typed and on the wire; the arbiter's status.
+//! - [`json`]: the public JSON forms of the state and the status (`scout echo`, zenoh).
+//! - [`remote`]: zenoh key expressions, remote commands and their permissions.
+//! - [`text`]: fixed-capacity text for shared-memory payloads.
+//!
+//! Every iceoryx2 payload's type name carries [`LAYOUT_VERSION`]: a client built against another
+//! layout is refused when it opens a service ("the gateway speaks another interface version")
+//! instead of misreading shared memory. Raise it with every change to a payload's fields.
+#![warn(missing_docs)]
+
+#[macro_use]
+mod macros;
+
+pub mod control;
+pub mod json;
+pub mod remote;
+pub mod services;
+pub mod state;
+pub mod text;
+
+/// The layout version in every payload's iceoryx2 type name (`scout::StatePayload.v2`).
+pub const LAYOUT_VERSION: u32 = 2;
+
+pub use control::{
+    Accepted, Class, ControlRequest, ControlResponse, LightsSetting, Rejection, RejectionKind,
+    Request, RequestKind, StatusPayload,
+};
+pub use scout_protocol::Transport;
+pub use services::{Ipc, Role, ServiceError};
+pub use state::{LinkState, StatePayload};
+pub use text::FixedText;

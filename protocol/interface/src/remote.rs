@@ -1,0 +1,361 @@
+//! The zenoh contract: key expressions, the remote command JSON and what it asks for, the
+//! permissions a gateway grants remote peers, and (with the `zenoh` feature) safe session
+//! settings.
+
+use serde::{Deserialize, Serialize};
+
+use crate::control::{Class, LightsSetting, Request, parse_fault_clear, parse_light};
+use crate::services::prefix;
+use scout_protocol::{Light, LightCommand};
+use std::time::Duration;
+
+/// Default zenoh listen endpoint of a gateway: loopback only.
+pub const DEFAULT_LISTEN: &str = "tcp/127.0.0.1:7447";
+
+/// The largest remote command payload accepted, bytes.
+pub const MAX_COMMAND_BYTES: usize = 4096;
+
+/// The prefix of a remote client's name in the status and the audit log.
+pub const REMOTE_PREFIX: &str = "remote:";
+
+/// The longest `client` of a remote command: the local name limit less [`REMOTE_PREFIX`].
+pub const MAX_REMOTE_CLIENT: usize = crate::control::MAX_CLIENT_NAME - REMOTE_PREFIX.len();
+
+/// The key of the state JSON (publication and queryable).
+pub fn state_key(robot: &str) -> String {
+    format!("{}/state", prefix(robot))
+}
+
+/// The key of the arbiter status JSON.
+pub fn status_key(robot: &str) -> String {
+    format!("{}/status", prefix(robot))
+}
+
+/// The liveliness token of a running gateway.
+pub fn alive_key(robot: &str) -> String {
+    format!("{}/alive", prefix(robot))
+}
+
+/// The key of the gateway information queryable.
+pub fn info_key(robot: &str) -> String {
+    format!("{}/info", prefix(robot))
+}
+
+/// The key expression of every remote command: `scout/ROBOT/cmd/KIND`.
+pub fn command_keys(robot: &str) -> String {
+    format!("{}/cmd/**", prefix(robot))
+}
+
+/// The key of one remote command.
+pub fn command_key(robot: &str, kind: RemoteKind) -> String {
+    format!("{}/cmd/{kind}", prefix(robot))
+}
+
+wire_enum! {
+    /// The remote commands: the last chunk of the command's key.
+    RemoteKind {
+        /// Drive as `class` (permission: the class).
+        Drive = 1 => "drive",
+        /// Latch the safety stop.
+        Estop = 2 => "estop",
+        /// Release the stop.
+        Release = 3 => "release",
+        /// Arm autonomy.
+        Resume = 4 => "resume",
+        /// Set the lights.
+        Lights = 5 => "lights",
+        /// Clear a fault.
+        ClearFault = 6 => "clear-fault",
+    }
+}
+
+wire_enum! {
+    /// What a gateway may allow remote peers (`zenoh.remote_commands.allowed`).
+    Permission {
+        /// Latch the stop.
+        Estop = 1 => "estop",
+        /// Drive as teleop.
+        Teleop = 2 => "teleop",
+        /// Drive as autonomy.
+        Autonomy = 3 => "autonomy",
+        /// Release the stop.
+        Release = 4 => "release",
+        /// Arm autonomy.
+        Resume = 5 => "resume",
+        /// Set the lights.
+        Lights = 6 => "lights",
+        /// Clear a fault.
+        ClearFault = 7 => "clear_fault",
+    }
+}
+
+/// A remote command's JSON payload (every field optional but those its command needs).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RemoteCommand {
+    /// The sender's name, shown (prefixed `remote:`) in the status and the audit log.
+    pub client: String,
+    /// drive: `teleop` or `autonomy`.
+    pub class: Option<String>,
+    /// drive: m/s.
+    pub linear: Option<f64>,
+    /// drive: rad/s.
+    pub angular: Option<f64>,
+    /// drive: the command's life, ms.
+    pub ttl_ms: Option<u32>,
+    /// estop: why.
+    pub reason: Option<String>,
+    /// lights: hand them back to the chassis.
+    pub auto: Option<bool>,
+    /// lights: front `{ "mode": "custom", "brightness": 40 }`.
+    pub front: Option<RemoteLight>,
+    /// lights: rear.
+    pub rear: Option<RemoteLight>,
+    /// clear-fault: a fault-clear name (`driver_overtemp`...) or `all`.
+    pub fault: Option<String>,
+}
+
+/// One light in a remote lights command.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RemoteLight {
+    /// off, on, breath, custom.
+    pub mode: String,
+    /// 0..100.
+    #[serde(default)]
+    pub brightness: u8,
+}
+
+impl RemoteCommand {
+    /// The request a command of `kind` makes and the permission it needs; the error says what
+    /// is missing or wrong.
+    pub fn request(&self, kind: RemoteKind) -> Result<(Permission, Request), String> {
+        if self.client.is_empty() || self.client.len() > MAX_REMOTE_CLIENT {
+            return Err(format!("`client` must be 1 to {MAX_REMOTE_CLIENT} bytes"));
+        }
+        Ok(match kind {
+            RemoteKind::Drive => {
+                let class: Class = self
+                    .class
+                    .as_deref()
+                    .ok_or("drive needs `class`: teleop or autonomy")?
+                    .parse()
+                    .map_err(|e: crate::control::UnknownName| e.to_string())?;
+                let (Some(linear), Some(angular)) = (self.linear, self.angular) else {
+                    return Err("drive needs `linear` and `angular` numbers".into());
+                };
+                let permission = match class {
+                    Class::Teleop => Permission::Teleop,
+                    Class::Autonomy => Permission::Autonomy,
+                };
+                let ttl = self.ttl_ms.map(|ms| Duration::from_millis(u64::from(ms)));
+                (
+                    permission,
+                    Request::Drive {
+                        class,
+                        linear,
+                        angular,
+                        ttl,
+                    },
+                )
+            }
+            RemoteKind::Estop => {
+                let reason = self.reason.clone().unwrap_or_else(|| "remote estop".into());
+                (Permission::Estop, Request::Stop { reason })
+            }
+            RemoteKind::Release => (Permission::Release, Request::Release),
+            RemoteKind::Resume => (Permission::Resume, Request::Resume),
+            RemoteKind::Lights => (Permission::Lights, Request::Lights(self.lights()?)),
+            RemoteKind::ClearFault => {
+                let fault = self.fault.as_deref().ok_or("clear-fault needs `fault`")?;
+                (
+                    Permission::ClearFault,
+                    Request::ClearFault(parse_fault_clear(fault)?),
+                )
+            }
+        })
+    }
+
+    fn lights(&self) -> Result<LightsSetting, String> {
+        if self.auto == Some(true) {
+            return Ok(LightsSetting::Auto);
+        }
+        let light = |light: &Option<RemoteLight>| match light {
+            None => Ok(Light::default()),
+            Some(light) => parse_light(&light.mode, light.brightness),
+        };
+        Ok(LightsSetting::Manual(LightCommand {
+            enabled: true,
+            front: light(&self.front)?,
+            rear: light(&self.rear)?,
+        }))
+    }
+}
+
+/// The answer to a remote command.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RemoteAnswer {
+    /// Accepted or rejected.
+    pub accepted: bool,
+    /// Accepted with a speed clamped to the caps.
+    #[serde(default)]
+    pub clamped: bool,
+    /// Why it was rejected.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
+}
+
+impl RemoteAnswer {
+    /// A rejection with `reason`.
+    pub fn rejected(reason: impl Into<String>) -> Self {
+        Self {
+            accepted: false,
+            clamped: false,
+            reason: Some(reason.into()),
+        }
+    }
+}
+
+/// Where a zenoh session comes from.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SessionSettings {
+    /// A zenoh configuration file (JSON5) for LAN, router and TLS set-ups; `$ZENOH_CONFIG` when
+    /// empty. Without one: peer mode, multicast scouting off.
+    pub config_file: Option<String>,
+    /// Endpoints to listen on (the default: `tcp/127.0.0.1:7447` for a gateway, none for a reader).
+    pub listen: Vec<String>,
+    /// Endpoints to connect to (a router, another gateway).
+    pub connect: Vec<String>,
+}
+
+/// Why a zenoh session could not be configured or opened.
+#[cfg(feature = "zenoh")]
+#[derive(Debug, thiserror::Error)]
+pub enum RemoteError {
+    /// The configuration (file or value) is invalid.
+    #[error("zenoh configuration: {0}")]
+    Config(String),
+    /// The session did not open.
+    #[error("zenoh session: {0}")]
+    Open(String),
+    /// Subscribing or declaring failed.
+    #[error("zenoh: {0}")]
+    Zenoh(String),
+}
+
+#[cfg(feature = "zenoh")]
+impl SessionSettings {
+    /// The zenoh configuration in `mode` (`peer` or `client`): the file if any, else safe
+    /// defaults; the endpoints given here override the file's.
+    pub fn config(&self, mode: &str) -> Result<zenoh::Config, RemoteError> {
+        let file = self
+            .config_file
+            .clone()
+            .or_else(|| std::env::var("ZENOH_CONFIG").ok());
+        let mut config = match file.filter(|f| !f.is_empty()) {
+            Some(file) => zenoh::Config::from_file(std::path::Path::new(&file))
+                .map_err(|e| RemoteError::Config(format!("{file}: {e}")))?,
+            None => {
+                let mut config = zenoh::Config::default();
+                insert(&mut config, "mode", &format!("\"{mode}\""))?;
+                insert(&mut config, "scouting/multicast/enabled", "false")?;
+                insert(&mut config, "scouting/gossip/enabled", "false")?;
+                config
+            }
+        };
+        if !self.listen.is_empty() {
+            insert(&mut config, "listen/endpoints", &json_list(&self.listen))?;
+        }
+        if !self.connect.is_empty() {
+            insert(&mut config, "connect/endpoints", &json_list(&self.connect))?;
+        }
+        Ok(config)
+    }
+
+    /// Opens a session (never from inside a current-thread tokio runtime: `wait` blocks).
+    pub fn open(&self, mode: &str) -> Result<zenoh::Session, RemoteError> {
+        use zenoh::Wait;
+        let config = self.config(mode)?;
+        zenoh::open(config)
+            .wait()
+            .map_err(|e| RemoteError::Open(e.to_string()))
+    }
+}
+
+#[cfg(feature = "zenoh")]
+fn insert(config: &mut zenoh::Config, key: &str, value: &str) -> Result<(), RemoteError> {
+    config
+        .insert_json5(key, value)
+        .map_err(|e| RemoteError::Config(format!("{key} = {value}: {e}")))
+}
+
+#[cfg(feature = "zenoh")]
+fn json_list(items: &[String]) -> String {
+    serde_json::Value::from(items.to_vec()).to_string()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn command(json: &str) -> RemoteCommand {
+        serde_json::from_str(json).expect("valid command JSON")
+    }
+
+    #[test]
+    fn commands_map_to_requests_and_permissions() {
+        let drive = command(r#"{"client":"op","class":"teleop","linear":0.5,"angular":0}"#);
+        assert_eq!(
+            drive.request(RemoteKind::Drive),
+            Ok((
+                Permission::Teleop,
+                Request::Drive {
+                    class: Class::Teleop,
+                    linear: 0.5,
+                    angular: 0.0,
+                    ttl: None
+                }
+            ))
+        );
+        let stop = command(r#"{"client":"op"}"#).request(RemoteKind::Estop);
+        assert_eq!(
+            stop,
+            Ok((
+                Permission::Estop,
+                Request::Stop {
+                    reason: "remote estop".into()
+                }
+            ))
+        );
+        let clear = command(r#"{"client":"op","fault":"all"}"#).request(RemoteKind::ClearFault);
+        assert_eq!(
+            clear,
+            Ok((Permission::ClearFault, Request::ClearFault(None)))
+        );
+    }
+
+    #[test]
+    fn bad_commands_say_what_is_wrong() {
+        let nameless = command(r#"{"class":"teleop","linear":1,"angular":0}"#);
+        assert_eq!(
+            nameless.request(RemoteKind::Drive),
+            Err("`client` must be 1 to 25 bytes".into())
+        );
+        let classless = command(r#"{"client":"op","linear":1,"angular":0}"#);
+        assert!(
+            classless
+                .request(RemoteKind::Drive)
+                .unwrap_err()
+                .contains("class")
+        );
+        let dim = command(r#"{"client":"op","front":{"mode":"on","brightness":101}}"#);
+        assert!(
+            dim.request(RemoteKind::Lights)
+                .unwrap_err()
+                .contains("above 100")
+        );
+        assert_eq!("clear-fault".parse(), Ok(RemoteKind::ClearFault));
+        assert_eq!("clear_fault".parse(), Ok(Permission::ClearFault));
+    }
+}

@@ -1,0 +1,510 @@
+//! The iceoryx2 services of a robot: their names, their sizing, and how the gateway creates and
+//! a client opens them; plus the client's request round trip ([`ControlPort`]).
+//!
+//! A robot `ROBOT` has three services: `scout/ROBOT/state` (publish-subscribe of
+//! [`StatePayload`] with an event service that fires after each), `scout/ROBOT/status`
+//! (publish-subscribe of [`StatusPayload`]) and `scout/ROBOT/control` (request-response of
+//! [`ControlRequest`] / [`ControlResponse`] with an event service that wakes the gateway).
+
+use std::time::{Duration, Instant};
+
+use iceoryx2::node::{Node, NodeCreationFailure};
+use iceoryx2::port::client::Client;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::prelude::{
+    CallbackProgression, Config, LogLevel, NodeBuilder, NodeName, NodeState, ServiceName,
+    SignalHandlingMode, ZeroCopySend,
+};
+use iceoryx2::service::builder::event::{EventOpenError, EventOpenOrCreateError};
+use iceoryx2::service::builder::publish_subscribe::{
+    PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError,
+};
+use iceoryx2::service::builder::request_response::{
+    RequestResponseOpenError, RequestResponseOpenOrCreateError,
+};
+use iceoryx2::service::port_factory::{event, publish_subscribe, request_response};
+
+use crate::LAYOUT_VERSION;
+use crate::control::{
+    Accepted, ControlRequest, ControlResponse, MAX_CLIENTS, Rejected, StatusPayload,
+};
+use crate::state::StatePayload;
+use crate::text::FixedText;
+
+/// The iceoryx2 service flavour every process uses: inter-process, shared memory.
+pub type Ipc = iceoryx2::service::ipc::Service;
+
+/// The state's publish-subscribe service.
+pub type StateService = publish_subscribe::PortFactory<Ipc, StatePayload, ()>;
+
+/// An event service paired with another service.
+pub type Events = event::PortFactory<Ipc>;
+
+/// The control request-response service.
+pub type ControlService =
+    request_response::PortFactory<Ipc, ControlRequest, (), ControlResponse, ()>;
+
+/// The status service.
+pub type StatusService = publish_subscribe::PortFactory<Ipc, StatusPayload, ()>;
+
+/// Local subscriber processes a gateway serves at once.
+pub const MAX_SUBSCRIBERS: usize = 64;
+/// Command-sending processes a gateway serves at once: one control port each.
+pub const MAX_CONTROLLERS: usize = MAX_CLIENTS;
+/// Nodes (processes) that may use one robot's services at once.
+pub const MAX_NODES: usize = 128;
+/// Samples a slow subscriber keeps before the oldest is overwritten.
+pub const SUBSCRIBER_BUFFER: usize = 8;
+/// Requests one client may have in flight.
+pub const MAX_REQUESTS_IN_FLIGHT: usize = 4;
+/// How long a request waits for the gateway's answer.
+pub const ANSWER_TIMEOUT: Duration = Duration::from_secs(1);
+
+/// The longest robot name: it names every service and key.
+pub const MAX_ROBOT_NAME: usize = 32;
+
+/// The prefix of every service and key of a robot.
+pub fn prefix(robot: &str) -> String {
+    format!("scout/{robot}")
+}
+
+/// The state service (and its event service).
+pub fn state_service(robot: &str) -> String {
+    format!("{}/state", prefix(robot))
+}
+
+/// The control service (and its wake-up event service).
+pub fn control_service(robot: &str) -> String {
+    format!("{}/control", prefix(robot))
+}
+
+/// The status service.
+pub fn status_service(robot: &str) -> String {
+    format!("{}/status", prefix(robot))
+}
+
+/// A robot name that cannot name services and keys.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "robot name `{0}` must be 1 to {MAX_ROBOT_NAME} letters, digits, `-` or `_` (it names iceoryx2 services and zenoh keys)"
+)]
+pub struct BadRobotName(pub String);
+
+/// Checks a robot name: letters, digits, `-` and `_`, 1..=32 characters.
+pub fn check_robot_name(name: &str) -> Result<(), BadRobotName> {
+    let valid = !name.is_empty()
+        && name.len() <= MAX_ROBOT_NAME
+        && name
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_');
+    if valid {
+        Ok(())
+    } else {
+        Err(BadRobotName(name.to_owned()))
+    }
+}
+
+/// Quiets iceoryx2's own logger (its messages duplicate our errors) unless `IOX2_LOG_LEVEL`
+/// asks for more.
+pub fn quiet_iceoryx2_logs() {
+    iceoryx2::prelude::set_log_level_from_env_or(LogLevel::Fatal);
+}
+
+/// A node named `name`, without iceoryx2's signal handlers: the program owns SIGINT and SIGTERM.
+pub fn node(name: &str) -> Result<Node<Ipc>, NodeCreationFailure> {
+    let mut builder = NodeBuilder::new().signal_handling_mode(SignalHandlingMode::Disabled);
+    if let Ok(name) = NodeName::new(name) {
+        builder = builder.name(&name);
+    }
+    builder.create::<Ipc>()
+}
+
+/// Removes what dead processes (SIGKILL, crash) left in shared memory; returns how many.
+pub fn remove_dead_nodes() -> Result<usize, iceoryx2::node::NodeListFailure> {
+    let mut removed = 0;
+    Node::<Ipc>::list(Config::global_config(), |state| {
+        if let NodeState::Dead(view) = state
+            && view.try_remove_stale_resources().is_ok()
+        {
+            removed += 1;
+        }
+        CallbackProgression::Continue
+    })?;
+    Ok(removed)
+}
+
+/// CLOCK_MONOTONIC now: the clock of every `*_ns` field, comparable across processes, and the
+/// gateway's one time base.
+pub fn monotonic() -> Duration {
+    // CLOCK_MONOTONIC cannot fail on Linux with a valid clock id.
+    nix::time::clock_gettime(nix::time::ClockId::CLOCK_MONOTONIC)
+        .map_or(Duration::ZERO, Duration::from)
+}
+
+/// CLOCK_MONOTONIC now, ns.
+pub fn monotonic_ns() -> u64 {
+    monotonic().as_nanos() as u64
+}
+
+/// Why a robot's services could not be created or opened.
+#[derive(Debug, thiserror::Error)]
+pub enum ServiceError {
+    /// The name is not a valid iceoryx2 service name.
+    #[error("invalid service name `{0}`")]
+    Name(String),
+    /// No gateway has created the service.
+    #[error(
+        "no gateway named '{robot}' is running: start one with `scout-gateway --name {robot} --sim` (or --serial/--slcan/--can DEVICE)"
+    )]
+    NoGateway {
+        /// The robot name.
+        robot: String,
+    },
+    /// The service exists with another payload layout: this program and the gateway were built
+    /// from different versions of the interface.
+    #[error(
+        "gateway '{robot}' speaks another interface version than this program (layout v{LAYOUT_VERSION}) on {service}: use a scout and scout-gateway built from the same release"
+    )]
+    Incompatible {
+        /// The robot name.
+        robot: String,
+        /// The service.
+        service: String,
+    },
+    /// Creating or opening a publish-subscribe service failed.
+    #[error("iceoryx2 service {service}: {source:?}")]
+    PublishSubscribe {
+        /// The service.
+        service: String,
+        /// iceoryx2's error.
+        #[source]
+        source: PublishSubscribeOpenOrCreateError,
+    },
+    /// Creating or opening an event service failed.
+    #[error("iceoryx2 service {service}: {source:?}")]
+    Event {
+        /// The service.
+        service: String,
+        /// iceoryx2's error.
+        #[source]
+        source: EventOpenOrCreateError,
+    },
+    /// Creating or opening a request-response service failed.
+    #[error("iceoryx2 service {service}: {source:?}")]
+    RequestResponse {
+        /// The service.
+        service: String,
+        /// iceoryx2's error.
+        #[source]
+        source: RequestResponseOpenOrCreateError,
+    },
+}
+
+fn service_name(name: &str) -> Result<ServiceName, ServiceError> {
+    ServiceName::new(name).map_err(|_| ServiceError::Name(name.to_owned()))
+}
+
+/// Who calls a `*_services` function.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Role {
+    /// The gateway: creates the services, sized for all its clients.
+    Gateway,
+    /// A client: opens them; a missing service means no gateway runs.
+    Client,
+}
+
+/// What a client's open failed with, as far as the cause matters to the user.
+enum OpenFailure {
+    Missing,
+    Incompatible,
+    Other,
+}
+
+fn open_error(
+    robot: &str,
+    service: &str,
+    failure: OpenFailure,
+    other: ServiceError,
+) -> ServiceError {
+    match failure {
+        OpenFailure::Missing => ServiceError::NoGateway {
+            robot: robot.to_owned(),
+        },
+        OpenFailure::Incompatible => ServiceError::Incompatible {
+            robot: robot.to_owned(),
+            service: service.to_owned(),
+        },
+        OpenFailure::Other => other,
+    }
+}
+
+/// Creates or opens the event service paired with `name`.
+fn event_service(
+    node: &Node<Ipc>,
+    robot: &str,
+    name: &str,
+    role: Role,
+    (notifiers, listeners): (usize, usize),
+) -> Result<Events, ServiceError> {
+    let error = |source| ServiceError::Event {
+        service: name.to_owned(),
+        source,
+    };
+    let builder = node.service_builder(&service_name(name)?).event();
+    match role {
+        Role::Gateway => builder
+            .max_notifiers(notifiers)
+            .max_listeners(listeners)
+            .max_nodes(MAX_NODES)
+            .open_or_create()
+            .map_err(error),
+        Role::Client => builder.open().map_err(|e| {
+            let failure = match e {
+                EventOpenError::DoesNotExist => OpenFailure::Missing,
+                _ => OpenFailure::Other,
+            };
+            open_error(
+                robot,
+                name,
+                failure,
+                error(EventOpenOrCreateError::EventOpenError(e)),
+            )
+        }),
+    }
+}
+
+/// Creates or opens a publish-subscribe service of `Payload` with one latest sample of history.
+fn latest_value_service<Payload: std::fmt::Debug + ZeroCopySend>(
+    node: &Node<Ipc>,
+    robot: &str,
+    name: &str,
+    role: Role,
+) -> Result<publish_subscribe::PortFactory<Ipc, Payload, ()>, ServiceError> {
+    let error = |source| ServiceError::PublishSubscribe {
+        service: name.to_owned(),
+        source,
+    };
+    let builder = node
+        .service_builder(&service_name(name)?)
+        .publish_subscribe::<Payload>();
+    match role {
+        Role::Gateway => builder
+            .max_publishers(2)
+            .max_subscribers(MAX_SUBSCRIBERS)
+            .max_nodes(MAX_NODES)
+            .history_size(1)
+            .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
+            .enable_safe_overflow(true)
+            .open_or_create()
+            .map_err(error),
+        Role::Client => builder.open().map_err(|e| {
+            let failure = match e {
+                PublishSubscribeOpenError::DoesNotExist => OpenFailure::Missing,
+                PublishSubscribeOpenError::IncompatibleTypes => OpenFailure::Incompatible,
+                _ => OpenFailure::Other,
+            };
+            let other = error(PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(e));
+            open_error(robot, name, failure, other)
+        }),
+    }
+}
+
+/// The state services of `robot`: publish-subscribe and its event service.
+pub fn state_services(
+    node: &Node<Ipc>,
+    robot: &str,
+    role: Role,
+) -> Result<(StateService, Events), ServiceError> {
+    let name = state_service(robot);
+    // Events first: clients take the publish-subscribe service as the sign that all exist.
+    let events = event_service(node, robot, &name, role, (2, MAX_SUBSCRIBERS))?;
+    let state = latest_value_service(node, robot, &name, role)?;
+    Ok((state, events))
+}
+
+/// The status service of `robot`.
+pub fn status_services(
+    node: &Node<Ipc>,
+    robot: &str,
+    role: Role,
+) -> Result<StatusService, ServiceError> {
+    latest_value_service(node, robot, &status_service(robot), role)
+}
+
+/// The control services of `robot`: requests and the wake-up event. Sized for
+/// [`MAX_CONTROLLERS`] client processes.
+pub fn control_services(
+    node: &Node<Ipc>,
+    robot: &str,
+    role: Role,
+) -> Result<(ControlService, Events), ServiceError> {
+    let name = control_service(robot);
+    let error = |source| ServiceError::RequestResponse {
+        service: name.clone(),
+        source,
+    };
+    let builder = node
+        .service_builder(&service_name(&name)?)
+        .request_response::<ControlRequest, ControlResponse>();
+    let requests = match role {
+        Role::Gateway => builder
+            .max_servers(2)
+            .max_clients(MAX_CONTROLLERS)
+            .max_nodes(MAX_NODES)
+            .max_active_requests_per_client(MAX_REQUESTS_IN_FLIGHT)
+            .max_response_buffer_size(MAX_REQUESTS_IN_FLIGHT)
+            .enable_safe_overflow_for_requests(true)
+            .enable_safe_overflow_for_responses(true)
+            .open_or_create()
+            .map_err(error)?,
+        Role::Client => builder.open().map_err(|e| {
+            let failure = match e {
+                RequestResponseOpenError::DoesNotExist => OpenFailure::Missing,
+                RequestResponseOpenError::IncompatibleRequestOrResponseType => {
+                    OpenFailure::Incompatible
+                }
+                _ => OpenFailure::Other,
+            };
+            let other = error(RequestResponseOpenOrCreateError::RequestResponseOpenError(
+                e,
+            ));
+            open_error(robot, &name, failure, other)
+        })?,
+    };
+    let events = event_service(node, robot, &name, role, (MAX_CONTROLLERS, 2))?;
+    Ok((requests, events))
+}
+
+/// Why a request got no answer.
+#[derive(Debug, thiserror::Error)]
+pub enum RequestError {
+    /// The arbiter refused it, with the reason.
+    #[error("rejected: {0}")]
+    Rejected(#[from] Rejected),
+    /// No answer within [`ANSWER_TIMEOUT`]: the gateway is stopped, stuck or gone.
+    #[error("no answer from gateway '{robot}' within {timeout:?}: is it running (not stopped)?")]
+    NoAnswer {
+        /// The robot.
+        robot: String,
+        /// How long it waited.
+        timeout: Duration,
+    },
+    /// Sending the request failed.
+    #[error("sending the request: {0:?}")]
+    Send(#[source] iceoryx2::port::client::RequestSendError),
+    /// Waking the gateway failed.
+    #[error("waking the gateway: {0:?}")]
+    Wake(#[source] iceoryx2::port::notifier::NotifierNotifyError),
+    /// Receiving the answer failed.
+    #[error("receiving the answer: {0:?}")]
+    Receive(#[source] iceoryx2::port::ReceiveError),
+}
+
+/// Why a control port could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum ControlPortError {
+    /// The services could not be opened.
+    #[error(transparent)]
+    Service(#[from] ServiceError),
+    /// The client port could not be created (the gateway serves [`MAX_CONTROLLERS`] at once).
+    #[error("creating a control port (at most {MAX_CONTROLLERS} at once): {0:?}")]
+    Client(#[source] iceoryx2::service::port_factory::client::ClientCreateError),
+    /// The wake-up notifier could not be created.
+    #[error("creating the wake-up notifier: {0:?}")]
+    Notifier(#[source] iceoryx2::port::notifier::NotifierCreateError),
+}
+
+/// A client's way to the arbiter: sends one request at a time and waits for its answer.
+#[derive(Debug)]
+pub struct ControlPort {
+    robot: String,
+    name: FixedText<{ crate::control::MAX_CLIENT_NAME }>,
+    node: [u64; 2],
+    seq: u64,
+    client: Client<Ipc, ControlRequest, (), ControlResponse, ()>,
+    wake: Notifier<Ipc>,
+}
+
+impl ControlPort {
+    /// A port on `robot`'s control service for the client `name` of `node`.
+    pub fn open(node: &Node<Ipc>, robot: &str, name: &str) -> Result<Self, ControlPortError> {
+        let (requests, events) = control_services(node, robot, Role::Client)?;
+        Ok(Self {
+            robot: robot.to_owned(),
+            name: FixedText::new(name),
+            node: crate::control::node_halves(node.id().value()),
+            seq: 0,
+            client: requests
+                .client_builder()
+                .create()
+                .map_err(ControlPortError::Client)?,
+            wake: events
+                .notifier_builder()
+                .create()
+                .map_err(ControlPortError::Notifier)?,
+        })
+    }
+
+    /// Sends `request`, wakes the gateway and waits for the answer.
+    pub fn request(&mut self, request: &crate::control::Request) -> Result<Accepted, RequestError> {
+        self.seq += 1;
+        let mut wire = request.encode(self.seq);
+        wire.client = self.name;
+        wire.node = self.node;
+        let pending = self.client.send_copy(wire).map_err(RequestError::Send)?;
+        self.wake.notify().map_err(RequestError::Wake)?;
+        let deadline = Instant::now() + ANSWER_TIMEOUT;
+        while Instant::now() < deadline {
+            while let Some(response) = pending.receive().map_err(RequestError::Receive)? {
+                if response.seq == self.seq {
+                    return Ok(response.answer()?);
+                }
+            }
+            std::thread::sleep(Duration::from_micros(200));
+        }
+        Err(RequestError::NoAnswer {
+            robot: self.robot.clone(),
+            timeout: ANSWER_TIMEOUT,
+        })
+    }
+}
+
+/// The newest sample a subscriber holds, skipping older ones; `None` when it holds none.
+pub fn latest<Payload: std::fmt::Debug + ZeroCopySend + Copy>(
+    subscriber: &iceoryx2::port::subscriber::Subscriber<Ipc, Payload, ()>,
+) -> Result<Option<Payload>, iceoryx2::port::ReceiveError> {
+    let mut latest = None;
+    while let Some(sample) = subscriber.receive()? {
+        latest = Some(*sample);
+    }
+    Ok(latest)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn robot_names_are_checked() {
+        assert!(check_robot_name("scout-1_b").is_ok());
+        for bad in ["", "a/b", "with space", "*", &"x".repeat(33)] {
+            assert!(check_robot_name(bad).is_err(), "{bad:?}");
+        }
+    }
+
+    #[test]
+    #[allow(unsafe_code)]
+    fn payload_type_names_carry_the_layout_version() {
+        use iceoryx2::prelude::ZeroCopySend;
+        let suffix = format!(".v{LAYOUT_VERSION}");
+        // SAFETY: `type_name` only returns the derive's constant string.
+        for name in [
+            unsafe { StatePayload::type_name() },
+            unsafe { StatusPayload::type_name() },
+            unsafe { ControlRequest::type_name() },
+            unsafe { ControlResponse::type_name() },
+        ] {
+            assert!(name.ends_with(&suffix), "{name}");
+        }
+    }
+}
