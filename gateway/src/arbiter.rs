@@ -18,6 +18,9 @@ use tracing::info;
 
 /// The hard ceiling on any command's age: the chassis' own timeout.
 pub const MAX_COMMAND_AGE: Duration = Duration::from_millis(500);
+/// The heartbeat periods a stop source may register.
+pub const HEARTBEAT_PERIODS: std::ops::RangeInclusive<Duration> =
+    Duration::from_millis(20)..=Duration::from_secs(10);
 /// Motion commands that carry a requested fault-clear code.
 pub const FAULT_CLEAR_FRAMES: u8 = 3;
 /// The most clients the arbiter tracks at once.
@@ -102,7 +105,8 @@ impl ArbiterConfig {
         ] {
             if ms == 0 || ms > MAX_COMMAND_AGE.as_millis() as u64 {
                 return Err(format!(
-                    "arbiter.{name} must be 1..=500 (the chassis stops after 500 ms), found {ms}"
+                    "arbiter.{name} must be 1..={max} (the chassis stops after {max} ms), found {ms}",
+                    max = MAX_COMMAND_AGE.as_millis()
                 ));
             }
         }
@@ -421,10 +425,12 @@ impl Arbiter {
             Request::Heartbeat { period } => {
                 if period.is_zero() {
                     self.sources[index].heartbeat = None;
-                } else if !(Duration::from_millis(20)..=Duration::from_secs(10)).contains(&period) {
-                    return Err(Rejection::Malformed(
-                        "heartbeat period must be 20 ms to 10 s".into(),
-                    ));
+                } else if !HEARTBEAT_PERIODS.contains(&period) {
+                    return Err(Rejection::Malformed(format!(
+                        "heartbeat period must be {:?} to {:?}",
+                        HEARTBEAT_PERIODS.start(),
+                        HEARTBEAT_PERIODS.end()
+                    )));
                 } else {
                     if self.sources[index].heartbeat.is_none() {
                         info!(

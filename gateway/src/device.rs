@@ -246,7 +246,7 @@ impl Device {
                 framing: Some(framing),
                 ..
             } => framing.discarded_bytes(),
-            _ => 0,
+            Self::Port { framing: None, .. } | Self::Sim { .. } => 0,
         }
     }
 }

@@ -46,25 +46,21 @@ impl Endpoints {
             Err(error) => warn!("listing iceoryx2 nodes to clean up failed: {error:?}"),
         }
         let node = services::node(&format!("scout-gateway-{robot}"))
-            .map_err(|e| anyhow::anyhow!("{e:?}"))
             .context("creating the iceoryx2 node")?;
         // The state service last: once it exists, clients find every service.
         let status = services::status_services(&node, robot, Role::Gateway)?
             .publisher_builder()
             .backpressure_strategy(BackpressureStrategy::DiscardData)
             .create()
-            .map_err(|e| anyhow::anyhow!("{e:?}"))
             .context("creating the status publisher")?;
         let (control, control_events) = services::control_services(&node, robot, Role::Gateway)?;
         let server = control
             .server_builder()
             .create()
-            .map_err(|e| anyhow::anyhow!("{e:?}"))
             .context("creating the control server")?;
         let wake = control_events
             .listener_builder()
             .create()
-            .map_err(|e| anyhow::anyhow!("{e:?}"))
             .context("creating the control listener")?;
         let (state, events) = services::state_services(&node, robot, Role::Gateway)?;
         let state = state
@@ -72,12 +68,10 @@ impl Endpoints {
             .backpressure_strategy(BackpressureStrategy::DiscardData)
             .max_loaned_samples(2)
             .create()
-            .map_err(|e| anyhow::anyhow!("{e:?}"))
             .context("creating the state publisher")?;
         let state_notifier = events
             .notifier_builder()
             .create()
-            .map_err(|e| anyhow::anyhow!("{e:?}"))
             .context("creating the state notifier")?;
         Ok(Self {
             state,

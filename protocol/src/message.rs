@@ -568,7 +568,10 @@ impl MessageKind {
     pub const fn direction(self) -> Direction {
         match self {
             Self::MotionCommand | Self::LightCommand => Direction::Command,
-            _ => Direction::Feedback,
+            Self::SystemStatus
+            | Self::MotionFeedback
+            | Self::MotorFeedback(_)
+            | Self::LightFeedback => Direction::Feedback,
         }
     }
 

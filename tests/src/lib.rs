@@ -104,8 +104,16 @@ pub fn run_with_input(mut command: Command, stdin: &[u8], limit: Duration) -> Ou
     let writer = std::thread::spawn(move || {
         let _ = input.write_all(&bytes);
     });
-    let stdout = drain(child.stdout.take().expect("stdout"));
-    let stderr = drain(child.stderr.take().expect("stderr"));
+    let output = wait_output(child, limit);
+    let _ = writer.join();
+    output
+}
+
+/// Waits at most `limit` for `child` to exit (killing it past that), reading what is left of
+/// its piped output.
+pub fn wait_output(mut child: std::process::Child, limit: Duration) -> Output {
+    let stdout = child.stdout.take().map(drain);
+    let stderr = child.stderr.take().map(drain);
     let deadline = Instant::now() + limit;
     let status = loop {
         if let Some(status) = child.try_wait().expect("try_wait") {
@@ -113,15 +121,17 @@ pub fn run_with_input(mut command: Command, stdin: &[u8], limit: Duration) -> Ou
         }
         if Instant::now() > deadline {
             let _ = child.kill();
-            panic!("{command:?} did not finish within {limit:?}");
+            panic!("process {} did not finish within {limit:?}", child.id());
         }
         std::thread::sleep(Duration::from_millis(10));
     };
-    let _ = writer.join();
+    let read = |pipe: Option<std::thread::JoinHandle<Vec<u8>>>| {
+        pipe.map_or_else(Vec::new, |reader| reader.join().expect("pipe reader"))
+    };
     Output {
         status,
-        stdout: stdout.join().expect("stdout reader"),
-        stderr: stderr.join().expect("stderr reader"),
+        stdout: read(stdout),
+        stderr: read(stderr),
     }
 }
 

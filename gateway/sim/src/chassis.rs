@@ -387,7 +387,11 @@ impl Chassis {
                 self.host_lights = Some((lights, now));
                 None
             }
-            _ => {
+            // Feedback from another chassis on the bus is not a command.
+            Message::SystemStatus(_)
+            | Message::MotionFeedback(_)
+            | Message::MotorFeedback(_)
+            | Message::LightFeedback(_) => {
                 self.stats.rejected += 1;
                 None
             }

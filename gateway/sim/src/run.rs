@@ -334,7 +334,7 @@ impl Simulator<'_> {
     fn send_feedback(&mut self, batch: &[Counted], now: Duration) -> anyhow::Result<()> {
         let heard = match self.options.transport {
             Transport::Slcan => self.adapter.hears_chassis(),
-            _ => true,
+            Transport::Serial | Transport::Can | Transport::Sim => true,
         };
         if now < self.silent_until || self.endpoint.is_none() || !heard {
             return Ok(());

@@ -52,21 +52,22 @@ fn check_state_end_to_end(transport: &str) {
             .expect("faults")
             .contains(&"motor_1_comm_fault".into())
     );
-    // The chassis saw 0x130 every 20 ms with valid checksums and its link's control mode.
-    std::thread::sleep(Duration::from_secs(1));
-    let stats = sim.stats();
+    // The chassis hears 0x130 with valid checksums in its link's control mode (the 20 ms grid
+    // itself is tested exactly, in simulated time, in the gateway's core tests).
+    let deadline = std::time::Instant::now() + STATE_LIMIT;
+    let stats = loop {
+        let stats = sim.stats();
+        if stats["commands"]["0x130"].as_u64().unwrap_or(0) >= 40 {
+            break stats;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "too few commands: {stats}"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
     assert_eq!(stats["checksum_failures"], 0, "{stats}");
     assert_eq!(stats["ignored"]["wrong_mode"], 0, "{stats}");
-    assert!(
-        stats["commands"]["0x130"].as_u64().expect("count") >= 40,
-        "{stats}"
-    );
-    let intervals = &stats["motion_command_intervals"];
-    let mean = intervals["mean_ms"].as_f64().expect("mean");
-    assert!(
-        (15.0..30.0).contains(&mean),
-        "0x130 every 20 ms on average: {stats}"
-    );
     assert_eq!(stats["last_command"]["linear"], 0.0);
 }
 
@@ -247,6 +248,29 @@ fn echo_json_prints_n_updates_then_exits() {
     for pair in lines.windows(2) {
         assert!(pair[1]["seq"].as_u64() > pair[0]["seq"].as_u64());
     }
+}
+
+#[test]
+fn echo_into_a_closed_pipe_ends_quietly_with_exit_0() {
+    use std::io::{BufRead, BufReader};
+    let name = robot_name("pipe");
+    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    connect(&name);
+    // `scout echo --json | head -1`: the reader takes one line and closes the pipe.
+    let mut echo = scout_system_tests::command("scout")
+        .args(["echo", "--json", "--name", &name])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("start scout echo");
+    let mut first = String::new();
+    BufReader::new(echo.stdout.take().expect("stdout"))
+        .read_line(&mut first)
+        .expect("one line");
+    assert!(first.starts_with('{'), "{first}");
+    let output = scout_system_tests::wait_output(echo, Duration::from_secs(10));
+    assert_eq!(output.status.code(), Some(0));
+    assert_eq!(String::from_utf8_lossy(&output.stderr), "");
 }
 
 #[test]
