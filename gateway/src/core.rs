@@ -304,6 +304,8 @@ impl Core {
         if self.arbiter.take_urgent_stop() {
             self.stats.urgent_stops += 1;
             if let Some(frame) = self.motion(&Output::STOP, now) {
+                // Subscribers (a safety monitor) see the stop on the wire at once.
+                self.state_due = true;
                 return Some(frame);
             }
         }
