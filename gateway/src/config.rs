@@ -195,6 +195,18 @@ mod tests {
         let config: GatewayConfig = toml::from_str(text).expect("example config");
         assert_eq!(config.name, "scout");
         assert!(matches!(config.validate(), Ok(DeviceSpec::Serial(_))));
+        // "else the defaults below": the example shows the defaults, apart from the device.
+        let defaults = GatewayConfig {
+            transport: config.transport,
+            device: config.device.clone(),
+            zenoh: ZenohConfig {
+                listen: config.zenoh.listen.clone(),
+                ..ZenohConfig::default()
+            },
+            sim: config.sim.clone(),
+            ..GatewayConfig::default()
+        };
+        assert_eq!(config, defaults);
     }
 
     #[test]
