@@ -3,6 +3,7 @@
 //!
 //! ```sh
 //! cargo run --release --bin scout-gateway -- --sim &
+//! cargo run --release --bin scout -- resume      # autonomy starts disarmed
 //! cargo run --release -p scout-clients --example square -- --side 1.0
 //! ```
 
@@ -72,6 +73,8 @@ fn main() -> anyhow::Result<()> {
     let robot = Robot::connect(&args.name)?;
     let states = robot.subscribe()?;
     let mut controller = robot.controller("square", Some(Class::Autonomy))?;
+    // Autonomy drives only once an operator armed it (`scout resume`), under control it takes.
+    controller.take_control()?;
     for side in 1..=args.sides {
         let start = leg(&mut controller, &states, |_| None)?.odometry;
         // Straight: the remaining distance sets the speed, down to a creep near the end.

@@ -5,10 +5,10 @@ use std::time::{Duration, Instant};
 
 use iceoryx2::port::subscriber::Subscriber;
 use scout_interface::control::{
-    Accepted, Class, LightsSetting, MAX_CLIENT_NAME, Rejected, RejectionKind, Request,
-    StatusPayload,
+    Accepted, Class, LightsSetting, MAX_CLIENT_NAME, Rejected, RejectionKind, ReleaseTarget,
+    Request, StatusPayload,
 };
-use scout_interface::services::{self, ControlPort, Ipc, RequestError, Role};
+use scout_interface::services::{self, ControlPort, Ipc, RequestError, Role, Way};
 use scout_protocol::FaultClear;
 
 use crate::client::{ClientError, Robot};
@@ -45,6 +45,15 @@ impl ControlError {
             Self::NoAnswer { .. } | Self::Request(_) | Self::Client(_) => None,
         }
     }
+
+    /// Whether this client lost (or never had) control: it must take control again, a
+    /// deliberate act the library never does by itself.
+    pub fn lost_control(&self) -> bool {
+        matches!(
+            self.rejection(),
+            Some(RejectionKind::Revoked | RejectionKind::NoControl)
+        )
+    }
 }
 
 impl From<RequestError> for ControlError {
@@ -60,11 +69,30 @@ impl From<RequestError> for ControlError {
 /// The lights to ask for.
 pub type Lights = LightsSetting;
 
-/// A named client of the arbiter. With a class it may drive; any controller may stop.
+/// A named client of the arbiter. With a class it may take control and drive; any controller
+/// may stop (through the stop service, which a full control service cannot block).
 #[derive(Debug)]
 pub struct Controller {
     class: Option<Class>,
     port: ControlPort,
+    stop: ControlPort,
+    lease: Option<u64>,
+}
+
+/// A client that only stops: a safety monitor, an e-stop button. Its port is on the stop
+/// service, apart from the control service's slots.
+#[derive(Debug)]
+pub struct Stopper {
+    port: ControlPort,
+}
+
+impl Stopper {
+    /// Latches a stop owned by this client's name: zero speed at once, until released.
+    pub fn stop(&mut self, reason: &str) -> Result<Accepted, ControlError> {
+        Ok(self.port.request(&Request::Stop {
+            reason: reason.to_owned(),
+        })?)
+    }
 }
 
 impl Robot {
@@ -76,7 +104,19 @@ impl Robot {
         }
         Ok(Controller {
             class,
-            port: ControlPort::open(self.node(), self.name(), name)?,
+            port: ControlPort::open(self.node(), self.name(), Way::Control, name)?,
+            stop: ControlPort::open(self.node(), self.name(), Way::Stop, name)?,
+            lease: None,
+        })
+    }
+
+    /// A client named `name` that only stops.
+    pub fn stopper(&self, name: &str) -> Result<Stopper, ClientError> {
+        if name.is_empty() || name.len() > MAX_CLIENT_NAME {
+            return Err(ClientError::BadClientName(name.to_owned()));
+        }
+        Ok(Stopper {
+            port: ControlPort::open(self.node(), self.name(), Way::Stop, name)?,
         })
     }
 
@@ -97,9 +137,38 @@ impl Controller {
         self.class
     }
 
+    /// The lease it holds, if it took control and has not lost it.
+    pub fn lease(&self) -> Option<u64> {
+        self.lease
+    }
+
     /// Sends one request and waits for its answer.
     pub fn request(&mut self, request: &Request) -> Result<Accepted, ControlError> {
-        Ok(self.port.request(request)?)
+        let answer: Result<Accepted, ControlError> = match request {
+            Request::Stop { .. } => self.stop.request(request),
+            _ => self.port.request(request),
+        }
+        .map_err(ControlError::from);
+        match (&answer, request) {
+            (Ok(accepted), Request::TakeControl { .. }) => self.lease = accepted.lease,
+            (Ok(_), Request::Relinquish | Request::Release { .. }) => self.lease = None,
+            (Err(error), _) if error.lost_control() => self.lease = None,
+            _ => {}
+        }
+        answer
+    }
+
+    /// Takes control as this controller's class: from now on it may drive, until a stop, a
+    /// gap, a release, a takeover or silence ends its control ([`ControlError::lost_control`]);
+    /// then only this call, made again on purpose, gives control back.
+    pub fn take_control(&mut self) -> Result<Accepted, ControlError> {
+        let Some(class) = self.class else {
+            return Err(ControlError::Rejected(Rejected {
+                kind: Some(RejectionKind::UnknownClass),
+                reason: "this controller has no class: give teleop or autonomy".into(),
+            }));
+        };
+        self.request(&Request::TakeControl { class })
     }
 
     /// Drives at `linear` m/s and `angular` rad/s until the class's maximum age passes (send
@@ -108,39 +177,40 @@ impl Controller {
         self.drive_for(linear, angular, None)
     }
 
-    /// Drives with a command that lives at most `ttl` (capped by the class's maximum age).
-    /// A controller without a class is refused by the gateway as an unknown class.
+    /// Drives with a command that lives at most `ttl` (capped by the class's maximum age),
+    /// under the control [`Controller::take_control`] took.
     pub fn drive_for(
         &mut self,
         linear: f64,
         angular: f64,
         ttl: Option<Duration>,
     ) -> Result<Accepted, ControlError> {
-        let Some(class) = self.class else {
+        let Some(lease) = self.lease else {
             return Err(ControlError::Rejected(Rejected {
-                kind: Some(RejectionKind::UnknownClass),
-                reason: "this controller has no class: give teleop or autonomy".into(),
+                kind: Some(RejectionKind::NoControl),
+                reason: "no control: take control first".into(),
             }));
         };
         self.request(&Request::Drive {
-            class,
+            lease,
             linear,
             angular,
             ttl,
         })
     }
 
-    /// Latches the safety stop: zero speed at once, until someone releases it.
+    /// Latches a stop owned by this controller's name: zero speed at once, until released.
     pub fn stop(&mut self, reason: &str) -> Result<Accepted, ControlError> {
         self.request(&Request::Stop {
             reason: reason.to_owned(),
         })
     }
 
-    /// Releases the latched stop and whatever this controller drives. Nothing moves until a
-    /// new drive command (teleop) or a resume and command (autonomy).
-    pub fn release(&mut self) -> Result<Accepted, ControlError> {
-        self.request(&Request::Release)
+    /// Releases the stops `target` names (this controller's own; another owner's or all need
+    /// the operator role) and gives up this controller's control. Nothing moves until clients
+    /// take control again (and autonomy is resumed).
+    pub fn release(&mut self, target: ReleaseTarget) -> Result<Accepted, ControlError> {
+        self.request(&Request::Release { target })
     }
 
     /// Gives up this controller's control: the output ramps to zero. Leaves the stop alone (a

@@ -16,6 +16,8 @@ pub mod echo;
 pub mod remote;
 
 pub use scout_interface as interface;
-pub use scout_interface::control::{Accepted, Class, Rejected, RejectionKind, Request};
+pub use scout_interface::control::{
+    Accepted, Class, Rejected, RejectionKind, ReleaseTarget, Request, StopCause,
+};
 pub use scout_interface::services::monotonic_ns;
 pub use scout_interface::{StatePayload, StatusPayload};

@@ -1,16 +1,23 @@
-//! The command arbiter: which client drives, every tick, and what reaches the wheels. Sans-IO:
-//! requests and time in, the motion output and status out.
+//! The command arbiter: who may drive, every tick, and what reaches the wheels. Sans-IO:
+//! requests, gaps and time in; the motion output, the stops and an audit trail out.
 //!
-//! Priority: a latched safety stop > teleop > autonomy. The stop latches at once from any client
-//! and holds until an explicit release; release never restarts motion by itself. Within a class
-//! the holder keeps control until it releases, goes stale or its process dies. Commands live for
-//! their TTL or the class's maximum age, whichever is shorter. After a teleop takeover, a stop or
-//! a release, autonomy stays disarmed until `resume`. The output is capped, then rate-limited;
-//! only the stop skips the ramp.
+//! - **Stops stack.** Every stop is kept with its owner, cause, reason and time; motion only when
+//!   none is left. A stop is never refused and its zero goes out at once. A stop is released by
+//!   its owner (a client's name) or by an operator, never while its cause persists, and a
+//!   release never restarts anything.
+//! - **Gaps end control.** A gap (the gateway starting after an unclean exit, the link lost, the
+//!   chassis silent, in e-stop, in fault, under RC, a tick overrun, a runaway, a CAN fault)
+//!   latches a stop with its cause.
+//! - **Control is taken, not inherited.** A client drives only under a lease it took
+//!   (`take_control`); a stop, a gap, a release, a teleop takeover, staleness or the client's
+//!   death revokes it, and the client must take control again.
+//! - Priority among leases: teleop > autonomy; autonomy only while armed (`resume`).
+//! - The output is capped, then rate-limited; only a stop skips the ramp.
 
 use std::collections::VecDeque;
 use std::time::Duration;
 
+use scout_interface::control::{ReleaseTarget, StopCause};
 use scout_protocol::FaultClear;
 use scout_protocol::units::{DEFAULT_MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED};
 use serde::{Deserialize, Serialize};
@@ -18,11 +25,20 @@ use tracing::info;
 
 /// The hard ceiling on any command's age: the chassis' own timeout.
 pub const MAX_COMMAND_AGE: Duration = Duration::from_millis(500);
+/// Motion commands that carry a requested fault-clear code.
+pub const FAULT_CLEAR_FRAMES: u8 = 3;
 /// The heartbeat periods a stop source may register.
 pub const HEARTBEAT_PERIODS: std::ops::RangeInclusive<Duration> =
     Duration::from_millis(20)..=Duration::from_secs(10);
-/// Motion commands that carry a requested fault-clear code.
-pub const FAULT_CLEAR_FRAMES: u8 = 3;
+/// Stops kept one by one; past this, further owners' stops are merged into one entry.
+pub const MAX_STOPS: usize = 256;
+/// Entries of the audit history kept for the status.
+pub const HISTORY: usize = scout_interface::control::STATUS_EVENTS;
+/// The owner of the stops the gateway latches for gaps.
+pub const GATEWAY: &str = "gateway";
+/// The owner of merged stops once [`MAX_STOPS`] are kept.
+pub const OTHERS: &str = "(others)";
+
 /// The most clients the arbiter tracks at once.
 pub use scout_interface::control::MAX_CLIENTS as MAX_SOURCES;
 
@@ -70,6 +86,13 @@ pub struct ArbiterConfig {
     pub autonomy_caps: Caps,
     /// Acceleration and deceleration limits.
     pub limits: RateLimits,
+    /// Requests a second one client may send, sustained (stops are never limited).
+    pub request_rate_hz: f64,
+    /// Requests one client may send in a burst above the sustained rate.
+    pub request_burst: u32,
+    /// Programs whose clients have the operator role (may release others' stops and all stops),
+    /// by the file name of their executable: the `scout` tool, a person at a terminal.
+    pub operator_programs: Vec<String>,
 }
 
 impl Default for ArbiterConfig {
@@ -92,6 +115,9 @@ impl Default for ArbiterConfig {
                 angular_acceleration: 1.5,
                 angular_deceleration: 3.0,
             },
+            request_rate_hz: 500.0,
+            request_burst: 50,
+            operator_programs: vec!["scout".into()],
         }
     }
 }
@@ -118,12 +144,14 @@ impl ArbiterConfig {
             limits.linear_deceleration,
             limits.angular_acceleration,
             limits.angular_deceleration,
+            self.request_rate_hz,
         ]);
-        if all.into_iter().all(positive) {
-            Ok(())
-        } else {
-            Err("arbiter caps and limits must be positive numbers".into())
+        if !all.into_iter().all(positive) || self.request_burst == 0 {
+            return Err(
+                "arbiter caps, limits, request_rate_hz and request_burst must be positive".into(),
+            );
         }
+        Ok(())
     }
 
     fn max_age(&self, class: Class) -> Duration {
@@ -141,13 +169,24 @@ impl ArbiterConfig {
     }
 }
 
-/// Who sent a request: the client's name and its iceoryx2 node (process).
+/// Who sent a request, as the transport tells: its port, its process's node, the port's name.
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
 pub struct ClientKey {
-    /// The name the client gave.
-    pub name: String,
-    /// Its iceoryx2 node id, for dead-process detection.
+    /// The iceoryx2 client port (`UniqueClientId`): the identity.
+    pub port: u128,
+    /// The iceoryx2 node (process) of the port, for dead-process detection.
     pub node: u128,
+    /// The port's name: the client's name in the status, the audit log and on its stops.
+    pub name: String,
+}
+
+/// A request's sender and what it may do.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Origin {
+    /// Who.
+    pub key: ClientKey,
+    /// May release others' stops and all stops.
+    pub operator: bool,
 }
 
 /// The motion command for one tick.
@@ -173,14 +212,58 @@ impl Output {
     };
 }
 
-/// A command a client sent.
+/// A stop that holds the robot.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Stop {
+    /// A client's name, or [`GATEWAY`] for a gap.
+    pub owner: String,
+    /// Why it holds.
+    pub cause: StopCause,
+    /// In words.
+    pub reason: String,
+    /// When it latched.
+    pub at: Duration,
+    /// For a heartbeat stop: the source's port, while the cause is its silence.
+    source: Option<u128>,
+}
+
+impl std::fmt::Display for Stop {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} ({}): {}", self.owner, self.cause, self.reason)
+    }
+}
+
+/// A command a client sent under its lease.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Command {
-    class: Class,
     linear: f64,
     angular: f64,
     clamped: bool,
     expires: Duration,
+}
+
+/// Control a client took.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Lease {
+    id: u64,
+    class: Class,
+    granted: Duration,
+    command: Option<Command>,
+}
+
+/// A heartbeat stop source's registration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Heartbeat {
+    period: Duration,
+    /// It missed a beat and has not beaten since: its stop cannot be released.
+    silent: bool,
+}
+
+/// Requests a client may still send now (a token bucket).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Budget {
+    tokens: f64,
+    at: Duration,
 }
 
 /// One client the arbiter knows.
@@ -188,10 +271,11 @@ struct Command {
 pub struct Source {
     /// Who.
     pub key: ClientKey,
-    /// The class it holds, if it holds one.
-    pub holding: Option<Class>,
-    command: Option<Command>,
-    heartbeat: Option<Duration>,
+    lease: Option<Lease>,
+    /// Why its last lease ended.
+    revoked: Option<String>,
+    heartbeat: Option<Heartbeat>,
+    budget: Budget,
     /// When it last sent a request.
     pub last_seen: Duration,
     /// Requests it sent.
@@ -201,28 +285,24 @@ pub struct Source {
 impl Source {
     /// Its heartbeat period, if registered.
     pub fn heartbeat(&self) -> Option<Duration> {
-        self.heartbeat
+        self.heartbeat.map(|h| h.period)
     }
 
-    /// The class of its last command.
+    /// The class of its lease.
     pub fn class(&self) -> Option<Class> {
-        self.command.map(|c| c.class)
+        self.lease.map(|lease| lease.class)
+    }
+
+    /// Its lease's id.
+    pub fn lease(&self) -> Option<u64> {
+        self.lease.map(|lease| lease.id)
     }
 
     fn fresh_command(&self, now: Duration) -> Option<Command> {
-        self.command.filter(|command| now < command.expires)
+        self.lease
+            .and_then(|lease| lease.command)
+            .filter(|command| now < command.expires)
     }
-}
-
-/// The latched stop.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Latch {
-    /// Who latched it.
-    pub by: String,
-    /// Why.
-    pub reason: String,
-    /// When.
-    pub at: Duration,
 }
 
 /// The arbiter.
@@ -230,7 +310,9 @@ pub struct Latch {
 pub struct Arbiter {
     config: ArbiterConfig,
     global: Caps,
-    latch: Option<Latch>,
+    stops: Vec<Stop>,
+    /// The gap causes present now: their stops cannot be released.
+    present: Vec<StopCause>,
     autonomy_armed: bool,
     sources: Vec<Source>,
     output: Output,
@@ -238,31 +320,65 @@ pub struct Arbiter {
     lights: Option<LightsSetting>,
     rejections: [u64; REJECTION_COUNTERS],
     urgent_stop: bool,
+    last_stop: Option<Duration>,
+    next_lease: u64,
+    history: VecDeque<(Duration, String)>,
 }
 
 impl Arbiter {
     /// An arbiter with `config` for a chassis whose maximum angular speed is `max_angular`.
-    pub fn new(config: ArbiterConfig, max_angular: f64) -> Self {
+    /// `instance` tells this gateway's leases from another's. Autonomy starts disarmed.
+    pub fn new(config: ArbiterConfig, max_angular: f64, instance: u32) -> Self {
         Self {
             config,
             global: Caps {
                 linear: MAX_LINEAR_SPEED,
                 angular: max_angular,
             },
-            latch: None,
-            autonomy_armed: true,
+            stops: Vec::new(),
+            present: Vec::new(),
+            autonomy_armed: false,
             sources: Vec::new(),
             output: Output::STOP,
             fault_clears: VecDeque::new(),
             lights: None,
             rejections: [0; REJECTION_COUNTERS],
             urgent_stop: false,
+            last_stop: None,
+            next_lease: (u64::from(instance) << 32) | 1,
+            history: VecDeque::with_capacity(HISTORY),
         }
     }
 
-    /// The latched stop, if any.
-    pub fn latch(&self) -> Option<&Latch> {
-        self.latch.as_ref()
+    /// The stops that hold the robot, oldest first.
+    pub fn stops(&self) -> &[Stop] {
+        &self.stops
+    }
+
+    /// Whether a stop's cause persists (it cannot be released yet).
+    pub fn persists(&self, stop: &Stop) -> bool {
+        match stop.cause {
+            StopCause::Heartbeat => stop.source.is_some_and(|port| {
+                self.sources
+                    .iter()
+                    .any(|s| s.key.port == port && s.heartbeat.is_some_and(|h| h.silent))
+            }),
+            StopCause::Client
+            | StopCause::GatewayStart
+            | StopCause::Overrun
+            | StopCause::Runaway => false,
+            StopCause::LinkLost
+            | StopCause::ChassisSilent
+            | StopCause::ChassisEstop
+            | StopCause::ChassisFault
+            | StopCause::RcOverride
+            | StopCause::LinkFault => self.present.contains(&stop.cause),
+        }
+    }
+
+    /// Whether a gap's cause is present now.
+    pub fn present(&self, cause: StopCause) -> bool {
+        self.present.contains(&cause)
     }
 
     /// Whether autonomy may drive.
@@ -290,6 +406,11 @@ impl Arbiter {
         self.output
     }
 
+    /// The latest events, oldest first, with when.
+    pub fn history(&self) -> impl Iterator<Item = &(Duration, String)> {
+        self.history.iter()
+    }
+
     /// Counts a request refused before it reached the arbiter (malformed on the wire).
     pub fn count_rejection(&mut self, rejection: &Rejection) {
         self.rejections[usize::from(rejection.kind().raw())] += 1;
@@ -301,15 +422,16 @@ impl Arbiter {
         std::mem::take(&mut self.urgent_stop)
     }
 
-    /// The source sending, by class, if one holds it with a fresh command.
+    /// The source sending, by class, if one holds a lease with a fresh command and no stop
+    /// holds the robot.
     pub fn selected(&self, now: Duration) -> Option<(&Source, Class)> {
-        if self.latch.is_some() {
+        if !self.stops.is_empty() {
             return None;
         }
         let holder = |class: Class| {
             self.sources
                 .iter()
-                .find(|s| s.holding == Some(class) && s.fresh_command(now).is_some())
+                .find(|s| s.class() == Some(class) && s.fresh_command(now).is_some())
                 .map(|s| (s, class))
         };
         holder(Class::Teleop).or_else(|| {
@@ -321,84 +443,78 @@ impl Arbiter {
         })
     }
 
-    /// Handles one request at `now`.
+    /// Records an event: the audit log and the status' history.
+    fn audit(&mut self, now: Duration, event: String) {
+        info!("audit t={:.3}s: {event}", now.as_secs_f64());
+        if self.history.len() == HISTORY {
+            self.history.pop_front();
+        }
+        self.history.push_back((now, event));
+    }
+
+    /// Handles one request at `now` from `origin`, sent at `sent` by the sender's clock (the
+    /// same CLOCK_MONOTONIC on one host).
     pub fn handle_request(
         &mut self,
         now: Duration,
-        client: &ClientKey,
+        origin: &Origin,
         request: Request,
+        sent: Duration,
     ) -> Answer {
         self.expire(now);
-        let answer = self.decide(now, client, request);
+        let answer = match request {
+            // Never refused, never limited, never needs a client slot.
+            Request::Stop { reason } => {
+                self.latch(now, &origin.key.name, StopCause::Client, &reason, None);
+                Ok(Accepted::default())
+            }
+            other => self.decide(now, origin, other, sent),
+        };
         if let Err(rejection) = &answer {
             self.count_rejection(rejection);
         }
         answer
     }
 
-    fn decide(&mut self, now: Duration, client: &ClientKey, request: Request) -> Answer {
-        let index = self.source_index(client, now)?;
-        self.sources[index].last_seen = now;
-        self.sources[index].requests += 1;
-        let accepted = Ok(Accepted { clamped: false });
+    fn decide(
+        &mut self,
+        now: Duration,
+        origin: &Origin,
+        request: Request,
+        sent: Duration,
+    ) -> Answer {
+        let index = self.source_index(&origin.key, now)?;
+        self.spend(index, now)?;
+        let source = &mut self.sources[index];
+        source.last_seen = now;
+        source.requests += 1;
+        if let Some(heartbeat) = source.heartbeat.as_mut() {
+            heartbeat.silent = false;
+        }
+        let accepted = Ok(Accepted::default());
         match request {
             Request::Stop { reason } => {
-                self.latch_stop(now, &client.name, &reason);
+                self.latch(now, &origin.key.name, StopCause::Client, &reason, None);
                 accepted
             }
+            Request::TakeControl { class } => self.take_control(now, index, class),
             Request::Drive {
-                class,
+                lease,
                 linear,
                 angular,
                 ttl,
-            } => self.drive(now, index, class, linear, angular, ttl),
-            Request::Release => {
-                if let Some(latch) = self.latch.take() {
-                    info!(
-                        "{}: stop released by {} (latched by {}: {})",
-                        secs(now),
-                        client.name,
-                        latch.by,
-                        latch.reason
-                    );
-                    for source in &mut self.sources {
-                        source.command = None;
-                    }
-                }
-                let source = &mut self.sources[index];
-                if let Some(class) = source.holding.take() {
-                    info!(
-                        "{}: {} {} released control",
-                        secs(now),
-                        class.name(),
-                        client.name
-                    );
-                }
-                source.command = None;
-                self.disarm_autonomy(now, "a release");
-                accepted
-            }
+            } => self.drive(now, index, lease, (linear, angular), ttl, sent),
+            Request::Release { target } => self.release(now, index, origin, &target),
             Request::Relinquish => {
-                let source = &mut self.sources[index];
-                if let Some(class) = source.holding.take() {
-                    info!(
-                        "{}: {} {} relinquished control",
-                        secs(now),
-                        class.name(),
-                        client.name
-                    );
-                }
-                source.command = None;
+                self.end_lease(now, index, "relinquished");
                 accepted
             }
             Request::Resume => {
-                if let Some(latch) = &self.latch {
-                    return Err(Rejection::Latched {
-                        by: latch.by.clone(),
-                    });
+                if !self.stops.is_empty() {
+                    return Err(self.latched());
                 }
                 if !self.autonomy_armed {
-                    info!("{}: autonomy armed by {}", secs(now), client.name);
+                    self.audit(now, format!("autonomy armed by {}", origin.key.name));
                 }
                 self.autonomy_armed = true;
                 accepted
@@ -415,7 +531,7 @@ impl Arbiter {
                     }
                     Some(code) => vec![code],
                 };
-                info!("{}: {} clears faults {codes:?}", secs(now), client.name);
+                self.audit(now, format!("{} clears faults {codes:?}", origin.key.name));
                 self.fault_clears = codes
                     .into_iter()
                     .map(|code| (code, FAULT_CLEAR_FRAMES))
@@ -433,13 +549,18 @@ impl Arbiter {
                     )));
                 } else {
                     if self.sources[index].heartbeat.is_none() {
-                        info!(
-                            "{}: {} is a heartbeat stop source ({period:?})",
-                            secs(now),
-                            client.name
+                        self.audit(
+                            now,
+                            format!(
+                                "{} is a heartbeat stop source ({period:?})",
+                                origin.key.name
+                            ),
                         );
                     }
-                    self.sources[index].heartbeat = Some(period);
+                    self.sources[index].heartbeat = Some(Heartbeat {
+                        period,
+                        silent: false,
+                    });
                 }
                 accepted
             }
@@ -448,22 +569,21 @@ impl Arbiter {
         }
     }
 
-    fn drive(
-        &mut self,
-        now: Duration,
-        index: usize,
-        class: Class,
-        linear: f64,
-        angular: f64,
-        ttl: Option<Duration>,
-    ) -> Answer {
-        if !(linear.is_finite() && angular.is_finite()) {
-            return Err(Rejection::NotFinite);
+    /// The rejection that lists what holds the robot.
+    fn latched(&self) -> Rejection {
+        Rejection::Latched {
+            stops: self.describe(self.stops.iter()),
         }
-        if let Some(latch) = &self.latch {
-            return Err(Rejection::Latched {
-                by: latch.by.clone(),
-            });
+    }
+
+    fn describe<'a>(&self, stops: impl Iterator<Item = &'a Stop>) -> String {
+        let listed: Vec<String> = stops.map(Stop::to_string).collect();
+        listed.join("; ")
+    }
+
+    fn take_control(&mut self, now: Duration, index: usize, class: Class) -> Answer {
+        if !self.stops.is_empty() {
+            return Err(self.latched());
         }
         if class == Class::Autonomy && !self.autonomy_armed {
             return Err(Rejection::AutonomyDisarmed);
@@ -472,13 +592,74 @@ impl Arbiter {
             .sources
             .iter()
             .enumerate()
-            .find(|(i, s)| *i != index && s.holding == Some(class))
+            .find(|(i, s)| *i != index && s.class() == Some(class))
             .map(|(_, s)| s)
         {
             return Err(Rejection::Held {
                 class,
                 holder: holder.key.name.clone(),
             });
+        }
+        if let Some(lease) = self.sources[index].lease.filter(|l| l.class == class) {
+            return Ok(Accepted {
+                clamped: false,
+                lease: Some(lease.id),
+            });
+        }
+        let id = self.next_lease;
+        self.next_lease += 1;
+        let source = &mut self.sources[index];
+        source.lease = Some(Lease {
+            id,
+            class,
+            granted: now,
+            command: None,
+        });
+        source.revoked = None;
+        let name = source.key.name.clone();
+        self.audit(
+            now,
+            format!("{name} takes control as {class} (lease {id:x})"),
+        );
+        if class == Class::Teleop {
+            self.disarm_autonomy(now, &format!("teleop {name} took over"));
+        }
+        Ok(Accepted {
+            clamped: false,
+            lease: Some(id),
+        })
+    }
+
+    fn drive(
+        &mut self,
+        now: Duration,
+        index: usize,
+        lease_id: u64,
+        (linear, angular): (f64, f64),
+        ttl: Option<Duration>,
+        sent: Duration,
+    ) -> Answer {
+        if !linear.is_finite() || !angular.is_finite() {
+            return Err(Rejection::NotFinite);
+        }
+        let source = &self.sources[index];
+        let Some(lease) = source.lease.filter(|lease| lease.id == lease_id) else {
+            return Err(match &source.revoked {
+                Some(cause) => Rejection::Revoked {
+                    cause: cause.clone(),
+                },
+                None => Rejection::NoControl,
+            });
+        };
+        let class = lease.class;
+        let life = ttl.map_or(self.config.max_age(class), |ttl| {
+            ttl.min(self.config.max_age(class))
+        });
+        // A command lives from when it was sent, not from when it was read.
+        let sent = sent.min(now);
+        let age = now - sent;
+        if age > life {
+            return Err(Rejection::Stale { age, life });
         }
         let caps = self.config.caps(class);
         let (linear_cap, angular_cap) = (
@@ -488,75 +669,205 @@ impl Arbiter {
         let clamped_linear = linear.clamp(-linear_cap, linear_cap);
         let clamped_angular = angular.clamp(-angular_cap, angular_cap);
         let clamped = clamped_linear != linear || clamped_angular != angular;
-        let age = ttl.map_or(self.config.max_age(class), |ttl| {
-            ttl.min(self.config.max_age(class))
-        });
-        let source = &mut self.sources[index];
-        if let Some(previous) = source.holding.filter(|held| *held != class) {
-            info!(
-                "{}: {} switches from {} to {}",
-                secs(now),
-                source.key.name,
-                previous.name(),
-                class.name()
-            );
-        }
-        if source.holding != Some(class) {
-            info!(
-                "{}: {} {} takes control",
-                secs(now),
-                class.name(),
-                source.key.name
-            );
-        }
-        source.holding = Some(class);
-        source.command = Some(Command {
-            class,
-            linear: clamped_linear,
-            angular: clamped_angular,
-            clamped,
-            expires: now + age,
-        });
-        if class == Class::Teleop {
-            let name = source.key.name.clone();
-            self.disarm_autonomy(now, &format!("teleop {name} took over"));
-        }
-        Ok(Accepted { clamped })
-    }
-
-    fn latch_stop(&mut self, now: Duration, by: &str, reason: &str) {
-        if self.latch.is_none() {
-            info!("{}: STOP latched by {by}: {reason}", secs(now));
-            self.latch = Some(Latch {
-                by: by.to_owned(),
-                reason: reason.to_owned(),
-                at: now,
+        if let Some(lease) = self.sources[index].lease.as_mut() {
+            lease.command = Some(Command {
+                linear: clamped_linear,
+                angular: clamped_angular,
+                clamped,
+                expires: sent + life,
             });
         }
-        for source in &mut self.sources {
-            source.holding = None;
-            source.command = None;
+        Ok(Accepted {
+            clamped,
+            lease: None,
+        })
+    }
+
+    fn release(
+        &mut self,
+        now: Duration,
+        index: usize,
+        origin: &Origin,
+        target: &ReleaseTarget,
+    ) -> Answer {
+        let name = &origin.key.name;
+        if self.last_stop == Some(now) {
+            return Err(Rejection::NotAllowed {
+                why: "a stop arrived at the same instant: the stop wins".into(),
+            });
         }
-        self.output = Output::STOP;
+        let own = match target {
+            ReleaseTarget::Own => true,
+            ReleaseTarget::Owner(owner) => owner == name,
+            ReleaseTarget::All => false,
+        };
+        if !own && !origin.operator {
+            return Err(Rejection::NotAllowed {
+                why: format!(
+                    "only an operator releases others' stops (this is {name}); held by: {}",
+                    self.describe(self.stops.iter())
+                ),
+            });
+        }
+        let named = |stop: &Stop| match target {
+            ReleaseTarget::Own => stop.owner == *name,
+            ReleaseTarget::Owner(owner) => stop.owner == *owner,
+            ReleaseTarget::All => true,
+        };
+        if !self.stops.is_empty() && !self.stops.iter().any(named) {
+            return Err(Rejection::NotAllowed {
+                why: format!(
+                    "no stop of {} to release; held by: {}",
+                    match target {
+                        ReleaseTarget::Owner(owner) => owner.as_str(),
+                        ReleaseTarget::Own | ReleaseTarget::All => name.as_str(),
+                    },
+                    self.describe(self.stops.iter())
+                ),
+            });
+        }
+        let persisting: Vec<&Stop> = self
+            .stops
+            .iter()
+            .filter(|stop| named(stop) && self.persists(stop))
+            .collect();
+        if !persisting.is_empty() {
+            return Err(Rejection::CausePersists {
+                stops: format!(
+                    "{} (the cause persists)",
+                    self.describe(persisting.into_iter())
+                ),
+            });
+        }
+        let (released, kept): (Vec<Stop>, Vec<Stop>) =
+            std::mem::take(&mut self.stops).into_iter().partition(named);
+        self.stops = kept;
+        for stop in &released {
+            self.audit(now, format!("stop released by {name}: {stop}"));
+        }
+        self.end_lease(now, index, "released");
+        self.disarm_autonomy(now, "a release");
+        Ok(Accepted::default())
+    }
+
+    fn end_lease(&mut self, now: Duration, index: usize, why: &str) {
+        let source = &mut self.sources[index];
+        if let Some(lease) = source.lease.take() {
+            source.revoked = Some(why.to_owned());
+            let name = source.key.name.clone();
+            self.audit(
+                now,
+                format!("{} {name} gave up control ({why})", lease.class),
+            );
+        }
+    }
+
+    /// Ends every lease (of `class`, or all): its holder must take control again.
+    fn revoke(&mut self, now: Duration, class: Option<Class>, why: &str) {
+        let mut ended = Vec::new();
+        for source in &mut self.sources {
+            if let Some(lease) = source.lease
+                && class.is_none_or(|class| lease.class == class)
+            {
+                source.lease = None;
+                source.revoked = Some(why.to_owned());
+                ended.push(format!("{} {}", lease.class, source.key.name));
+            }
+        }
+        if !ended.is_empty() {
+            self.audit(
+                now,
+                format!("control revoked ({why}): {}", ended.join(", ")),
+            );
+        }
+    }
+
+    /// Latches a stop (owner, cause, reason): zero at once, every lease revoked, autonomy
+    /// disarmed. The same owner and cause again only refreshes the reason.
+    fn latch(
+        &mut self,
+        now: Duration,
+        owner: &str,
+        cause: StopCause,
+        reason: &str,
+        source: Option<u128>,
+    ) {
+        self.last_stop = Some(now);
         self.urgent_stop = true;
+        self.output = Output::STOP;
+        let known = self
+            .stops
+            .iter_mut()
+            .find(|stop| stop.owner == owner && stop.cause == cause);
+        let why = format!("{owner} ({cause}): {reason}");
+        match known {
+            Some(stop) => {
+                stop.reason = reason.to_owned();
+                stop.source = source;
+            }
+            None => {
+                let owner = if self.stops.len() >= MAX_STOPS {
+                    OTHERS
+                } else {
+                    owner
+                };
+                if let Some(merged) = self
+                    .stops
+                    .iter_mut()
+                    .find(|s| s.owner == owner && s.cause == cause)
+                {
+                    merged.reason = reason.to_owned();
+                } else {
+                    self.stops.push(Stop {
+                        owner: owner.to_owned(),
+                        cause,
+                        reason: reason.to_owned(),
+                        at: now,
+                        source,
+                    });
+                }
+                self.audit(now, format!("STOP latched by {why}"));
+            }
+        }
+        self.revoke(now, None, &format!("stop by {why}"));
         self.disarm_autonomy(now, "the stop");
+    }
+
+    /// A gap: the gateway lost control or knowledge of the chassis. Latches a stop owned by the
+    /// gateway with `cause`; while `present`, the cause persists and the stop cannot be
+    /// released.
+    pub fn handle_gap(&mut self, now: Duration, cause: StopCause, detail: &str, present: bool) {
+        if present && !self.present.contains(&cause) {
+            self.present.push(cause);
+        }
+        self.latch(now, GATEWAY, cause, detail, None);
+    }
+
+    /// A gap's cause is gone: its stop can be released (it is not released by itself).
+    pub fn handle_gap_cleared(&mut self, now: Duration, cause: StopCause) {
+        if let Some(at) = self.present.iter().position(|c| *c == cause) {
+            self.present.swap_remove(at);
+            self.audit(now, format!("{cause} cleared: the stop can be released"));
+        }
     }
 
     fn disarm_autonomy(&mut self, now: Duration, why: &str) {
         if self.autonomy_armed && !self.config.auto_resume {
-            info!(
-                "{}: autonomy disarmed after {why}: resume to re-arm",
-                secs(now)
+            self.audit(
+                now,
+                format!("autonomy disarmed after {why}: resume to re-arm"),
             );
             self.autonomy_armed = false;
         }
+        self.revoke(
+            now,
+            Some(Class::Autonomy),
+            &format!("autonomy disarmed after {why}"),
+        );
     }
 
     fn source_index(&mut self, client: &ClientKey, now: Duration) -> Result<usize, Rejection> {
-        if client.name.is_empty() {
-            return Err(Rejection::Malformed("client name is empty".into()));
-        }
-        if let Some(index) = self.sources.iter().position(|s| s.key == *client) {
+        if let Some(index) = self.sources.iter().position(|s| s.key.port == client.port) {
             return Ok(index);
         }
         if self.sources.len() >= MAX_SOURCES {
@@ -565,7 +876,7 @@ impl Arbiter {
                 .sources
                 .iter()
                 .enumerate()
-                .filter(|(_, s)| s.holding.is_none() && s.heartbeat.is_none())
+                .filter(|(_, s)| s.lease.is_none() && s.heartbeat.is_none())
                 .min_by_key(|(_, s)| s.last_seen)
                 .map(|(i, _)| i)
                 .ok_or(Rejection::TooManyClients)?;
@@ -573,17 +884,38 @@ impl Arbiter {
         }
         self.sources.push(Source {
             key: client.clone(),
-            holding: None,
-            command: None,
+            lease: None,
+            revoked: None,
             heartbeat: None,
+            budget: Budget {
+                tokens: f64::from(self.config.request_burst),
+                at: now,
+            },
             last_seen: now,
             requests: 0,
         });
         Ok(self.sources.len() - 1)
     }
 
-    /// The client processes of `node` are gone (dead-process detection): their control is
-    /// released at once, and a heartbeat source among them latches the stop.
+    /// Takes one request from the source's budget, or refuses it.
+    fn spend(&mut self, index: usize, now: Duration) -> Result<(), Rejection> {
+        let (rate, burst) = (
+            self.config.request_rate_hz,
+            f64::from(self.config.request_burst),
+        );
+        let budget = &mut self.sources[index].budget;
+        let refill = now.saturating_sub(budget.at).as_secs_f64() * rate;
+        budget.tokens = (budget.tokens + refill).min(burst);
+        budget.at = now;
+        if budget.tokens < 1.0 {
+            return Err(Rejection::RateLimited { rate });
+        }
+        budget.tokens -= 1.0;
+        Ok(())
+    }
+
+    /// The client processes of `node` are gone (dead-process detection): their control ends at
+    /// once, and a heartbeat source among them latches a stop.
     pub fn handle_node_gone(&mut self, now: Duration, node: u128) {
         let gone: Vec<Source> = self
             .sources
@@ -593,49 +925,54 @@ impl Arbiter {
             .collect();
         self.sources.retain(|s| s.key.node != node);
         for source in gone {
-            if let Some(class) = source.holding {
-                info!(
-                    "{}: {} {} died: control released",
-                    secs(now),
-                    class.name(),
-                    source.key.name
+            if let Some(lease) = source.lease {
+                self.audit(
+                    now,
+                    format!("{} {} died: control ended", lease.class, source.key.name),
                 );
                 self.disarm_autonomy(now, "a driving client died");
             }
             if source.heartbeat.is_some() {
-                self.latch_stop(now, &source.key.name, "heartbeat source died");
+                self.latch(
+                    now,
+                    &source.key.name,
+                    StopCause::Heartbeat,
+                    "heartbeat source died",
+                    None,
+                );
             }
         }
     }
 
-    /// Drops stale holds and latches the stop for missed heartbeats.
+    /// Ends stale leases and latches a stop for each newly missed heartbeat.
     fn expire(&mut self, now: Duration) {
+        let mut stale = Vec::new();
         let mut missed = Vec::new();
-        for source in &mut self.sources {
-            if let Some(class) = source.holding
-                && source.fresh_command(now).is_none()
-            {
-                info!(
-                    "{}: {} {} went stale: control released",
-                    secs(now),
-                    class.name(),
-                    source.key.name
-                );
-                source.holding = None;
+        for (index, source) in self.sources.iter_mut().enumerate() {
+            if let Some(lease) = source.lease {
+                let life = self.config.max_age(lease.class);
+                let quiet = match lease.command {
+                    Some(command) => now >= command.expires,
+                    None => now >= lease.granted + life,
+                };
+                if quiet {
+                    stale.push(index);
+                }
             }
-            if let Some(period) = source.heartbeat
-                && now.saturating_sub(source.last_seen) > period
+            if let Some(heartbeat) = source.heartbeat.as_mut()
+                && !heartbeat.silent
+                && now.saturating_sub(source.last_seen) > heartbeat.period
             {
-                source.heartbeat = None;
-                missed.push((source.key.name.clone(), period));
+                heartbeat.silent = true;
+                missed.push((source.key.name.clone(), source.key.port, heartbeat.period));
             }
         }
-        for (name, period) in missed {
-            self.latch_stop(
-                now,
-                &name,
-                &format!("heartbeat missed (period {} ms)", period.as_millis()),
-            );
+        for index in stale {
+            self.end_lease(now, index, "stale: no command within its life");
+        }
+        for (name, port, period) in missed {
+            let reason = format!("heartbeat missed (period {} ms)", period.as_millis());
+            self.latch(now, &name, StopCause::Heartbeat, &reason, Some(port));
         }
     }
 
@@ -653,7 +990,7 @@ impl Arbiter {
             }
             None => FaultClear::None,
         };
-        if self.latch.is_some() {
+        if !self.stops.is_empty() {
             self.output = Output {
                 fault_clear,
                 ..Output::STOP
@@ -704,10 +1041,6 @@ fn ramp(current: f64, target: f64, acceleration: f64, deceleration: f64, dt: f64
         let step = (target - current).abs().min(acceleration * dt);
         current + (target - current).signum() * step
     }
-}
-
-fn secs(now: Duration) -> String {
-    format!("t={:.3}s", now.as_secs_f64())
 }
 
 #[cfg(test)]

@@ -30,6 +30,8 @@ pub struct GatewayConfig {
     pub timing: Timing,
     /// Who drives: ages, caps, rate limits, autonomy re-arming.
     pub arbiter: ArbiterConfig,
+    /// Gap detection beyond the chassis' own reports.
+    pub safety: SafetyConfig,
     /// Remote peers through zenoh.
     pub zenoh: ZenohConfig,
     /// The simulated chassis (`transport = "sim"`).
@@ -64,6 +66,28 @@ impl Default for Timing {
     }
 }
 
+/// Gap detection beyond the chassis' own reports: the runaway check.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SafetyConfig {
+    /// How much faster than commanded (beyond braking) the chassis may go, m/s.
+    pub runaway_tolerance: f64,
+    /// For how long, ms, before it is a runaway.
+    pub runaway_time_ms: u64,
+    /// The braking the chassis manages at least after a command drops, m/s².
+    pub runaway_braking: f64,
+}
+
+impl Default for SafetyConfig {
+    fn default() -> Self {
+        Self {
+            runaway_tolerance: 0.3,
+            runaway_time_ms: 500,
+            runaway_braking: 0.5,
+        }
+    }
+}
+
 impl Default for GatewayConfig {
     fn default() -> Self {
         Self {
@@ -73,6 +97,7 @@ impl Default for GatewayConfig {
             max_angular: DEFAULT_MAX_ANGULAR_SPEED,
             timing: Timing::default(),
             arbiter: ArbiterConfig::default(),
+            safety: SafetyConfig::default(),
             zenoh: ZenohConfig::default(),
             sim: SimParams::default(),
         }
@@ -137,6 +162,18 @@ impl GatewayConfig {
             )));
         }
         self.arbiter.validate().map_err(ConfigError::Invalid)?;
+        let safety = &self.safety;
+        if !(safety.runaway_tolerance.is_finite()
+            && safety.runaway_tolerance > 0.0
+            && safety.runaway_braking.is_finite()
+            && safety.runaway_braking > 0.0
+            && safety.runaway_time_ms > 0)
+        {
+            return Err(ConfigError::Invalid(
+                "safety.runaway_tolerance, runaway_time_ms and runaway_braking must be positive"
+                    .into(),
+            ));
+        }
         self.zenoh
             .validate()
             .map_err(|error| ConfigError::Invalid(error.to_string()))?;

@@ -11,19 +11,23 @@ use std::collections::HashSet;
 use std::time::Duration;
 
 use scout_interface::control::{
-    ControlRequest, ControlResponse, LightsControl, Request, SourcePayload, StatusPayload,
-    node_from_halves,
+    ControlRequest, ControlResponse, EventPayload, LightsControl, MAX_STATUS_STOPS, Rejection,
+    Request, RequestKind, SourcePayload, StatusPayload, StopCause, StopPayload,
 };
+use scout_interface::services::Way;
 use scout_interface::state::{LinkState, StatePayload};
 use scout_interface::{FixedText, Transport};
 use scout_protocol::link::RxEvent;
 use scout_protocol::sequence::RollingCounter;
 use scout_protocol::units::{self, MAX_LINEAR_SPEED};
-use scout_protocol::{Counted, LightCommand, Message, MotionCommand};
+use scout_protocol::{
+    ChassisState, ControlMode, Counted, LightCommand, Message, MotionCommand, Severity,
+    SystemStatus,
+};
 use tracing::{debug, info, warn};
 
-use crate::arbiter::{Arbiter, ClientKey, LightsSetting, Output};
-use crate::config::GatewayConfig;
+use crate::arbiter::{Arbiter, LightsSetting, Origin, Output};
+use crate::config::{GatewayConfig, SafetyConfig};
 use crate::state::{Publish, StateTracker};
 
 /// The state is published at least this often, frames or not: a subscriber sees that the
@@ -35,6 +39,19 @@ pub const STATUS_HEARTBEAT: Duration = Duration::from_secs(1);
 
 /// The first wait before reopening a failed port; it doubles up to `reconnect_max_ms`.
 pub const FIRST_BACKOFF: Duration = Duration::from_millis(50);
+
+/// The chassis stops after this long without a valid motion command: feedback silent for
+/// longer, or a tick later than this, is a gap.
+pub const CHASSIS_TIMEOUT: Duration = Duration::from_millis(500);
+
+/// How the previous gateway of this robot ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Start {
+    /// It exited cleanly (or there was none): autonomy disarmed, no stop.
+    Clean,
+    /// It crashed or was killed: a `gateway_start` stop holds until released.
+    AfterUncleanExit,
+}
 
 /// Something to publish, borrowed from the core (the payloads are copied once, into shared
 /// memory).
@@ -102,11 +119,33 @@ pub struct Core {
     watched: HashSet<u128>,
     new_clients: Vec<u128>,
     stats: CoreStats,
+    opened_at: Duration,
+    last_lateness: Duration,
+    safety: SafetyConfig,
+    runaway: Runaway,
+}
+
+/// Watching the chassis move faster than commanded.
+#[derive(Debug, Clone, Copy, Default)]
+struct Runaway {
+    /// The fastest the chassis may still be going, braking since the command dropped, m/s.
+    envelope: f64,
+    /// When the feedback left the envelope.
+    since: Option<Duration>,
+    last: Option<Duration>,
 }
 
 impl Core {
-    /// The core for `config`, talking to `device` over `transport`, starting at `now`.
-    pub fn new(config: &GatewayConfig, transport: Transport, device: &str, now: Duration) -> Self {
+    /// The core for `config`, talking to `device` over `transport`, starting at `now` after a
+    /// `start`; `instance` tells this gateway's leases from another's.
+    pub fn new(
+        config: &GatewayConfig,
+        transport: Transport,
+        device: &str,
+        now: Duration,
+        start: Start,
+        instance: u32,
+    ) -> Self {
         let timing = &config.timing;
         let light_period_ms = match transport {
             Transport::Serial => timing.serial_light_period_ms,
@@ -121,7 +160,7 @@ impl Core {
             stop_cycles: timing.stop_cycles,
             reconnect_max: Duration::from_millis(timing.reconnect_max_ms),
             tracker: StateTracker::new(&config.name, transport, device, config.max_angular),
-            arbiter: Arbiter::new(config.arbiter.clone(), config.max_angular),
+            arbiter: Self::new_arbiter(config, now, start, instance),
             link: Link::Closed {
                 reopen_at: now,
                 backoff: FIRST_BACKOFF,
@@ -141,6 +180,101 @@ impl Core {
             watched: HashSet::new(),
             new_clients: Vec::new(),
             stats: CoreStats::default(),
+            opened_at: now,
+            last_lateness: Duration::ZERO,
+            safety: config.safety.clone(),
+            runaway: Runaway::default(),
+        }
+    }
+
+    fn new_arbiter(config: &GatewayConfig, now: Duration, start: Start, instance: u32) -> Arbiter {
+        let mut arbiter = Arbiter::new(config.arbiter.clone(), config.max_angular, instance);
+        match start {
+            Start::Clean => {}
+            Start::AfterUncleanExit => arbiter.handle_gap(
+                now,
+                StopCause::GatewayStart,
+                "the previous gateway exited uncleanly (crash or kill): check the robot, then release",
+                false,
+            ),
+        }
+        arbiter
+    }
+
+    /// Raises a gap when `cause` appears, and lets its stop be released when it goes.
+    fn set_condition(&mut self, now: Duration, cause: StopCause, present: bool, detail: &str) {
+        if present == self.arbiter.present(cause) {
+            return;
+        }
+        if present {
+            self.arbiter.handle_gap(now, cause, detail, true);
+        } else {
+            self.arbiter.handle_gap_cleared(now, cause);
+        }
+        self.status_due = true;
+    }
+
+    /// The chassis' own state: e-stop, faults and RC are gaps while they last.
+    fn observe_system(&mut self, now: Duration, status: &SystemStatus) {
+        let estop = status.state == ChassisState::EStop;
+        self.set_condition(
+            now,
+            StopCause::ChassisEstop,
+            estop,
+            "the chassis is in e-stop",
+        );
+        let faults: Vec<&str> = status
+            .faults
+            .iter()
+            .filter(|f| matches!(f.severity(), Severity::Fault | Severity::Protection))
+            .map(|f| f.name())
+            .collect();
+        let detail = format!("the chassis reports {}", faults.join(", "));
+        self.set_condition(now, StopCause::ChassisFault, !faults.is_empty(), &detail);
+        let rc = status.control_mode == ControlMode::Rc;
+        self.set_condition(
+            now,
+            StopCause::RcOverride,
+            rc,
+            "the RC transmitter took over",
+        );
+    }
+
+    /// The chassis moving faster than commanded (beyond what braking explains), or the wrong
+    /// way, for longer than the configured time, is a runaway.
+    fn observe_motion(&mut self, now: Duration, linear: f64) {
+        let quiet = [
+            StopCause::ChassisEstop,
+            StopCause::RcOverride,
+            StopCause::ChassisFault,
+        ]
+        .iter()
+        .any(|cause| self.arbiter.present(*cause));
+        let command = self.tracker.state().command.linear;
+        let dt = self
+            .runaway
+            .last
+            .map_or(0.0, |last| now.saturating_sub(last).as_secs_f64().min(0.1));
+        self.runaway.last = Some(now);
+        let safety = &self.safety;
+        let braking = self.runaway.envelope - safety.runaway_braking * dt;
+        self.runaway.envelope = command.abs().max(braking);
+        let tolerance = safety.runaway_tolerance;
+        let away = linear.abs() > self.runaway.envelope + tolerance
+            || (linear * command < 0.0 && linear.abs() > tolerance);
+        if quiet || !away {
+            self.runaway.since = None;
+            return;
+        }
+        let since = *self.runaway.since.get_or_insert(now);
+        if now - since >= Duration::from_millis(safety.runaway_time_ms) {
+            let detail = format!(
+                "the chassis moves at {linear:.2} m/s against a command of {command:.2} m/s"
+            );
+            self.arbiter
+                .handle_gap(now, StopCause::Runaway, &detail, false);
+            self.runaway.since = None;
+            self.status_due = true;
         }
     }
 
@@ -174,6 +308,7 @@ impl Core {
     pub fn handle_opened(&mut self, now: Duration) {
         info!("{} {} open", self.transport, self.device());
         self.link = Link::Open;
+        self.opened_at = now;
         let reconnect = std::mem::replace(&mut self.opened_before, true);
         let publish = self.tracker.handle_connected(reconnect);
         self.publish_if(publish);
@@ -210,8 +345,20 @@ impl Core {
 
     /// The port failed (`what`: reading or writing, and why): it is closed and reopened soon.
     pub fn handle_link_failed(&mut self, now: Duration, what: &str) {
+        self.close(now, StopCause::LinkLost, what);
+    }
+
+    /// The CAN bus or adapter failed (a write refused for a full buffer, bus-off,
+    /// error-passive): the port is closed, dropping what was queued, and reopened soon.
+    pub fn handle_link_fault(&mut self, now: Duration, what: &str) {
+        self.close(now, StopCause::LinkFault, what);
+    }
+
+    fn close(&mut self, now: Duration, cause: StopCause, what: &str) {
         if self.link == Link::Open {
             warn!("{} {}: {what}; reopening", self.transport, self.device());
+            let detail = format!("{} {}: {what}", self.transport, self.device());
+            self.set_condition(now, cause, true, &detail);
         }
         self.link = Link::Closed {
             reopen_at: now + FIRST_BACKOFF,
@@ -226,6 +373,26 @@ impl Core {
     pub fn handle_rx(&mut self, now: Duration, event: &RxEvent) {
         let publish = self.tracker.handle_rx(event, now);
         self.publish_if(publish);
+        if publish == Publish::No || self.tracker.link_state() != LinkState::Ok {
+            return;
+        }
+        for cause in [
+            StopCause::LinkLost,
+            StopCause::LinkFault,
+            StopCause::ChassisSilent,
+        ] {
+            self.set_condition(now, cause, false, "");
+        }
+        if let RxEvent::Message(counted) = event {
+            match &counted.message {
+                Message::SystemStatus(status) => self.observe_system(now, status),
+                Message::MotionFeedback(motion) => self.observe_motion(now, motion.linear()),
+                Message::MotorFeedback(_)
+                | Message::LightFeedback(_)
+                | Message::MotionCommand(_)
+                | Message::LightCommand(_) => {}
+            }
+        }
     }
 
     /// The stream decoder has thrown away this many bytes so far.
@@ -233,21 +400,32 @@ impl Core {
         self.tracker.set_discarded_bytes(total);
     }
 
-    /// A client's request; every request gets an answer.
-    pub fn handle_request(&mut self, now: Duration, wire: &ControlRequest) -> ControlResponse {
+    /// A client's request, from `origin` (as the transport tells) on request service `way`;
+    /// every request gets an answer, and a stop is never refused.
+    pub fn handle_request(
+        &mut self,
+        now: Duration,
+        origin: &Origin,
+        way: Way,
+        wire: &ControlRequest,
+    ) -> ControlResponse {
         self.stats.requests += 1;
         self.status_due = true;
-        let client = ClientKey {
-            name: wire.client.as_str().to_owned(),
-            node: node_from_halves(wire.node),
-        };
+        let client = &origin.key;
         if self.watched.insert(client.node) {
             self.new_clients.push(client.node);
         }
-        let answer = match Request::decode(wire) {
+        let decoded = match (way, RequestKind::from_raw(wire.kind)) {
+            (Way::Stop, Some(RequestKind::Stop)) | (Way::Control, _) => Request::decode(wire),
+            (Way::Stop, _) => Err(Rejection::Malformed(
+                "the stop service takes stops only: send the rest on the control service".into(),
+            )),
+        };
+        let sent = Duration::from_nanos(wire.sent_ns);
+        let answer = match decoded {
             Ok(request) => {
                 let reset_odometry = request == Request::ResetOdometry;
-                let answer = self.arbiter.handle_request(now, &client, request);
+                let answer = self.arbiter.handle_request(now, origin, request, sent);
                 if reset_odometry && answer.is_ok() {
                     info!("odometry reset by {}", client.name);
                     let publish = self.tracker.reset_odometry();
@@ -310,6 +488,7 @@ impl Core {
             }
         }
         if now >= self.next_command {
+            self.check_silence(now);
             let output = match self.shutdown.as_mut() {
                 Some(left) => {
                     *left = left.saturating_sub(1);
@@ -388,6 +567,25 @@ impl Core {
         deadline
     }
 
+    /// Feedback silent for longer than the chassis' command timeout is a gap.
+    fn check_silence(&mut self, now: Duration) {
+        if self.link != Link::Open {
+            return;
+        }
+        let since = self
+            .tracker
+            .last_feedback()
+            .unwrap_or(self.opened_at)
+            .max(self.opened_at);
+        if now.saturating_sub(since) > CHASSIS_TIMEOUT {
+            let detail = format!(
+                "no feedback from the chassis for {} ms",
+                now.saturating_sub(since).as_millis()
+            );
+            self.set_condition(now, StopCause::ChassisSilent, true, &detail);
+        }
+    }
+
     fn device(&self) -> &str {
         self.tracker.state().link.device.as_str()
     }
@@ -402,7 +600,16 @@ impl Core {
     /// period is skipped rather than sent late in a burst.
     fn advance_schedule(&mut self, now: Duration) {
         let lateness = now - self.next_command;
+        self.last_lateness = lateness;
         self.stats.max_lateness = self.stats.max_lateness.max(lateness);
+        if lateness > CHASSIS_TIMEOUT {
+            let detail = format!(
+                "a motion command went out {} ms late: the chassis stopped by its timeout",
+                lateness.as_millis()
+            );
+            self.arbiter
+                .handle_gap(now, StopCause::Overrun, &detail, false);
+        }
         self.next_command += self.period;
         while self.next_command <= now {
             self.next_command += self.period;
@@ -447,12 +654,27 @@ impl Core {
             robot: FixedText::new(&self.robot),
             ..StatusPayload::default()
         };
-        if let Some(latch) = arbiter.latch() {
-            status.latched = true;
-            status.latched_by = FixedText::new(&latch.by);
-            status.latched_reason = FixedText::new(&latch.reason);
-            status.latched_age_ms = millis(now.saturating_sub(latch.at));
+        status.stop_total = arbiter.stops().len() as u32;
+        for (slot, stop) in status.stops.iter_mut().zip(arbiter.stops()) {
+            *slot = StopPayload {
+                owner: FixedText::new(&stop.owner),
+                cause: stop.cause.raw(),
+                persists: arbiter.persists(stop),
+                reason: FixedText::new(&stop.reason),
+                age_ms: millis(now.saturating_sub(stop.at)),
+            };
         }
+        debug_assert!(status.stops().len() <= MAX_STATUS_STOPS);
+        for (slot, (at, text)) in status.events.iter_mut().zip(arbiter.history()) {
+            *slot = EventPayload {
+                age_ms: millis(now.saturating_sub(*at)),
+                text: FixedText::new(text),
+            };
+            status.event_count += 1;
+        }
+        status.tick_lateness_ms = millis(self.last_lateness);
+        status.tick_max_lateness_ms = millis(self.stats.max_lateness);
+        status.ticks_missed = self.stats.missed_ticks;
         if let Some((source, class)) = arbiter.selected(now) {
             status.selected_class = class.raw();
             status.selected_client = FixedText::new(&source.key.name);
@@ -468,7 +690,8 @@ impl Core {
             *slot = SourcePayload {
                 client: FixedText::new(&source.key.name),
                 class: source.class().map_or(0, |class| class.raw()),
-                holding: source.holding.is_some(),
+                holding: source.lease().is_some(),
+                lease: source.lease().unwrap_or(0),
                 heartbeat_ms: source.heartbeat().map_or(0, |p| p.as_millis() as u32),
                 requests: source.requests,
                 age_ms: millis(now.saturating_sub(source.last_seen)),

@@ -6,15 +6,24 @@
 use std::time::Duration;
 
 use proptest::prelude::*;
-use scout_interface::control::{Accepted, ControlRequest, Rejected, Request};
+use scout_interface::control::{
+    Accepted, ControlRequest, Rejected, RejectionKind, ReleaseTarget, Request, StopCause,
+};
+use scout_interface::services::Way;
 use scout_interface::state::LinkState;
 use scout_interface::{Class, LightsSetting, StatePayload, StatusPayload, Transport};
 use scout_protocol::link::RxEvent;
-use scout_protocol::{Counted, Light, LightCommand, LightMode, Message, MotionCommand};
+use scout_protocol::{
+    Counted, Light, LightCommand, LightMode, Message, MotionCommand, MotionFeedback,
+};
+use scout_sim::chassis::{Injection, Protection};
 use scout_sim::{Chassis, SimParams};
 
+use crate::arbiter::{ClientKey, Origin};
 use crate::config::GatewayConfig;
-use crate::core::{Core, FIRST_BACKOFF, Publication, STATE_HEARTBEAT, STATUS_HEARTBEAT};
+use crate::core::{
+    CHASSIS_TIMEOUT, Core, FIRST_BACKOFF, Publication, STATE_HEARTBEAT, STATUS_HEARTBEAT, Start,
+};
 
 const TICK: Duration = Duration::from_millis(20);
 
@@ -22,13 +31,27 @@ const fn ms(millis: u64) -> Duration {
     Duration::from_millis(millis)
 }
 
-/// A client of the core: its name and node id.
+/// A client of the core: its name, port id (its node's too) and whether it is an operator.
 #[derive(Debug, Clone, Copy)]
-struct Client(&'static str, u128);
+struct Client(&'static str, u128, bool);
 
-const TELEOP: Client = Client("joystick", 1);
-const AUTONOMY: Client = Client("planner", 2);
-const OFFICER: Client = Client("officer", 3);
+impl Client {
+    fn origin(self) -> Origin {
+        Origin {
+            key: ClientKey {
+                port: self.1,
+                node: self.1,
+                name: self.0.to_owned(),
+            },
+            operator: self.2,
+        }
+    }
+}
+
+const TELEOP: Client = Client("joystick", 1, false);
+const AUTONOMY: Client = Client("planner", 2, false);
+const OFFICER: Client = Client("officer", 3, false);
+const OPERATOR: Client = Client("operator", 4, true);
 
 /// The core and a simulated chassis on one virtual clock.
 struct Pair {
@@ -50,6 +73,7 @@ struct Pair {
     statuses: Vec<(Duration, StatusPayload)>,
     open_attempts: Vec<Duration>,
     seq: u64,
+    leases: std::collections::HashMap<u128, u64>,
 }
 
 impl Pair {
@@ -58,15 +82,19 @@ impl Pair {
     }
 
     fn with_config(transport: Transport, config: &GatewayConfig) -> Self {
+        Self::starting(transport, config, Start::Clean)
+    }
+
+    fn starting(transport: Transport, config: &GatewayConfig, start: Start) -> Self {
         // Far from zero, as CLOCK_MONOTONIC is: nothing may assume time starts at zero.
-        let start = Duration::from_secs(1000);
+        let start_time = Duration::from_secs(1000);
         let mut chassis = Chassis::new(SimParams::default(), transport);
         let _ = chassis.poll_feedback(Duration::ZERO);
         let mut pair = Self {
-            now: start,
-            core: Core::new(config, transport, "simulator", start),
+            now: start_time,
+            core: Core::new(config, transport, "simulator", start_time, start, 1),
             chassis,
-            epoch: start,
+            epoch: start_time,
             plugged: true,
             open: false,
             feedback: true,
@@ -75,6 +103,7 @@ impl Pair {
             statuses: Vec::new(),
             open_attempts: Vec::new(),
             seq: 0,
+            leases: std::collections::HashMap::new(),
         };
         pair.step();
         pair
@@ -145,23 +174,85 @@ impl Pair {
     fn request(&mut self, client: Client, request: &Request) -> Result<Accepted, Rejected> {
         self.seq += 1;
         let mut wire: ControlRequest = request.encode(self.seq);
-        wire.client = scout_interface::FixedText::new(client.0);
-        wire.node = scout_interface::control::node_halves(client.1);
-        let answer = self.core.handle_request(self.now, &wire).answer();
+        wire.sent_ns = self.now.as_nanos() as u64;
+        let way = match request {
+            Request::Stop { .. } => Way::Stop,
+            _ => Way::Control,
+        };
+        let answer = self
+            .core
+            .handle_request(self.now, &client.origin(), way, &wire)
+            .answer();
         self.step();
         answer
     }
 
-    fn drive(&mut self, client: Client, class: Class, linear: f64) -> Result<Accepted, Rejected> {
+    /// Takes control as `class` for `client`: the deliberate act.
+    fn take(&mut self, client: Client, class: Class) -> Result<u64, Rejected> {
+        let lease = self.request(client, &Request::TakeControl { class })?.lease;
+        let lease = lease.expect("a lease");
+        self.leases.insert(client.1, lease);
+        Ok(lease)
+    }
+
+    /// Drives under the lease `client` holds (none: 0, which the core refuses).
+    fn send_drive(&mut self, client: Client, linear: f64) -> Result<Accepted, Rejected> {
+        let lease = self.leases.get(&client.1).copied().unwrap_or(0);
         self.request(
             client,
             &Request::Drive {
-                class,
+                lease,
                 linear,
                 angular: 0.0,
                 ttl: None,
             },
         )
+    }
+
+    /// Drives, taking control first if `client` holds none.
+    fn drive(&mut self, client: Client, class: Class, linear: f64) -> Result<Accepted, Rejected> {
+        if !self.leases.contains_key(&client.1) {
+            self.take(client, class)?;
+        }
+        let answer = self.send_drive(client, linear);
+        if answer.as_ref().is_err_and(|r| {
+            matches!(
+                r.kind,
+                Some(RejectionKind::Revoked | RejectionKind::NoControl)
+            )
+        }) {
+            self.leases.remove(&client.1);
+        }
+        answer
+    }
+
+    /// Drives under the lease it had, never taking control again, every 20 ms for `time`:
+    /// a client that keeps streaming across whatever happens. Returns the answers.
+    fn keep_streaming(
+        &mut self,
+        client: Client,
+        linear: f64,
+        time: Duration,
+    ) -> Vec<Result<Accepted, Rejected>> {
+        let end = self.now + time;
+        let mut answers = Vec::new();
+        while self.now < end {
+            answers.push(self.send_drive(client, linear));
+            let next = self.now + TICK;
+            while self.now < next {
+                self.step();
+            }
+        }
+        answers
+    }
+
+    fn stops(&self) -> Vec<(String, StopCause)> {
+        self.core
+            .arbiter()
+            .stops()
+            .iter()
+            .map(|stop| (stop.owner.clone(), stop.cause))
+            .collect()
     }
 
     /// Drives as `client` every 20 ms for `time`.
@@ -275,8 +366,8 @@ fn a_stop_goes_on_the_wire_at_once_not_at_the_next_tick() {
     assert_eq!((command.linear_percent, command.angular_percent), (0, 0));
     assert_eq!(pair.core.stats().urgent_stops, 1);
     let status = pair.statuses().last().expect("status").1;
-    assert!(status.latched);
-    assert_eq!(status.latched_by.as_str(), "officer");
+    assert!(status.stopped());
+    assert_eq!(status.stops()[0].owner.as_str(), "officer");
 }
 
 #[test]
@@ -423,7 +514,7 @@ fn status_is_published_on_change_and_once_a_second() {
     let changed = pair
         .statuses()
         .into_iter()
-        .find(|(at, s)| *at >= asked && s.latched);
+        .find(|(at, s)| *at >= asked && s.stopped());
     assert_eq!(
         changed.map(|(at, _)| at),
         Some(asked),
@@ -470,12 +561,15 @@ fn shutdown_sends_zero_for_the_configured_cycles_then_finishes() {
 #[test]
 fn malformed_requests_are_answered_and_counted() {
     let mut pair = Pair::new(Transport::Sim);
-    let mut wire = ControlRequest {
+    let wire = ControlRequest {
         kind: 200,
         ..ControlRequest::default()
     };
-    wire.client = scout_interface::FixedText::new("fuzzer");
-    let answer = pair.core.handle_request(pair.now, &wire).answer();
+    let fuzzer = Client("fuzzer", 66, false).origin();
+    let answer = pair
+        .core
+        .handle_request(pair.now, &fuzzer, Way::Control, &wire)
+        .answer();
     assert!(
         answer
             .expect_err("refused")
@@ -501,9 +595,9 @@ enum Event {
 }
 
 const CLIENTS: [(Client, Class); 3] = [
-    (Client("teleop", 11), Class::Teleop),
-    (Client("autonomy", 12), Class::Autonomy),
-    (Client("safety", 13), Class::Teleop),
+    (Client("teleop", 11, false), Class::Teleop),
+    (Client("autonomy", 12, false), Class::Autonomy),
+    (Client("safety", 13, true), Class::Teleop),
 ];
 
 fn event() -> impl Strategy<Value = Event> {
@@ -540,9 +634,12 @@ proptest! {
                     stops.push(pair.now);
                     pair.request(CLIENTS[c].0, &Request::Stop { reason: "p".into() }).expect("a stop is never refused");
                 }
-                Event::Release(c) => { let _ = pair.request(CLIENTS[c].0, &Request::Release); }
+                Event::Release(c) => { let _ = pair.request(CLIENTS[c].0, &Request::Release { target: ReleaseTarget::All }); }
                 Event::Resume(c) => { let _ = pair.request(CLIENTS[c].0, &Request::Resume); }
-                Event::Dies(c) => pair.core.handle_client_gone(pair.now, CLIENTS[c].0.1),
+                Event::Dies(c) => {
+                    pair.core.handle_client_gone(pair.now, CLIENTS[c].0.1);
+                    pair.leases.remove(&CLIENTS[c].0.1);
+                }
                 Event::Stall(millis) => {
                     stalls.push(pair.now);
                     pair.stall(ms(millis));
@@ -562,8 +659,274 @@ proptest! {
             let stalled = stalls.iter().any(|at| *at >= pair[0] && *at < pair[1]);
             prop_assert!(pair[1] - pair[0] <= TICK || stalled, "gap {:?} at {:?}", pair[1] - pair[0], pair[0]);
         }
-        for status in pair.statuses().iter().map(|(_, s)| s).filter(|s| s.latched) {
+        for status in pair.statuses().iter().map(|(_, s)| s).filter(|s| s.stopped()) {
             prop_assert_eq!(status.output_linear, 0.0);
         }
     }
+}
+
+/// The chassis' actual speed stays at zero from `pair.now` for `time`.
+fn stays_still(pair: &mut Pair, client: Client, time: Duration) {
+    let answers = pair.keep_streaming(client, 0.5, time);
+    assert!(
+        answers.iter().all(Result::is_err),
+        "the old stream is refused"
+    );
+    assert_eq!(
+        pair.chassis.actual().linear,
+        0.0,
+        "the chassis does not move"
+    );
+    let moving = pair
+        .motion_commands()
+        .into_iter()
+        .rev()
+        .take(10)
+        .any(|(_, command)| command.linear_percent != 0);
+    assert!(!moving, "only zero commands go out");
+}
+
+/// Releases every stop as the operator and checks that still nothing moves.
+fn release_and_check_nothing_restarts(pair: &mut Pair, client: Client) {
+    pair.request(
+        OPERATOR,
+        &Request::Release {
+            target: ReleaseTarget::All,
+        },
+    )
+    .expect("the operator releases once the causes are gone");
+    assert!(pair.stops().is_empty());
+    stays_still(pair, client, Duration::from_secs(1));
+    // A deliberate take of control, and it drives again.
+    pair.leases.remove(&client.1);
+    pair.stream(client, Class::Teleop, 0.5, Duration::from_secs(2));
+    assert!(pair.chassis.actual().linear > 0.3);
+}
+
+#[test]
+fn a_link_lost_and_back_does_not_restart_a_streaming_client() {
+    let mut pair = Pair::new(Transport::Sim);
+    pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(2));
+    pair.unplug();
+    assert_eq!(pair.stops(), [("gateway".into(), StopCause::LinkLost)]);
+    let refused = pair.send_drive(TELEOP, 0.5).expect_err("revoked");
+    assert!(refused.reason.contains("link_lost"), "{}", refused.reason);
+    // The chassis stopped by its own timeout; the port comes back.
+    pair.keep_streaming(TELEOP, 0.5, Duration::from_secs(1));
+    pair.plugged = true;
+    pair.run_until(Duration::from_secs(3), |p| {
+        p.last_state().link.state() == LinkState::Ok
+    });
+    stays_still(&mut pair, TELEOP, Duration::from_secs(2));
+    release_and_check_nothing_restarts(&mut pair, TELEOP);
+}
+
+#[test]
+fn a_silent_chassis_is_a_gap_that_holds_until_it_speaks_again() {
+    let mut pair = Pair::new(Transport::Sim);
+    pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(2));
+    pair.feedback = false;
+    pair.keep_streaming(TELEOP, 0.5, CHASSIS_TIMEOUT + ms(100));
+    assert_eq!(pair.stops(), [("gateway".into(), StopCause::ChassisSilent)]);
+    let refused = pair
+        .request(
+            OPERATOR,
+            &Request::Release {
+                target: ReleaseTarget::All,
+            },
+        )
+        .expect_err("the chassis is still silent");
+    assert_eq!(refused.kind, Some(RejectionKind::CausePersists));
+    pair.feedback = true;
+    stays_still(&mut pair, TELEOP, Duration::from_secs(1));
+    release_and_check_nothing_restarts(&mut pair, TELEOP);
+}
+
+#[test]
+fn a_chassis_estop_episode_does_not_restart_motion() {
+    let mut pair = Pair::new(Transport::Sim);
+    pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(2));
+    let at = pair.now - pair.epoch;
+    pair.chassis.inject(at, Injection::EStop(true));
+    pair.keep_streaming(TELEOP, 0.5, ms(200));
+    let causes: Vec<StopCause> = pair.stops().into_iter().map(|(_, cause)| cause).collect();
+    assert!(causes.contains(&StopCause::ChassisEstop), "{causes:?}");
+    let held = pair
+        .request(
+            OPERATOR,
+            &Request::Release {
+                target: ReleaseTarget::All,
+            },
+        )
+        .expect_err("the e-stop is still pressed");
+    assert_eq!(held.kind, Some(RejectionKind::CausePersists));
+    let at = pair.now - pair.epoch;
+    pair.chassis.inject(at, Injection::EStop(false));
+    pair.chassis.inject(
+        at,
+        Injection::MotorCommFault(scout_protocol::Motor::ALL[0], false),
+    );
+    for motor in scout_protocol::Motor::ALL {
+        pair.chassis
+            .inject(at, Injection::MotorCommFault(motor, false));
+    }
+    pair.request(OPERATOR, &Request::ClearFault(None))
+        .expect("clear the latched comm faults");
+    stays_still(&mut pair, TELEOP, Duration::from_secs(2));
+    release_and_check_nothing_restarts(&mut pair, TELEOP);
+}
+
+#[test]
+fn rc_and_latched_protections_are_gaps() {
+    let mut pair = Pair::new(Transport::Sim);
+    pair.stream(TELEOP, Class::Teleop, 0.3, Duration::from_secs(1));
+    let at = pair.now - pair.epoch;
+    pair.chassis.inject(at, Injection::Rc(true));
+    pair.run(ms(100));
+    assert!(
+        pair.stops()
+            .contains(&("gateway".into(), StopCause::RcOverride))
+    );
+    let at = pair.now - pair.epoch;
+    pair.chassis.inject(at, Injection::Rc(false));
+    pair.chassis
+        .inject(at, Injection::Protect(Protection::DriverOvertemp));
+    pair.run(ms(100));
+    assert!(
+        pair.stops()
+            .contains(&("gateway".into(), StopCause::ChassisFault))
+    );
+    let status = pair.statuses().last().expect("status").1;
+    let fault = status
+        .stops()
+        .iter()
+        .find(|s| s.cause == StopCause::ChassisFault.raw())
+        .expect("listed");
+    assert!(fault.persists, "the protection is still latched");
+    assert!(fault.reason.as_str().contains("driver_overtemp_protection"));
+}
+
+#[test]
+fn after_an_unclean_exit_the_gateway_starts_stopped() {
+    let config = GatewayConfig::default();
+    let mut pair = Pair::starting(Transport::Sim, &config, Start::AfterUncleanExit);
+    assert_eq!(pair.stops(), [("gateway".into(), StopCause::GatewayStart)]);
+    let refused = pair.take(TELEOP, Class::Teleop).expect_err("stopped");
+    assert_eq!(refused.kind, Some(RejectionKind::Latched));
+    pair.run(Duration::from_secs(1));
+    assert_eq!(pair.chassis.actual().linear, 0.0);
+    release_and_check_nothing_restarts(&mut pair, TELEOP);
+    // A clean start: no stop, but autonomy disarmed until a resume.
+    let mut clean = Pair::new(Transport::Sim);
+    assert!(clean.stops().is_empty());
+    let disarmed = clean.take(AUTONOMY, Class::Autonomy).expect_err("disarmed");
+    assert_eq!(disarmed.kind, Some(RejectionKind::AutonomyDisarmed));
+}
+
+#[test]
+fn a_tick_later_than_the_chassis_timeout_is_an_overrun() {
+    let mut pair = Pair::new(Transport::Sim);
+    pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(1));
+    pair.now = pair.core.poll_timeout();
+    pair.stall(CHASSIS_TIMEOUT + ms(100));
+    pair.step();
+    assert!(
+        pair.stops()
+            .contains(&("gateway".into(), StopCause::Overrun))
+    );
+    let status = pair.statuses().last().expect("status").1;
+    assert!(
+        status.tick_max_lateness_ms >= 600.0,
+        "{}",
+        status.tick_max_lateness_ms
+    );
+}
+
+#[test]
+fn a_chassis_faster_than_commanded_is_a_runaway() {
+    let mut pair = Pair::new(Transport::Sim);
+    pair.run(ms(200));
+    // Feedback of 1 m/s while nothing was commanded, for longer than the runaway time.
+    let runaway = |count: u8| {
+        RxEvent::Message(Counted {
+            message: Message::MotionFeedback(MotionFeedback {
+                linear_mm_s: 1000,
+                angular_mrad_s: 0,
+            }),
+            count,
+        })
+    };
+    pair.feedback = false;
+    for i in 0..40u8 {
+        pair.core.handle_rx(pair.now, &runaway(100 + i));
+        pair.now += TICK;
+        pair.step();
+    }
+    assert!(
+        pair.stops()
+            .contains(&("gateway".into(), StopCause::Runaway)),
+        "{:?}",
+        pair.stops()
+    );
+}
+
+#[test]
+fn a_can_fault_latches_and_the_first_command_after_recovery_is_zero() {
+    let mut pair = Pair::new(Transport::Sim);
+    pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(1));
+    let failed = pair.now;
+    pair.open = false;
+    pair.core.handle_link_fault(
+        pair.now,
+        "writing: No buffer space available (os error 105)",
+    );
+    pair.run(Duration::from_secs(1));
+    assert!(
+        pair.stops()
+            .contains(&("gateway".into(), StopCause::LinkFault))
+    );
+    let (_, first) = pair
+        .motion_commands()
+        .into_iter()
+        .find(|(at, _)| *at > failed)
+        .expect("commands after the reopen");
+    assert_eq!(first.linear_percent, 0);
+}
+
+#[test]
+fn a_stop_comes_through_the_stop_service_with_every_control_slot_taken() {
+    let mut pair = Pair::new(Transport::Sim);
+    for port in 100..100 + scout_interface::control::MAX_CLIENTS as u128 {
+        let client = Client("holder", port, false);
+        pair.request(
+            client,
+            &Request::Heartbeat {
+                period: Duration::from_secs(10),
+            },
+        )
+        .expect("registered");
+    }
+    let late = Client("late-guard", 999, false);
+    let full = pair.take(late, Class::Teleop).expect_err("table full");
+    assert_eq!(full.kind, Some(RejectionKind::TooManyClients));
+    pair.request(
+        late,
+        &Request::Stop {
+            reason: "emergency".into(),
+        },
+    )
+    .expect("never refused");
+    assert_eq!(pair.stops(), [("late-guard".into(), StopCause::Client)]);
+    // The stop service takes stops only.
+    let wire = Request::Resume.encode(1);
+    let answer = pair
+        .core
+        .handle_request(pair.now, &late.origin(), Way::Stop, &wire)
+        .answer();
+    assert!(
+        answer
+            .expect_err("not a stop")
+            .reason
+            .contains("stops only")
+    );
 }

@@ -14,13 +14,16 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::server::Server;
 use iceoryx2::prelude::BackpressureStrategy;
+use iceoryx2::prelude::CallbackProgression;
+use iceoryx2::service::port_factory::PortFactory;
 use scout_interface::control::{ControlRequest, ControlResponse, StatusPayload};
-use scout_interface::services::{self, Ipc, Role, monotonic};
+use scout_interface::services::{self, ControlService, Ipc, Role, Way, monotonic};
 use scout_interface::state::{LinkState, StatePayload};
 use tracing::{debug, error, info, warn};
 
+use crate::arbiter::{ClientKey, Origin};
 use crate::config::GatewayConfig;
-use crate::core::{Core, Publication};
+use crate::core::{Core, Publication, Start};
 use crate::device::{Device, DeviceSpec, OpenError};
 use crate::monitor::NodeMonitor;
 use crate::wait::Ready;
@@ -30,7 +33,8 @@ struct Endpoints {
     state: Publisher<Ipc, StatePayload, ()>,
     state_notifier: Notifier<Ipc>,
     status: Publisher<Ipc, StatusPayload, ()>,
-    server: Server<Ipc, ControlRequest, (), ControlResponse, ()>,
+    control: RequestServer,
+    stop: RequestServer,
     wake: Listener<Ipc>,
     // Dropped last: the ports above belong to it.
     _node: Node<Ipc>,
@@ -53,11 +57,10 @@ impl Endpoints {
             .backpressure_strategy(BackpressureStrategy::DiscardData)
             .create()
             .context("creating the status publisher")?;
-        let (control, control_events) = services::control_services(&node, robot, Role::Gateway)?;
-        let server = control
-            .server_builder()
-            .create()
-            .context("creating the control server")?;
+        let stop = RequestServer::create(&node, robot, Way::Stop)?;
+        let control = RequestServer::create(&node, robot, Way::Control)?;
+        let (_, control_events) =
+            services::request_services(&node, robot, Way::Control, Role::Gateway)?;
         let wake = control_events
             .listener_builder()
             .create()
@@ -77,7 +80,8 @@ impl Endpoints {
             state,
             state_notifier,
             status,
-            server,
+            control,
+            stop,
             wake,
             _node: node,
         })
@@ -115,6 +119,59 @@ impl Endpoints {
     }
 }
 
+/// A request service's server, and what its dynamic configuration tells of each client port.
+struct RequestServer {
+    way: Way,
+    service: ControlService,
+    server: Server<Ipc, ControlRequest, (), ControlResponse, ()>,
+}
+
+impl RequestServer {
+    fn create(node: &Node<Ipc>, robot: &str, way: Way) -> anyhow::Result<Self> {
+        let (service, _) = services::request_services(node, robot, way, Role::Gateway)?;
+        let server = service
+            .server_builder()
+            .create()
+            .with_context(|| format!("creating the {way:?} server"))?;
+        Ok(Self {
+            way,
+            service,
+            server,
+        })
+    }
+
+    /// Who sent a request: the port, its node and its name as iceoryx2 records them.
+    fn origin(&self, port: u128, operators: &[String]) -> Origin {
+        let mut key = ClientKey {
+            port,
+            node: 0,
+            name: format!("client-{:x}", port as u32),
+        };
+        let mut pid = None;
+        self.service.dynamic_config().list_clients(|client| {
+            if client.client_id.value() != port {
+                return CallbackProgression::Continue;
+            }
+            key.node = client.node_id.value();
+            if !client.client_name.as_str().is_empty() {
+                key.name = client.client_name.as_str().to_owned();
+            }
+            pid = client.node_id.pid::<Ipc>().ok().map(|pid| pid.value());
+            CallbackProgression::Stop
+        });
+        let program = pid.and_then(|pid| std::fs::read_link(format!("/proc/{pid}/exe")).ok());
+        let operator = program
+            .as_deref()
+            .and_then(std::path::Path::file_name)
+            .and_then(|name| name.to_str())
+            .is_some_and(|name| operators.iter().any(|op| op == name));
+        Origin { key, operator }
+    }
+}
+
+/// Control requests handled per iteration at most: a flood cannot hold up the tick.
+const MAX_REQUESTS_PER_ITERATION: usize = 64;
+
 /// The gateway's control thread.
 pub struct Driver {
     spec: DeviceSpec,
@@ -124,6 +181,9 @@ pub struct Driver {
     monitor: NodeMonitor,
     buffer: Box<[u8; 4096]>,
     publish_errors: u64,
+    operators: Vec<String>,
+    origins: std::collections::HashMap<u128, Origin>,
+    backlog: bool,
 }
 
 impl std::fmt::Debug for Driver {
@@ -136,9 +196,11 @@ impl std::fmt::Debug for Driver {
 
 impl Driver {
     /// Sets up the iceoryx2 services for `config.name`; the port is opened by [`Driver::run`].
-    pub fn new(config: &GatewayConfig, spec: DeviceSpec) -> anyhow::Result<Self> {
+    pub fn new(config: &GatewayConfig, spec: DeviceSpec, start: Start) -> anyhow::Result<Self> {
         let endpoints = Endpoints::create(&config.name)?;
-        let core = Core::new(config, spec.transport(), &spec.name(), monotonic());
+        let now = monotonic();
+        let instance = std::process::id() ^ (now.subsec_nanos() << 8);
+        let core = Core::new(config, spec.transport(), &spec.name(), now, start, instance);
         let monitor = NodeMonitor::start().context("starting the client monitor thread")?;
         Ok(Self {
             spec,
@@ -148,6 +210,9 @@ impl Driver {
             monitor,
             buffer: Box::new([0; 4096]),
             publish_errors: 0,
+            operators: config.arbiter.operator_programs.clone(),
+            origins: std::collections::HashMap::new(),
+            backlog: false,
         })
     }
 
@@ -190,7 +255,12 @@ impl Driver {
             if self.core.is_finished() {
                 break;
             }
-            ready = self.wait(now, self.core.poll_timeout());
+            let deadline = if self.backlog {
+                now
+            } else {
+                self.core.poll_timeout()
+            };
+            ready = self.wait(now, deadline);
         }
         self.device = None;
         let stats = self.core.stats();
@@ -224,25 +294,51 @@ impl Driver {
         }
     }
 
-    /// Answers every waiting request.
+    /// Answers every waiting stop, then at most [`MAX_REQUESTS_PER_ITERATION`] control
+    /// requests (the rest wait for the next iteration, after the tick).
     fn handle_requests(&mut self, now: Duration, woken: bool) {
         if woken && let Err(error) = self.endpoints.wake.try_wait(|_| {}) {
             debug!("draining the wake-up event failed: {error:?}");
         }
-        loop {
-            let active = match self.endpoints.server.receive() {
+        self.serve(now, Way::Stop, usize::MAX);
+        self.backlog = self.serve(now, Way::Control, MAX_REQUESTS_PER_ITERATION);
+    }
+
+    /// Answers at most `limit` requests of `way`; returns whether more are waiting.
+    fn serve(&mut self, now: Duration, way: Way, limit: usize) -> bool {
+        let endpoint = match way {
+            Way::Control => &self.endpoints.control,
+            Way::Stop => &self.endpoints.stop,
+        };
+        for _ in 0..limit {
+            let active = match endpoint.server.receive() {
                 Ok(Some(active)) => active,
-                Ok(None) => break,
+                Ok(None) => return false,
                 Err(error) => {
-                    warn!("receiving control requests failed: {error:?}");
-                    break;
+                    warn!("receiving {:?} requests failed: {error:?}", endpoint.way);
+                    return false;
                 }
             };
-            let response = self.core.handle_request(now, active.payload());
+            let port = active.origin().value();
+            let origin = match self.origins.get(&port) {
+                Some(origin) => origin.clone(),
+                None => {
+                    let origin = endpoint.origin(port, &self.operators);
+                    if self.origins.len() > 4 * services::MAX_STOPPERS {
+                        self.origins.clear();
+                    }
+                    self.origins.insert(port, origin.clone());
+                    origin
+                }
+            };
+            let response = self
+                .core
+                .handle_request(now, &origin, way, active.payload());
             if let Err(error) = active.send_copy(response) {
                 debug!("answering request {} failed: {error:?}", response.seq);
             }
         }
+        true
     }
 
     /// Sends every frame the core has for the port now.
@@ -253,8 +349,14 @@ impl Driver {
             };
             if let Err(error) = device.send(&frame, now) {
                 self.device = None;
-                self.core
-                    .handle_link_failed(now, &format!("writing: {error}"));
+                let what = format!("writing: {error}");
+                // A full CAN transmit queue or a downed interface: the bus or adapter failed.
+                match error.raw_os_error() {
+                    Some(nix::libc::ENOBUFS | nix::libc::ENETDOWN) => {
+                        self.core.handle_link_fault(now, &what);
+                    }
+                    _ => self.core.handle_link_failed(now, &what),
+                }
             }
         }
     }

@@ -63,6 +63,11 @@ impl StateTracker {
         }
     }
 
+    /// When the last valid feedback came, since the port opened.
+    pub fn last_feedback(&self) -> Option<Duration> {
+        self.last_feedback
+    }
+
     /// The current link state.
     pub fn link_state(&self) -> LinkState {
         self.link_state

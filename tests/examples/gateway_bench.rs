@@ -5,7 +5,7 @@
 
 use std::time::{Duration, Instant};
 
-use scout_clients::{Class, monotonic_ns};
+use scout_clients::{Class, ReleaseTarget, monotonic_ns};
 use scout_system_tests::{Gateway, Sim, connect, robot_name};
 
 fn percentiles(mut samples: Vec<f64>) -> String {
@@ -39,6 +39,7 @@ fn main() -> anyhow::Result<()> {
 
     // Control round trip: a drive request until its answer.
     let mut driver = robot.controller("bench-driver", Some(Class::Teleop))?;
+    driver.take_control()?;
     let mut round_trip_ms = Vec::new();
     for _ in 0..500 {
         let sent = Instant::now();
@@ -65,7 +66,8 @@ fn main() -> anyhow::Result<()> {
                 break;
             }
         }
-        safety.release()?;
+        safety.release(ReleaseTarget::Own)?;
+        driver.take_control()?;
     }
     driver.relinquish()?;
     let stats = sim.quit();

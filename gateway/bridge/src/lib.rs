@@ -8,13 +8,13 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use scout_interface::control::{Accepted, StatusPayload};
+use scout_interface::control::{Accepted, Class, RejectionKind, Request, StatusPayload};
 use scout_interface::json::{state_json, status_json};
 use scout_interface::remote::{
     self, DEFAULT_LISTEN, MAX_COMMAND_BYTES, Permission, REMOTE_PREFIX, RemoteAnswer,
     RemoteCommand, RemoteKind, SessionSettings,
 };
-use scout_interface::services::{self, ControlPort, Role, monotonic_ns};
+use scout_interface::services::{self, ControlPort, RequestError, Role, Way, monotonic_ns};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use tracing::{error, info, warn};
@@ -309,19 +309,33 @@ fn reply(query: &Query, payload: String) {
     }
 }
 
-/// Remote commands: each remote client gets a control port of its own, named `remote:CLIENT`, so
-/// the arbiter treats it like a local one (freshness, limits, priority).
+/// Remote commands: each remote peer gets ports of its own, named `remote:PEER`, so the
+/// arbiter treats it like a local client (leases, freshness, limits, priority). The peer is
+/// named by the command's key, which zenoh's access control binds to the peer's certificate.
 struct RemoteControl<'a> {
     node: &'a iceoryx2::node::Node<services::Ipc>,
     robot: &'a str,
     config: &'a ZenohConfig,
-    /// The ports of the clients heard from, with the request count when each was last used.
-    ports: Vec<(String, ControlPort, u64)>,
+    peers: Vec<Peer>,
     used: u64,
 }
 
-/// Remote clients kept at once; the least recently used is forgotten past this.
-const MAX_REMOTE_CLIENTS: usize = 16;
+/// What the bridge keeps of one remote peer.
+struct Peer {
+    name: String,
+    control: ControlPort,
+    stop: Option<ControlPort>,
+    /// The lease it took and its class.
+    lease: Option<(u64, Class)>,
+    /// Its last command number.
+    seq: Option<u64>,
+    /// The least (arrival - sent) seen, ms: its clock's offset plus the fastest delivery.
+    offset: Option<i128>,
+    used: u64,
+}
+
+/// Remote peers kept at once; the least recently used is forgotten past this.
+const MAX_REMOTE_PEERS: usize = 16;
 
 impl<'a> RemoteControl<'a> {
     fn new(
@@ -333,7 +347,7 @@ impl<'a> RemoteControl<'a> {
             node,
             robot,
             config,
-            ports: Vec::new(),
+            peers: Vec::new(),
             used: 0,
         }
     }
@@ -357,7 +371,7 @@ impl<'a> RemoteControl<'a> {
             );
         }
         let answer = match self.decide(query) {
-            Ok(Accepted { clamped }) => RemoteAnswer {
+            Ok(Accepted { clamped, .. }) => RemoteAnswer {
                 accepted: true,
                 clamped,
                 reason: None,
@@ -373,17 +387,7 @@ impl<'a> RemoteControl<'a> {
     }
 
     fn decide(&mut self, query: &Query) -> Result<Accepted, String> {
-        let key = query.key_expr().as_str();
-        let last = key.rsplit('/').next().unwrap_or("");
-        let kind: RemoteKind =
-            last.parse()
-                .map_err(|e: scout_interface::control::UnknownName| {
-                    format!(
-                        "unknown command `{}`: one of {}",
-                        e.found,
-                        e.expected.join(", ")
-                    )
-                })?;
+        let (kind, peer_name) = remote::parse_command_key(query.key_expr().as_str())?;
         let payload = query
             .payload()
             .ok_or("no payload: send the command as JSON")?;
@@ -395,36 +399,131 @@ impl<'a> RemoteControl<'a> {
         }
         let command: RemoteCommand = serde_json::from_slice(&payload.to_bytes())
             .map_err(|error| format!("invalid JSON: {error}"))?;
-        let (permission, request) = command.request(kind)?;
+        let peer = self.peer(peer_name)?;
+        let (permission, request) = command.request(kind, peer.lease)?;
+        let sent = match kind {
+            RemoteKind::Drive => peer.on_time(&command)?,
+            RemoteKind::TakeControl
+            | RemoteKind::Relinquish
+            | RemoteKind::Estop
+            | RemoteKind::Release
+            | RemoteKind::Resume
+            | RemoteKind::Lights
+            | RemoteKind::ClearFault => services::monotonic(),
+        };
         self.allowed(permission)?;
-        self.port(&command.client)?
-            .request(&request)
-            .map_err(|error| error.to_string())
+        let (node, robot) = (self.node, self.robot);
+        let peer = self.peer(peer_name)?;
+        let answer = match &request {
+            Request::Stop { .. } => peer.stop_port(node, robot)?.request(&request),
+            _ => peer.control.request_sent_at(&request, sent),
+        };
+        let lost_control = matches!(
+            &answer,
+            Err(RequestError::Rejected(r))
+                if matches!(r.kind, Some(RejectionKind::Revoked | RejectionKind::NoControl))
+        );
+        match (&request, &answer) {
+            (Request::TakeControl { class }, Ok(accepted)) => {
+                peer.lease = accepted.lease.map(|lease| (lease, *class));
+            }
+            (Request::Relinquish, Ok(_)) => peer.lease = None,
+            // Revoked or not held: the peer must take control again.
+            _ if lost_control => peer.lease = None,
+            _ => {}
+        }
+        answer.map_err(|error| error.to_string())
     }
 
-    fn port(&mut self, client: &str) -> Result<&mut ControlPort, String> {
+    fn peer(&mut self, name: &str) -> Result<&mut Peer, String> {
         self.used += 1;
         let used = self.used;
-        let index = match self.ports.iter().position(|(name, ..)| name == client) {
+        let index = match self.peers.iter().position(|peer| peer.name == name) {
             Some(index) => index,
             None => {
-                if self.ports.len() >= MAX_REMOTE_CLIENTS
-                    && let Some(oldest) = (0..self.ports.len()).min_by_key(|&i| self.ports[i].2)
+                if self.peers.len() >= MAX_REMOTE_PEERS
+                    && let Some(oldest) = (0..self.peers.len()).min_by_key(|&i| self.peers[i].used)
                 {
-                    self.ports.swap_remove(oldest);
+                    self.peers.swap_remove(oldest);
                 }
-                let name = format!("{REMOTE_PREFIX}{client}");
-                let port = ControlPort::open(self.node, self.robot, &name)
-                    .map_err(|error| error.to_string())?;
-                self.ports.push((client.to_owned(), port, used));
-                self.ports.len() - 1
+                let port = ControlPort::open(
+                    self.node,
+                    self.robot,
+                    Way::Control,
+                    &format!("{REMOTE_PREFIX}{name}"),
+                )
+                .map_err(|error| error.to_string())?;
+                self.peers.push(Peer {
+                    name: name.to_owned(),
+                    control: port,
+                    stop: None,
+                    lease: None,
+                    seq: None,
+                    offset: None,
+                    used,
+                });
+                self.peers.len() - 1
             }
         };
-        let entry = &mut self.ports[index];
-        entry.2 = used;
-        Ok(&mut entry.1)
+        let peer = &mut self.peers[index];
+        peer.used = used;
+        Ok(peer)
     }
 }
+
+impl Peer {
+    fn stop_port(
+        &mut self,
+        node: &iceoryx2::node::Node<services::Ipc>,
+        robot: &str,
+    ) -> Result<&mut ControlPort, String> {
+        if self.stop.is_none() {
+            let name = format!("{REMOTE_PREFIX}{}", self.name);
+            let port = ControlPort::open(node, robot, Way::Stop, &name)
+                .map_err(|error| error.to_string())?;
+            self.stop = Some(port);
+        }
+        self.stop.as_mut().ok_or_else(|| "no stop port".into())
+    }
+
+    /// Checks a drive command's order and age; returns when it was sent, on this host's clock.
+    /// A repeated or older `seq` is refused; so is a command the network held up for longer
+    /// than its life (measured against the fastest delivery seen from this peer, so no common
+    /// clock is needed).
+    fn on_time(&mut self, command: &RemoteCommand) -> Result<Duration, String> {
+        let (Some(seq), Some(sent_ms)) = (command.seq, command.sent_ms) else {
+            return Err("drive needs `seq` (rising) and `sent_ms` (the sender's clock, ms)".into());
+        };
+        if let Some(last) = self.seq
+            && seq <= last
+        {
+            return Err(format!(
+                "out of order: seq {seq} after {last} (duplicated or reordered)"
+            ));
+        }
+        self.seq = Some(seq);
+        let now = services::monotonic();
+        let delay = now.as_millis() as i128 - i128::from(sent_ms);
+        let offset = *self
+            .offset
+            .insert(self.offset.map_or(delay, |offset| offset.min(delay)));
+        let late = Duration::from_millis((delay - offset).max(0) as u64);
+        let life = command.ttl_ms.map_or(MAX_REMOTE_LIFE, |ms| {
+            Duration::from_millis(u64::from(ms)).min(MAX_REMOTE_LIFE)
+        });
+        if late > life {
+            return Err(format!(
+                "held up {} ms on the way, past its life of {} ms",
+                late.as_millis(),
+                life.as_millis()
+            ));
+        }
+        Ok(now.saturating_sub(late))
+    }
+}
+
+/// The longest a remote drive command may live: the chassis' own timeout.
+const MAX_REMOTE_LIFE: Duration = Duration::from_millis(500);
 
 #[cfg(test)]
 mod tests {

@@ -12,6 +12,7 @@ use anyhow::Context;
 use clap::{ArgGroup, Parser};
 use scout_bridge::Bridge;
 use scout_gateway::config::GatewayConfig;
+use scout_gateway::core::Start;
 use scout_gateway::device::DeviceSpec;
 use scout_gateway::driver::Driver;
 use scout_gateway::lock::{Lock, LockError};
@@ -166,7 +167,15 @@ fn serve(config: GatewayConfig, spec: DeviceSpec) -> anyhow::Result<()> {
     let bridge_config = config.zenoh.clone();
     let info = config.info(spec.transport(), &spec.name());
     let robot = config.name.clone();
-    let mut driver = Driver::new(&config, spec)?;
+    let marker = RunningMarker::new(&config.name);
+    let start = marker.start()?;
+    if start == Start::AfterUncleanExit {
+        tracing::warn!(
+            "the previous gateway of '{}' exited uncleanly: a gateway_start stop holds until released (scout release)",
+            config.name
+        );
+    }
+    let mut driver = Driver::new(&config, spec, start)?;
     // After the driver's services exist; dropped (stopped and joined) after it ends.
     let _bridge = if bridge_config.enabled {
         Some(
@@ -177,5 +186,39 @@ fn serve(config: GatewayConfig, spec: DeviceSpec) -> anyhow::Result<()> {
         info!("zenoh off: local clients only");
         None
     };
-    driver.run(&stop)
+    driver.run(&stop)?;
+    marker.clean_exit();
+    Ok(())
+}
+
+/// A file that exists while a gateway of the robot runs: found at start, it tells that the
+/// previous one did not exit cleanly (crash, kill, power loss of the host).
+struct RunningMarker {
+    path: PathBuf,
+}
+
+impl RunningMarker {
+    fn new(robot: &str) -> Self {
+        Self {
+            path: scout_gateway::lock::lock_dir().join(format!("robot-{robot}.running")),
+        }
+    }
+
+    /// How the previous gateway ended; marks this one as running.
+    fn start(&self) -> anyhow::Result<Start> {
+        let start = if self.path.exists() {
+            Start::AfterUncleanExit
+        } else {
+            Start::Clean
+        };
+        std::fs::write(&self.path, std::process::id().to_string())
+            .with_context(|| format!("writing {}", self.path.display()))?;
+        Ok(start)
+    }
+
+    fn clean_exit(&self) {
+        if let Err(error) = std::fs::remove_file(&self.path) {
+            tracing::warn!("removing {}: {error}", self.path.display());
+        }
+    }
 }

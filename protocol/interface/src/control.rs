@@ -35,11 +35,11 @@ pub struct UnknownName {
 wire_enum! {
     /// What a [`ControlRequest`] asks for (its `kind` byte).
     RequestKind {
-        /// Drive at `linear`, `angular` as `class` for `ttl_ms` (0: the class's maximum age).
+        /// Drive at `linear`, `angular` under `lease` for `ttl_ms` (0: the class's maximum age).
         Drive = 1 => "drive",
-        /// Latch the safety stop (`reason`).
+        /// Latch a safety stop (`reason`), owned by this client's name.
         Stop = 2 => "stop",
-        /// Release the latched stop and this client's control.
+        /// Release stops (`release_target`, `owner`).
         Release = 3 => "release",
         /// Arm autonomy.
         Resume = 4 => "resume",
@@ -51,8 +51,62 @@ wire_enum! {
         Heartbeat = 7 => "heartbeat",
         /// Reset the gateway's odometry.
         ResetOdometry = 8 => "reset_odometry",
-        /// Give up this client's control (never touches the stop).
+        /// Give up this client's control (never touches a stop).
         Relinquish = 9 => "relinquish",
+        /// Take control as `class`: the answer carries the lease that drive commands name.
+        TakeControl = 10 => "take_control",
+    }
+}
+
+wire_enum! {
+    /// Which stops a release names.
+    ReleaseScope {
+        /// The stops this client's name owns.
+        Own = 0 => "own",
+        /// The stops of the owner named in `owner` (an operator's, unless it is this client's).
+        Owner = 1 => "owner",
+        /// Every stop (operators only).
+        All = 2 => "all",
+    }
+}
+
+/// What a release names.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ReleaseTarget {
+    /// The stops this client's name owns.
+    Own,
+    /// The stops of this owner.
+    Owner(String),
+    /// Every stop.
+    All,
+}
+
+wire_enum! {
+    /// Why a stop holds the robot: a client asked, or the gateway found a gap (a time it lost
+    /// control or knowledge of the chassis).
+    StopCause {
+        /// A client's stop.
+        Client = 0 => "client",
+        /// A heartbeat source went silent or died (a deadman).
+        Heartbeat = 1 => "heartbeat",
+        /// The gateway started after an unclean exit of the previous one.
+        GatewayStart = 2 => "gateway_start",
+        /// The port closed or failed.
+        LinkLost = 3 => "link_lost",
+        /// No feedback for longer than the chassis' command timeout.
+        ChassisSilent = 4 => "chassis_silent",
+        /// The chassis reports its e-stop.
+        ChassisEstop = 5 => "chassis_estop",
+        /// The chassis reports a fault or a latched protection.
+        ChassisFault = 6 => "chassis_fault",
+        /// The RC transmitter took over.
+        RcOverride = 7 => "rc_override",
+        /// A tick was late by more than the chassis' command timeout.
+        Overrun = 8 => "overrun",
+        /// The chassis moves faster than commanded, or the wrong way.
+        Runaway = 9 => "runaway",
+        /// The CAN bus or adapter failed (write errors, bus-off, error-passive).
+        LinkFault = 10 => "link_fault",
     }
 }
 
@@ -81,10 +135,16 @@ pub enum LightsSetting {
 /// What a client asks of the gateway.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Request {
-    /// Drive at these speeds (m/s, rad/s) for at most `ttl` (`None`: the class's maximum age).
-    Drive {
-        /// The class the client drives as.
+    /// Take control as `class`; the answer's lease is what drive commands name.
+    TakeControl {
+        /// The class to drive as.
         class: Class,
+    },
+    /// Drive at these speeds (m/s, rad/s) for at most `ttl` (`None`: the class's maximum age),
+    /// under a lease from [`Request::TakeControl`].
+    Drive {
+        /// The lease.
+        lease: u64,
         /// m/s.
         linear: f64,
         /// rad/s.
@@ -92,14 +152,17 @@ pub enum Request {
         /// The command's life.
         ttl: Option<Duration>,
     },
-    /// Latch the safety stop.
+    /// Latch a safety stop, owned by this client's name.
     Stop {
         /// Why, for the status and the audit log.
         reason: String,
     },
-    /// Release the latched stop and whatever control this client holds.
-    Release,
-    /// Give up this client's control; the stop is left alone.
+    /// Release the stops `target` names, and whatever control this client holds.
+    Release {
+        /// Which stops.
+        target: ReleaseTarget,
+    },
+    /// Give up this client's control; stops are left alone.
     Relinquish,
     /// Arm autonomy.
     Resume,
@@ -121,9 +184,10 @@ impl Request {
     /// Its kind.
     pub fn kind(&self) -> RequestKind {
         match self {
+            Self::TakeControl { .. } => RequestKind::TakeControl,
             Self::Drive { .. } => RequestKind::Drive,
             Self::Stop { .. } => RequestKind::Stop,
-            Self::Release => RequestKind::Release,
+            Self::Release { .. } => RequestKind::Release,
             Self::Relinquish => RequestKind::Relinquish,
             Self::Resume => RequestKind::Resume,
             Self::Lights(_) => RequestKind::Lights,
@@ -133,8 +197,7 @@ impl Request {
         }
     }
 
-    /// The request on the wire, numbered `seq` (the client and node fields are the sender's to
-    /// fill).
+    /// The request on the wire, numbered `seq` (`sent_ns` is the sender's to fill).
     pub fn encode(&self, seq: u64) -> ControlRequest {
         let mut wire = ControlRequest {
             kind: self.kind().raw(),
@@ -142,13 +205,14 @@ impl Request {
             ..ControlRequest::default()
         };
         match self {
+            Self::TakeControl { class } => wire.class = class.raw(),
             Self::Drive {
-                class,
+                lease,
                 linear,
                 angular,
                 ttl,
             } => {
-                wire.class = class.raw();
+                wire.lease = *lease;
                 wire.linear = *linear;
                 wire.angular = *angular;
                 wire.ttl_ms = ttl.map_or(0, |ttl| {
@@ -156,6 +220,17 @@ impl Request {
                 });
             }
             Self::Stop { reason } => wire.reason = FixedText::new(reason),
+            Self::Release { target } => {
+                let scope = match target {
+                    ReleaseTarget::Own => ReleaseScope::Own,
+                    ReleaseTarget::Owner(owner) => {
+                        wire.owner = FixedText::new(owner);
+                        ReleaseScope::Owner
+                    }
+                    ReleaseTarget::All => ReleaseScope::All,
+                };
+                wire.release_scope = scope.raw();
+            }
             Self::Lights(LightsSetting::Auto) => wire.lights.auto = true,
             Self::Lights(LightsSetting::Manual(command)) => {
                 wire.lights.front = LightPayload::new(command.front);
@@ -167,7 +242,7 @@ impl Request {
             Self::Heartbeat { period } => {
                 wire.heartbeat_ms = period.as_millis().min(u128::from(u32::MAX)) as u32;
             }
-            Self::Release | Self::Relinquish | Self::Resume | Self::ResetOdometry => {}
+            Self::Relinquish | Self::Resume | Self::ResetOdometry => {}
         }
         wire
     }
@@ -176,8 +251,11 @@ impl Request {
     pub fn decode(wire: &ControlRequest) -> Result<Self, Rejection> {
         let kind = RequestKind::from_raw(wire.kind).ok_or(Rejection::UnknownRequest(wire.kind))?;
         Ok(match kind {
-            RequestKind::Drive => Self::Drive {
+            RequestKind::TakeControl => Self::TakeControl {
                 class: Class::from_raw(wire.class).ok_or(Rejection::UnknownClass(wire.class))?,
+            },
+            RequestKind::Drive => Self::Drive {
+                lease: wire.lease,
                 linear: wire.linear,
                 angular: wire.angular,
                 ttl: (wire.ttl_ms > 0).then(|| Duration::from_millis(u64::from(wire.ttl_ms))),
@@ -188,7 +266,21 @@ impl Request {
                     reason => reason.to_owned(),
                 },
             },
-            RequestKind::Release => Self::Release,
+            RequestKind::Release => Self::Release {
+                target: match ReleaseScope::from_raw(wire.release_scope) {
+                    Some(ReleaseScope::Own) => ReleaseTarget::Own,
+                    Some(ReleaseScope::Owner) => {
+                        ReleaseTarget::Owner(wire.owner.as_str().to_owned())
+                    }
+                    Some(ReleaseScope::All) => ReleaseTarget::All,
+                    None => {
+                        return Err(Rejection::Malformed(format!(
+                            "release scope {} is not 0..2",
+                            wire.release_scope
+                        )));
+                    }
+                },
+            },
             RequestKind::Relinquish => Self::Relinquish,
             RequestKind::Resume => Self::Resume,
             RequestKind::Lights => Self::Lights(decode_lights(&wire.lights)?),
@@ -287,11 +379,23 @@ wire_enum! {
         AutonomyDisarmed = 6 => "autonomy_disarmed",
         /// The arbiter tracks too many clients.
         TooManyClients = 7 => "too_many_clients",
+        /// The client holds no control: take control first.
+        NoControl = 8 => "no_control",
+        /// The client's control was revoked (a gap, a stop, a release, a takeover, staleness).
+        Revoked = 9 => "revoked",
+        /// The command is older than its life on arrival.
+        Stale = 10 => "stale",
+        /// The client sends faster than the gateway's request rate limit.
+        RateLimited = 11 => "rate_limited",
+        /// The client may not do that (a release of another owner's stops without the operator role).
+        NotAllowed = 12 => "not_allowed",
+        /// The cause of a stop persists: it cannot be released yet.
+        CausePersists = 13 => "cause_persists",
     }
 }
 
 /// Rejection counters in a status: one per [`RejectionKind`].
-pub const REJECTION_COUNTERS: usize = 8;
+pub const REJECTION_COUNTERS: usize = 14;
 const _: () = assert!(RejectionKind::ALL.len() == REJECTION_COUNTERS);
 
 /// Why a request was refused.
@@ -305,10 +409,10 @@ pub enum Rejection {
     UnknownRequest(u8),
     /// The request is malformed, with what is wrong.
     Malformed(String),
-    /// The safety stop is latched.
+    /// Stops hold the robot.
     Latched {
-        /// Who latched it.
-        by: String,
+        /// The stops, as owner (cause): reason.
+        stops: String,
     },
     /// Another client holds the class.
     Held {
@@ -321,6 +425,35 @@ pub enum Rejection {
     AutonomyDisarmed,
     /// The arbiter tracks too many clients.
     TooManyClients,
+    /// The client holds no control.
+    NoControl,
+    /// The client's control was revoked.
+    Revoked {
+        /// Why.
+        cause: String,
+    },
+    /// The command arrived older than its life.
+    Stale {
+        /// Its age on arrival.
+        age: Duration,
+        /// Its life.
+        life: Duration,
+    },
+    /// Too many requests from this client.
+    RateLimited {
+        /// The sustained rate allowed, requests per second.
+        rate: f64,
+    },
+    /// The client may not do that.
+    NotAllowed {
+        /// Why, and what holds the robot.
+        why: String,
+    },
+    /// A stop's cause persists.
+    CausePersists {
+        /// The stops that cannot be released yet, with their causes.
+        stops: String,
+    },
 }
 
 impl Rejection {
@@ -335,6 +468,12 @@ impl Rejection {
             Self::Held { .. } => RejectionKind::Held,
             Self::AutonomyDisarmed => RejectionKind::AutonomyDisarmed,
             Self::TooManyClients => RejectionKind::TooManyClients,
+            Self::NoControl => RejectionKind::NoControl,
+            Self::Revoked { .. } => RejectionKind::Revoked,
+            Self::Stale { .. } => RejectionKind::Stale,
+            Self::RateLimited { .. } => RejectionKind::RateLimited,
+            Self::NotAllowed { .. } => RejectionKind::NotAllowed,
+            Self::CausePersists { .. } => RejectionKind::CausePersists,
         }
     }
 }
@@ -346,21 +485,38 @@ impl std::fmt::Display for Rejection {
             Self::UnknownClass(raw) => write!(f, "unknown class {raw} (teleop or autonomy)"),
             Self::UnknownRequest(raw) => write!(f, "unknown request kind {raw}"),
             Self::Malformed(what) => write!(f, "malformed request: {what}"),
-            Self::Latched { by } => write!(f, "safety stop latched by {by}: release it first"),
+            Self::Latched { stops } => write!(f, "stopped by {stops}: release first"),
             Self::Held { class, holder } => write!(f, "{class} held by {holder}"),
             Self::AutonomyDisarmed => f.write_str(
                 "autonomy disarmed (after a teleop takeover, stop or release): resume first",
             ),
             Self::TooManyClients => write!(f, "too many clients (at most {MAX_CLIENTS})"),
+            Self::NoControl => f.write_str("no control: take control first"),
+            Self::Revoked { cause } => {
+                write!(f, "control revoked ({cause}): take control again to drive")
+            }
+            Self::Stale { age, life } => write!(
+                f,
+                "command {} ms old on arrival, past its life of {} ms",
+                age.as_millis(),
+                life.as_millis()
+            ),
+            Self::RateLimited { rate } => {
+                write!(f, "too many requests (at most {rate} a second per client)")
+            }
+            Self::NotAllowed { why } => f.write_str(why),
+            Self::CausePersists { stops } => write!(f, "cannot release yet: {stops}"),
         }
     }
 }
 
 /// The answer to an accepted request.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Accepted {
     /// A speed was beyond the caps and was clamped.
     pub clamped: bool,
+    /// For a take-control: the lease that drive commands name.
+    pub lease: Option<u64>,
 }
 
 /// Every request gets one.
@@ -385,6 +541,7 @@ impl ControlResponse {
                 accepted: true,
                 clamped: accepted.clamped,
                 code: 0xFF,
+                lease: accepted.lease.unwrap_or(0),
                 reason: FixedText::empty(),
             },
             Err(rejection) => Self {
@@ -392,6 +549,7 @@ impl ControlResponse {
                 accepted: false,
                 clamped: false,
                 code: rejection.kind().raw(),
+                lease: 0,
                 reason: FixedText::new(&rejection.to_string()),
             },
         }
@@ -402,6 +560,7 @@ impl ControlResponse {
         if self.accepted {
             Ok(Accepted {
                 clamped: self.clamped,
+                lease: (self.lease != 0).then_some(self.lease),
             })
         } else {
             Err(Rejected {
@@ -427,7 +586,7 @@ pub struct LightsRequest {
 
 /// A request from a client to the gateway's arbiter.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::ControlRequest.v2")]
+#[type_name("scout::ControlRequest.v3")]
 #[repr(C)]
 pub struct ControlRequest {
     /// [`RequestKind`] as `u8`.
@@ -438,12 +597,17 @@ pub struct ControlRequest {
     pub fault_clear: u8,
     /// Lights, for lights.
     pub lights: LightsRequest,
-    /// The client's name (shown in the status and the audit log).
-    pub client: FixedText<MAX_CLIENT_NAME>,
-    /// The client's iceoryx2 node id, high and low 64 bits (dead-process detection).
-    pub node: [u64; 2],
+    /// [`ReleaseScope`] byte, for release.
+    pub release_scope: u8,
+    /// The owner whose stops a release names.
+    pub owner: FixedText<MAX_CLIENT_NAME>,
     /// The client's own request number.
     pub seq: u64,
+    /// The lease a drive command belongs to.
+    pub lease: u64,
+    /// CLOCK_MONOTONIC time the client sent it, ns (a command older than its life on arrival is
+    /// refused).
+    pub sent_ns: u64,
     /// m/s, for drive.
     pub linear: f64,
     /// rad/s, for drive.
@@ -458,7 +622,7 @@ pub struct ControlRequest {
 
 /// The gateway's answer to one request.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("scout::ControlResponse.v2")]
+#[type_name("scout::ControlResponse.v3")]
 #[repr(C)]
 pub struct ControlResponse {
     /// The request's `seq`.
@@ -469,18 +633,10 @@ pub struct ControlResponse {
     pub clamped: bool,
     /// The [`RejectionKind`] byte; 0xFF when accepted.
     pub code: u8,
+    /// For an accepted take-control: the lease (0: none).
+    pub lease: u64,
     /// Why it was rejected.
     pub reason: FixedText<160>,
-}
-
-/// The node id as the two halves a [`ControlRequest`] carries.
-pub fn node_halves(node: u128) -> [u64; 2] {
-    [(node >> 64) as u64, node as u64]
-}
-
-/// The node id from a [`ControlRequest`]'s halves.
-pub fn node_from_halves(halves: [u64; 2]) -> u128 {
-    (u128::from(halves[0]) << 64) | u128::from(halves[1])
 }
 
 wire_enum! {
@@ -506,18 +662,51 @@ impl LightsControl {
     }
 }
 
+/// Stops listed in a status (more are counted in `stop_total`).
+pub const MAX_STATUS_STOPS: usize = 16;
+/// Recent events kept in a status.
+pub const STATUS_EVENTS: usize = 16;
+
+/// One stop in the arbiter's status.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+pub struct StopPayload {
+    /// Who set it: a client's name, or `gateway` for a gap.
+    pub owner: FixedText<MAX_CLIENT_NAME>,
+    /// [`StopCause`] byte.
+    pub cause: u8,
+    /// Whether its cause persists (it cannot be released yet).
+    pub persists: bool,
+    /// Why.
+    pub reason: FixedText<MAX_REASON>,
+    /// How long ago, ms.
+    pub age_ms: f64,
+}
+
+/// One entry of the status' recent history.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+pub struct EventPayload {
+    /// How long ago, ms.
+    pub age_ms: f64,
+    /// What happened, with who and why.
+    pub text: FixedText<120>,
+}
+
 /// One client in the arbiter's status.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
 pub struct SourcePayload {
     /// The client's name.
     pub client: FixedText<MAX_CLIENT_NAME>,
-    /// [`Class`] byte of its last command (0: none).
+    /// [`Class`] byte of its lease (0: none).
     pub class: u8,
-    /// Whether it holds its class now.
+    /// Whether it holds a lease now.
     pub holding: bool,
     /// Its heartbeat period, ms (0: none).
     pub heartbeat_ms: u32,
+    /// Its lease (0: none).
+    pub lease: u64,
     /// Requests it sent.
     pub requests: u64,
     /// How long ago it last sent a request, ms.
@@ -526,7 +715,7 @@ pub struct SourcePayload {
 
 /// The arbiter's status, published on every change and at least once a second.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::StatusPayload.v2")]
+#[type_name("scout::StatusPayload.v3")]
 #[repr(C)]
 pub struct StatusPayload {
     /// Rises by one with every publication.
@@ -535,14 +724,10 @@ pub struct StatusPayload {
     pub published_ns: u64,
     /// The robot's name.
     pub robot: FixedText<32>,
-    /// The safety stop is latched.
-    pub latched: bool,
-    /// Who latched it.
-    pub latched_by: FixedText<MAX_CLIENT_NAME>,
-    /// Why.
-    pub latched_reason: FixedText<MAX_REASON>,
-    /// How long ago, ms.
-    pub latched_age_ms: f64,
+    /// How many stops hold the robot (motion only at zero).
+    pub stop_total: u32,
+    /// The first [`MAX_STATUS_STOPS`] of them, oldest first.
+    pub stops: [StopPayload; MAX_STATUS_STOPS],
     /// [`Class`] byte of the selected source (0: none).
     pub selected_class: u8,
     /// The selected client.
@@ -565,6 +750,16 @@ pub struct StatusPayload {
     pub sources: [SourcePayload; MAX_CLIENTS],
     /// Rejections, indexed by [`RejectionKind::raw`].
     pub rejections: [u64; REJECTION_COUNTERS],
+    /// The latest motion command's lateness behind its tick when it was sent, ms.
+    pub tick_lateness_ms: f64,
+    /// The worst lateness since the gateway started, ms.
+    pub tick_max_lateness_ms: f64,
+    /// Ticks missed (skipped to stay on the grid) since the gateway started.
+    pub ticks_missed: u64,
+    /// How many entries of `events` are used.
+    pub event_count: u8,
+    /// The latest events, oldest first.
+    pub events: [EventPayload; STATUS_EVENTS],
 }
 
 impl StatusPayload {
@@ -574,7 +769,15 @@ impl StatusPayload {
             let mut s = *s;
             s.seq = 0;
             s.published_ns = 0;
-            s.latched_age_ms = 0.0;
+            s.tick_lateness_ms = 0.0;
+            s.tick_max_lateness_ms = 0.0;
+            s.ticks_missed = 0;
+            for stop in &mut s.stops {
+                stop.age_ms = 0.0;
+            }
+            for event in &mut s.events {
+                event.age_ms = 0.0;
+            }
             for source in &mut s.sources {
                 source.age_ms = 0.0;
                 source.requests = 0;
@@ -587,6 +790,21 @@ impl StatusPayload {
     /// The listed clients.
     pub fn sources(&self) -> &[SourcePayload] {
         &self.sources[..usize::from(self.source_count).min(MAX_CLIENTS)]
+    }
+
+    /// The listed stops.
+    pub fn stops(&self) -> &[StopPayload] {
+        &self.stops[..(self.stop_total as usize).min(MAX_STATUS_STOPS)]
+    }
+
+    /// The recent events, oldest first.
+    pub fn events(&self) -> &[EventPayload] {
+        &self.events[..usize::from(self.event_count).min(STATUS_EVENTS)]
+    }
+
+    /// Whether any stop holds the robot.
+    pub fn stopped(&self) -> bool {
+        self.stop_total > 0
     }
 }
 
@@ -610,7 +828,7 @@ mod tests {
         );
         let drive = ControlRequest {
             class: 7,
-            ..wire(RequestKind::Drive.raw())
+            ..wire(RequestKind::TakeControl.raw())
         };
         assert_eq!(Request::decode(&drive), Err(Rejection::UnknownClass(7)));
         let clear = ControlRequest {
@@ -656,17 +874,27 @@ mod tests {
     fn request() -> impl Strategy<Value = Request> {
         let class = prop::sample::select(Class::ALL.to_vec());
         let speed = -10.0f64..10.0;
+        let target = prop_oneof![
+            Just(ReleaseTarget::Own),
+            Just(ReleaseTarget::All),
+            "[a-z:-]{1,32}".prop_map(ReleaseTarget::Owner),
+        ];
         prop_oneof![
-            (class, speed.clone(), speed, prop::option::of(1u64..100_000)).prop_map(
-                |(class, linear, angular, ttl)| Request::Drive {
-                    class,
+            class.prop_map(|class| Request::TakeControl { class }),
+            (
+                any::<u64>(),
+                speed.clone(),
+                speed,
+                prop::option::of(1u64..100_000)
+            )
+                .prop_map(|(lease, linear, angular, ttl)| Request::Drive {
+                    lease,
                     linear,
                     angular,
                     ttl: ttl.map(Duration::from_millis),
-                }
-            ),
+                }),
             "[a-z ]{1,64}".prop_map(|reason| Request::Stop { reason }),
-            Just(Request::Release),
+            target.prop_map(|target| Request::Release { target }),
             Just(Request::Relinquish),
             Just(Request::Resume),
             Just(Request::Lights(LightsSetting::Auto)),
@@ -697,10 +925,11 @@ mod tests {
         #[test]
         fn any_bytes_decode_or_are_rejected_with_a_reason(
             kind in any::<u8>(), class in any::<u8>(), fault in any::<u8>(),
-            front in any::<(u8, u8)>(), auto in any::<bool>(),
+            front in any::<(u8, u8)>(), auto in any::<bool>(), scope in any::<u8>(),
         ) {
             let mut wire = wire(kind);
             wire.class = class;
+            wire.release_scope = scope;
             wire.fault_clear = fault;
             wire.lights.auto = auto;
             wire.lights.front = LightPayload { mode: front.0, brightness: front.1 };
@@ -714,14 +943,19 @@ mod tests {
     fn every_kind_has_a_request() {
         // Request::kind is exhaustive over Request; this checks the other way round.
         let kinds: Vec<RequestKind> = [
-            Request::Drive {
+            Request::TakeControl {
                 class: Class::Teleop,
+            },
+            Request::Drive {
+                lease: 1,
                 linear: 0.0,
                 angular: 0.0,
                 ttl: None,
             },
             Request::Stop { reason: "x".into() },
-            Request::Release,
+            Request::Release {
+                target: ReleaseTarget::Own,
+            },
             Request::Relinquish,
             Request::Resume,
             Request::Lights(LightsSetting::Auto),
@@ -754,8 +988,18 @@ mod tests {
             })
         );
         assert_eq!(
-            ControlResponse::new(6, &Ok(Accepted { clamped: true })).answer(),
-            Ok(Accepted { clamped: true })
+            ControlResponse::new(
+                6,
+                &Ok(Accepted {
+                    clamped: true,
+                    lease: Some(7)
+                })
+            )
+            .answer(),
+            Ok(Accepted {
+                clamped: true,
+                lease: Some(7)
+            })
         );
     }
 

@@ -5,7 +5,7 @@
 use scout_protocol::{FaultClear, Light, Message, MessageKind, Motor};
 use serde_json::{Map, Value, json};
 
-use crate::control::{Class, LightsControl, RejectionKind, StatusPayload};
+use crate::control::{Class, LightsControl, RejectionKind, StatusPayload, StopCause};
 use crate::state::{Received, StatePayload};
 
 fn age_ms(at_ns: u64, now_ns: u64) -> f64 {
@@ -139,15 +139,24 @@ fn class_name(raw: u8) -> Value {
 
 /// The arbiter's status as the README documents it.
 pub fn status_json(status: &StatusPayload, now_ns: u64) -> Value {
-    let latched_by = if status.latched {
-        json!({
-            "client": status.latched_by.as_str(),
-            "reason": status.latched_reason.as_str(),
-            "age_ms": status.latched_age_ms,
+    let stops: Vec<Value> = status
+        .stops()
+        .iter()
+        .map(|stop| {
+            json!({
+                "owner": stop.owner.as_str(),
+                "cause": StopCause::from_raw(stop.cause).map_or("unknown", StopCause::name),
+                "reason": stop.reason.as_str(),
+                "age_ms": stop.age_ms,
+                "persists": stop.persists,
+            })
         })
-    } else {
-        Value::Null
-    };
+        .collect();
+    let events: Vec<Value> = status
+        .events()
+        .iter()
+        .map(|event| json!({ "age_ms": event.age_ms, "event": event.text.as_str() }))
+        .collect();
     let selected = match Class::from_raw(status.selected_class) {
         Some(class) => json!({ "client": status.selected_client.as_str(), "class": class.name() }),
         None => Value::Null,
@@ -160,6 +169,7 @@ pub fn status_json(status: &StatusPayload, now_ns: u64) -> Value {
                 "client": source.client.as_str(),
                 "class": class_name(source.class),
                 "holding": source.holding,
+                "lease": (source.lease != 0).then_some(source.lease),
                 "heartbeat_ms": (source.heartbeat_ms > 0).then_some(source.heartbeat_ms),
                 "requests": source.requests,
                 "age_ms": source.age_ms,
@@ -178,8 +188,9 @@ pub fn status_json(status: &StatusPayload, now_ns: u64) -> Value {
         "robot": status.robot.as_str(),
         "seq": status.seq,
         "age_ms": age_ms(status.published_ns, now_ns),
-        "latched": status.latched,
-        "latched_by": latched_by,
+        "latched": status.stopped(),
+        "stop_total": status.stop_total,
+        "stops": stops,
         "selected": selected,
         "output": {
             "linear": status.output_linear,
@@ -191,6 +202,12 @@ pub fn status_json(status: &StatusPayload, now_ns: u64) -> Value {
         "lights": lights.name(),
         "sources": sources,
         "rejections": rejections,
+        "tick": {
+            "lateness_ms": status.tick_lateness_ms,
+            "max_lateness_ms": status.tick_max_lateness_ms,
+            "missed": status.ticks_missed,
+        },
+        "events": events,
     })
 }
 
@@ -202,21 +219,23 @@ mod tests {
 
     #[test]
     fn status_schema_has_the_documented_fields() {
-        let status = StatusPayload {
-            latched: true,
-            latched_by: FixedText::new("safety"),
+        let mut status = StatusPayload {
+            stop_total: 1,
             selected_class: 0,
             autonomy_armed: false,
             ..StatusPayload::default()
         };
+        status.stops[0].owner = FixedText::new("safety");
+        status.stops[0].cause = StopCause::ChassisEstop.raw();
         let json = status_json(&status, 0);
         assert_eq!(json["latched"], true);
-        assert_eq!(json["latched_by"]["client"], "safety");
+        assert_eq!(json["stops"][0]["owner"], "safety");
+        assert_eq!(json["stops"][0]["cause"], "chassis_estop");
         assert_eq!(json["selected"], Value::Null);
         assert_eq!(json["autonomy_armed"], false);
         assert_eq!(json["lights"], "chassis");
         assert_eq!(json["rejections"]["not_finite"], 0);
-        assert_eq!(json["rejections"].as_object().map(Map::len), Some(8));
+        assert_eq!(json["rejections"].as_object().map(Map::len), Some(14));
         let driving = StatusPayload {
             selected_class: Class::Teleop.raw(),
             selected_client: FixedText::new("joy"),

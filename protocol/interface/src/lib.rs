@@ -25,8 +25,8 @@ pub mod services;
 pub mod state;
 pub mod text;
 
-/// The layout version in every payload's iceoryx2 type name (`scout::StatePayload.v2`).
-pub const LAYOUT_VERSION: u32 = 2;
+/// The layout version in every payload's iceoryx2 type name (`scout::StatePayload.v3`).
+pub const LAYOUT_VERSION: u32 = 3;
 
 pub use control::{
     Accepted, Class, ControlRequest, ControlResponse, LightsSetting, Rejection, RejectionKind,

@@ -4,7 +4,9 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::control::{Class, LightsSetting, Request, parse_fault_clear, parse_light};
+use crate::control::{
+    Class, LightsSetting, ReleaseTarget, Request, parse_fault_clear, parse_light,
+};
 use crate::services::prefix;
 use scout_protocol::{Light, LightCommand};
 use std::time::Duration;
@@ -41,20 +43,46 @@ pub fn info_key(robot: &str) -> String {
     format!("{}/info", prefix(robot))
 }
 
-/// The key expression of every remote command: `scout/ROBOT/cmd/KIND`.
+/// The key expression of every remote command: `scout/ROBOT/cmd/KIND/PEER`.
 pub fn command_keys(robot: &str) -> String {
     format!("{}/cmd/**", prefix(robot))
 }
 
-/// The key of one remote command.
-pub fn command_key(robot: &str, kind: RemoteKind) -> String {
-    format!("{}/cmd/{kind}", prefix(robot))
+/// The key of one remote command from `peer`. The peer's name is part of the key, not of the
+/// payload, so that zenoh's access control binds it to the peer's certificate: a peer may query
+/// only the keys of its own name.
+pub fn command_key(robot: &str, kind: RemoteKind, peer: &str) -> String {
+    format!("{}/cmd/{kind}/{peer}", prefix(robot))
+}
+
+/// A command key's kind and peer, or why it is not one.
+pub fn parse_command_key(key: &str) -> Result<(RemoteKind, &str), String> {
+    let mut chunks = key.rsplit('/');
+    let (Some(peer), Some(kind), Some("cmd")) = (chunks.next(), chunks.next(), chunks.next())
+    else {
+        return Err(format!(
+            "`{key}` is not scout/ROBOT/cmd/KIND/PEER: name yourself in the key"
+        ));
+    };
+    let kind = kind.parse().map_err(|e: crate::control::UnknownName| {
+        format!(
+            "unknown command `{}`: one of {}",
+            e.found,
+            e.expected.join(", ")
+        )
+    })?;
+    if peer.is_empty() || peer.len() > MAX_REMOTE_CLIENT {
+        return Err(format!(
+            "the peer name in the key must be 1 to {MAX_REMOTE_CLIENT} bytes"
+        ));
+    }
+    Ok((kind, peer))
 }
 
 wire_enum! {
     /// The remote commands: the last chunk of the command's key.
     RemoteKind {
-        /// Drive as `class` (permission: the class).
+        /// Drive under the control this peer took (permission: its class).
         Drive = 1 => "drive",
         /// Latch the safety stop.
         Estop = 2 => "estop",
@@ -66,6 +94,10 @@ wire_enum! {
         Lights = 5 => "lights",
         /// Clear a fault.
         ClearFault = 6 => "clear-fault",
+        /// Take control as `class` (permission: the class).
+        TakeControl = 7 => "take-control",
+        /// Give up control.
+        Relinquish = 8 => "relinquish",
     }
 }
 
@@ -93,9 +125,13 @@ wire_enum! {
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RemoteCommand {
-    /// The sender's name, shown (prefixed `remote:`) in the status and the audit log.
-    pub client: String,
-    /// drive: `teleop` or `autonomy`.
+    /// drive: the peer's own command number, rising by at least one per command (a repeated
+    /// or older number is refused: duplicated or reordered).
+    pub seq: Option<u64>,
+    /// drive: the peer's clock when it sent the command, ms (any epoch; the bridge learns the
+    /// offset, and a command held up by the network for longer than its life is refused).
+    pub sent_ms: Option<u64>,
+    /// take-control: `teleop` or `autonomy`.
     pub class: Option<String>,
     /// drive: m/s.
     pub linear: Option<f64>,
@@ -127,43 +163,58 @@ pub struct RemoteLight {
 }
 
 impl RemoteCommand {
-    /// The request a command of `kind` makes and the permission it needs; the error says what
-    /// is missing or wrong.
-    pub fn request(&self, kind: RemoteKind) -> Result<(Permission, Request), String> {
-        if self.client.is_empty() || self.client.len() > MAX_REMOTE_CLIENT {
-            return Err(format!("`client` must be 1 to {MAX_REMOTE_CLIENT} bytes"));
-        }
+    /// The request a command of `kind` makes and the permission it needs, for a peer that
+    /// holds control as `class` (if it does); the error says what is missing or wrong.
+    pub fn request(
+        &self,
+        kind: RemoteKind,
+        control: Option<(u64, Class)>,
+    ) -> Result<(Permission, Request), String> {
+        let permission = |class: Class| match class {
+            Class::Teleop => Permission::Teleop,
+            Class::Autonomy => Permission::Autonomy,
+        };
         Ok(match kind {
-            RemoteKind::Drive => {
+            RemoteKind::TakeControl => {
                 let class: Class = self
                     .class
                     .as_deref()
-                    .ok_or("drive needs `class`: teleop or autonomy")?
+                    .ok_or("take-control needs `class`: teleop or autonomy")?
                     .parse()
                     .map_err(|e: crate::control::UnknownName| e.to_string())?;
+                (permission(class), Request::TakeControl { class })
+            }
+            RemoteKind::Drive => {
+                let (lease, class) =
+                    control.ok_or("no control: send take-control first (cmd/take-control/PEER)")?;
                 let (Some(linear), Some(angular)) = (self.linear, self.angular) else {
                     return Err("drive needs `linear` and `angular` numbers".into());
                 };
-                let permission = match class {
-                    Class::Teleop => Permission::Teleop,
-                    Class::Autonomy => Permission::Autonomy,
-                };
                 let ttl = self.ttl_ms.map(|ms| Duration::from_millis(u64::from(ms)));
                 (
-                    permission,
+                    permission(class),
                     Request::Drive {
-                        class,
+                        lease,
                         linear,
                         angular,
                         ttl,
                     },
                 )
             }
+            RemoteKind::Relinquish => {
+                let (_, class) = control.ok_or("no control to give up")?;
+                (permission(class), Request::Relinquish)
+            }
             RemoteKind::Estop => {
                 let reason = self.reason.clone().unwrap_or_else(|| "remote estop".into());
                 (Permission::Estop, Request::Stop { reason })
             }
-            RemoteKind::Release => (Permission::Release, Request::Release),
+            RemoteKind::Release => (
+                Permission::Release,
+                Request::Release {
+                    target: ReleaseTarget::Own,
+                },
+            ),
             RemoteKind::Resume => (Permission::Resume, Request::Resume),
             RemoteKind::Lights => (Permission::Lights, Request::Lights(self.lights()?)),
             RemoteKind::ClearFault => {
@@ -305,20 +356,30 @@ mod tests {
 
     #[test]
     fn commands_map_to_requests_and_permissions() {
-        let drive = command(r#"{"client":"op","class":"teleop","linear":0.5,"angular":0}"#);
+        let take = command(r#"{"class":"teleop"}"#).request(RemoteKind::TakeControl, None);
         assert_eq!(
-            drive.request(RemoteKind::Drive),
+            take,
             Ok((
                 Permission::Teleop,
+                Request::TakeControl {
+                    class: Class::Teleop
+                }
+            ))
+        );
+        let drive = command(r#"{"linear":0.5,"angular":0}"#);
+        assert_eq!(
+            drive.request(RemoteKind::Drive, Some((9, Class::Autonomy))),
+            Ok((
+                Permission::Autonomy,
                 Request::Drive {
-                    class: Class::Teleop,
+                    lease: 9,
                     linear: 0.5,
                     angular: 0.0,
                     ttl: None
                 }
             ))
         );
-        let stop = command(r#"{"client":"op"}"#).request(RemoteKind::Estop);
+        let stop = command("{}").request(RemoteKind::Estop, None);
         assert_eq!(
             stop,
             Ok((
@@ -328,7 +389,18 @@ mod tests {
                 }
             ))
         );
-        let clear = command(r#"{"client":"op","fault":"all"}"#).request(RemoteKind::ClearFault);
+        let release = command("{}").request(RemoteKind::Release, None);
+        assert_eq!(
+            release,
+            Ok((
+                Permission::Release,
+                Request::Release {
+                    target: ReleaseTarget::Own
+                }
+            )),
+            "a remote peer releases only its own stops"
+        );
+        let clear = command(r#"{"fault":"all"}"#).request(RemoteKind::ClearFault, None);
         assert_eq!(
             clear,
             Ok((Permission::ClearFault, Request::ClearFault(None)))
@@ -337,25 +409,45 @@ mod tests {
 
     #[test]
     fn bad_commands_say_what_is_wrong() {
-        let nameless = command(r#"{"class":"teleop","linear":1,"angular":0}"#);
-        assert_eq!(
-            nameless.request(RemoteKind::Drive),
-            Err("`client` must be 1 to 25 bytes".into())
+        let uncontrolled = command(r#"{"linear":1,"angular":0}"#);
+        assert!(
+            uncontrolled
+                .request(RemoteKind::Drive, None)
+                .unwrap_err()
+                .contains("take-control")
         );
-        let classless = command(r#"{"client":"op","linear":1,"angular":0}"#);
+        let classless = command("{}");
         assert!(
             classless
-                .request(RemoteKind::Drive)
+                .request(RemoteKind::TakeControl, None)
                 .unwrap_err()
                 .contains("class")
         );
-        let dim = command(r#"{"client":"op","front":{"mode":"on","brightness":101}}"#);
+        let dim = command(r#"{"front":{"mode":"on","brightness":101}}"#);
         assert!(
-            dim.request(RemoteKind::Lights)
+            dim.request(RemoteKind::Lights, None)
                 .unwrap_err()
                 .contains("above 100")
         );
+        assert!(
+            serde_json::from_str::<RemoteCommand>(r#"{"client":"someone"}"#).is_err(),
+            "identity is not a payload field"
+        );
         assert_eq!("clear-fault".parse(), Ok(RemoteKind::ClearFault));
         assert_eq!("clear_fault".parse(), Ok(Permission::ClearFault));
+    }
+
+    #[test]
+    fn the_peer_comes_from_the_key() {
+        assert_eq!(
+            parse_command_key("scout/alpha/cmd/estop/laptop"),
+            Ok((RemoteKind::Estop, "laptop"))
+        );
+        assert!(parse_command_key("scout/alpha/cmd/estop").is_err());
+        assert!(parse_command_key("scout/alpha/cmd/fly/laptop").is_err());
+        assert_eq!(
+            command_key("alpha", RemoteKind::Drive, "op"),
+            "scout/alpha/cmd/drive/op"
+        );
     }
 }

@@ -1,10 +1,15 @@
 //! The iceoryx2 services of a robot: their names, their sizing, and how the gateway creates and
 //! a client opens them; plus the client's request round trip ([`ControlPort`]).
 //!
-//! A robot `ROBOT` has three services: `scout/ROBOT/state` (publish-subscribe of
+//! A robot `ROBOT` has four services: `scout/ROBOT/state` (publish-subscribe of
 //! [`StatePayload`] with an event service that fires after each), `scout/ROBOT/status`
-//! (publish-subscribe of [`StatusPayload`]) and `scout/ROBOT/control` (request-response of
-//! [`ControlRequest`] / [`ControlResponse`] with an event service that wakes the gateway).
+//! (publish-subscribe of [`StatusPayload`]), `scout/ROBOT/control` (request-response of
+//! [`ControlRequest`] / [`ControlResponse`]) and `scout/ROBOT/stop` (the same payloads, stops
+//! only: its own way in, sized apart, that a full control service or a flood cannot block).
+//! Both request services share one wake-up event service (`scout/ROBOT/control`).
+//!
+//! A client's identity is its port: the gateway reads the port's name and node from iceoryx2
+//! (the request's origin), never from the payload.
 
 use std::time::{Duration, Instant};
 
@@ -29,7 +34,6 @@ use crate::control::{
     Accepted, ControlRequest, ControlResponse, MAX_CLIENTS, Rejected, StatusPayload,
 };
 use crate::state::StatePayload;
-use crate::text::FixedText;
 
 /// The iceoryx2 service flavour every process uses: inter-process, shared memory.
 pub type Ipc = iceoryx2::service::ipc::Service;
@@ -49,8 +53,10 @@ pub type StatusService = publish_subscribe::PortFactory<Ipc, StatusPayload, ()>;
 
 /// Local subscriber processes a gateway serves at once.
 pub const MAX_SUBSCRIBERS: usize = 64;
-/// Command-sending processes a gateway serves at once: one control port each.
+/// Control ports a gateway serves at once.
 pub const MAX_CONTROLLERS: usize = MAX_CLIENTS;
+/// Stop ports a gateway serves at once, apart from the control ports.
+pub const MAX_STOPPERS: usize = 256;
 /// Nodes (processes) that may use one robot's services at once.
 pub const MAX_NODES: usize = 128;
 /// Samples a slow subscriber keeps before the oldest is overwritten.
@@ -81,6 +87,36 @@ pub fn control_service(robot: &str) -> String {
 /// The status service.
 pub fn status_service(robot: &str) -> String {
     format!("{}/status", prefix(robot))
+}
+
+/// The stop service.
+pub fn stop_service(robot: &str) -> String {
+    format!("{}/stop", prefix(robot))
+}
+
+/// A request service: control, or stops only.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Way {
+    /// `scout/ROBOT/control`: every request.
+    Control,
+    /// `scout/ROBOT/stop`: stops, never refused, never behind a full control service.
+    Stop,
+}
+
+impl Way {
+    fn service(self, robot: &str) -> String {
+        match self {
+            Self::Control => control_service(robot),
+            Self::Stop => stop_service(robot),
+        }
+    }
+
+    fn max_clients(self) -> usize {
+        match self {
+            Self::Control => MAX_CONTROLLERS,
+            Self::Stop => MAX_STOPPERS,
+        }
+    }
 }
 
 /// A robot name that cannot name services and keys.
@@ -331,14 +367,14 @@ pub fn status_services(
     latest_value_service(node, robot, &status_service(robot), role)
 }
 
-/// The control services of `robot`: requests and the wake-up event. Sized for
-/// [`MAX_CONTROLLERS`] client processes.
-pub fn control_services(
+/// A request service of `robot` (`way`) and the wake-up event both share.
+pub fn request_services(
     node: &Node<Ipc>,
     robot: &str,
+    way: Way,
     role: Role,
 ) -> Result<(ControlService, Events), ServiceError> {
-    let name = control_service(robot);
+    let name = way.service(robot);
     let error = |source| ServiceError::RequestResponse {
         service: name.clone(),
         source,
@@ -349,7 +385,7 @@ pub fn control_services(
     let requests = match role {
         Role::Gateway => builder
             .max_servers(2)
-            .max_clients(MAX_CONTROLLERS)
+            .max_clients(way.max_clients())
             .max_nodes(MAX_NODES)
             .max_active_requests_per_client(MAX_REQUESTS_IN_FLIGHT)
             .max_response_buffer_size(MAX_REQUESTS_IN_FLIGHT)
@@ -371,7 +407,14 @@ pub fn control_services(
             open_error(robot, &name, failure, other)
         })?,
     };
-    let events = event_service(node, robot, &name, role, (MAX_CONTROLLERS, 2))?;
+    let wake = control_service(robot);
+    let events = event_service(
+        node,
+        robot,
+        &wake,
+        role,
+        (MAX_CONTROLLERS + MAX_STOPPERS, 2),
+    )?;
     Ok((requests, events))
 }
 
@@ -406,38 +449,55 @@ pub enum ControlPortError {
     /// The services could not be opened.
     #[error(transparent)]
     Service(#[from] ServiceError),
-    /// The client port could not be created (the gateway serves [`MAX_CONTROLLERS`] at once).
-    #[error("creating a control port (at most {MAX_CONTROLLERS} at once): {0:?}")]
-    Client(#[source] iceoryx2::service::port_factory::client::ClientCreateError),
+    /// The client port could not be created (the gateway serves [`MAX_CONTROLLERS`] control
+    /// and [`MAX_STOPPERS`] stop ports at once).
+    #[error("creating a {way:?} port (all taken?): {source:?}")]
+    Client {
+        /// Which service.
+        way: Way,
+        /// iceoryx2's error.
+        #[source]
+        source: iceoryx2::service::port_factory::client::ClientCreateError,
+    },
+    /// The name cannot name an iceoryx2 port.
+    #[error("client name `{0}` must be 1 to 32 bytes")]
+    Name(String),
     /// The wake-up notifier could not be created.
     #[error("creating the wake-up notifier: {0:?}")]
     Notifier(#[source] iceoryx2::port::notifier::NotifierCreateError),
 }
 
-/// A client's way to the arbiter: sends one request at a time and waits for its answer.
+/// A client's way to the arbiter: sends one request at a time and waits for its answer. The
+/// port's name is the client's name: the gateway reads it from iceoryx2 with the request.
 #[derive(Debug)]
 pub struct ControlPort {
     robot: String,
-    name: FixedText<{ crate::control::MAX_CLIENT_NAME }>,
-    node: [u64; 2],
     seq: u64,
     client: Client<Ipc, ControlRequest, (), ControlResponse, ()>,
     wake: Notifier<Ipc>,
 }
 
 impl ControlPort {
-    /// A port on `robot`'s control service for the client `name` of `node`.
-    pub fn open(node: &Node<Ipc>, robot: &str, name: &str) -> Result<Self, ControlPortError> {
-        let (requests, events) = control_services(node, robot, Role::Client)?;
+    /// A port named `name` on `robot`'s request service `way`.
+    pub fn open(
+        node: &Node<Ipc>,
+        robot: &str,
+        way: Way,
+        name: &str,
+    ) -> Result<Self, ControlPortError> {
+        let port_name = (!name.is_empty() && name.len() <= crate::control::MAX_CLIENT_NAME)
+            .then(|| iceoryx2::prelude::PortName::new(name).ok())
+            .flatten()
+            .ok_or_else(|| ControlPortError::Name(name.to_owned()))?;
+        let (requests, events) = request_services(node, robot, way, Role::Client)?;
         Ok(Self {
             robot: robot.to_owned(),
-            name: FixedText::new(name),
-            node: crate::control::node_halves(node.id().value()),
             seq: 0,
             client: requests
                 .client_builder()
+                .name(&port_name)
                 .create()
-                .map_err(ControlPortError::Client)?,
+                .map_err(|source| ControlPortError::Client { way, source })?,
             wake: events
                 .notifier_builder()
                 .create()
@@ -447,10 +507,20 @@ impl ControlPort {
 
     /// Sends `request`, wakes the gateway and waits for the answer.
     pub fn request(&mut self, request: &crate::control::Request) -> Result<Accepted, RequestError> {
+        self.request_sent_at(request, monotonic())
+    }
+
+    /// Sends `request` as sent at `sent` (CLOCK_MONOTONIC; earlier than now for a command that
+    /// was held up before it reached this port, such as a remote one), and waits for the
+    /// answer.
+    pub fn request_sent_at(
+        &mut self,
+        request: &crate::control::Request,
+        sent: Duration,
+    ) -> Result<Accepted, RequestError> {
         self.seq += 1;
         let mut wire = request.encode(self.seq);
-        wire.client = self.name;
-        wire.node = self.node;
+        wire.sent_ns = sent.as_nanos() as u64;
         let pending = self.client.send_copy(wire).map_err(RequestError::Send)?;
         self.wake.notify().map_err(RequestError::Wake)?;
         let deadline = Instant::now() + ANSWER_TIMEOUT;

@@ -9,6 +9,8 @@ fn square_example_drives_back_near_its_start() {
     let name = robot_name("square");
     let _gateway = Gateway::start(&["--sim", "--name", &name]);
     connect(&name);
+    let (code, _, stderr) = scout_system_tests::scout(&["resume", "--name", &name]);
+    assert_eq!(code, Some(0), "{stderr}");
     let mut square = example("square");
     square.args([
         "--name",

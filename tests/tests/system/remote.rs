@@ -126,8 +126,8 @@ fn remote_commands_are_ignored_by_default_and_counted() {
     query_until_answered(&session, &format!("scout/{name}/info"));
     let answers = zenoh_query(
         &session,
-        &format!("scout/{name}/cmd/estop"),
-        Some(r#"{"client":"laptop"}"#),
+        &format!("scout/{name}/cmd/estop/laptop"),
+        Some("{}"),
         QUERY,
     );
     assert_eq!(answers.len(), 1);
@@ -139,7 +139,7 @@ fn remote_commands_are_ignored_by_default_and_counted() {
         "{answers:?}"
     );
     session
-        .put(format!("scout/{name}/cmd/drive"), r#"{"client":"x"}"#)
+        .put(format!("scout/{name}/cmd/drive/x"), "{}")
         .wait()
         .expect("put");
     let status = robot.status().expect("status");
@@ -173,50 +173,81 @@ fn enabled_remote_commands_go_through_the_arbiter_and_bad_input_is_rejected() {
     let status = robot.status().expect("status");
     let session = zenoh_session("client", &[], &[tcp(port)]);
     query_until_answered(&session, &format!("scout/{name}/info"));
-    let command = |kind: &str, payload: &str| {
+    // The peer's name is the last chunk of the key: zenoh's access control binds it to the
+    // peer's certificate (see the TLS test); the payload names nobody.
+    let command = |kind: &str, peer: &str, payload: &str| {
         let mut answers = zenoh_query(
             &session,
-            &format!("scout/{name}/cmd/{kind}"),
+            &format!("scout/{name}/cmd/{kind}/{peer}"),
             Some(payload),
             QUERY,
         );
         assert_eq!(answers.len(), 1, "{kind} {payload}: {answers:?}");
         answers.remove(0)
     };
-    let drive = r#"{"client":"laptop","class":"teleop","linear":0.3,"angular":0.0,"ttl_ms":300}"#;
-    assert_eq!(command("drive", drive)["accepted"], true);
+    let drive = |seq: u64, sent_ms: u64| {
+        format!(r#"{{"seq":{seq},"sent_ms":{sent_ms},"linear":0.3,"angular":0.0,"ttl_ms":300}}"#)
+    };
+    let no_control = command("drive", "laptop", &drive(1, 1000));
+    assert!(
+        no_control["reason"]
+            .as_str()
+            .is_some_and(|r| r.contains("take-control")),
+        "{no_control}"
+    );
+    assert_eq!(
+        command("take-control", "laptop", r#"{"class":"teleop"}"#)["accepted"],
+        true
+    );
+    assert_eq!(
+        command("drive", "laptop", &drive(2, 1000))["accepted"],
+        true
+    );
     let driving = wait_for_status(&status, LIMIT, |s| {
         s["selected"]["client"] == "remote:laptop"
     });
     assert_eq!(driving["selected"]["class"], "teleop");
+    // Duplicated and reordered commands are refused; so is one the network held up past its
+    // life (sent 1000 ms "earlier" than the fastest delivery seen from this peer).
+    let duplicate = command("drive", "laptop", &drive(2, 1020));
+    assert!(
+        duplicate["reason"]
+            .as_str()
+            .is_some_and(|r| r.contains("out of order")),
+        "{duplicate}"
+    );
+    let held_up = command("drive", "laptop", &drive(3, 1040 - 1000));
+    assert!(
+        held_up["reason"]
+            .as_str()
+            .is_some_and(|r| r.contains("held up")),
+        "{held_up}"
+    );
     let refusals = [
+        ("take-control", r#"{"class":"autonomy"}"#, "not allowed"),
+        ("resume", "{}", "not allowed"),
         (
             "drive",
-            r#"{"client":"laptop","class":"autonomy","linear":0.3,"angular":0.0}"#,
-            "not allowed",
-        ),
-        ("resume", r#"{"client":"laptop"}"#, "not allowed"),
-        (
-            "drive",
-            r#"{"client":"laptop","class":"teleop","linear":"NaN","angular":0.0}"#,
+            r#"{"seq":9,"sent_ms":1,"linear":"NaN","angular":0.0}"#,
             "invalid JSON",
         ),
         ("drive", "{not json", "invalid JSON"),
         (
             "drive",
-            r#"{"client":"laptop","class":"teleop"}"#,
+            r#"{"seq":10,"sent_ms":1}"#,
             "needs `linear` and `angular`",
         ),
+        ("drive", r#"{"linear":1,"angular":0}"#, "needs `seq`"),
         (
             "drive",
-            r#"{"client":"laptop","class":"teleop","linear":1,"angular":0,"extra":1}"#,
+            r#"{"linear":1,"angular":0,"extra":1}"#,
             "invalid JSON",
         ),
-        ("fly", r#"{"client":"laptop"}"#, "unknown command"),
-        ("estop", r#"{"client":""}"#, "`client`"),
+        ("estop", r#"{"client":"someone-else"}"#, "invalid JSON"),
+        ("fly", "{}", "unknown command"),
     ];
     for (kind, payload, reason) in refusals {
-        let answer = command(kind, payload);
+        let answer = command(kind, "laptop", payload);
         assert_eq!(answer["accepted"], false, "{kind} {payload}");
         assert!(
             answer["reason"]
@@ -225,23 +256,65 @@ fn enabled_remote_commands_go_through_the_arbiter_and_bad_input_is_rejected() {
             "{kind} {payload}: {answer}"
         );
     }
-    let huge = format!(r#"{{"client":"laptop","reason":"{}"}}"#, "x".repeat(5000));
+    let nameless = zenoh_query(
+        &session,
+        &format!("scout/{name}/cmd/estop"),
+        Some("{}"),
+        QUERY,
+    );
     assert!(
-        command("estop", &huge)["reason"]
+        nameless[0]["reason"]
+            .as_str()
+            .is_some_and(|r| r.contains("name yourself")),
+        "{nameless:?}"
+    );
+    let huge = format!(r#"{{"reason":"{}"}}"#, "x".repeat(5000));
+    assert!(
+        command("estop", "laptop", &huge)["reason"]
             .as_str()
             .is_some_and(|r| r.contains("exceeds"))
     );
+    // A local officer's stop: a remote peer allowed `release` releases only its own stops.
+    robot
+        .stopper("safety-officer")
+        .expect("stopper")
+        .stop("person ahead")
+        .expect("stop");
+    let not_owner = command("release", "laptop", "{}");
+    assert_eq!(not_owner["accepted"], false, "{not_owner}");
+    assert!(
+        not_owner["reason"]
+            .as_str()
+            .is_some_and(|r| r.contains("safety-officer")),
+        "{not_owner}"
+    );
     assert_eq!(
-        command("estop", r#"{"client":"laptop","reason":"remote stop"}"#)["accepted"],
+        command("estop", "laptop", r#"{"reason":"remote stop"}"#)["accepted"],
         true
     );
-    let latched = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
-    assert_eq!(latched["latched_by"]["client"], "remote:laptop");
+    let latched = wait_for_status(&status, LIMIT, |s| s["stop_total"] == 2);
+    assert_eq!(latched["stops"][1]["owner"], "remote:laptop");
+    assert_eq!(command("release", "laptop", "{}")["accepted"], true);
+    let left = wait_for_status(&status, LIMIT, |s| s["stop_total"] == 1);
     assert_eq!(
-        command("release", r#"{"client":"laptop"}"#)["accepted"],
-        true
+        left["stops"][0]["owner"], "safety-officer",
+        "the officer's stop holds"
     );
-    wait_for_status(&status, LIMIT, |s| s["latched"] == false);
+    // The lease ended with the stop: the old stream is refused until it takes control again.
+    let revoked = command("drive", "laptop", &drive(20, 2000));
+    assert!(
+        revoked["reason"]
+            .as_str()
+            .is_some_and(|r| r.contains("control revoked (stop by safety-officer")),
+        "{revoked}"
+    );
+    let again = command("drive", "laptop", &drive(21, 2020));
+    assert!(
+        again["reason"]
+            .as_str()
+            .is_some_and(|r| r.contains("take-control")),
+        "{again}"
+    );
 }
 
 #[test]
@@ -372,16 +445,32 @@ impl Drop for Pki {
 const OPERATOR_ONLY: &str = r#"access_control: {
     enabled: true,
     default_permission: "deny",
-    rules: [{
-      id: "operate",
-      messages: ["put", "delete", "declare_subscriber", "query", "reply", "declare_queryable",
-                 "liveliness_token", "liveliness_query", "declare_liveliness_subscriber"],
-      flows: ["ingress", "egress"],
-      permission: "allow",
-      key_exprs: ["scout/**"],
-    }],
+    rules: [
+      {
+        id: "declarations",
+        messages: ["declare_subscriber", "declare_queryable", "liveliness_token",
+                   "liveliness_query", "declare_liveliness_subscriber"],
+        flows: ["ingress", "egress"],
+        permission: "allow",
+        key_exprs: ["scout/**"],
+      },
+      {
+        id: "read",
+        messages: ["put", "delete", "query", "reply"],
+        flows: ["ingress", "egress"],
+        permission: "allow",
+        key_exprs: ["scout/*/state", "scout/*/status", "scout/*/info", "scout/*/alive"],
+      },
+      {
+        id: "command-as-operator",
+        messages: ["query", "reply"],
+        flows: ["ingress", "egress"],
+        permission: "allow",
+        key_exprs: ["scout/*/cmd/*/operator"],
+      },
+    ],
     subjects: [{ id: "operator", cert_common_names: ["operator"] }],
-    policies: [{ rules: ["operate"], subjects: ["operator"] }],
+    policies: [{ rules: ["declarations", "read", "command-as-operator"], subjects: ["operator"] }],
   },"#;
 
 #[test]
@@ -414,27 +503,25 @@ fn tls_with_mutual_authentication_and_access_control() {
     let operator = open("operator");
     let state = query_until_answered(&operator, &format!("scout/{name}/state"));
     assert_eq!(state["robot"], name.as_str());
-    let estop = format!("scout/{name}/cmd/estop");
-    let answers = zenoh_query(
-        &operator,
-        &estop,
-        Some(r#"{"client":"operator","reason":"tls test"}"#),
-        QUERY,
-    );
+    let estop = format!("scout/{name}/cmd/estop/operator");
+    let answers = zenoh_query(&operator, &estop, Some(r#"{"reason":"tls test"}"#), QUERY);
     assert_eq!(answers.len(), 1, "{answers:?}");
     assert_eq!(answers[0]["accepted"], true);
     let latched = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
-    assert_eq!(latched["latched_by"]["client"], "remote:operator");
-    let release = format!("scout/{name}/cmd/release");
+    assert_eq!(latched["stops"][0]["owner"], "remote:operator");
+    // The certificate binds the name: the operator cannot command as another peer.
+    let impostor = format!("scout/{name}/cmd/release/laptop");
+    assert!(zenoh_query(&operator, &impostor, Some("{}"), QUERY).is_empty());
+    let release = format!("scout/{name}/cmd/release/operator");
     assert_eq!(
-        zenoh_query(&operator, &release, Some(r#"{"client":"operator"}"#), QUERY)[0]["accepted"],
+        zenoh_query(&operator, &release, Some("{}"), QUERY)[0]["accepted"],
         true
     );
     wait_for_status(&status, LIMIT, |s| s["latched"] == false);
     // The intruder's certificate is valid, but the access control gives it nothing: its
     // command never reaches the gateway, and nothing latches.
     let intruder = open("intruder");
-    let answers = zenoh_query(&intruder, &estop, Some(r#"{"client":"intruder"}"#), QUERY);
+    let answers = zenoh_query(&intruder, &estop, Some("{}"), QUERY);
     assert!(answers.is_empty(), "the intruder was answered: {answers:?}");
     assert!(zenoh_query(&intruder, &format!("scout/{name}/state"), None, QUERY).is_empty());
     std::thread::sleep(Duration::from_millis(300));
@@ -446,7 +533,7 @@ fn tls_with_mutual_authentication_and_access_control() {
         ..Default::default()
     };
     if let Ok(session) = plain.open("client") {
-        assert!(zenoh_query(&session, &estop, Some(r#"{"client":"plain"}"#), QUERY).is_empty());
+        assert!(zenoh_query(&session, &estop, Some("{}"), QUERY).is_empty());
     }
     assert!(gateway.is_running(), "{}", gateway.log());
 }

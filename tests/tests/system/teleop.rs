@@ -57,7 +57,16 @@ fn keyboard_teleop_drives_stops_and_restores_the_terminal() {
     assert_eq!(driving["selected"]["class"], "teleop");
     master.write_all(b"e").expect("e-stop key");
     let latched = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
-    assert_eq!(latched["latched_by"]["client"], "keyboard");
+    assert_eq!(latched["stops"][0]["owner"], "keyboard");
+    // Released: nothing moves until a movement key takes control again.
+    master.write_all(b"r").expect("release key");
+    read_until(&mut master, &mut screen, "press a movement key");
+    wait_for_status(&status, LIMIT, |s| {
+        s["latched"] == false && s["selected"].is_null()
+    });
+    master.write_all(b"w").expect("a movement key");
+    let again = wait_for_status(&status, LIMIT, |s| s["selected"]["client"] == "keyboard");
+    assert_eq!(again["selected"]["class"], "teleop");
     master.write_all(b"q").expect("quit key");
     let deadline = Instant::now() + LIMIT;
     let code = loop {

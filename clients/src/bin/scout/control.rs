@@ -12,7 +12,7 @@ use scout_clients::client::Robot;
 use scout_clients::control::{ControlError, Controller, Lights};
 use scout_clients::interface::control::{parse_fault_clear, parse_light};
 use scout_clients::interface::json::status_json;
-use scout_clients::{Accepted, Class, monotonic_ns};
+use scout_clients::{Accepted, Class, ReleaseTarget, monotonic_ns};
 use scout_protocol::{Light, LightCommand};
 
 use crate::RobotArgs;
@@ -31,15 +31,21 @@ pub struct ClientArgs {
 }
 
 impl ClientArgs {
+    fn name(&self, default_name: &str) -> String {
+        self.client
+            .clone()
+            .unwrap_or_else(|| default_name.to_owned())
+    }
+
     fn connect(&self, default_name: &str, class: Option<Class>) -> anyhow::Result<Controller> {
         let robot = Robot::connect(&self.robot.name)?;
-        let name = self
-            .client
-            .clone()
-            .unwrap_or_else(|| format!("{default_name}-{}", std::process::id()));
-        Ok(robot.controller(&name, class)?)
+        Ok(robot.controller(&self.name(default_name), class)?)
     }
 }
+
+/// The client name of the one-shot commands (estop, release, resume...): a person at a
+/// terminal. The stops `scout estop` latches are owned by it.
+pub const OPERATOR: &str = "operator";
 
 #[derive(Debug, Args)]
 pub struct DriveArgs {
@@ -62,8 +68,8 @@ pub struct DriveArgs {
 /// The gateway's answer in words (`scout drive` prints it once per change, not per message).
 pub fn describe(answer: &Result<Accepted, ControlError>) -> String {
     match answer {
-        Ok(Accepted { clamped: false }) => "accepted".into(),
-        Ok(Accepted { clamped: true }) => "accepted (clamped to the speed caps)".into(),
+        Ok(Accepted { clamped: false, .. }) => "accepted".into(),
+        Ok(Accepted { clamped: true, .. }) => "accepted (clamped to the speed caps)".into(),
         Err(error) => error.to_string(),
     }
 }
@@ -74,7 +80,9 @@ pub fn drive(args: &DriveArgs) -> anyhow::Result<ExitCode> {
         Some(s) => anyhow::bail!("--duration must be a non-negative number of seconds, found {s}"),
         None => None,
     };
-    let mut controller = args.client.connect("drive", Some(args.class))?;
+    let name = format!("drive-{}", std::process::id());
+    let mut controller = args.client.connect(&name, Some(args.class))?;
+    controller.take_control()?;
     let stop = Arc::new(AtomicBool::new(false));
     let on_signal = Arc::clone(&stop);
     ctrlc::set_handler(move || on_signal.store(true, Ordering::Relaxed))
@@ -82,14 +90,19 @@ pub fn drive(args: &DriveArgs) -> anyhow::Result<ExitCode> {
     let start = Instant::now();
     let mut next = start;
     let mut last: Option<String> = None;
-    let mut last_answer = Ok(Accepted { clamped: false });
+    let mut last_answer = Ok(Accepted::default());
     while !stop.load(Ordering::Relaxed) && duration.is_none_or(|d| start.elapsed() < d) {
         let answer = controller.drive(args.linear, args.angular);
-        if matches!(
-            answer,
-            Err(ControlError::NoAnswer { .. } | ControlError::Client(_))
-        ) {
-            return Err(answer.map(|_| ()).unwrap_err().into());
+        match &answer {
+            Err(ControlError::NoAnswer { .. } | ControlError::Client(_)) => {
+                return Err(answer.map(|_| ()).unwrap_err().into());
+            }
+            // Control ended (a stop, a gap, a release, a takeover): never taken back by itself.
+            Err(error) if error.lost_control() => {
+                println!("{error}");
+                return Err(answer.map(|_| ()).unwrap_err().into());
+            }
+            _ => {}
         }
         let text = describe(&answer);
         if last.as_deref() != Some(text.as_str()) {
@@ -119,10 +132,32 @@ pub struct EstopArgs {
 }
 
 pub fn estop(args: &EstopArgs) -> anyhow::Result<ExitCode> {
-    let mut controller = args.client.connect("estop", None)?;
-    controller.stop(&args.reason)?;
-    println!("stop latched: `scout release` to release it");
+    let robot = Robot::connect(&args.client.robot.name)?;
+    let name = args.client.name(OPERATOR);
+    robot.stopper(&name)?.stop(&args.reason)?;
+    println!("stop latched, owned by {name}: `scout release` to release it");
     Ok(ExitCode::SUCCESS)
+}
+
+#[derive(Debug, Args)]
+pub struct ReleaseArgs {
+    #[command(flatten)]
+    client: ClientArgs,
+    /// Release only this client's own stops (by default every stop: `scout` is an operator).
+    #[arg(long, conflicts_with = "owner")]
+    own: bool,
+    /// Release only the stops of this owner (a client's name, or `gateway` for gaps).
+    #[arg(long, value_name = "NAME")]
+    owner: Option<String>,
+}
+
+pub fn release(args: &ReleaseArgs) -> anyhow::Result<ExitCode> {
+    let target = match (&args.owner, args.own) {
+        (Some(owner), _) => ReleaseTarget::Owner(owner.clone()),
+        (None, true) => ReleaseTarget::Own,
+        (None, false) => ReleaseTarget::All,
+    };
+    one_shot(&args.client, |controller| controller.release(target))
 }
 
 /// Sends one request and prints the answer.
@@ -130,7 +165,7 @@ pub fn one_shot(
     args: &ClientArgs,
     request: impl FnOnce(&mut Controller) -> Result<Accepted, ControlError>,
 ) -> anyhow::Result<ExitCode> {
-    let mut controller = args.connect("cli", None)?;
+    let mut controller = args.connect(OPERATOR, None)?;
     let answer = request(&mut controller);
     println!("{}", describe(&answer));
     answer?;

@@ -43,8 +43,9 @@ enum Command {
     Teleop(teleop::TeleopArgs),
     /// Latch the safety stop: zero speed at once, until `scout release`.
     Estop(control::EstopArgs),
-    /// Release the latched stop (nothing moves until a new command; autonomy needs `resume`).
-    Release(control::ClientArgs),
+    /// Release stops: all of them (the default), `--own`, or `--owner NAME`; refused while a
+    /// stop's cause persists. Nothing moves until clients take control again.
+    Release(control::ReleaseArgs),
     /// Arm autonomy again after a teleop takeover, a stop or a release.
     Resume(control::ClientArgs),
     /// Set the lights: `--front MODE[:BRIGHTNESS] --rear MODE[:BRIGHTNESS]`, or `auto`.
@@ -75,7 +76,7 @@ fn main() -> ExitCode {
         Command::Drive(args) => control::drive(&args),
         Command::Teleop(args) => teleop::run(&args),
         Command::Estop(args) => control::estop(&args),
-        Command::Release(args) => control::one_shot(&args, |c| c.release()),
+        Command::Release(args) => control::release(&args),
         Command::Resume(args) => control::one_shot(&args, |c| c.resume()),
         Command::Lights(args) => control::lights(&args),
         Command::ClearFault(args) => control::clear_fault(&args),

@@ -11,7 +11,7 @@ use crossterm::{cursor, execute, terminal};
 use scout_clients::client::Robot;
 use scout_clients::control::ControlError;
 use scout_clients::interface::json::{state_json, status_json};
-use scout_clients::{Class, monotonic_ns};
+use scout_clients::{Class, ReleaseTarget, monotonic_ns};
 
 use crate::RobotArgs;
 use crate::control::describe;
@@ -101,11 +101,11 @@ pub fn run(args: &TeleopArgs) -> anyhow::Result<ExitCode> {
         .clone()
         .unwrap_or_else(|| format!("teleop-{}", std::process::id()));
     let mut controller = robot.controller(&name, Some(Class::Teleop))?;
+    let mut action = format!("take control: {}", describe(&controller.take_control()));
     let state = robot.subscribe()?;
     let status = robot.status()?;
     let _guard = TerminalGuard::enter()?;
     let (mut linear, mut angular) = (0.0f64, 0.0f64);
-    let mut action = String::from("-");
     let mut next = Instant::now();
     let mut last_state = None;
     let mut last_status = None;
@@ -120,6 +120,11 @@ pub fn run(args: &TeleopArgs) -> anyhow::Result<ExitCode> {
             }
             match key(event) {
                 Key::Speed(dl, da) => {
+                    if controller.lease().is_none() {
+                        // A key press is the deliberate act that takes control again.
+                        (linear, angular) = (0.0, 0.0);
+                        action = format!("take control: {}", describe(&controller.take_control()));
+                    }
                     linear = (linear + dl).clamp(-1.5, 1.5);
                     angular = (angular + da).clamp(-1.0, 1.0);
                 }
@@ -131,7 +136,12 @@ pub fn run(args: &TeleopArgs) -> anyhow::Result<ExitCode> {
                         describe(&controller.stop("teleop e-stop key"))
                     );
                 }
-                Key::Release => action = format!("release: {}", describe(&controller.release())),
+                Key::Release => {
+                    action = format!(
+                        "release: {}",
+                        describe(&controller.release(ReleaseTarget::All))
+                    );
+                }
                 Key::Quit => {
                     let _ = controller.drive(0.0, 0.0);
                     let _ = controller.relinquish();
@@ -141,11 +151,20 @@ pub fn run(args: &TeleopArgs) -> anyhow::Result<ExitCode> {
             }
         }
         next += PERIOD;
-        let result = controller.drive(linear, angular);
-        let answer = describe(&result);
-        if let Err(error @ ControlError::NoAnswer { .. }) = result {
-            return Err(error.into());
-        }
+        let answer = if controller.lease().is_some() {
+            let result = controller.drive(linear, angular);
+            let answer = describe(&result);
+            match result {
+                Err(error @ ControlError::NoAnswer { .. }) => return Err(error.into()),
+                Err(error) if error.lost_control() => {
+                    (linear, angular) = (0.0, 0.0);
+                    format!("{error} (press a movement key to take control)")
+                }
+                _ => answer,
+            }
+        } else {
+            "no control: press a movement key to take control".to_owned()
+        };
         last_state = state.try_latest()?.or(last_state);
         last_status = status.latest(Duration::ZERO)?.or(last_status);
         let answers = [answer.as_str(), action.as_str()];
