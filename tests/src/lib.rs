@@ -17,12 +17,13 @@ fn bin_dir() -> PathBuf {
 }
 
 /// The binaries and examples the system tests run.
-const ARTIFACTS: [&str; 5] = [
+const ARTIFACTS: [&str; 6] = [
     "scout",
     "scout-gateway",
     "scout-sim",
     "examples/square",
     "examples/logger",
+    "examples/flood",
 ];
 
 /// Makes sure the binaries exist. `cargo test --workspace` (the README's test command) builds

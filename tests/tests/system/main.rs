@@ -6,5 +6,6 @@ mod decode;
 mod examples;
 mod gateway;
 mod remote;
+mod safety;
 mod sim;
 mod teleop;

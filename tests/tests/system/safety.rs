@@ -1,0 +1,266 @@
+//! Safety across real processes: nothing but a deliberate act restarts motion (a gateway
+//! restart, a lost port, a silent chassis, a chassis e-stop), stops stack and are released only
+//! by their owner or an operator, a stop is never refused, and a flood does not starve the tick.
+
+use std::time::{Duration, Instant};
+
+use nix::sys::signal::Signal;
+use scout_clients::control::ControlError;
+use scout_clients::{Class, RejectionKind, ReleaseTarget};
+use scout_system_tests::{
+    Driver, Gateway, Sim, connect, example, robot_name, scout, wait_for_state, wait_for_status,
+};
+
+const LIMIT: Duration = Duration::from_secs(10);
+
+/// The simulator's ground truth stays at rest for `time` (it is polled, not slept on).
+fn chassis_stays_still(sim: &mut Sim, time: Duration) {
+    let end = Instant::now() + time;
+    while Instant::now() < end {
+        let stats = sim.stats();
+        assert_eq!(stats["actual"]["linear"], 0.0, "the chassis moves: {stats}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+fn moving(sim: &mut Sim) {
+    let deadline = Instant::now() + LIMIT;
+    while sim.stats()["actual"]["linear"].as_f64() < Some(0.2) {
+        assert!(Instant::now() < deadline, "the chassis never moved");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+fn release_all(name: &str) {
+    let (code, _, stderr) = scout(&["release", "--name", name]);
+    assert_eq!(code, Some(0), "{stderr}");
+}
+
+#[test]
+fn a_gateway_restart_does_not_resume_a_client_that_keeps_streaming() {
+    let name = robot_name("restart-live");
+    let mut gateway = Gateway::start(&["--sim", "--name", &name]);
+    let robot = connect(&name);
+    let (code, ..) = scout(&["resume", "--name", &name]);
+    assert_eq!(code, Some(0));
+    let mut planner = robot
+        .controller("planner", Some(Class::Autonomy))
+        .expect("controller");
+    planner.take_control().expect("control");
+    let state = robot.subscribe().expect("state");
+    for _ in 0..50 {
+        planner.drive(0.5, 0.0).expect("driving");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    wait_for_state(&state, LIMIT, |s| {
+        s["command"]["linear"].as_f64() > Some(0.3)
+    });
+    gateway.signal(Signal::SIGKILL);
+    gateway.wait_exit(LIMIT);
+    let _new = Gateway::start(&["--sim", "--name", &name]);
+    let status = connect(&name).status().expect("status");
+    // The unclean exit left a stop, and the client that kept streaming drives nothing.
+    let stopped = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
+    assert_eq!(stopped["stops"][0]["cause"], "gateway_start");
+    let state = connect(&name).subscribe().expect("state");
+    let end = Instant::now() + Duration::from_secs(2);
+    while Instant::now() < end {
+        let answer = planner.drive(0.5, 0.0);
+        assert!(answer.is_err(), "the old stream was accepted: {answer:?}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let latest = wait_for_state(&state, LIMIT, |_| true);
+    assert_eq!(latest["command"]["linear"], 0.0, "{latest}");
+    assert_eq!(latest["motion"]["linear"], 0.0, "{latest}");
+    // Released: still nothing, until it takes control again (and autonomy is resumed).
+    release_all(&name);
+    let err = planner.drive(0.5, 0.0).expect_err("no control");
+    assert!(err.lost_control(), "{err}");
+    let err = planner.take_control().expect_err("disarmed");
+    assert_eq!(err.rejection(), Some(RejectionKind::AutonomyDisarmed));
+}
+
+#[test]
+fn a_lost_port_and_a_silent_chassis_stop_a_streaming_driver_for_good() {
+    let name = robot_name("unplug-live");
+    let mut sim = Sim::start(&["--serial", "--link", &link(&name)]);
+    let gateway = Gateway::start(&["--serial", &link(&name), "--name", &name]);
+    let robot = connect(&name);
+    let status = robot.status().expect("status");
+    let mut driver = Driver::start(&name, &["--linear", "0.5", "--client", "streamer"]);
+    moving(&mut sim);
+    sim.send("unplug 1500");
+    // The driver's control ended with the link: it exits 4, naming the cause.
+    assert_eq!(driver.wait_exit(LIMIT), Some(4));
+    let lost = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
+    assert_eq!(lost["stops"][0]["cause"], "link_lost", "{lost}");
+    // The port comes back: the stop can be released, and nothing moves.
+    sim.next_port_line();
+    wait_for_status(&status, LIMIT, |s| s["stops"][0]["persists"] == false);
+    chassis_stays_still(&mut sim, Duration::from_secs(1));
+    release_all(&name);
+    // A chassis power cycle: silent for longer than its timeout.
+    let mut driver = Driver::start(&name, &["--linear", "0.5", "--client", "streamer-2"]);
+    moving(&mut sim);
+    sim.send("silence 1200");
+    assert_eq!(driver.wait_exit(LIMIT), Some(4));
+    let silent = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
+    assert_eq!(silent["stops"][0]["cause"], "chassis_silent", "{silent}");
+    wait_for_status(&status, LIMIT, |s| s["stops"][0]["persists"] == false);
+    chassis_stays_still(&mut sim, Duration::from_secs(1));
+    drop(gateway);
+}
+
+fn link(name: &str) -> String {
+    std::env::temp_dir()
+        .join(format!("{name}.tty"))
+        .to_string_lossy()
+        .into_owned()
+}
+
+#[test]
+fn a_chassis_estop_episode_needs_a_release_and_a_new_take() {
+    let name = robot_name("estop-episode");
+    let mut sim = Sim::start(&["--serial"]);
+    let port = sim.port().to_owned();
+    let _gateway = Gateway::start(&["--serial", &port, "--name", &name]);
+    let status = connect(&name).status().expect("status");
+    let mut driver = Driver::start(&name, &["--linear", "0.5", "--client", "streamer"]);
+    moving(&mut sim);
+    sim.send("estop on");
+    assert_eq!(driver.wait_exit(LIMIT), Some(4));
+    wait_for_status(&status, LIMIT, |s| {
+        s["stops"].as_array().is_some_and(|stops| {
+            stops
+                .iter()
+                .any(|stop| stop["cause"] == "chassis_estop" && stop["persists"] == true)
+        })
+    });
+    // Refused while the e-stop is down.
+    let (code, _, stderr) = scout(&["release", "--name", &name]);
+    assert_eq!(code, Some(4), "{stderr}");
+    assert!(stderr.contains("cannot release yet"), "{stderr}");
+    sim.send("estop off");
+    // The e-stop left the motors' communication faults latched: clear them, then release.
+    let (code, ..) = scout(&["clear-fault", "--name", &name, "all"]);
+    assert_eq!(code, Some(0));
+    wait_for_status(&status, LIMIT, |s| {
+        s["stops"]
+            .as_array()
+            .is_some_and(|stops| stops.iter().all(|stop| stop["persists"] == false))
+    });
+    release_all(&name);
+    chassis_stays_still(&mut sim, Duration::from_secs(1));
+}
+
+#[test]
+fn stacked_stops_are_released_by_their_owners_or_an_operator() {
+    let name = robot_name("stacked");
+    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    let robot = connect(&name);
+    let status = robot.status().expect("status");
+    for owner in ["safety-officer", "lidar-guard"] {
+        let (code, _, stderr) = scout(&["estop", "--name", &name, "--client", owner]);
+        assert_eq!(code, Some(0), "{stderr}");
+    }
+    let both = wait_for_status(&status, LIMIT, |s| s["stop_total"] == 2);
+    assert_eq!(both["stops"][1]["owner"], "lidar-guard");
+    // A program that is not an operator releases neither.
+    let mut random = robot.controller("random-user", None).expect("controller");
+    for target in [
+        ReleaseTarget::All,
+        ReleaseTarget::Owner("safety-officer".into()),
+        ReleaseTarget::Own,
+    ] {
+        let Err(ControlError::Rejected(refused)) = random.release(target) else {
+            panic!("a stranger released a stop")
+        };
+        assert_eq!(refused.kind, Some(RejectionKind::NotAllowed), "{refused}");
+        assert!(
+            refused.reason.contains("lidar-guard"),
+            "lists what holds: {refused}"
+        );
+    }
+    // The owner releases its own; an operator (the scout tool) releases another's.
+    let (code, _, stderr) = scout(&[
+        "release",
+        "--name",
+        &name,
+        "--client",
+        "lidar-guard",
+        "--own",
+    ]);
+    assert_eq!(code, Some(0), "{stderr}");
+    let (code, _, stderr) = scout(&["release", "--name", &name, "--owner", "safety-officer"]);
+    assert_eq!(code, Some(0), "{stderr}");
+    wait_for_status(&status, LIMIT, |s| s["latched"] == false);
+}
+
+#[test]
+fn a_stop_goes_through_with_every_control_slot_taken() {
+    let name = robot_name("slots");
+    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    let robot = connect(&name);
+    let status = robot.status().expect("status");
+    let mut controllers = Vec::new();
+    while let Ok(controller) = robot.controller(&format!("c{}", controllers.len()), None) {
+        controllers.push(controller);
+        assert!(controllers.len() <= 64, "the control service is sized");
+    }
+    assert_eq!(
+        controllers.len(),
+        scout_clients::interface::services::MAX_CONTROLLERS
+    );
+    let (code, _, stderr) = scout(&["estop", "--name", &name, "--client", "guard"]);
+    assert_eq!(code, Some(0), "{stderr}");
+    let latched = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
+    assert_eq!(latched["stops"][0]["owner"], "guard");
+}
+
+#[test]
+fn a_request_flood_neither_starves_the_tick_nor_holds_up_a_stop() {
+    let name = robot_name("flood");
+    let mut sim = Sim::start(&["--serial"]);
+    let port = sim.port().to_owned();
+    let _gateway = Gateway::start(&["--serial", &port, "--name", &name]);
+    let robot = connect(&name);
+    let status = robot.status().expect("status");
+    let _driver = Driver::start(&name, &["--linear", "0.3", "--client", "streamer"]);
+    moving(&mut sim);
+    let before = sim.stats()["motion_command_intervals"]["count"]
+        .as_u64()
+        .unwrap_or(0);
+    let floods: Vec<_> = (0..16)
+        .map(|_| {
+            let mut flood = example("flood");
+            flood.args(["--name", &name, "--hz", "1000", "--seconds", "3"]);
+            flood
+                .stdout(std::process::Stdio::null())
+                .spawn()
+                .expect("flood")
+        })
+        .collect();
+    std::thread::sleep(Duration::from_secs(1));
+    let (code, _, stderr) = scout(&["estop", "--name", &name, "--client", "guard"]);
+    assert_eq!(code, Some(0), "{stderr}");
+    wait_for_status(&status, LIMIT, |s| s["latched"] == true);
+    for mut flood in floods {
+        let _ = flood.wait();
+    }
+    let stats = sim.stats();
+    let intervals = &stats["motion_command_intervals"];
+    assert!(
+        intervals["count"].as_u64().unwrap_or(0) > before + 50,
+        "{stats}"
+    );
+    assert!(
+        intervals["max_ms"].as_f64() < Some(500.0),
+        "the chassis never timed out: {stats}"
+    );
+    let after = wait_for_status(&status, LIMIT, |_| true);
+    assert!(
+        after["rejections"]["rate_limited"].as_u64() > Some(0),
+        "{after}"
+    );
+    println!("flood: {intervals}, tick {}", after["tick"]);
+}
