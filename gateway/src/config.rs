@@ -52,6 +52,10 @@ pub struct Timing {
     pub stop_cycles: u32,
     /// The longest wait between attempts to reopen a failed port, ms.
     pub reconnect_max_ms: u64,
+    /// Real-time (SCHED_FIFO) priority of the control thread, 1..=99, so that the tick holds
+    /// when other processes load every core; 0 leaves it at normal priority. Without the right
+    /// (root, CAP_SYS_NICE or an rtprio limit) the gateway runs at normal priority and says so.
+    pub realtime_priority: u8,
 }
 
 impl Default for Timing {
@@ -62,6 +66,7 @@ impl Default for Timing {
             serial_light_period_ms: 100,
             stop_cycles: 5,
             reconnect_max_ms: 1000,
+            realtime_priority: 50,
         }
     }
 }
@@ -159,6 +164,12 @@ impl GatewayConfig {
             return Err(ConfigError::Invalid(format!(
                 "timing.command_period_ms must be 5..100 (the chassis stops after 500 ms), found {}",
                 self.timing.command_period_ms
+            )));
+        }
+        if self.timing.realtime_priority > 99 {
+            return Err(ConfigError::Invalid(format!(
+                "timing.realtime_priority must be 0 (off) or 1..=99, found {}",
+                self.timing.realtime_priority
             )));
         }
         self.arbiter.validate().map_err(ConfigError::Invalid)?;

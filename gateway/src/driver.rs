@@ -184,6 +184,34 @@ pub struct Driver {
     operators: Vec<String>,
     origins: std::collections::HashMap<u128, Origin>,
     backlog: bool,
+    realtime_priority: u8,
+}
+
+/// Puts the calling thread under SCHED_FIFO at `priority` (0: leaves it alone).
+fn raise_priority(priority: u8) {
+    use thread_priority::{
+        RealtimeThreadSchedulePolicy, ThreadPriority, ThreadPriorityValue, ThreadSchedulePolicy,
+        set_thread_priority_and_policy, thread_native_id,
+    };
+    if priority == 0 {
+        return;
+    }
+    let result = ThreadPriorityValue::try_from(priority)
+        .map_err(|e| format!("{e:?}"))
+        .and_then(|value| {
+            set_thread_priority_and_policy(
+                thread_native_id(),
+                ThreadPriority::Crossplatform(value),
+                ThreadSchedulePolicy::Realtime(RealtimeThreadSchedulePolicy::Fifo),
+            )
+            .map_err(|e| format!("{e:?}"))
+        });
+    match result {
+        Ok(()) => info!("control thread at real-time priority {priority} (SCHED_FIFO)"),
+        Err(error) => info!(
+            "control thread at normal priority ({error}): grant CAP_SYS_NICE or an rtprio limit for a tick that holds under load"
+        ),
+    }
 }
 
 impl std::fmt::Debug for Driver {
@@ -213,6 +241,7 @@ impl Driver {
             operators: config.arbiter.operator_programs.clone(),
             origins: std::collections::HashMap::new(),
             backlog: false,
+            realtime_priority: config.timing.realtime_priority,
         })
     }
 
@@ -223,6 +252,7 @@ impl Driver {
 
     /// Runs until `stop` is set, then sends zero speed for the configured cycles and returns.
     pub fn run(&mut self, stop: &AtomicBool) -> anyhow::Result<()> {
+        raise_priority(self.realtime_priority);
         let mut ready = Ready::default();
         loop {
             let now = monotonic();
