@@ -233,6 +233,13 @@ impl Device {
                     }
                     Incoming::Frame(frame) => on_event(decode_can(&frame)),
                     Incoming::Foreign(id) => on_event(RxEvent::Rejected(RxError::ForeignFrame(id))),
+                    // Bus-off or error-passive: the caller closes the port (a link fault).
+                    Incoming::BusError(error) if error.is_fault() => {
+                        return Err(io::Error::other(error));
+                    }
+                    Incoming::BusError(error) => {
+                        on_event(RxEvent::Rejected(RxError::ForeignFrame(error.class)));
+                    }
                 }
             }
         }

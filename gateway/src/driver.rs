@@ -319,8 +319,15 @@ impl Driver {
         core.handle_discarded_bytes(device.discarded_bytes());
         if let Err(error) = result {
             self.device = None;
-            self.core
-                .handle_link_failed(now, &format!("reading: {error}"));
+            let what = format!("reading: {error}");
+            if error
+                .get_ref()
+                .is_some_and(|inner| inner.downcast_ref::<scout_io::BusError>().is_some())
+            {
+                self.core.handle_link_fault(now, &what);
+            } else {
+                self.core.handle_link_failed(now, &what);
+            }
         }
     }
 

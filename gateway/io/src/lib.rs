@@ -8,4 +8,4 @@
 pub mod logging;
 pub mod port;
 
-pub use port::{Incoming, Port};
+pub use port::{BusError, Incoming, Port};

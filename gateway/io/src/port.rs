@@ -7,7 +7,7 @@ use std::time::Duration;
 
 use scout_protocol::CanFrame;
 use serialport::{SerialPort, TTYPort};
-use socketcan::{EmbeddedFrame, Frame, Socket};
+use socketcan::{EmbeddedFrame, Frame, Socket, SocketOptions};
 
 /// The serial link's speed (115200 8N1); slcan adapters on USB ignore it.
 pub const BAUD_RATE: u32 = 115_200;
@@ -30,9 +30,57 @@ pub enum Incoming {
     Bytes(usize),
     /// A standard-id CAN data frame.
     Frame(CanFrame),
-    /// A frame SCOUT v1 never sends: extended id, remote or error frame (with its raw id).
+    /// A frame SCOUT v1 never sends: extended id or remote frame (with its raw id).
     Foreign(u32),
+    /// An error frame the CAN driver reported.
+    BusError(BusError),
 }
+
+/// An error frame from the CAN driver (`linux/can/error.h`): its class bits and the controller
+/// status byte.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BusError {
+    /// The error class bits of the frame's id.
+    pub class: u32,
+    /// Byte 1: the controller's problems (warning, passive, overflow).
+    pub controller: u8,
+}
+
+impl BusError {
+    const BUS_OFF: u32 = 0x40;
+    const CONTROLLER: u32 = 0x04;
+    const RX_PASSIVE: u8 = 0x10;
+    const TX_PASSIVE: u8 = 0x20;
+
+    /// Whether the bus can no longer be trusted: bus-off, or the controller error-passive.
+    pub fn is_fault(&self) -> bool {
+        self.class & Self::BUS_OFF != 0
+            || (self.class & Self::CONTROLLER != 0
+                && self.controller & (Self::RX_PASSIVE | Self::TX_PASSIVE) != 0)
+    }
+}
+
+impl std::fmt::Display for BusError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.class & Self::BUS_OFF != 0 {
+            f.write_str("CAN bus-off")
+        } else if self.is_fault() {
+            write!(
+                f,
+                "CAN controller error-passive (0x{:02x})",
+                self.controller
+            )
+        } else {
+            write!(
+                f,
+                "CAN error frame (class 0x{:x}, controller 0x{:02x})",
+                self.class, self.controller
+            )
+        }
+    }
+}
+
+impl std::error::Error for BusError {}
 
 impl Port {
     /// Opens a tty device at 115200 8N1, exclusively: a second opener is refused.
@@ -52,6 +100,8 @@ impl Port {
     pub fn open_can(interface: &str) -> io::Result<Self> {
         let socket = socketcan::CanSocket::open(interface)?;
         socket.set_write_timeout(Duration::from_millis(5))?;
+        // Bus-off and error-passive arrive as error frames: a gap for the gateway.
+        socket.set_error_filter_accept_all()?;
         Ok(Self::Can(socket))
     }
 
@@ -130,7 +180,39 @@ fn from_socketcan(frame: &socketcan::CanFrame) -> Incoming {
             CanFrame::new(raw_id as u16, data.data())
                 .map_or(Incoming::Foreign(raw_id), Incoming::Frame)
         }
-        _ => Incoming::Foreign(raw_id),
+        socketcan::CanFrame::Error(error) => Incoming::BusError(BusError {
+            class: error.error_bits(),
+            controller: error.data().get(1).copied().unwrap_or(0),
+        }),
+        socketcan::CanFrame::Data(_) | socketcan::CanFrame::Remote(_) => Incoming::Foreign(raw_id),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn error_frame(class: u32, controller: u8) -> Incoming {
+        let frame =
+            socketcan::CanErrorFrame::new_error(class, &[0, controller]).expect("an error frame");
+        from_socketcan(&socketcan::CanFrame::Error(frame))
+    }
+
+    #[test]
+    fn bus_off_and_error_passive_are_faults_other_error_frames_are_not() {
+        let Incoming::BusError(bus_off) = error_frame(0x40, 0) else {
+            panic!("not an error frame")
+        };
+        assert!(bus_off.is_fault());
+        assert_eq!(bus_off.to_string(), "CAN bus-off");
+        let Incoming::BusError(passive) = error_frame(0x04, 0x20) else {
+            panic!("not an error frame")
+        };
+        assert!(passive.is_fault(), "{passive}");
+        let Incoming::BusError(warning) = error_frame(0x04, 0x04) else {
+            panic!("not an error frame")
+        };
+        assert!(!warning.is_fault(), "a warning is counted, not a gap");
     }
 }
 

@@ -195,7 +195,9 @@ impl Simulator<'_> {
                 Ok(Incoming::Timeout) => {}
                 Ok(Incoming::Bytes(n)) => self.receive_bytes(&buffer[..n])?,
                 Ok(Incoming::Frame(frame)) => self.receive(decode_can(&frame))?,
-                Ok(Incoming::Foreign(_)) => self.chassis.handle_rejected(self.now()),
+                Ok(Incoming::Foreign(_) | Incoming::BusError(_)) => {
+                    self.chassis.handle_rejected(self.now())
+                }
                 Err(error) => {
                     warn!("port read failed: {error}; unplugging for 1 s");
                     self.unplug(Duration::from_secs(1));
