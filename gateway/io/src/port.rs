@@ -188,6 +188,20 @@ fn from_socketcan(frame: &socketcan::CanFrame) -> Incoming {
     }
 }
 
+impl std::os::fd::AsRawFd for Port {
+    fn as_raw_fd(&self) -> std::os::fd::RawFd {
+        match self {
+            Self::Tty(tty) => tty.as_raw_fd(),
+            Self::Can(socket) => socket.as_raw_fd(),
+        }
+    }
+}
+
+/// Whether `interface` exists as a network interface (SocketCAN tests skip when it does not).
+pub fn can_interface_exists(interface: &str) -> bool {
+    Path::new("/sys/class/net").join(interface).exists()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -214,18 +228,4 @@ mod tests {
         };
         assert!(!warning.is_fault(), "a warning is counted, not a gap");
     }
-}
-
-impl std::os::fd::AsRawFd for Port {
-    fn as_raw_fd(&self) -> std::os::fd::RawFd {
-        match self {
-            Self::Tty(tty) => tty.as_raw_fd(),
-            Self::Can(socket) => socket.as_raw_fd(),
-        }
-    }
-}
-
-/// Whether `interface` exists as a network interface (SocketCAN tests skip when it does not).
-pub fn can_interface_exists(interface: &str) -> bool {
-    Path::new("/sys/class/net").join(interface).exists()
 }
