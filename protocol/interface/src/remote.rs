@@ -437,6 +437,19 @@ mod tests {
         assert_eq!("clear_fault".parse(), Ok(Permission::ClearFault));
     }
 
+    proptest::proptest! {
+        /// Whatever a network peer sends, parsing answers (a request or a reason), never panics.
+        #[test]
+        fn any_key_and_payload_is_answered(key in ".{0,80}", payload in ".{0,200}", lease in proptest::option::of(0u64..3)) {
+            let _ = parse_command_key(&key);
+            if let Ok(command) = serde_json::from_str::<RemoteCommand>(&payload) {
+                for kind in RemoteKind::ALL {
+                    let _ = command.request(*kind, lease.map(|l| (l, Class::Teleop)));
+                }
+            }
+        }
+    }
+
     #[test]
     fn the_peer_comes_from_the_key() {
         assert_eq!(
