@@ -607,7 +607,7 @@ impl Arbiter {
             });
         }
         let id = self.next_lease;
-        self.next_lease += 1;
+        self.next_lease = self.next_lease.wrapping_add(1).max(1);
         let source = &mut self.sources[index];
         source.lease = Some(Lease {
             id,
