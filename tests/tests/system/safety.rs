@@ -58,7 +58,16 @@ fn a_gateway_restart_does_not_resume_a_client_that_keeps_streaming() {
     gateway.signal(Signal::SIGKILL);
     gateway.wait_exit(LIMIT);
     let _new = Gateway::start(&["--sim", "--name", &name]);
-    let status = connect(&name).status().expect("status");
+    // The killed gateway's services linger until the new one cleans them up and creates its
+    // own: retry until the new status service is there.
+    let deadline = Instant::now() + LIMIT;
+    let status = loop {
+        match connect(&name).status() {
+            Ok(status) => break status,
+            Err(error) => assert!(Instant::now() < deadline, "{error}"),
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
     // The unclean exit left a stop, and the client that kept streaming drives nothing.
     let stopped = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
     assert_eq!(stopped["stops"][0]["cause"], "gateway_start");
