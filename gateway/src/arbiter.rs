@@ -588,6 +588,20 @@ impl Arbiter {
         if class == Class::Autonomy && !self.autonomy_armed {
             return Err(Rejection::AutonomyDisarmed);
         }
+        // Autonomy never waits behind a teleop holder to drive the moment teleop lets go.
+        if class == Class::Autonomy
+            && let Some(teleop) = self
+                .sources
+                .iter()
+                .enumerate()
+                .find(|(i, s)| *i != index && s.class() == Some(Class::Teleop))
+                .map(|(_, s)| s)
+        {
+            return Err(Rejection::Held {
+                class: Class::Teleop,
+                holder: teleop.key.name.clone(),
+            });
+        }
         if let Some(holder) = self
             .sources
             .iter()
@@ -696,11 +710,14 @@ impl Arbiter {
                 why: "a stop arrived at the same instant: the stop wins".into(),
             });
         }
-        let own = match target {
-            ReleaseTarget::Own => true,
-            ReleaseTarget::Owner(owner) => owner == name,
-            ReleaseTarget::All => false,
-        };
+        // The gateway's and merged stops belong to no client: only an operator releases them.
+        let reserved = name == GATEWAY || name == OTHERS;
+        let own = !reserved
+            && match target {
+                ReleaseTarget::Own => true,
+                ReleaseTarget::Owner(owner) => owner == name,
+                ReleaseTarget::All => false,
+            };
         if !own && !origin.operator {
             return Err(Rejection::NotAllowed {
                 why: format!(
@@ -817,6 +834,7 @@ impl Arbiter {
                     .find(|s| s.owner == owner && s.cause == cause)
                 {
                     merged.reason = reason.to_owned();
+                    merged.source = source;
                 } else {
                     self.stops.push(Stop {
                         owner: owner.to_owned(),

@@ -705,3 +705,38 @@ proptest! {
         prop_assert!((next - current).abs() <= 0.04 + 1e-12);
     }
 }
+
+#[test]
+fn the_gateways_stops_are_released_only_by_an_operator() {
+    let mut bench = Bench::new();
+    bench
+        .arbiter
+        .handle_gap(bench.now, StopCause::Overrun, "late", false);
+    let impostor = client(GATEWAY, 1);
+    assert_eq!(
+        bench
+            .release(&impostor, ReleaseTarget::Own)
+            .map_err(|r| r.kind()),
+        Err(RejectionKind::NotAllowed)
+    );
+    bench
+        .release(&operator("op", 2), ReleaseTarget::All)
+        .expect("released");
+}
+
+#[test]
+fn autonomy_cannot_wait_behind_a_teleop_holder() {
+    let mut bench = Bench::new();
+    let (joy, planner) = (client("joy", 1), client("planner", 2));
+    bench.take(&joy, Class::Teleop);
+    bench.request(&planner, Request::Resume).expect("resume");
+    assert_eq!(
+        bench.kind(
+            &planner,
+            Request::TakeControl {
+                class: Class::Autonomy
+            }
+        ),
+        Some(RejectionKind::Held)
+    );
+}

@@ -223,11 +223,16 @@ impl Core {
             estop,
             "the chassis is in e-stop",
         );
+        let abnormal = match status.state {
+            ChassisState::Normal | ChassisState::EStop => None,
+            ChassisState::Exception | ChassisState::Unknown(_) => Some(status.state.name()),
+        };
         let faults: Vec<&str> = status
             .faults
             .iter()
             .filter(|f| matches!(f.severity(), Severity::Fault | Severity::Protection))
             .map(|f| f.name())
+            .chain(abnormal)
             .collect();
         let detail = format!("the chassis reports {}", faults.join(", "));
         self.set_condition(now, StopCause::ChassisFault, !faults.is_empty(), &detail);
@@ -489,6 +494,8 @@ impl Core {
         }
         if now >= self.next_command {
             self.check_silence(now);
+            // A gap found at this tick stops this very frame, not the next one.
+            self.advance_schedule(now);
             let output = match self.shutdown.as_mut() {
                 Some(left) => {
                     *left = left.saturating_sub(1);
@@ -496,7 +503,6 @@ impl Core {
                 }
                 None => self.arbiter.poll_output(now, self.period),
             };
-            self.advance_schedule(now);
             self.status_due = true;
             if let Some(frame) = self.motion(&output, now) {
                 return Some(frame);
@@ -599,7 +605,7 @@ impl Core {
     /// Moves the deadline one period on, on the absolute grid; a deadline missed by more than a
     /// period is skipped rather than sent late in a burst.
     fn advance_schedule(&mut self, now: Duration) {
-        let lateness = now - self.next_command;
+        let lateness = now.saturating_sub(self.next_command);
         self.last_lateness = lateness;
         self.stats.max_lateness = self.stats.max_lateness.max(lateness);
         if lateness > CHASSIS_TIMEOUT {

@@ -930,3 +930,47 @@ fn a_stop_comes_through_the_stop_service_with_every_control_slot_taken() {
             .contains("stops only")
     );
 }
+
+#[test]
+fn the_frame_after_an_overrun_is_already_zero() {
+    let mut pair = Pair::new(Transport::Sim);
+    pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(1));
+    let stalled = pair.core.poll_timeout();
+    pair.now = stalled;
+    pair.stall(CHASSIS_TIMEOUT + ms(100));
+    pair.step();
+    let (_, first) = pair
+        .motion_commands()
+        .into_iter()
+        .find(|(at, _)| *at > stalled)
+        .expect("a command after the stall");
+    assert_eq!(
+        first.linear_percent, 0,
+        "no motion after the chassis timed out"
+    );
+}
+
+#[test]
+fn a_chassis_exception_state_is_a_gap() {
+    let mut pair = Pair::new(Transport::Sim);
+    let status = |state: u8, count: u8| {
+        RxEvent::Message(Counted {
+            message: Message::SystemStatus(scout_protocol::SystemStatus {
+                state: scout_protocol::ChassisState::from_raw(state),
+                control_mode: scout_protocol::ControlMode::Can,
+                battery_decivolts: 250,
+                faults: scout_protocol::FaultBits::NONE,
+            }),
+            count,
+        })
+    };
+    pair.feedback = false;
+    pair.core.handle_rx(pair.now, &status(2, 200));
+    pair.step();
+    assert!(
+        pair.stops()
+            .contains(&("gateway".into(), StopCause::ChassisFault)),
+        "{:?}",
+        pair.stops()
+    );
+}

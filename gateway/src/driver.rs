@@ -21,12 +21,13 @@ use scout_interface::services::{self, ControlService, Ipc, Role, Way, monotonic}
 use scout_interface::state::{LinkState, StatePayload};
 use tracing::{debug, error, info, warn};
 
-use crate::arbiter::{ClientKey, Origin};
+use crate::arbiter::{ClientKey, GATEWAY, OTHERS, Origin};
 use crate::config::GatewayConfig;
 use crate::core::{Core, Publication, Start};
 use crate::device::{Device, DeviceSpec, OpenError};
 use crate::monitor::NodeMonitor;
 use crate::wait::Ready;
+use scout_interface::remote::REMOTE_PREFIX;
 
 /// The gateway's iceoryx2 side: the node and the ports it owns.
 struct Endpoints {
@@ -159,6 +160,15 @@ impl RequestServer {
             pid = client.node_id.pid::<Ipc>().ok().map(|pid| pid.value());
             CallbackProgression::Stop
         });
+        // Names that stand for the gateway itself, or for remote peers, are not for clients to
+        // take (only the bridge, in this process, speaks for remote peers).
+        let in_this_process = pid.is_some_and(|pid| u32::try_from(pid) == Ok(std::process::id()));
+        let reserved = key.name == GATEWAY
+            || key.name == OTHERS
+            || (key.name.starts_with(REMOTE_PREFIX) && !in_this_process);
+        if reserved {
+            key.name = format!("client-{:x}", port as u32);
+        }
         let program = pid.and_then(|pid| std::fs::read_link(format!("/proc/{pid}/exe")).ok());
         let operator = program
             .as_deref()
@@ -337,8 +347,12 @@ impl Driver {
         if woken && let Err(error) = self.endpoints.wake.try_wait(|_| {}) {
             debug!("draining the wake-up event failed: {error:?}");
         }
-        self.serve(now, Way::Stop, usize::MAX);
-        self.backlog = self.serve(now, Way::Control, MAX_REQUESTS_PER_ITERATION);
+        // Stops first, bounded (a flood of stops cannot hold up the zero frame), and their zero
+        // goes out before any control request is read.
+        let stops_waiting = self.serve(now, Way::Stop, services::MAX_STOPPERS);
+        self.transmit(now);
+        let requests_waiting = self.serve(now, Way::Control, MAX_REQUESTS_PER_ITERATION);
+        self.backlog = stops_waiting || requests_waiting;
     }
 
     /// Answers at most `limit` requests of `way`; returns whether more are waiting.

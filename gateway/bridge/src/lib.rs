@@ -323,7 +323,8 @@ struct RemoteControl<'a> {
 /// What the bridge keeps of one remote peer.
 struct Peer {
     name: String,
-    control: ControlPort,
+    /// Opened on its first control request: an e-stop needs only the stop port.
+    control: Option<ControlPort>,
     stop: Option<ControlPort>,
     /// The lease it took and its class.
     lease: Option<(u64, Class)>,
@@ -388,6 +389,9 @@ impl<'a> RemoteControl<'a> {
 
     fn decide(&mut self, query: &Query) -> Result<Accepted, String> {
         let (kind, peer_name) = remote::parse_command_key(query.key_expr().as_str())?;
+        if kind == RemoteKind::Estop {
+            return self.estop(query, peer_name);
+        }
         let payload = query
             .payload()
             .ok_or("no payload: send the command as JSON")?;
@@ -416,7 +420,9 @@ impl<'a> RemoteControl<'a> {
         let peer = self.peer(peer_name)?;
         let answer = match &request {
             Request::Stop { .. } => peer.stop_port(node, robot)?.request(&request),
-            _ => peer.control.request_sent_at(&request, sent),
+            _ => peer
+                .control_port(node, robot)?
+                .request_sent_at(&request, sent),
         };
         let lost_control = matches!(
             &answer,
@@ -435,6 +441,29 @@ impl<'a> RemoteControl<'a> {
         answer.map_err(|error| error.to_string())
     }
 
+    /// An e-stop is never refused for its payload: a missing, oversized or malformed one only
+    /// loses its reason. It needs the permission and the stop service, nothing else.
+    fn estop(&mut self, query: &Query, peer_name: &str) -> Result<Accepted, String> {
+        self.allowed(Permission::Estop)?;
+        let reason = query
+            .payload()
+            .filter(|payload| payload.len() <= MAX_COMMAND_BYTES)
+            .and_then(|payload| {
+                serde_json::from_slice::<serde_json::Value>(&payload.to_bytes()).ok()
+            })
+            .and_then(|json| {
+                json.get("reason")
+                    .and_then(Value::as_str)
+                    .map(str::to_owned)
+            })
+            .unwrap_or_else(|| "remote estop".into());
+        let (node, robot) = (self.node, self.robot);
+        self.peer(peer_name)?
+            .stop_port(node, robot)?
+            .request(&Request::Stop { reason })
+            .map_err(|error| error.to_string())
+    }
+
     fn peer(&mut self, name: &str) -> Result<&mut Peer, String> {
         self.used += 1;
         let used = self.used;
@@ -446,16 +475,9 @@ impl<'a> RemoteControl<'a> {
                 {
                     self.peers.swap_remove(oldest);
                 }
-                let port = ControlPort::open(
-                    self.node,
-                    self.robot,
-                    Way::Control,
-                    &format!("{REMOTE_PREFIX}{name}"),
-                )
-                .map_err(|error| error.to_string())?;
                 self.peers.push(Peer {
                     name: name.to_owned(),
-                    control: port,
+                    control: None,
                     stop: None,
                     lease: None,
                     seq: None,
@@ -472,6 +494,22 @@ impl<'a> RemoteControl<'a> {
 }
 
 impl Peer {
+    fn control_port(
+        &mut self,
+        node: &iceoryx2::node::Node<services::Ipc>,
+        robot: &str,
+    ) -> Result<&mut ControlPort, String> {
+        if self.control.is_none() {
+            let name = format!("{REMOTE_PREFIX}{}", self.name);
+            let port = ControlPort::open(node, robot, Way::Control, &name)
+                .map_err(|error| error.to_string())?;
+            self.control = Some(port);
+        }
+        self.control
+            .as_mut()
+            .ok_or_else(|| "no control port".into())
+    }
+
     fn stop_port(
         &mut self,
         node: &iceoryx2::node::Node<services::Ipc>,

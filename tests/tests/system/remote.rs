@@ -243,7 +243,6 @@ fn enabled_remote_commands_go_through_the_arbiter_and_bad_input_is_rejected() {
             r#"{"linear":1,"angular":0,"extra":1}"#,
             "invalid JSON",
         ),
-        ("estop", r#"{"client":"someone-else"}"#, "invalid JSON"),
         ("fly", "{}", "unknown command"),
     ];
     for (kind, payload, reason) in refusals {
@@ -268,12 +267,6 @@ fn enabled_remote_commands_go_through_the_arbiter_and_bad_input_is_rejected() {
             .is_some_and(|r| r.contains("name yourself")),
         "{nameless:?}"
     );
-    let huge = format!(r#"{{"reason":"{}"}}"#, "x".repeat(5000));
-    assert!(
-        command("estop", "laptop", &huge)["reason"]
-            .as_str()
-            .is_some_and(|r| r.contains("exceeds"))
-    );
     // A local officer's stop: a remote peer allowed `release` releases only its own stops.
     robot
         .stopper("safety-officer")
@@ -288,10 +281,9 @@ fn enabled_remote_commands_go_through_the_arbiter_and_bad_input_is_rejected() {
             .is_some_and(|r| r.contains("safety-officer")),
         "{not_owner}"
     );
-    assert_eq!(
-        command("estop", "laptop", r#"{"reason":"remote stop"}"#)["accepted"],
-        true
-    );
+    // An e-stop is never refused for its payload: an oversized one only loses its reason.
+    let huge = format!(r#"{{"reason":"{}"}}"#, "x".repeat(5000));
+    assert_eq!(command("estop", "laptop", &huge)["accepted"], true);
     let latched = wait_for_status(&status, LIMIT, |s| s["stop_total"] == 2);
     assert_eq!(latched["stops"][1]["owner"], "remote:laptop");
     assert_eq!(command("release", "laptop", "{}")["accepted"], true);
