@@ -49,10 +49,10 @@ impl ControlError {
     /// Whether this client lost (or never had) control: it must take control again, a
     /// deliberate act the library never does by itself.
     pub fn lost_control(&self) -> bool {
-        matches!(
-            self.rejection(),
-            Some(RejectionKind::Revoked | RejectionKind::NoControl)
-        )
+        match self {
+            Self::Rejected(rejected) => rejected.lost_control(),
+            Self::NoAnswer { .. } | Self::Request(_) | Self::Client(_) => false,
+        }
     }
 }
 

@@ -464,10 +464,7 @@ impl Arbiter {
         self.expire(now);
         let answer = match request {
             // Never refused, never limited, never needs a client slot.
-            Request::Stop { reason } => {
-                self.latch(now, &origin.key.name, StopCause::Client, &reason, None);
-                Ok(Accepted::default())
-            }
+            Request::Stop { reason } => self.client_stop(now, origin, &reason),
             other => self.decide(now, origin, other, sent),
         };
         if let Err(rejection) = &answer {
@@ -493,10 +490,7 @@ impl Arbiter {
         }
         let accepted = Ok(Accepted::default());
         match request {
-            Request::Stop { reason } => {
-                self.latch(now, &origin.key.name, StopCause::Client, &reason, None);
-                accepted
-            }
+            Request::Stop { reason } => self.client_stop(now, origin, &reason),
             Request::TakeControl { class } => self.take_control(now, index, class),
             Request::Drive {
                 lease,
@@ -567,6 +561,12 @@ impl Arbiter {
             // The state tracker resets the odometry; to the arbiter it is a beat.
             Request::ResetOdometry => accepted,
         }
+    }
+
+    /// A client's stop, owned by its name: never refused.
+    fn client_stop(&mut self, now: Duration, origin: &Origin, reason: &str) -> Answer {
+        self.latch(now, &origin.key.name, StopCause::Client, reason, None);
+        Ok(Accepted::default())
     }
 
     /// The rejection that lists what holds the robot.

@@ -8,7 +8,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use scout_interface::control::{Accepted, Class, RejectionKind, Request, StatusPayload};
+use scout_interface::control::{Accepted, Class, Request, StatusPayload};
 use scout_interface::json::{state_json, status_json};
 use scout_interface::remote::{
     self, DEFAULT_LISTEN, MAX_COMMAND_BYTES, Permission, REMOTE_PREFIX, RemoteAnswer,
@@ -424,11 +424,8 @@ impl<'a> RemoteControl<'a> {
                 .control_port(node, robot)?
                 .request_sent_at(&request, sent),
         };
-        let lost_control = matches!(
-            &answer,
-            Err(RequestError::Rejected(r))
-                if matches!(r.kind, Some(RejectionKind::Revoked | RejectionKind::NoControl))
-        );
+        let lost_control =
+            matches!(&answer, Err(RequestError::Rejected(rejected)) if rejected.lost_control());
         match (&request, &answer) {
             (Request::TakeControl { class }, Ok(accepted)) => {
                 peer.lease = accepted.lease.map(|lease| (lease, *class));

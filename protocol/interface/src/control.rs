@@ -532,6 +532,17 @@ pub struct Rejected {
     pub reason: String,
 }
 
+impl Rejected {
+    /// Whether the client lost (or never had) control: it must take control again, a
+    /// deliberate act no library does by itself.
+    pub fn lost_control(&self) -> bool {
+        matches!(
+            self.kind,
+            Some(RejectionKind::Revoked | RejectionKind::NoControl)
+        )
+    }
+}
+
 impl ControlResponse {
     /// The answer to request `seq` on the wire.
     pub fn new(seq: u64, answer: &Answer) -> Self {
