@@ -331,14 +331,19 @@ impl Drop for Gateway {
 
 /// Connects to robot `name`, retrying until its gateway is up (at most `LINE_TIMEOUT`).
 pub fn connect(name: &str) -> scout_clients::client::Robot {
-    let deadline = Instant::now() + LINE_TIMEOUT;
+    connect_within(name, LINE_TIMEOUT)
+}
+
+/// Connects to robot `name`, retrying until its gateway is up (at most `limit`).
+pub fn connect_within(name: &str, limit: Duration) -> scout_clients::client::Robot {
+    let deadline = Instant::now() + limit;
     loop {
         match scout_clients::client::Robot::connect(name) {
             Ok(robot) => return robot,
             Err(error) => {
                 assert!(
                     Instant::now() < deadline,
-                    "no gateway '{name}' after {LINE_TIMEOUT:?}: {error}"
+                    "no gateway '{name}' after {limit:?}: {error}"
                 );
                 std::thread::sleep(Duration::from_millis(50));
             }
@@ -480,6 +485,15 @@ pub fn free_port() -> u16 {
 /// A zenoh session of this test process in `mode` (`router`, `peer`, `client`), multicast
 /// scouting off, listening on / connecting to loopback endpoints only.
 pub fn zenoh_session(mode: &str, listen: &[String], connect: &[String]) -> zenoh::Session {
+    try_zenoh_session(mode, listen, connect).expect("open a zenoh session")
+}
+
+/// [`zenoh_session`], or why it could not open (nobody listening on `connect` yet).
+pub fn try_zenoh_session(
+    mode: &str,
+    listen: &[String],
+    connect: &[String],
+) -> zenoh::Result<zenoh::Session> {
     use zenoh::Wait;
     let settings = scout_clients::remote::SessionSettings {
         config_file: Some(String::new()),
@@ -487,7 +501,7 @@ pub fn zenoh_session(mode: &str, listen: &[String], connect: &[String]) -> zenoh
         connect: connect.to_vec(),
     };
     let config = settings.config(mode).expect("zenoh config");
-    zenoh::open(config).wait().expect("open a zenoh session")
+    zenoh::open(config).wait()
 }
 
 /// Sends `payload` as a zenoh query to `key` and returns the replies' JSON (empty when none
@@ -516,4 +530,29 @@ pub fn zenoh_query(
         }
     }
     answers
+}
+
+/// The simulator's ground truth stays at rest for `time` (it is polled, not slept on).
+pub fn chassis_stays_still(sim: &mut Sim, time: Duration) {
+    let end = Instant::now() + time;
+    while Instant::now() < end {
+        let stats = sim.stats();
+        assert_eq!(stats["actual"]["linear"], 0.0, "the chassis moves: {stats}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// Waits at most `limit` until the simulator's ground truth moves forward (it is polled).
+pub fn moving(sim: &mut Sim, limit: Duration) {
+    let deadline = Instant::now() + limit;
+    while sim.stats()["actual"]["linear"].as_f64() < Some(0.2) {
+        assert!(Instant::now() < deadline, "the chassis never moved");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// `scout release`: every stop, as an operator.
+pub fn release_all(name: &str) {
+    let (code, _, stderr) = scout(&["release", "--name", name]);
+    assert_eq!(code, Some(0), "{stderr}");
 }

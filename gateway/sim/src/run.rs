@@ -42,6 +42,8 @@ struct LinkStats {
     garbage_bytes: u64,
     corrupted_frames: u64,
     unplugs: u64,
+    /// CAN frames the socket refused (a full queue, an interface down).
+    write_errors: u64,
 }
 
 /// The open port and, for a pseudo-terminal, what keeps it alive.
@@ -121,6 +123,8 @@ struct Simulator<'a> {
     corrupt_remaining: u32,
     garbage: Garbage,
     stats: LinkStats,
+    /// `stats.write_errors` when the last failure streak was reported.
+    write_errors_reported: u64,
     out: &'a mut dyn Write,
 }
 
@@ -143,6 +147,7 @@ pub fn run(
         corrupt_remaining: 0,
         garbage: Garbage(options.seed | 1),
         stats: LinkStats::default(),
+        write_errors_reported: 0,
         out,
         options,
     };
@@ -175,8 +180,11 @@ impl Simulator<'_> {
             if self
                 .unplugged_until
                 .is_some_and(|until| self.now() >= until)
+                && let Err(error) = self.plug_in()
             {
-                self.plug_in()?;
+                // The interface went away (a USB adapter unplugged): wait for it to come back.
+                warn!("{error:#}; trying again in 1 s");
+                self.unplugged_until = Some(self.now() + Duration::from_secs(1));
             }
             let now = self.now();
             if let Some(batch) = self.chassis.poll_feedback(now) {
@@ -370,8 +378,23 @@ impl Simulator<'_> {
                     if let (Transport::Can, Some(endpoint)) =
                         (self.options.transport, self.endpoint.as_mut())
                     {
-                        if let Err(error) = endpoint.port.write_frame(&frame) {
-                            warn!("CAN write failed: {error}");
+                        match endpoint.port.write_frame(&frame) {
+                            Ok(()) if self.stats.write_errors > self.write_errors_reported => {
+                                info!(
+                                    "CAN writes go through again after {} failures",
+                                    self.stats.write_errors - self.write_errors_reported
+                                );
+                                self.write_errors_reported = self.stats.write_errors;
+                            }
+                            Ok(()) => {}
+                            Err(error) => {
+                                if self.stats.write_errors == self.write_errors_reported {
+                                    warn!(
+                                        "CAN write failed: {error} (counting until one goes through)"
+                                    );
+                                }
+                                self.stats.write_errors += 1;
+                            }
                         }
                     } else {
                         bytes.extend_from_slice(

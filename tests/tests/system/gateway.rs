@@ -289,23 +289,6 @@ fn odometry_reset_from_a_client() {
 }
 
 #[test]
-fn socketcan_gateway_on_vcan0() {
-    if !std::path::Path::new("/sys/class/net/vcan0").exists() {
-        scout_system_tests::skip(
-            "socketcan_gateway_on_vcan0",
-            "no vcan0 here (the kernel has no SocketCAN; `ip link add vcan0 type vcan`)",
-        );
-        return;
-    }
-    let name = robot_name("vcan");
-    let _sim = Sim::start(&["--can", "vcan0"]);
-    let _gateway = Gateway::start(&["--can", "vcan0", "--name", &name]);
-    let subscriber = connect(&name).subscribe().expect("subscribe");
-    let state = wait_for_state(&subscriber, STATE_LIMIT, |s| s["link"]["state"] == "ok");
-    assert_eq!(state["link"]["transport"], "can");
-}
-
-#[test]
 fn a_late_subscriber_gets_the_latest_state_at_once() {
     let name = robot_name("late");
     let mut sim = Sim::start(&["--serial"]);

@@ -8,33 +8,11 @@ use nix::sys::signal::Signal;
 use scout_clients::control::ControlError;
 use scout_clients::{Class, RejectionKind, ReleaseTarget};
 use scout_system_tests::{
-    Driver, Gateway, Sim, connect, example, robot_name, scout, wait_for_state, wait_for_status,
+    Driver, Gateway, Sim, chassis_stays_still, connect, example, moving, release_all, robot_name,
+    scout, wait_for_state, wait_for_status,
 };
 
 const LIMIT: Duration = Duration::from_secs(10);
-
-/// The simulator's ground truth stays at rest for `time` (it is polled, not slept on).
-fn chassis_stays_still(sim: &mut Sim, time: Duration) {
-    let end = Instant::now() + time;
-    while Instant::now() < end {
-        let stats = sim.stats();
-        assert_eq!(stats["actual"]["linear"], 0.0, "the chassis moves: {stats}");
-        std::thread::sleep(Duration::from_millis(50));
-    }
-}
-
-fn moving(sim: &mut Sim) {
-    let deadline = Instant::now() + LIMIT;
-    while sim.stats()["actual"]["linear"].as_f64() < Some(0.2) {
-        assert!(Instant::now() < deadline, "the chassis never moved");
-        std::thread::sleep(Duration::from_millis(50));
-    }
-}
-
-fn release_all(name: &str) {
-    let (code, _, stderr) = scout(&["release", "--name", name]);
-    assert_eq!(code, Some(0), "{stderr}");
-}
 
 #[test]
 fn a_gateway_restart_does_not_resume_a_client_that_keeps_streaming() {
@@ -97,7 +75,7 @@ fn a_lost_port_and_a_silent_chassis_stop_a_streaming_driver_for_good() {
     let robot = connect(&name);
     let status = robot.status().expect("status");
     let mut driver = Driver::start(&name, &["--linear", "0.5", "--client", "streamer"]);
-    moving(&mut sim);
+    moving(&mut sim, LIMIT);
     sim.send("unplug 1500");
     // The driver's control ended with the link: it exits 4, naming the cause.
     assert_eq!(driver.wait_exit(LIMIT), Some(4));
@@ -110,7 +88,7 @@ fn a_lost_port_and_a_silent_chassis_stop_a_streaming_driver_for_good() {
     release_all(&name);
     // A chassis power cycle: silent for longer than its timeout.
     let mut driver = Driver::start(&name, &["--linear", "0.5", "--client", "streamer-2"]);
-    moving(&mut sim);
+    moving(&mut sim, LIMIT);
     sim.send("silence 1200");
     assert_eq!(driver.wait_exit(LIMIT), Some(4));
     let silent = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
@@ -135,7 +113,7 @@ fn a_chassis_estop_episode_needs_a_release_and_a_new_take() {
     let _gateway = Gateway::start(&["--serial", &port, "--name", &name]);
     let status = connect(&name).status().expect("status");
     let mut driver = Driver::start(&name, &["--linear", "0.5", "--client", "streamer"]);
-    moving(&mut sim);
+    moving(&mut sim, LIMIT);
     sim.send("estop on");
     assert_eq!(driver.wait_exit(LIMIT), Some(4));
     wait_for_status(&status, LIMIT, |s| {
@@ -235,7 +213,7 @@ fn a_request_flood_neither_starves_the_tick_nor_holds_up_a_stop() {
     let robot = connect(&name);
     let status = robot.status().expect("status");
     let _driver = Driver::start(&name, &["--linear", "0.3", "--client", "streamer"]);
-    moving(&mut sim);
+    moving(&mut sim, LIMIT);
     let before = sim.stats()["motion_command_intervals"]["count"]
         .as_u64()
         .unwrap_or(0);

@@ -274,38 +274,3 @@ fn script_file_injects_faults_on_schedule() {
     }
     let _ = std::fs::remove_dir_all(dir);
 }
-
-/// The SocketCAN interface these tests use when the kernel has one.
-const VCAN: &str = "vcan0";
-
-#[test]
-fn socketcan_simulator_on_vcan0() {
-    use socketcan::{EmbeddedFrame, Socket};
-    if !std::path::Path::new("/sys/class/net").join(VCAN).exists() {
-        scout_system_tests::skip(
-            "socketcan_simulator_on_vcan0",
-            &format!(
-                "no {VCAN} here (the kernel has no SocketCAN; `ip link add {VCAN} type vcan`)"
-            ),
-        );
-        return;
-    }
-    let sim = Sim::start(&["--can", VCAN]);
-    let socket = socketcan::CanSocket::open(VCAN).expect("open vcan0");
-    socket
-        .set_read_timeout(Duration::from_millis(100))
-        .expect("timeout");
-    let mut decoded = 0;
-    let start = Instant::now();
-    while start.elapsed() < Duration::from_millis(500) {
-        if let Ok(socketcan::CanFrame::Data(frame)) = socket.read_frame() {
-            let id = socketcan::Frame::raw_id(&frame) as u16;
-            let ours = scout_protocol::CanFrame::new(id, frame.data()).expect("standard frame");
-            if can::decode(&ours).is_ok() {
-                decoded += 1;
-            }
-        }
-    }
-    assert!(decoded > 50, "{decoded}");
-    drop(sim);
-}

@@ -1,0 +1,243 @@
+//! The gateway and the simulator on one virtual bus: state end to end, the 0x130 stream as the
+//! chassis saw it, teleop over autonomy, an e-stop to the wire, the interface going down and
+//! away, and frames the gateway must refuse.
+
+use std::time::{Duration, Instant};
+
+use scout_protocol::can;
+use scout_system_tests::{
+    Driver, Gateway, Sim, chassis_stays_still, connect, connect_within, moving, release_all,
+    robot_name, scout, wait_for_state, wait_for_status,
+};
+
+use crate::{Bus, LIMIT};
+
+/// The simulator and the gateway on `bus`, the link up, with the gateway's robot name.
+pub fn start(bus: &Bus, test: &str) -> (Sim, Gateway, String) {
+    let name = robot_name(test);
+    let sim = Sim::start(&["--can", bus.name()]);
+    let gateway = Gateway::start(&["--can", bus.name(), "--name", &name]);
+    let state = connect_within(&name, LIMIT).subscribe().expect("subscribe");
+    wait_for_state(&state, LIMIT, |s| s["link"]["state"] == "ok");
+    (sim, gateway, name)
+}
+
+/// `scout resume`: arms autonomy.
+fn resume(name: &str) {
+    let (code, _, stderr) = scout(&["resume", "--name", name]);
+    assert_eq!(code, Some(0), "{stderr}");
+}
+
+/// Waits until the simulator's last motion command has `linear` near `wanted`.
+pub fn chassis_commanded(sim: &mut Sim, wanted: f64) -> serde_json::Value {
+    let deadline = Instant::now() + LIMIT;
+    loop {
+        let stats = sim.stats();
+        if stats["last_command"]["linear"]
+            .as_f64()
+            .is_some_and(|linear| (linear - wanted).abs() < 0.011)
+        {
+            return stats;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the chassis was never commanded {wanted} m/s: {stats}"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+#[test]
+fn state_and_motion_end_to_end_with_valid_checksums() {
+    let Some(bus) = Bus::create("state_and_motion_end_to_end_with_valid_checksums") else {
+        return;
+    };
+    let (mut sim, _gateway, name) = start(&bus, "can-e2e");
+    let robot = connect(&name);
+    let state = robot.subscribe().expect("subscribe");
+    let ok = wait_for_state(&state, LIMIT, |s| {
+        s["link"]["state"] == "ok" && !s["system"].is_null() && !s["motors"][3].is_null()
+    });
+    assert_eq!(ok["link"]["transport"], "can");
+    assert_eq!(ok["link"]["device"], bus.name());
+    assert_eq!(ok["system"]["control_mode"], "can", "{ok}");
+    let _driver = Driver::start(&name, &["--linear", "0.5", "--client", "driver"]);
+    moving(&mut sim, LIMIT);
+    wait_for_state(&state, LIMIT, |s| {
+        s["motion"]["linear"].as_f64() > Some(0.2)
+    });
+    let stats = sim.stats();
+    let intervals = &stats["motion_command_intervals"];
+    eprintln!(
+        "0x130 as the simulator saw it: {} commands, mean {} ms, max {} ms, p99 {} ms",
+        intervals["count"], intervals["mean_ms"], intervals["max_ms"], intervals["p99_ms"]
+    );
+    assert_eq!(stats["checksum_failures"], 0, "{stats}");
+    assert_eq!(stats["rejected"], 0, "{stats}");
+    assert!(intervals["count"].as_u64() > Some(10), "{stats}");
+    // The chassis never timed out (its 500 ms): a functional bound, not a timing target.
+    assert!(intervals["max_ms"].as_f64() < Some(500.0), "{stats}");
+    let seen = wait_for_state(&state, LIMIT, |_| true);
+    assert_eq!(seen["link"]["checksum_errors"], 0, "{seen}");
+    assert_eq!(seen["link"]["rejected_frames"], 0, "{seen}");
+}
+
+#[test]
+fn teleop_overrides_autonomy_and_an_estop_reaches_the_wire() {
+    let Some(bus) = Bus::create("teleop_overrides_autonomy_and_an_estop_reaches_the_wire") else {
+        return;
+    };
+    let (mut sim, _gateway, name) = start(&bus, "can-override");
+    let robot = connect(&name);
+    let status = robot.status().expect("status");
+    resume(&name);
+    let _autonomy = Driver::start(
+        &name,
+        &[
+            "--linear", "0.3", "--class", "autonomy", "--client", "planner",
+        ],
+    );
+    chassis_commanded(&mut sim, 0.3);
+    let _teleop = Driver::start(
+        &name,
+        &[
+            "--linear", "0.6", "--class", "teleop", "--client", "joystick",
+        ],
+    );
+    wait_for_status(&status, LIMIT, |s| s["selected"]["client"] == "joystick");
+    chassis_commanded(&mut sim, 0.6);
+    let (code, _, stderr) = scout(&["estop", "--name", &name, "--reason", "test"]);
+    assert_eq!(code, Some(0), "{stderr}");
+    let stopped = chassis_commanded(&mut sim, 0.0);
+    assert_eq!(stopped["checksum_failures"], 0, "{stopped}");
+    chassis_stays_still_after_braking(&mut sim);
+}
+
+/// The chassis brakes to rest, then stays there.
+pub fn chassis_stays_still_after_braking(sim: &mut Sim) {
+    let deadline = Instant::now() + LIMIT;
+    while sim.stats()["actual"]["linear"] != 0.0 {
+        assert!(Instant::now() < deadline, "the chassis never came to rest");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    chassis_stays_still(sim, Duration::from_secs(1));
+}
+
+/// The interface goes away while a client streams: the client loses control, the stop latches,
+/// the gateway reopens when the interface is back, and nothing moves until a release and a new
+/// take.
+fn lose_the_interface(test: &str, robot: &str, cut: impl Fn(&Bus), restore: impl Fn(&Bus)) {
+    let Some(bus) = Bus::create(test) else {
+        return;
+    };
+    let (mut sim, _gateway, name) = start(&bus, robot);
+    let robot = connect(&name);
+    let status = robot.status().expect("status");
+    let state = robot.subscribe().expect("state");
+    let mut driver = Driver::start(&name, &["--linear", "0.5", "--client", "streamer"]);
+    moving(&mut sim, LIMIT);
+    cut(&bus);
+    assert_eq!(driver.wait_exit(LIMIT), Some(4), "the driver lost control");
+    let lost = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
+    let cause = &lost["stops"][0]["cause"];
+    assert!(
+        *cause == "link_lost" || *cause == "link_fault",
+        "a link stop: {lost}"
+    );
+    wait_for_state(&state, LIMIT, |s| s["link"]["state"] == "disconnected");
+    restore(&bus);
+    let back = wait_for_state(&state, LIMIT, |s| s["link"]["state"] == "ok");
+    assert!(back["link"]["reconnects"].as_u64() >= Some(1), "{back}");
+    wait_for_status(&status, LIMIT, |s| s["stops"][0]["persists"] == false);
+    chassis_commanded(&mut sim, 0.0);
+    chassis_stays_still_after_braking(&mut sim);
+    release_all(&name);
+    chassis_stays_still(&mut sim, Duration::from_secs(1));
+    let _again = Driver::start(&name, &["--linear", "0.4", "--client", "streamer-2"]);
+    chassis_commanded(&mut sim, 0.4);
+}
+
+#[test]
+fn interface_down_and_up_needs_a_release() {
+    lose_the_interface(
+        "interface_down_and_up_needs_a_release",
+        "can-down",
+        |bus| bus.set_up(false).expect("set the interface down"),
+        |bus| bus.set_up(true).expect("set the interface up"),
+    );
+}
+
+#[test]
+fn interface_deleted_and_created_again_needs_a_release() {
+    lose_the_interface(
+        "interface_deleted_and_created_again_needs_a_release",
+        "can-unplug",
+        |bus| bus.delete().expect("delete the interface"),
+        |bus| bus.add().expect("create the interface again"),
+    );
+}
+
+/// `cansend`'s `ID#DATA` for a frame.
+pub fn cansend_text(id: u16, data: &[u8]) -> String {
+    let hex: String = data.iter().map(|byte| format!("{byte:02X}")).collect();
+    format!("{id:03X}#{hex}")
+}
+
+/// Sends one raw frame (standard or extended id) on `bus` from a socket of this test's own.
+pub fn send_raw(bus: &Bus, frame: socketcan::CanFrame) {
+    use socketcan::Socket;
+    let socket = socketcan::CanSocket::open(bus.name()).expect("open the bus");
+    socket.write_frame(&frame).expect("send a frame");
+}
+
+#[test]
+fn garbage_and_wrong_checksum_frames_are_refused_and_counted() {
+    use socketcan::{EmbeddedFrame, ExtendedId, StandardId};
+    let Some(bus) = Bus::create("garbage_and_wrong_checksum_frames_are_refused_and_counted") else {
+        return;
+    };
+    let (mut sim, _gateway, name) = start(&bus, "can-garbage");
+    let state = connect(&name).subscribe().expect("state");
+    wait_for_state(&state, LIMIT, |s| s["link"]["state"] == "ok");
+    // A 0x151 whose checksum is off by one, one of the wrong length, one with an id SCOUT does
+    // not use, an extended id, and the simulator's own corrupted feedback.
+    let mut status = can::encode(
+        &scout_protocol::Message::SystemStatus(scout_protocol::message::SystemStatus {
+            state: scout_protocol::message::ChassisState::Normal,
+            control_mode: scout_protocol::message::ControlMode::Can,
+            battery_decivolts: 250,
+            faults: scout_protocol::fault::FaultBits(0),
+        }),
+        0,
+    )
+    .data()
+    .to_vec();
+    status[7] = status[7].wrapping_add(1);
+    let standard = |id: u16, data: &[u8]| {
+        socketcan::CanFrame::new(StandardId::new(id).expect("id"), data).expect("frame")
+    };
+    send_raw(&bus, standard(0x151, &status));
+    send_raw(&bus, standard(0x151, &[0; 3]));
+    send_raw(&bus, standard(0x123, &[1, 2, 3]));
+    send_raw(
+        &bus,
+        socketcan::CanFrame::new(ExtendedId::new(0x151).expect("id"), &[0; 8]).expect("frame"),
+    );
+    sim.send("corrupt 3");
+    let counted = wait_for_state(&state, LIMIT, |s| {
+        s["link"]["checksum_errors"].as_u64() >= Some(4)
+            && s["link"]["rejected_frames"].as_u64() >= Some(3)
+    });
+    assert_eq!(counted["link"]["state"], "ok", "{counted}");
+    let later = wait_for_state(&state, LIMIT, |s| {
+        s["seq"].as_u64() > counted["seq"].as_u64().map(|seq| seq + 10)
+    });
+    assert_eq!(
+        later["link"]["state"], "ok",
+        "refused frames do not cut the link: {later}"
+    );
+    assert_eq!(
+        later["system"]["battery_voltage"].as_f64().map(f64::round),
+        Some(26.0)
+    );
+}

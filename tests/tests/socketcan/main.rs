@@ -1,0 +1,169 @@
+//! SocketCAN end to end: the gateway and the simulator on a virtual CAN bus of each test's own,
+//! can-utils as the independent peer, CAN faults, and zenoh over a lossy, partitioned network.
+//!
+//! Each test needs to create network interfaces (root, the `vcan` and `sch_netem` modules).
+//! Where it cannot, it prints why and skips, and `socketcan_tests_in_a_vm` runs this whole
+//! binary inside a micro-VM whose kernel can (`tests/vm/run`).
+
+mod bus;
+mod can_utils;
+mod faults;
+mod netem;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Duration;
+
+use scout_system_tests::skip;
+
+/// How long a test waits for one expected event: generous, as the VM emulates its CPU.
+pub const LIMIT: Duration = Duration::from_secs(30);
+
+/// Set inside the VM, where the tests below run instead of skipping.
+const IN_VM: &str = "SCOUT_IN_VM";
+
+/// A virtual CAN interface of one test's own, up, deleted when dropped.
+#[derive(Debug)]
+pub struct Bus {
+    name: String,
+}
+
+impl Bus {
+    /// A new vcan interface for `test`, or `None` (with the reason printed) where none can be
+    /// made.
+    pub fn create(test: &str) -> Option<Bus> {
+        static NEXT: AtomicUsize = AtomicUsize::new(0);
+        let name = format!(
+            "sc{}x{}",
+            std::process::id() % 100_000,
+            NEXT.fetch_add(1, Ordering::Relaxed)
+        );
+        let bus = Bus { name };
+        match bus.add() {
+            Ok(()) => Some(bus),
+            Err(reason) => {
+                skip(
+                    test,
+                    &format!(
+                        "cannot create a vcan interface here ({reason}); \
+                         socketcan_tests_in_a_vm runs this test in a VM"
+                    ),
+                );
+                None
+            }
+        }
+    }
+
+    /// The interface's name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Creates the interface and sets it up.
+    pub fn add(&self) -> Result<(), String> {
+        ip(&["link", "add", &self.name, "type", "vcan"])?;
+        self.set_up(true)
+    }
+
+    /// `ip link set NAME up` or `down`.
+    pub fn set_up(&self, up: bool) -> Result<(), String> {
+        ip(&["link", "set", &self.name, if up { "up" } else { "down" }])
+    }
+
+    /// Deletes the interface, as when a USB adapter is unplugged.
+    pub fn delete(&self) -> Result<(), String> {
+        ip(&["link", "del", &self.name])
+    }
+}
+
+impl Drop for Bus {
+    fn drop(&mut self) {
+        let _ = self.delete();
+    }
+}
+
+/// Runs `ip ARGS`, returning its complaint when it fails.
+pub fn ip(args: &[&str]) -> Result<(), String> {
+    run("ip", args)
+}
+
+/// Runs `tc ARGS`, returning its complaint when it fails.
+pub fn tc(args: &[&str]) -> Result<(), String> {
+    run("tc", args)
+}
+
+fn run(program: &str, args: &[&str]) -> Result<(), String> {
+    let output = Command::new(program)
+        .args(args)
+        .output()
+        .map_err(|error| format!("{program}: {error}"))?;
+    if output.status.success() {
+        Ok(())
+    } else {
+        Err(format!(
+            "`{program} {}`: {}",
+            args.join(" "),
+            String::from_utf8_lossy(&output.stderr).trim()
+        ))
+    }
+}
+
+/// Whether can-utils is installed, printing why `test` skips if not.
+pub fn can_utils(test: &str) -> bool {
+    let found = ["candump", "cansend", "cangen"].iter().all(|tool| {
+        std::env::var_os("PATH")
+            .is_some_and(|path| std::env::split_paths(&path).any(|dir| dir.join(tool).exists()))
+    });
+    if !found {
+        skip(
+            test,
+            "can-utils is not installed (apt-get install can-utils)",
+        );
+    }
+    found
+}
+
+fn vm_runner() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("vm/run")
+}
+
+/// Runs this test binary inside the VM where this kernel cannot make vcan interfaces.
+#[test]
+fn socketcan_tests_in_a_vm() {
+    const TEST: &str = "socketcan_tests_in_a_vm";
+    if std::env::var_os(IN_VM).is_some() {
+        return;
+    }
+    let probe = Bus {
+        name: format!("scprobe{}", std::process::id() % 100_000),
+    };
+    if probe.add().is_ok() {
+        skip(
+            TEST,
+            "this kernel has vcan: the SocketCAN tests ran directly",
+        );
+        return;
+    }
+    let check = Command::new(vm_runner())
+        .arg("--check")
+        .output()
+        .expect("run tests/vm/run --check");
+    if !check.status.success() {
+        skip(TEST, String::from_utf8_lossy(&check.stdout).trim());
+        return;
+    }
+    let exe = std::env::current_exe().expect("this test binary");
+    let status = Command::new(vm_runner())
+        .args(["--timeout", "900", "--"])
+        .arg("env")
+        .arg(format!("{IN_VM}=1"))
+        .arg(exe)
+        .args(["--skip", TEST, "--test-threads", "1", "--color", "never"])
+        .status()
+        .expect("run tests/vm/run");
+    assert!(
+        status.success(),
+        "the SocketCAN tests failed inside the VM ({status}): their output is above"
+    );
+}

@@ -1,0 +1,286 @@
+//! Zenoh remote teleop over a bad network, made with netem on loopback: 100 ms delay and 10 %
+//! loss, then a partition (100 % loss) and its healing.
+
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use scout_system_tests::{
+    Gateway, connect_within, free_port, robot_name, try_zenoh_session, wait_for_state, zenoh_query,
+};
+use zenoh::Wait;
+
+use crate::{LIMIT, skip, tc};
+
+/// netem on loopback for as long as it lives.
+struct Loopback;
+
+impl Loopback {
+    fn set(rule: &[&str]) -> Result<Loopback, String> {
+        Self::replace(rule).map(|()| Loopback)
+    }
+
+    fn change(&self, rule: &[&str]) {
+        Self::replace(rule).expect("change netem on loopback");
+    }
+
+    fn replace(rule: &[&str]) -> Result<(), String> {
+        let mut args = vec!["qdisc", "replace", "dev", "lo", "root", "netem"];
+        args.extend_from_slice(rule);
+        tc(&args)
+    }
+}
+
+impl Drop for Loopback {
+    fn drop(&mut self) {
+        let _ = tc(&["qdisc", "del", "dev", "lo", "root"]);
+    }
+}
+
+const LOSSY: u8 = 0;
+const PARTITION: u8 = 1;
+const PHASES: usize = 2;
+
+/// What the remote teleop's commands got, per phase.
+#[derive(Debug, Default)]
+struct Answers {
+    sent: [u64; PHASES],
+    accepted: [u64; PHASES],
+    refused: [BTreeMap<String, u64>; PHASES],
+    retakes: u64,
+}
+
+/// A remote teleop on its own thread: a drive command every 20 ms (life 500 ms) as zenoh
+/// queries, answers read as they come; after its control lapsed, it takes control again, as an
+/// operator still holding the stick would.
+fn remote_teleop(
+    session: zenoh::Session,
+    name: String,
+    phase: Arc<AtomicU8>,
+    running: Arc<AtomicBool>,
+    answers: Arc<Mutex<Answers>>,
+) -> std::thread::JoinHandle<()> {
+    std::thread::spawn(move || {
+        let epoch = Instant::now();
+        let key = |kind: &str| format!("scout/{name}/cmd/{kind}/laptop");
+        let mut pending = Vec::new();
+        let mut seq = 0u64;
+        while running.load(Ordering::Relaxed) {
+            seq += 1;
+            let now_phase = phase.load(Ordering::Relaxed);
+            let payload = format!(
+                r#"{{"seq":{seq},"sent_ms":{},"linear":0.3,"angular":0.0,"ttl_ms":500}}"#,
+                epoch.elapsed().as_millis()
+            );
+            let replies = session
+                .get(key("drive"))
+                .payload(payload)
+                .timeout(Duration::from_secs(15))
+                .wait()
+                .expect("send a drive query");
+            pending.push((now_phase, replies));
+            answers.lock().expect("answers").sent[usize::from(now_phase)] += 1;
+            let mut retake = false;
+            pending.retain(|(sent_in, replies)| match replies.try_recv() {
+                Ok(Some(reply)) => {
+                    let answer: serde_json::Value = reply
+                        .result()
+                        .ok()
+                        .and_then(|sample| {
+                            sample
+                                .payload()
+                                .try_to_string()
+                                .ok()
+                                .map(|t| t.into_owned())
+                        })
+                        .and_then(|text| serde_json::from_str(&text).ok())
+                        .unwrap_or_default();
+                    let mut answers = answers.lock().expect("answers");
+                    if answer["accepted"] == true {
+                        answers.accepted[usize::from(*sent_in)] += 1;
+                    } else {
+                        let reason = answer["reason"].as_str().unwrap_or("no reason").to_owned();
+                        retake |= reason.contains("take-control") || reason.contains("revoked");
+                        let short = reason_kind(&reason);
+                        *answers.refused[usize::from(*sent_in)]
+                            .entry(short)
+                            .or_default() += 1;
+                    }
+                    false
+                }
+                Ok(None) => true,
+                Err(_) => false,
+            });
+            if retake {
+                answers.lock().expect("answers").retakes += 1;
+                let _ = session
+                    .get(key("take-control"))
+                    .payload(r#"{"class":"teleop"}"#)
+                    .timeout(Duration::from_secs(15))
+                    .wait();
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        // The answers to what was sent, as they arrive (the partition's after it heals).
+        let deadline = Instant::now() + Duration::from_secs(20);
+        for (sent_in, replies) in pending {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if let Ok(Some(reply)) = replies.recv_timeout(left) {
+                let accepted = reply.result().ok().and_then(|sample| {
+                    let text = sample.payload().try_to_string().ok()?.into_owned();
+                    serde_json::from_str::<serde_json::Value>(&text).ok()
+                });
+                let mut answers = answers.lock().expect("answers");
+                match accepted {
+                    Some(answer) if answer["accepted"] == true => {
+                        answers.accepted[usize::from(sent_in)] += 1;
+                    }
+                    Some(answer) => {
+                        let reason = answer["reason"].as_str().unwrap_or("no reason");
+                        let short = reason_kind(reason);
+                        *answers.refused[usize::from(sent_in)]
+                            .entry(short)
+                            .or_default() += 1;
+                    }
+                    None => {}
+                }
+            }
+        }
+    })
+}
+
+/// A refusal's reason without its figures, to count them by kind.
+fn reason_kind(reason: &str) -> String {
+    reason
+        .split(|c: char| c.is_ascii_digit() || c == '(')
+        .next()
+        .unwrap_or_default()
+        .trim()
+        .to_owned()
+}
+
+#[test]
+fn remote_teleop_through_delay_and_loss_then_a_partition() {
+    const TEST: &str = "remote_teleop_through_delay_and_loss_then_a_partition";
+    // Checks that netem works here before anything starts.
+    let loopback = match Loopback::set(&["delay", "0ms"]) {
+        Ok(loopback) => loopback,
+        Err(reason) => {
+            skip(
+                TEST,
+                &format!("no netem here ({reason}); socketcan_tests_in_a_vm runs it in a VM"),
+            );
+            return;
+        }
+    };
+    let name = robot_name("netem");
+    let port = free_port();
+    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let _gateway = Gateway::start(&[
+        "--sim",
+        "--name",
+        &name,
+        "--zenoh-listen",
+        &endpoint,
+        "--remote-commands",
+        "estop,teleop,release",
+    ]);
+    let state = connect_within(&name, LIMIT).subscribe().expect("state");
+    // The gateway listens a moment after its services are up (long in the VM).
+    let deadline = Instant::now() + LIMIT;
+    let session = loop {
+        match try_zenoh_session("client", &[], std::slice::from_ref(&endpoint)) {
+            Ok(session) => break session,
+            Err(error) => assert!(
+                Instant::now() < deadline,
+                "the gateway never listened: {error}"
+            ),
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    let deadline = Instant::now() + LIMIT;
+    while zenoh_query(
+        &session,
+        &format!("scout/{name}/info"),
+        None,
+        Duration::from_secs(1),
+    )
+    .is_empty()
+    {
+        assert!(
+            Instant::now() < deadline,
+            "the gateway's queryable never answered"
+        );
+    }
+    let taken = zenoh_query(
+        &session,
+        &format!("scout/{name}/cmd/take-control/laptop"),
+        Some(r#"{"class":"teleop"}"#),
+        LIMIT,
+    );
+    assert_eq!(
+        taken.first().map(|a| a["accepted"] == true),
+        Some(true),
+        "{taken:?}"
+    );
+
+    loopback.change(&["delay", "100ms", "loss", "10%"]);
+    let phase = Arc::new(AtomicU8::new(LOSSY));
+    let running = Arc::new(AtomicBool::new(true));
+    let answers = Arc::new(Mutex::new(Answers::default()));
+    let teleop = remote_teleop(
+        session.clone(),
+        name.clone(),
+        Arc::clone(&phase),
+        Arc::clone(&running),
+        Arc::clone(&answers),
+    );
+    // Through 100 ms and 10 % loss, the robot drives.
+    wait_for_state(&state, LIMIT, |s| {
+        s["motion"]["linear"].as_f64() > Some(0.2)
+    });
+    let lossy_end = Instant::now() + Duration::from_secs(5);
+    let (mut samples, mut driving) = (0u32, 0u32);
+    while Instant::now() < lossy_end {
+        if let Ok(Some(sample)) = state.next_timeout(Duration::from_millis(200)) {
+            samples += 1;
+            driving += u32::from(sample.command.linear > 0.0);
+        }
+    }
+    eprintln!("100 ms delay, 10 % loss: the command was non-zero in {driving} of {samples} states");
+    assert!(driving > 0);
+
+    // A partition: the robot stops within the commands' life, by itself.
+    loopback.change(&["loss", "100%"]);
+    phase.store(PARTITION, Ordering::Relaxed);
+    let cut = Instant::now();
+    wait_for_state(&state, LIMIT, |s| s["command"]["linear"] == 0.0);
+    eprintln!(
+        "partition: command zero after {} ms",
+        cut.elapsed().as_millis()
+    );
+    std::thread::sleep(Duration::from_secs(2));
+    // The teleop stops sending; once every command it sent is past its life, the network heals.
+    running.store(false, Ordering::Relaxed);
+    std::thread::sleep(Duration::from_millis(600));
+    loopback.change(&["delay", "0ms"]);
+    let healed = Instant::now();
+    while healed.elapsed() < Duration::from_secs(3) {
+        if let Ok(Some(sample)) = state.next_timeout(Duration::from_millis(200)) {
+            assert_eq!(
+                sample.command.linear, 0.0,
+                "a command queued in the partition moved the robot"
+            );
+        }
+    }
+    teleop.join().expect("teleop thread");
+    let answers = answers.lock().expect("answers");
+    eprintln!("remote teleop answers: {answers:?}");
+    assert!(answers.accepted[usize::from(LOSSY)] > 0, "{answers:?}");
+    assert_eq!(
+        answers.accepted[usize::from(PARTITION)],
+        0,
+        "a command sent in the partition was accepted after it: {answers:?}"
+    );
+}
