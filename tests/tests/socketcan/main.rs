@@ -3,7 +3,8 @@
 //!
 //! Each test needs to create network interfaces (root, the `vcan` and `sch_netem` modules).
 //! Where it cannot, it prints why and skips, and `socketcan_tests_in_a_vm` runs this whole
-//! binary inside a micro-VM whose kernel can (`tests/vm/run`).
+//! binary inside a micro-VM whose kernel can (`tests/vm/run`). `SCOUT_TEST_CAN=can0` runs them
+//! on a real interface instead (`--test-threads 1`; see the README).
 
 mod bus;
 mod can_utils;
@@ -23,23 +24,35 @@ pub const LIMIT: Duration = Duration::from_secs(30);
 /// Set inside the VM, where the tests below run instead of skipping.
 const IN_VM: &str = "SCOUT_IN_VM";
 
-/// A virtual CAN interface of one test's own, up, deleted when dropped.
+/// Names a real CAN interface to run the tests on instead of vcan interfaces of their own
+/// (one test at a time: they share it).
+const REAL_INTERFACE: &str = "SCOUT_TEST_CAN";
+
+/// The CAN interface of one test: a vcan interface of its own, up, deleted when dropped; or the
+/// real interface `SCOUT_TEST_CAN` names, left as it is.
 #[derive(Debug)]
 pub struct Bus {
     name: String,
+    real: bool,
 }
 
 impl Bus {
-    /// A new vcan interface for `test`, or `None` (with the reason printed) where none can be
-    /// made.
+    /// A new vcan interface for `test` (or the real one), or `None` (with the reason printed)
+    /// where none can be made.
     pub fn create(test: &str) -> Option<Bus> {
         static NEXT: AtomicUsize = AtomicUsize::new(0);
+        if let Some(name) = std::env::var_os(REAL_INTERFACE) {
+            return Some(Bus {
+                name: name.to_string_lossy().into_owned(),
+                real: true,
+            });
+        }
         let name = format!(
             "sc{}x{}",
             std::process::id() % 100_000,
             NEXT.fetch_add(1, Ordering::Relaxed)
         );
-        let bus = Bus { name };
+        let bus = Bus { name, real: false };
         match bus.add() {
             Ok(()) => Some(bus),
             Err(reason) => {
@@ -58,6 +71,11 @@ impl Bus {
     /// The interface's name.
     pub fn name(&self) -> &str {
         &self.name
+    }
+
+    /// Whether it is a real interface (which tests cannot delete or inject error frames into).
+    pub fn is_real(&self) -> bool {
+        self.real
     }
 
     /// Creates the interface and sets it up.
@@ -79,7 +97,9 @@ impl Bus {
 
 impl Drop for Bus {
     fn drop(&mut self) {
-        let _ = self.delete();
+        if !self.real {
+            let _ = self.delete();
+        }
     }
 }
 
@@ -137,8 +157,9 @@ fn socketcan_tests_in_a_vm() {
     }
     let probe = Bus {
         name: format!("scprobe{}", std::process::id() % 100_000),
+        real: false,
     };
-    if probe.add().is_ok() {
+    if std::env::var_os(REAL_INTERFACE).is_some() || probe.add().is_ok() {
         skip(
             TEST,
             "this kernel has vcan: the SocketCAN tests ran directly",
