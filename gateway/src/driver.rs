@@ -97,8 +97,13 @@ impl Endpoints {
                     .state
                     .loan_uninit()
                     .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+                // Stamped as it goes out: subscribers measure delivery from here.
+                let state = StatePayload {
+                    published_ns: services::monotonic_ns(),
+                    ..**state
+                };
                 sample
-                    .write_payload(**state)
+                    .write_payload(state)
                     .send()
                     .map_err(|e| anyhow::anyhow!("sending the state: {e:?}"))?;
                 self.state_notifier
@@ -197,33 +202,6 @@ pub struct Driver {
     realtime_priority: u8,
 }
 
-/// Puts the calling thread under SCHED_FIFO at `priority` (0: leaves it alone).
-fn raise_priority(priority: u8) {
-    use thread_priority::{
-        RealtimeThreadSchedulePolicy, ThreadPriority, ThreadPriorityValue, ThreadSchedulePolicy,
-        set_thread_priority_and_policy, thread_native_id,
-    };
-    if priority == 0 {
-        return;
-    }
-    let result = ThreadPriorityValue::try_from(priority)
-        .map_err(|e| format!("{e:?}"))
-        .and_then(|value| {
-            set_thread_priority_and_policy(
-                thread_native_id(),
-                ThreadPriority::Crossplatform(value),
-                ThreadSchedulePolicy::Realtime(RealtimeThreadSchedulePolicy::Fifo),
-            )
-            .map_err(|e| format!("{e:?}"))
-        });
-    match result {
-        Ok(()) => info!("control thread at real-time priority {priority} (SCHED_FIFO)"),
-        Err(error) => info!(
-            "control thread at normal priority ({error}): grant CAP_SYS_NICE or an rtprio limit for a tick that holds under load"
-        ),
-    }
-}
-
 impl std::fmt::Debug for Driver {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Driver")
@@ -262,15 +240,17 @@ impl Driver {
 
     /// Runs until `stop` is set, then sends zero speed for the configured cycles and returns.
     pub fn run(&mut self, stop: &AtomicBool) -> anyhow::Result<()> {
-        raise_priority(self.realtime_priority);
+        scout_io::raise_priority(self.realtime_priority, "control thread");
         let mut ready = Ready::default();
         loop {
             let now = monotonic();
             self.receive(now, ready.port);
+            // What the port brought goes out before the requests are served.
+            self.publish(now);
             if stop.load(Ordering::Relaxed) {
                 self.core.handle_shutdown();
             }
-            self.handle_requests(now, ready.wake);
+            self.handle_requests(now);
             while let Some(node) = self.monitor.try_gone() {
                 self.core.handle_client_gone(now, node);
             }
@@ -281,17 +261,7 @@ impl Driver {
                 self.open(now)?;
             }
             self.transmit(now);
-            while let Some(publication) = self.core.poll_publish(now) {
-                if let Err(error) = self.endpoints.publish(&publication) {
-                    self.publish_errors += 1;
-                    if self.publish_errors.is_power_of_two() {
-                        error!(
-                            "publishing failed ({} times): {error:#}",
-                            self.publish_errors
-                        );
-                    }
-                }
-            }
+            self.publish(now);
             if self.core.is_finished() {
                 break;
             }
@@ -315,6 +285,21 @@ impl Driver {
             self.publish_errors
         );
         Ok(())
+    }
+
+    /// Publishes what the core has to publish now.
+    fn publish(&mut self, now: Duration) {
+        while let Some(publication) = self.core.poll_publish(now) {
+            if let Err(error) = self.endpoints.publish(&publication) {
+                self.publish_errors += 1;
+                if self.publish_errors.is_power_of_two() {
+                    error!(
+                        "publishing failed ({} times): {error:#}",
+                        self.publish_errors
+                    );
+                }
+            }
+        }
     }
 
     /// Feeds the core what the port delivered.
@@ -342,17 +327,34 @@ impl Driver {
     }
 
     /// Answers every waiting stop, then at most [`MAX_REQUESTS_PER_ITERATION`] control
-    /// requests (the rest wait for the next iteration, after the tick).
-    fn handle_requests(&mut self, now: Duration, woken: bool) {
-        if woken && let Err(error) = self.endpoints.wake.try_wait(|_| {}) {
+    /// requests (the rest wait for the next iteration, after the tick), looking for stops again
+    /// before each one: a stop waits for one control request at most, never for a batch.
+    fn handle_requests(&mut self, now: Duration) {
+        // Drained every iteration, not only when `ppoll` saw it readable: iceoryx2 sends no
+        // wake-up while it believes one is pending, and a notification that raced with the
+        // last drain can leave it believing so with the socket empty; then only draining
+        // (cheap: an atomic and a non-blocking read) makes clients wake the gateway again.
+        if let Err(error) = self.endpoints.wake.try_wait(|_| {}) {
             debug!("draining the wake-up event failed: {error:?}");
         }
-        // Stops first, bounded (a flood of stops cannot hold up the zero frame), and their zero
-        // goes out before any control request is read.
-        let stops_waiting = self.serve(now, Way::Stop, services::MAX_STOPPERS);
-        self.transmit(now);
-        let requests_waiting = self.serve(now, Way::Control, MAX_REQUESTS_PER_ITERATION);
+        let mut stops_waiting = self.serve_stops(now);
+        let mut requests_waiting = false;
+        for _ in 0..MAX_REQUESTS_PER_ITERATION {
+            requests_waiting = self.serve(now, Way::Control, 1);
+            if !requests_waiting {
+                break;
+            }
+            stops_waiting = self.serve_stops(now);
+        }
         self.backlog = stops_waiting || requests_waiting;
+    }
+
+    /// Answers the waiting stops, bounded (a flood of stops cannot hold up the zero frame), and
+    /// sends their zero before anything else is read; returns whether more stops wait.
+    fn serve_stops(&mut self, now: Duration) -> bool {
+        let waiting = self.serve(now, Way::Stop, services::MAX_STOPPERS);
+        self.transmit(now);
+        waiting
     }
 
     /// Answers at most `limit` requests of `way`; returns whether more are waiting.

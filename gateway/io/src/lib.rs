@@ -4,8 +4,36 @@
 //! - [`port`]: the chassis port as an OS resource: a tty (serial, slcan adapter, pseudo-terminal)
 //!   or a SocketCAN socket.
 //! - [`logging`]: `tracing` to standard error, never blocking the caller.
+//! - [`raise_priority`]: real-time scheduling for the thread that keeps the wire's time.
 
 pub mod logging;
 pub mod port;
 
 pub use port::{BusError, Incoming, Port};
+
+/// Puts the calling thread under SCHED_FIFO at `priority` (0: leaves it alone).
+pub fn raise_priority(priority: u8, what: &str) {
+    use thread_priority::{
+        RealtimeThreadSchedulePolicy, ThreadPriority, ThreadPriorityValue, ThreadSchedulePolicy,
+        set_thread_priority_and_policy, thread_native_id,
+    };
+    if priority == 0 {
+        return;
+    }
+    let result = ThreadPriorityValue::try_from(priority)
+        .map_err(|e| format!("{e:?}"))
+        .and_then(|value| {
+            set_thread_priority_and_policy(
+                thread_native_id(),
+                ThreadPriority::Crossplatform(value),
+                ThreadSchedulePolicy::Realtime(RealtimeThreadSchedulePolicy::Fifo),
+            )
+            .map_err(|e| format!("{e:?}"))
+        });
+    match result {
+        Ok(()) => tracing::info!("{what} at real-time priority {priority} (SCHED_FIFO)"),
+        Err(error) => tracing::info!(
+            "{what} at normal priority ({error}): grant CAP_SYS_NICE or an rtprio limit for timing that holds under load"
+        ),
+    }
+}
