@@ -17,7 +17,7 @@ use scout_interface::remote::{
 use scout_interface::services::{self, ControlPort, RequestError, Role, Way, monotonic_ns};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
-use tracing::{error, info, warn};
+use tracing::{debug, error, info, warn};
 use zenoh::Wait;
 use zenoh::bytes::Encoding;
 use zenoh::qos::CongestionControl;
@@ -125,6 +125,8 @@ struct Counters {
     puts_ignored: u64,
     state_queries: u64,
     info_queries: u64,
+    /// Queries dropped unanswered because the query thread was [`MAX_QUEUED_QUERIES`] behind.
+    queries_dropped: u64,
 }
 
 /// The running bridge thread.
@@ -171,7 +173,7 @@ fn zenoh_error(error: impl std::fmt::Display) -> anyhow::Error {
 fn run(
     robot_name: &str,
     config: &ZenohConfig,
-    mut info: Value,
+    info: Value,
     stop: &AtomicBool,
 ) -> anyhow::Result<()> {
     let settings = config.session();
@@ -181,13 +183,78 @@ fn run(
             settings.listen
         )
     })?;
+    let _alive = session
+        .liveliness()
+        .declare_token(remote::alive_key(robot_name))
+        .wait()
+        .map_err(zenoh_error)?;
+    info!(
+        "zenoh: publishing scout/{robot_name}/{{state,status,alive,info}}, listening on {:?}, remote commands {}",
+        settings.listen,
+        if config.remote_commands.enabled {
+            format!("on ({})", config.allowed_names())
+        } else {
+            "off".into()
+        }
+    );
+    // Two threads, each blocked on its own input: the state goes out as the gateway publishes
+    // it, and a query (an e-stop) is served as it arrives, neither waiting for the other.
+    let latest_state = std::sync::Mutex::new(None);
+    let failed = AtomicBool::new(false);
+    let halt = || stop.load(Ordering::Relaxed) || failed.load(Ordering::Relaxed);
+    let give_up = |result: anyhow::Result<()>| {
+        if result.is_err() {
+            failed.store(true, Ordering::Relaxed);
+        }
+        result
+    };
+    std::thread::scope(|scope| {
+        let queries = std::thread::Builder::new()
+            .name("zenoh-queries".into())
+            .spawn_scoped(scope, || {
+                give_up(serve_queries(
+                    robot_name,
+                    config,
+                    info,
+                    &session,
+                    &latest_state,
+                    &halt,
+                ))
+            })?;
+        let forwarded = give_up(forward_state(
+            robot_name,
+            config,
+            &session,
+            &latest_state,
+            &halt,
+        ));
+        let served = queries
+            .join()
+            .map_err(|_| anyhow::anyhow!("the query thread panicked"))?;
+        forwarded.and(served)
+    })
+}
+
+/// Publishes each new state (at most about `state_rate_hz`) and each new status, woken by the
+/// gateway's notification.
+fn forward_state(
+    robot_name: &str,
+    config: &ZenohConfig,
+    session: &zenoh::Session,
+    latest_state: &std::sync::Mutex<Option<String>>,
+    halt: &dyn Fn() -> bool,
+) -> anyhow::Result<()> {
     let node = services::node(&format!("scout-bridge-{robot_name}"))
         .map_err(|e| anyhow::anyhow!("creating the bridge's iceoryx2 node: {e:?}"))?;
-    let (state_service, _) = services::state_services(&node, robot_name, Role::Client)?;
+    let (state_service, state_events) = services::state_services(&node, robot_name, Role::Client)?;
     let states = state_service
         .subscriber_builder()
         .create()
         .map_err(|e| anyhow::anyhow!("subscribing to the state: {e:?}"))?;
+    let new_state = state_events
+        .listener_builder()
+        .create()
+        .map_err(|e| anyhow::anyhow!("listening for new states: {e:?}"))?;
     let statuses = services::status_services(&node, robot_name, Role::Client)?
         .subscriber_builder()
         .create()
@@ -202,57 +269,24 @@ fn run(
     };
     let state_publisher = json_publisher(remote::state_key(robot_name))?;
     let status_publisher = json_publisher(remote::status_key(robot_name))?;
-    let _alive = session
-        .liveliness()
-        .declare_token(remote::alive_key(robot_name))
-        .wait()
-        .map_err(zenoh_error)?;
-    let state_queries = session
-        .declare_queryable(remote::state_key(robot_name))
-        .wait()
-        .map_err(zenoh_error)?;
-    let info_queries = session
-        .declare_queryable(remote::info_key(robot_name))
-        .wait()
-        .map_err(zenoh_error)?;
-    let command_queries = session
-        .declare_queryable(remote::command_keys(robot_name))
-        .wait()
-        .map_err(zenoh_error)?;
-    let command_puts = session
-        .declare_subscriber(remote::command_keys(robot_name))
-        .wait()
-        .map_err(zenoh_error)?;
-    info!(
-        "zenoh: publishing scout/{robot_name}/{{state,status,alive,info}}, listening on {:?}, remote commands {}",
-        settings.listen,
-        if config.remote_commands.enabled {
-            format!("on ({})", config.allowed_names())
-        } else {
-            "off".into()
-        }
-    );
-    let period = Duration::from_secs_f64(1.0 / config.state_rate_hz);
-    let mut commands = RemoteControl::new(&node, robot_name, config);
-    let mut counters = Counters::default();
-    let mut latest_state: Option<String> = None;
+    // A quarter period of slack, so that the chassis' jittered 50 Hz is not held back at the
+    // default 50 Hz.
+    let period = Duration::from_secs_f64(1.0 / config.state_rate_hz) * 3 / 4;
     let mut last_status: Option<StatusPayload> = None;
     let mut next_state = Instant::now();
-    while !stop.load(Ordering::Relaxed) {
+    while !halt() {
         let now = Instant::now();
-        if now >= next_state {
-            next_state += period;
-            if next_state < now {
-                next_state = now + period;
-            }
-            if let Some(state) = services::latest(&states)
+        if now >= next_state
+            && let Some(state) = services::latest(&states)
                 .map_err(|e| anyhow::anyhow!("receiving the state: {e:?}"))?
-            {
-                let json = state_json(&state, monotonic_ns()).to_string();
-                if let Err(error) = state_publisher.put(json.clone()).wait() {
-                    warn!("zenoh: publishing the state failed: {error}");
-                }
-                latest_state = Some(json);
+        {
+            next_state = now + period;
+            let json = state_json(&state, monotonic_ns()).to_string();
+            if let Err(error) = state_publisher.put(json.clone()).wait() {
+                warn!("zenoh: publishing the state failed: {error}");
+            }
+            if let Ok(mut latest) = latest_state.lock() {
+                *latest = Some(json);
             }
         }
         if let Some(status) = services::latest(&statuses)
@@ -267,37 +301,102 @@ fn run(
             }
             last_status = Some(status);
         }
-        while let Ok(Some(query)) = state_queries.try_recv() {
-            counters.state_queries += 1;
-            if let Some(state) = &latest_state {
-                reply(&query, state.clone());
-            }
+        // Until the next state (or the rate allows the held one), at most 100 ms to see a
+        // stop; a status change comes with a state.
+        let wait = if next_state > now {
+            next_state - now
+        } else {
+            Duration::from_millis(100)
+        };
+        if let Err(error) = new_state.timed_wait(|_| {}, wait) {
+            debug!("waiting for a new state failed: {error:?}");
+            std::thread::sleep(wait);
         }
-        while let Ok(Some(query)) = info_queries.try_recv() {
-            counters.info_queries += 1;
-            if let Value::Object(object) = &mut info {
-                object.insert(
-                    "counters".into(),
-                    serde_json::to_value(counters).unwrap_or(Value::Null),
-                );
-            }
-            reply(&query, info.to_string());
-        }
-        while let Ok(Some(query)) = command_queries.try_recv() {
-            let answer = commands.handle(&query, &mut counters);
-            reply(&query, serde_json::to_string(&answer).unwrap_or_default());
-        }
-        while let Ok(Some(_)) = command_puts.try_recv() {
-            counters.puts_ignored += 1;
-        }
-        std::thread::sleep(
-            next_state
-                .saturating_duration_since(Instant::now())
-                .min(Duration::from_millis(2)),
-        );
     }
     Ok(())
 }
+
+/// Answers queries as they arrive: remote commands, the latest state, the information.
+fn serve_queries(
+    robot_name: &str,
+    config: &ZenohConfig,
+    mut info: Value,
+    session: &zenoh::Session,
+    latest_state: &std::sync::Mutex<Option<String>>,
+    halt: &dyn Fn() -> bool,
+) -> anyhow::Result<()> {
+    let node = services::node(&format!("scout-bridge-commands-{robot_name}"))
+        .map_err(|e| anyhow::anyhow!("creating the bridge's iceoryx2 node: {e:?}"))?;
+    // The state, information and command queries, in arrival order, through one channel to
+    // block on. A query that finds it full (a flood) is dropped unanswered and counted.
+    let (sender, inbox) = std::sync::mpsc::sync_channel::<(Asked, Query)>(MAX_QUEUED_QUERIES);
+    let dropped = Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let queryable = |key: String, asked: Asked| {
+        let (sender, dropped) = (sender.clone(), Arc::clone(&dropped));
+        session
+            .declare_queryable(key)
+            .callback(move |query| {
+                if sender.try_send((asked, query)).is_err() {
+                    dropped.fetch_add(1, Ordering::Relaxed);
+                }
+            })
+            .wait()
+            .map_err(zenoh_error)
+    };
+    let _state_queries = queryable(remote::state_key(robot_name), Asked::State)?;
+    let _info_queries = queryable(remote::info_key(robot_name), Asked::Info)?;
+    let _command_queries = queryable(remote::command_keys(robot_name), Asked::Command)?;
+    let command_puts = session
+        .declare_subscriber(remote::command_keys(robot_name))
+        .wait()
+        .map_err(zenoh_error)?;
+    let mut commands = RemoteControl::new(&node, robot_name, config);
+    let mut counters = Counters::default();
+    while !halt() {
+        while let Ok(Some(_)) = command_puts.try_recv() {
+            counters.puts_ignored += 1;
+        }
+        counters.queries_dropped = dropped.load(Ordering::Relaxed);
+        let Ok((asked, query)) = inbox.recv_timeout(Duration::from_millis(100)) else {
+            continue;
+        };
+        match asked {
+            Asked::State => {
+                counters.state_queries += 1;
+                let latest = latest_state.lock().ok().and_then(|latest| latest.clone());
+                if let Some(state) = latest {
+                    reply(&query, state);
+                }
+            }
+            Asked::Info => {
+                counters.info_queries += 1;
+                if let Value::Object(object) = &mut info {
+                    object.insert(
+                        "counters".into(),
+                        serde_json::to_value(counters).unwrap_or(Value::Null),
+                    );
+                }
+                reply(&query, info.to_string());
+            }
+            Asked::Command => {
+                let answer = commands.handle(&query, &mut counters);
+                reply(&query, serde_json::to_string(&answer).unwrap_or_default());
+            }
+        }
+    }
+    Ok(())
+}
+
+/// What a query asks for.
+#[derive(Debug, Clone, Copy)]
+enum Asked {
+    State,
+    Info,
+    Command,
+}
+
+/// Queries waiting for the query thread; more are dropped unanswered (and counted).
+const MAX_QUEUED_QUERIES: usize = 1024;
 
 fn reply(query: &Query, payload: String) {
     if let Err(error) = query
@@ -481,7 +580,14 @@ impl<'a> RemoteControl<'a> {
                     offset: None,
                     used,
                 });
-                self.peers.len() - 1
+                // Its stop port now, whatever it asked first: opening one takes milliseconds,
+                // which its first e-stop should not wait for.
+                let (node, robot) = (self.node, self.robot);
+                let index = self.peers.len() - 1;
+                if let Err(error) = self.peers[index].stop_port(node, robot) {
+                    warn!("zenoh: no stop port for remote peer {name} yet: {error}");
+                }
+                index
             }
         };
         let peer = &mut self.peers[index];
