@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use scout_protocol::slcan::{self, Bitrate, Slcan};
-use scout_protocol::{Counted, can, serial};
+use scout_protocol::{Counted, Message, can, serial};
 use serialport::{SerialPort, TTYPort};
 use tracing::{info, warn};
 
@@ -32,6 +32,42 @@ pub struct SimOptions {
     pub params: SimParams,
     /// Seed of the garbage generator.
     pub seed: u64,
+    /// A file to record the wire in, with CLOCK_MONOTONIC times (see [`Trace`]).
+    pub trace: Option<PathBuf>,
+    /// SCHED_FIFO priority of the simulator's loop (0: normal), so that what it measures is
+    /// the gateway's timing, not its own scheduling.
+    pub realtime_priority: u8,
+}
+
+/// The wire as the chassis saw it, one line an event, times in CLOCK_MONOTONIC ns (shared by
+/// every process on the host), flushed every feedback period, for benchmarks: `F NS` a feedback batch written, `C NS LINEAR
+/// ANGULAR` a motion command read (m/s, rad/s), `A NS LINEAR` the chassis' actual speed when it
+/// changes.
+struct Trace {
+    out: std::io::BufWriter<std::fs::File>,
+    actual: f64,
+}
+
+impl Trace {
+    fn create(path: &Path) -> anyhow::Result<Self> {
+        let file = std::fs::File::create(path)
+            .with_context(|| format!("creating the trace file {}", path.display()))?;
+        Ok(Self {
+            out: std::io::BufWriter::new(file),
+            actual: f64::NAN,
+        })
+    }
+
+    fn now_ns() -> u64 {
+        nix::time::clock_gettime(nix::time::ClockId::CLOCK_MONOTONIC)
+            .map_or(0, |time| std::time::Duration::from(time).as_nanos() as u64)
+    }
+
+    fn line(&mut self, args: std::fmt::Arguments<'_>) {
+        if let Err(error) = self.out.write_fmt(args) {
+            warn!("writing the trace failed: {error}");
+        }
+    }
 }
 
 /// Counts of the link side, beside the model's statistics.
@@ -125,6 +161,7 @@ struct Simulator<'a> {
     stats: LinkStats,
     /// `stats.write_errors` when the last failure streak was reported.
     write_errors_reported: u64,
+    trace: Option<Trace>,
     out: &'a mut dyn Write,
 }
 
@@ -136,6 +173,7 @@ pub fn run(
     stop: &AtomicBool,
     out: &mut dyn Write,
 ) -> anyhow::Result<()> {
+    scout_io::raise_priority(options.realtime_priority, "simulator loop");
     let mut simulator = Simulator {
         start: Instant::now(),
         chassis: Chassis::new(options.params.clone(), options.transport),
@@ -148,6 +186,7 @@ pub fn run(
         garbage: Garbage(options.seed | 1),
         stats: LinkStats::default(),
         write_errors_reported: 0,
+        trace: options.trace.as_deref().map(Trace::create).transpose()?,
         out,
         options,
     };
@@ -326,6 +365,15 @@ impl Simulator<'_> {
                 return self.write_bytes(slcan::encode(&Slcan::Nack).as_bytes());
             }
             RxEvent::Message(counted) => {
+                if let (Some(trace), Message::MotionCommand(command)) =
+                    (self.trace.as_mut(), &counted.message)
+                {
+                    let (linear, angular) = (
+                        command.linear(),
+                        command.angular(self.options.params.max_angular),
+                    );
+                    trace.line(format_args!("C {} {linear} {angular}\n", Trace::now_ns()));
+                }
                 if !slcan || self.adapter.hears_chassis() {
                     self.chassis.handle_message(now, counted);
                 }
@@ -349,6 +397,8 @@ impl Simulator<'_> {
         if now < self.silent_until || self.endpoint.is_none() || !heard {
             return Ok(());
         }
+        // Stamped before the writes: a reader may wake before a later stamp would be taken.
+        let written_ns = Trace::now_ns();
         let timestamp = self
             .adapter
             .timestamps
@@ -404,7 +454,20 @@ impl Simulator<'_> {
                 }
             }
         }
-        self.write_bytes(&bytes)
+        self.write_bytes(&bytes)?;
+        if let Some(trace) = self.trace.as_mut() {
+            trace.line(format_args!("F {written_ns}\n"));
+            let actual = self.chassis.actual().linear;
+            if actual != trace.actual {
+                trace.actual = actual;
+                trace.line(format_args!("A {} {actual}\n", Trace::now_ns()));
+            }
+            // Readable while the simulator runs, at most one period behind.
+            if let Err(error) = trace.out.flush() {
+                warn!("writing the trace failed: {error}");
+            }
+        }
+        Ok(())
     }
 
     /// Writes to the tty without waiting for a reader: what does not fit is lost, as on a wire.

@@ -39,6 +39,14 @@ struct Cli {
     /// Keep a symbolic link at PATH pointing at the pseudo-terminal (stable across `unplug`).
     #[arg(long, value_name = "PATH")]
     link: Option<PathBuf>,
+    /// Record the wire in FILE with CLOCK_MONOTONIC times, for benchmarks (`F NS` feedback
+    /// written, `C NS LINEAR ANGULAR` motion command read, `A NS LINEAR` actual speed changed).
+    #[arg(long, value_name = "FILE")]
+    trace: Option<PathBuf>,
+    /// Run the simulator's loop under SCHED_FIFO at this priority (1-99; needs CAP_SYS_NICE),
+    /// so that a loaded host delays the gateway, not the simulated chassis measuring it.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    realtime_priority: u8,
     /// Run fault-injection commands from FILE (with `wait MS` lines) as well as from stdin.
     #[arg(long, value_name = "FILE")]
     script: Option<PathBuf>,
@@ -101,6 +109,8 @@ fn simulate(cli: Cli) -> anyhow::Result<()> {
         link: cli.link,
         params,
         seed: cli.seed,
+        trace: cli.trace,
+        realtime_priority: cli.realtime_priority,
     };
     run(options, &received, &stop, &mut std::io::stdout().lock())
 }
