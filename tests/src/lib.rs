@@ -21,9 +21,9 @@ const ARTIFACTS: [&str; 6] = [
     "scout",
     "scout-gateway",
     "scout-sim",
+    "scout-bench",
     "examples/square",
     "examples/logger",
-    "examples/flood",
 ];
 
 /// Makes sure the binaries exist. `cargo test --workspace` (the README's test command) builds

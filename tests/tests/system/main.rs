@@ -2,6 +2,7 @@
 //! deadline, on its own pseudo-terminals and names.
 
 mod arbiter;
+mod bench;
 mod decode;
 mod examples;
 mod gateway;

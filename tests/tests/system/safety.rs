@@ -8,8 +8,8 @@ use nix::sys::signal::Signal;
 use scout_clients::control::ControlError;
 use scout_clients::{Class, RejectionKind, ReleaseTarget};
 use scout_system_tests::{
-    Driver, Gateway, Sim, chassis_stays_still, connect, example, moving, release_all, robot_name,
-    scout, wait_for_state, wait_for_status,
+    Driver, Gateway, Sim, chassis_stays_still, connect, moving, release_all, robot_name, scout,
+    wait_for_state, wait_for_status,
 };
 
 const LIMIT: Duration = Duration::from_secs(10);
@@ -219,8 +219,8 @@ fn a_request_flood_neither_starves_the_tick_nor_holds_up_a_stop() {
         .unwrap_or(0);
     let floods: Vec<_> = (0..16)
         .map(|_| {
-            let mut flood = example("flood");
-            flood.args(["--name", &name, "--hz", "1000", "--seconds", "3"]);
+            let mut flood = scout_system_tests::command("scout-bench");
+            flood.args(["flood", &name, "1000", "3"]);
             flood
                 .stdout(std::process::Stdio::null())
                 .spawn()

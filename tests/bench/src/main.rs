@@ -1,0 +1,103 @@
+//! `scout-bench`: measures the gateway beside the alternatives in one run and prints a Markdown
+//! table (JSON with `--json FILE`, plots with `--plots DIR`). See BENCHMARKS.md.
+//!
+//! Exit codes: 0 measured; 1 a step failed (the message says which); 2 usage.
+
+mod figures;
+mod plot;
+mod procs;
+mod roles;
+mod run;
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+/// Measures scout-gateway: state latency through iceoryx2, zenoh and a direct read of the port,
+/// command and e-stop latency, tick jitter idle, loaded and under a request flood, recovery,
+/// cost, and decode throughput.
+#[derive(Debug, Parser)]
+#[command(version)]
+struct Cli {
+    /// Short windows and few samples (under a minute): checks the bench works.
+    #[arg(long)]
+    quick: bool,
+    /// Write the figures as JSON to FILE.
+    #[arg(long, value_name = "FILE")]
+    json: Option<PathBuf>,
+    /// Draw PNG plots into DIR.
+    #[arg(long, value_name = "DIR")]
+    plots: Option<PathBuf>,
+    /// SCHED_FIFO priority of the bench's requesting thread, which plays a safety monitor
+    /// (0: normal scheduling, as an ordinary client).
+    #[arg(long, value_name = "N", default_value_t = 40)]
+    client_priority: u8,
+    #[command(subcommand)]
+    role: Option<Role>,
+}
+
+/// The bench's own child processes.
+#[derive(Debug, Subcommand)]
+enum Role {
+    /// An iceoryx2 state subscriber.
+    #[command(hide = true)]
+    Subscribe {
+        name: String,
+        out: PathBuf,
+        seconds: f64,
+    },
+    /// A zenoh state subscriber.
+    #[command(hide = true)]
+    ZenohSubscribe {
+        name: String,
+        endpoint: String,
+        out: PathBuf,
+        seconds: f64,
+    },
+    /// A process reading the port itself.
+    #[command(hide = true)]
+    Direct {
+        port: PathBuf,
+        out: PathBuf,
+        seconds: f64,
+    },
+    /// Burns a core.
+    #[command(hide = true)]
+    Hog { seconds: f64 },
+    /// Control requests as fast as `hz`.
+    #[command(hide = true)]
+    Flood { name: String, hz: f64, seconds: f64 },
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.role {
+        Some(Role::Subscribe { name, out, seconds }) => roles::subscribe(&name, &out, seconds),
+        Some(Role::ZenohSubscribe {
+            name,
+            endpoint,
+            out,
+            seconds,
+        }) => roles::zenoh_subscribe(&name, &endpoint, &out, seconds),
+        Some(Role::Direct { port, out, seconds }) => roles::direct(&port, &out, seconds),
+        Some(Role::Hog { seconds }) => {
+            roles::hog(seconds);
+            Ok(())
+        }
+        Some(Role::Flood { name, hz, seconds }) => roles::flood(&name, hz, seconds),
+        None => run::run(&run::Options {
+            quick: cli.quick,
+            json: cli.json,
+            plots: cli.plots,
+            client_priority: cli.client_priority,
+        }),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(error) => {
+            eprintln!("scout-bench: {error:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

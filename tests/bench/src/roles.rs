@@ -1,0 +1,156 @@
+//! The bench's child processes: subscribers on each path (iceoryx2, zenoh, the port read
+//! directly), a CPU hog and a request flood. Each records what it saw to a file the bench reads.
+
+use std::io::Write;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use scout_clients::client::Robot;
+use scout_clients::{ReleaseTarget, Request, StatePayload, monotonic_ns};
+use scout_protocol::link::{RxEvent, StreamFraming, Transport};
+
+/// Connects to `name`, waiting up to 20 s for its gateway.
+pub fn connect(name: &str) -> anyhow::Result<Robot> {
+    let deadline = Instant::now() + Duration::from_secs(20);
+    loop {
+        match Robot::connect(name) {
+            Ok(robot) => return Ok(robot),
+            Err(error) if Instant::now() > deadline => return Err(error.into()),
+            Err(_) => std::thread::sleep(Duration::from_millis(20)),
+        }
+    }
+}
+
+fn create(out: &Path) -> anyhow::Result<std::io::BufWriter<std::fs::File>> {
+    let file = std::fs::File::create(out).with_context(|| format!("creating {}", out.display()))?;
+    Ok(std::io::BufWriter::new(file))
+}
+
+/// The newest frame time in a state: when the gateway read the batch it carries.
+fn newest_frame_ns(state: &StatePayload) -> u64 {
+    [
+        state.system.received,
+        state.motion.received,
+        state.lights.received,
+    ]
+    .into_iter()
+    .chain(state.motors.iter().map(|motor| motor.received))
+    .filter(|received| received.valid)
+    .map(|received| received.at_ns)
+    .max()
+    .unwrap_or(0)
+}
+
+/// iceoryx2: `SEEN READ PUBLISHED` (ns) per state, blocking on the event service.
+pub fn subscribe(name: &str, out: &Path, seconds: f64) -> anyhow::Result<()> {
+    let robot = connect(name)?;
+    let states = robot.subscribe()?;
+    let mut out = create(out)?;
+    let end = Instant::now() + Duration::from_secs_f64(seconds);
+    while Instant::now() < end {
+        if let Some(state) = states.next_timeout(Duration::from_millis(100))? {
+            let seen = monotonic_ns();
+            writeln!(
+                out,
+                "{seen} {} {}",
+                newest_frame_ns(&state),
+                state.published_ns
+            )?;
+        }
+    }
+    out.flush()?;
+    Ok(())
+}
+
+/// zenoh: `SEEN` (ns) per state JSON, parsed, from a session in client mode.
+pub fn zenoh_subscribe(name: &str, endpoint: &str, out: &Path, seconds: f64) -> anyhow::Result<()> {
+    use zenoh::Wait;
+    let settings = scout_clients::remote::SessionSettings {
+        config_file: Some(String::new()),
+        listen: Vec::new(),
+        connect: vec![endpoint.to_owned()],
+    };
+    let session = zenoh::open(settings.config("client")?)
+        .wait()
+        .map_err(|error| anyhow::anyhow!("opening a zenoh session to {endpoint}: {error}"))?;
+    let subscriber = session
+        .declare_subscriber(scout_clients::remote::state_key(name))
+        .wait()
+        .map_err(|error| anyhow::anyhow!("subscribing: {error}"))?;
+    let mut out = create(out)?;
+    let end = Instant::now() + Duration::from_secs_f64(seconds);
+    while Instant::now() < end {
+        let Ok(Some(sample)) = subscriber.recv_timeout(Duration::from_millis(100)) else {
+            continue;
+        };
+        let state: serde_json::Value = serde_json::from_slice(&sample.payload().to_bytes())?;
+        let seen = monotonic_ns();
+        if state["seq"].is_u64() {
+            writeln!(out, "{seen}")?;
+        }
+    }
+    out.flush()?;
+    Ok(())
+}
+
+/// The floor: the serial port read and decoded by this process, no gateway. `SEEN` (ns) per
+/// read that completed at least one frame.
+pub fn direct(port: &Path, out: &Path, seconds: f64) -> anyhow::Result<()> {
+    let mut port =
+        scout_io::Port::open_tty(port).with_context(|| format!("opening {}", port.display()))?;
+    let mut framing = StreamFraming::new(Transport::Serial).context("serial framing")?;
+    let mut out = create(out)?;
+    let mut buffer = [0u8; 1024];
+    let end = Instant::now() + Duration::from_secs_f64(seconds);
+    while Instant::now() < end {
+        let scout_io::Incoming::Bytes(n) = port.read(&mut buffer, Duration::from_millis(100))?
+        else {
+            continue;
+        };
+        let mut decoded = 0;
+        framing.push(&buffer[..n], |event| {
+            decoded += usize::from(matches!(event, RxEvent::Message(_)));
+        });
+        if decoded > 0 {
+            writeln!(out, "{}", monotonic_ns())?;
+        }
+    }
+    out.flush()?;
+    Ok(())
+}
+
+/// Burns one core for `seconds`.
+pub fn hog(seconds: f64) {
+    let end = Instant::now() + Duration::from_secs_f64(seconds);
+    let mut x = 0u64;
+    while Instant::now() < end {
+        for i in 0..10_000u64 {
+            x = std::hint::black_box(x.wrapping_mul(6364136223846793005).wrapping_add(i));
+        }
+    }
+}
+
+/// Control requests at `hz` for `seconds`, each waiting for its answer.
+pub fn flood(name: &str, hz: f64, seconds: f64) -> anyhow::Result<()> {
+    let robot = connect(name)?;
+    let mut controller = robot.controller(&format!("flood-{}", std::process::id()), None)?;
+    let requests = [
+        Request::Resume,
+        Request::Release {
+            target: ReleaseTarget::Own,
+        },
+        Request::Relinquish,
+    ];
+    let period = Duration::from_secs_f64(1.0 / hz);
+    let end = Instant::now() + Duration::from_secs_f64(seconds);
+    let mut next = Instant::now();
+    let mut i = 0;
+    while Instant::now() < end {
+        let _ = controller.request(&requests[i % requests.len()]);
+        i += 1;
+        next += period;
+        std::thread::sleep(next.saturating_duration_since(Instant::now()));
+    }
+    Ok(())
+}

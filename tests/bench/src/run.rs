@@ -1,0 +1,944 @@
+//! The measurements, in order: state latency on three paths and with many subscribers, command
+//! and e-stop latency (local and through zenoh), tick jitter idle, loaded and under a flood,
+//! recovery, cost and decode throughput; then the table, the JSON and the plots.
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use scout_clients::client::{Robot, StateSubscriber};
+use scout_clients::interface::state::LinkState;
+use scout_clients::{Class, ReleaseTarget, monotonic_ns};
+use serde_json::{Value, json};
+
+use crate::figures::{Summary, Ticks, Trace, read_rows, round};
+use crate::procs::{Gateway, Roles, Sim, command, ensure_built, usage};
+use crate::roles::connect;
+
+#[derive(Debug)]
+pub struct Options {
+    pub quick: bool,
+    pub json: Option<PathBuf>,
+    pub plots: Option<PathBuf>,
+    pub client_priority: u8,
+}
+
+/// Window lengths and sample counts.
+struct Plan {
+    window: f64,
+    commands: usize,
+    stops: usize,
+}
+
+/// Everything the run keeps for the report.
+#[derive(Default)]
+struct Report {
+    json: serde_json::Map<String, Value>,
+    rows: Vec<(String, String)>,
+    /// Latency samples per path, µs, for the plots.
+    paths: Vec<(String, Vec<f64>)>,
+    /// Tick intervals per condition, ms, for the plots.
+    ticks: Vec<(String, Ticks)>,
+}
+
+impl Report {
+    fn latency(&mut self, key: &str, label: &str, samples: &[f64]) -> Summary {
+        let summary = Summary::of(samples);
+        insert(&mut self.json, key, summary.json());
+        self.rows.push((format!("{label} (µs)"), summary.row()));
+        summary
+    }
+
+    fn value(&mut self, key: &str, label: &str, value: f64) {
+        insert(&mut self.json, key, json!(round(value)));
+        self.rows.push((label.to_owned(), format!("{value:.2}")));
+    }
+}
+
+/// Inserts `value` at a dotted `key`.
+fn insert(map: &mut serde_json::Map<String, Value>, key: &str, value: Value) {
+    match key.split_once('.') {
+        Some((head, rest)) => {
+            let entry = map
+                .entry(head.to_owned())
+                .or_insert_with(|| Value::Object(Default::default()));
+            if let Value::Object(inner) = entry {
+                insert(inner, rest, value);
+            }
+        }
+        None => {
+            map.insert(key.to_owned(), value);
+        }
+    }
+}
+
+fn progress(what: &str) {
+    eprintln!("scout-bench: {what}");
+}
+
+fn us(ns: u64) -> f64 {
+    ns as f64 / 1e3
+}
+
+/// The bench's scratch directory, removed when dropped.
+struct Scratch(PathBuf);
+
+impl Scratch {
+    fn new() -> anyhow::Result<Scratch> {
+        let dir = std::env::temp_dir().join(format!("scout-bench-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        Ok(Scratch(dir))
+    }
+
+    fn path(&self, name: &str) -> PathBuf {
+        self.0.join(name)
+    }
+
+    fn text(&self, name: &str) -> String {
+        self.path(name).to_string_lossy().into_owned()
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// The robot under test: the simulator on a pseudo-terminal behind a stable link, its gateway.
+struct Bench {
+    /// SCHED_FIFO priority of the thread while it stops the robot (see [`Realtime`]).
+    client_priority: u8,
+    scratch: Scratch,
+    name: String,
+    sim: Sim,
+    gateway: Option<Gateway>,
+    endpoint: String,
+    plan: Plan,
+}
+
+impl Bench {
+    fn gateway_args(&self, zenoh: bool) -> Vec<String> {
+        let mut args = vec![
+            "--serial".to_owned(),
+            self.scratch.text("chassis.tty"),
+            "--name".to_owned(),
+            self.name.clone(),
+        ];
+        if zenoh {
+            args.extend(
+                [
+                    "--zenoh-listen",
+                    &self.endpoint,
+                    "--remote-commands",
+                    "estop,teleop,release",
+                ]
+                .map(str::to_owned),
+            );
+        } else {
+            args.push("--no-zenoh".to_owned());
+        }
+        args
+    }
+
+    /// Starts a gateway and waits until it publishes a state with the link up.
+    fn start_gateway(&mut self, zenoh: bool) -> anyhow::Result<StateSubscriber> {
+        let args = self.gateway_args(zenoh);
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let log = self.scratch.path("gateway.log");
+        self.gateway = Some(Gateway::start(&args, &log)?);
+        let states = connect(&self.name)?.subscribe()?;
+        wait_state(&states, |state| state.link.state() == LinkState::Ok)?;
+        Ok(states)
+    }
+
+    /// `scout release --name NAME`, as an operator.
+    fn release_all(&self) -> anyhow::Result<()> {
+        let status = command("scout")?
+            .args(["release", "--name", &self.name])
+            .stdout(std::process::Stdio::null())
+            .status()?;
+        anyhow::ensure!(status.success(), "scout release failed");
+        Ok(())
+    }
+}
+
+/// Waits up to 20 s for a state that satisfies `wanted`.
+fn wait_state(
+    states: &StateSubscriber,
+    wanted: impl Fn(&scout_clients::StatePayload) -> bool,
+) -> anyhow::Result<scout_clients::StatePayload> {
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while Instant::now() < deadline {
+        if let Some(state) = states.next_timeout(Duration::from_millis(100))?
+            && wanted(&state)
+        {
+            return Ok(state);
+        }
+    }
+    anyhow::bail!("the state never became what the bench waited for (20 s)")
+}
+
+pub fn run(options: &Options) -> anyhow::Result<()> {
+    ensure_built()?;
+    let plan = if options.quick {
+        Plan {
+            window: 2.0,
+            commands: 10,
+            stops: 5,
+        }
+    } else {
+        Plan {
+            window: 10.0,
+            commands: 100,
+            stops: 50,
+        }
+    };
+    let scratch = Scratch::new()?;
+    let port = std::net::TcpListener::bind("127.0.0.1:0")?
+        .local_addr()?
+        .port();
+    progress("starting the simulator and the gateway");
+    let sim = Sim::start(&[
+        "--serial",
+        "--realtime-priority",
+        "60",
+        "--link",
+        &scratch.text("chassis.tty"),
+        "--trace",
+        &scratch.text("chassis.trace"),
+    ])?;
+    let mut bench = Bench {
+        client_priority: options.client_priority,
+        name: format!("bench-{}", std::process::id()),
+        endpoint: format!("tcp/127.0.0.1:{port}"),
+        scratch,
+        sim,
+        gateway: None,
+        plan,
+    };
+    let mut report = Report::default();
+    let states = bench.start_gateway(true)?;
+
+    state_latency(&mut bench, &mut report)?;
+    command_latency(&mut bench, &mut report, &states)?;
+    remote_latency(&mut bench, &mut report, &states)?;
+    ticks(&mut bench, &mut report, &states)?;
+    recovery(&mut bench, &mut report, states)?;
+    cost(&mut bench, &mut report)?;
+    decode_throughput(&mut report);
+
+    insert(
+        &mut report.json,
+        "client_priority",
+        json!(options.client_priority),
+    );
+    print_table(&report, options.quick);
+    if let Some(path) = &options.json {
+        let text = serde_json::to_string_pretty(&Value::Object(report.json.clone()))?;
+        std::fs::write(path, text + "\n").with_context(|| format!("writing {}", path.display()))?;
+        progress(&format!("figures written to {}", path.display()));
+    }
+    if let Some(dir) = &options.plots {
+        crate::plot::draw(dir, &report.paths, &report.ticks)?;
+        progress(&format!("plots drawn in {}", dir.display()));
+    }
+    if let Some(gateway) = bench.gateway.take() {
+        gateway.kill();
+    }
+    Ok(())
+}
+
+/// Reads the main simulator's trace (flushed every feedback period).
+fn trace(bench: &Bench) -> anyhow::Result<Trace> {
+    std::thread::sleep(Duration::from_millis(60));
+    Trace::read(&bench.scratch.path("chassis.trace"))
+}
+
+/// End-to-end latencies (µs) of recordings whose first column is when a state was seen: from
+/// the last feedback the simulator wrote before. A subscriber's first sample (the history, from
+/// before it subscribed) is left out.
+fn seen_latencies(rows: &[Vec<u64>], trace: &Trace) -> Vec<f64> {
+    rows.iter()
+        .skip(1)
+        .filter_map(|row| {
+            let seen = *row.first()?;
+            let written = trace.feedback_before(seen)?;
+            Some(us(seen - written))
+        })
+        .collect()
+}
+
+/// The iceoryx2 recordings `iox-COUNT-*`: end to end from the batch the gateway read, and its
+/// parts (written to read, read to published, published to seen).
+struct Split {
+    end_to_end: Vec<f64>,
+    link: Vec<f64>,
+    gateway: Vec<f64>,
+    delivery: Vec<f64>,
+}
+
+fn iceoryx2_latencies(bench: &Bench, count: usize, trace: &Trace) -> anyhow::Result<Split> {
+    let mut split = Split {
+        end_to_end: Vec::new(),
+        link: Vec::new(),
+        gateway: Vec::new(),
+        delivery: Vec::new(),
+    };
+    for i in 0..count {
+        let rows = read_rows(&bench.scratch.path(&format!("iox-{count}-{i}")))?;
+        for row in rows.iter().skip(1) {
+            let &[seen, read, published] = row.as_slice() else {
+                continue;
+            };
+            let Some(written) = trace.feedback_before(read) else {
+                continue;
+            };
+            if read < written || published < read || seen < published {
+                continue;
+            }
+            split.end_to_end.push(us(seen - written));
+            split.link.push(us(read - written));
+            split.gateway.push(us(published - read));
+            split.delivery.push(us(seen - published));
+        }
+    }
+    Ok(split)
+}
+
+/// A frame written by the simulator to a decoded state in another process: through the
+/// gateway and iceoryx2 (split into link, gateway and delivery), through the gateway and zenoh,
+/// and read from the port directly; then 8 and 32 iceoryx2 subscribers.
+fn state_latency(bench: &mut Bench, report: &mut Report) -> anyhow::Result<()> {
+    let window = bench.plan.window.to_string();
+    progress("state latency: iceoryx2, zenoh and a direct read of the port, at once");
+    let direct_sim = Sim::start(&[
+        "--serial",
+        "--realtime-priority",
+        "60",
+        "--trace",
+        &bench.scratch.text("direct.trace"),
+    ])?;
+    let mut roles = Roles::default();
+    let (name, endpoint) = (bench.name.clone(), bench.endpoint.clone());
+    let out = |file: &str| bench.scratch.text(file);
+    roles.spawn(&["subscribe", &name, &out("iox-1-0"), &window])?;
+    roles.spawn(&["zenoh-subscribe", &name, &endpoint, &out("zenoh"), &window])?;
+    roles.spawn(&["direct", &direct_sim.port, &out("direct"), &window])?;
+    roles.wait()?;
+    direct_sim.quit()?;
+    for count in [8, 32] {
+        progress(&format!(
+            "state latency: {count} iceoryx2 subscriber processes"
+        ));
+        for i in 0..count {
+            roles.spawn(&[
+                "subscribe",
+                &name,
+                &out(&format!("iox-{count}-{i}")),
+                &window,
+            ])?;
+        }
+        roles.wait()?;
+    }
+    let trace = trace(bench)?;
+    let direct_trace = Trace::read(&bench.scratch.path("direct.trace"))?;
+    let one = iceoryx2_latencies(bench, 1, &trace)?;
+    let zenoh = seen_latencies(&read_rows(&bench.scratch.path("zenoh"))?, &trace);
+    let direct = seen_latencies(&read_rows(&bench.scratch.path("direct"))?, &direct_trace);
+    report.latency(
+        "state_latency_us.iceoryx2",
+        "state, iceoryx2",
+        &one.end_to_end,
+    );
+    report.latency("state_latency_us.zenoh", "state, zenoh", &zenoh);
+    report.latency(
+        "state_latency_us.direct",
+        "state, direct read (floor)",
+        &direct,
+    );
+    report.latency(
+        "link_part_us",
+        "  of which link (written to read)",
+        &one.link,
+    );
+    report.latency(
+        "gateway_part_us",
+        "  of which gateway (read to published)",
+        &one.gateway,
+    );
+    report.latency(
+        "delivery_part_us",
+        "  of which delivery (published to seen)",
+        &one.delivery,
+    );
+    for count in [8, 32] {
+        let split = iceoryx2_latencies(bench, count, &trace)?;
+        report.latency(
+            &format!("state_latency_us.iceoryx2_{count}"),
+            &format!("state, iceoryx2, {count} subscribers"),
+            &split.end_to_end,
+        );
+        if count == 32 {
+            report
+                .paths
+                .push(("iceoryx2, 32 subscribers".into(), split.end_to_end));
+        }
+    }
+    report.paths.insert(0, ("direct read".into(), direct));
+    report.paths.insert(1, ("iceoryx2".into(), one.end_to_end));
+    report.paths.insert(2, ("zenoh".into(), zenoh));
+    Ok(())
+}
+
+/// Waits until the gateway sends `wanted` (by the state's last command), up to 20 s.
+fn wait_command(states: &StateSubscriber, wanted: impl Fn(f64) -> bool) -> anyhow::Result<()> {
+    wait_state(states, |state| wanted(state.command.linear)).map(|_| ())
+}
+
+/// One way of driving and stopping: locally through iceoryx2, or a remote peer through zenoh.
+trait Commander {
+    fn take(&mut self) -> anyhow::Result<()>;
+    fn drive(&mut self, linear: f64) -> anyhow::Result<()>;
+    fn stop(&mut self) -> anyhow::Result<()>;
+    fn release(&mut self) -> anyhow::Result<()>;
+}
+
+struct Local {
+    driver: scout_clients::control::Controller,
+    safety: scout_clients::control::Controller,
+}
+
+impl Commander for Local {
+    fn take(&mut self) -> anyhow::Result<()> {
+        self.driver.take_control()?;
+        Ok(())
+    }
+    fn drive(&mut self, linear: f64) -> anyhow::Result<()> {
+        self.driver.drive(linear, 0.0)?;
+        Ok(())
+    }
+    fn stop(&mut self) -> anyhow::Result<()> {
+        self.safety.stop("bench")?;
+        Ok(())
+    }
+    fn release(&mut self) -> anyhow::Result<()> {
+        self.safety.release(ReleaseTarget::Own)?;
+        Ok(())
+    }
+}
+
+struct Remote {
+    session: zenoh::Session,
+    name: String,
+    seq: u64,
+}
+
+impl Remote {
+    fn query(&self, kind: &str, payload: String) -> anyhow::Result<()> {
+        use zenoh::Wait;
+        let replies = self
+            .session
+            .get(format!("scout/{}/cmd/{kind}/bench", self.name))
+            .payload(payload)
+            .timeout(Duration::from_secs(5))
+            .wait()
+            .map_err(|error| anyhow::anyhow!("querying {kind}: {error}"))?;
+        let reply = replies
+            .recv()
+            .map_err(|_| anyhow::anyhow!("no answer to the remote {kind}"))?;
+        let sample = reply
+            .result()
+            .map_err(|error| anyhow::anyhow!("remote {kind}: {error:?}"))?;
+        let answer: Value = serde_json::from_slice(&sample.payload().to_bytes())?;
+        anyhow::ensure!(
+            answer["accepted"] == true,
+            "remote {kind} refused: {answer}"
+        );
+        Ok(())
+    }
+}
+
+impl Commander for Remote {
+    fn take(&mut self) -> anyhow::Result<()> {
+        self.query("take-control", r#"{"class":"teleop"}"#.into())
+    }
+    fn drive(&mut self, linear: f64) -> anyhow::Result<()> {
+        self.seq += 1;
+        let sent_ms = monotonic_ns() / 1_000_000;
+        let payload = format!(
+            r#"{{"seq":{},"sent_ms":{sent_ms},"linear":{linear},"angular":0.0,"ttl_ms":500}}"#,
+            self.seq
+        );
+        self.query("drive", payload)
+    }
+    fn stop(&mut self) -> anyhow::Result<()> {
+        self.query("estop", r#"{"reason":"bench"}"#.into())
+    }
+    fn release(&mut self) -> anyhow::Result<()> {
+        self.query("release", "{}".into())
+    }
+}
+
+/// `drive` to the first frame carrying it at the chassis, `count` times: returns the request
+/// times.
+fn drive_samples(
+    commander: &mut dyn Commander,
+    states: &StateSubscriber,
+    count: usize,
+) -> anyhow::Result<Vec<u64>> {
+    commander.take()?;
+    let mut sent = Vec::new();
+    for _ in 0..count {
+        wait_command(states, |linear| linear == 0.0)?;
+        // A random phase against the 20 ms grid: 25 to 45 ms after the robot came to rest.
+        let jitter = (monotonic_ns().wrapping_mul(6364136223846793005) >> 33) % 20_000;
+        std::thread::sleep(Duration::from_micros(25_000 + jitter));
+        sent.push(monotonic_ns());
+        commander.drive(0.3)?;
+        wait_command(states, |linear| linear > 0.0)?;
+        commander.drive(0.0)?;
+    }
+    wait_command(states, |linear| linear == 0.0)?;
+    Ok(sent)
+}
+
+/// The calling thread under SCHED_FIFO while it lives: the bench's stops play a safety
+/// monitor deployed as real-time as the gateway, so that its own scheduling under the loads the
+/// bench makes is not counted as the gateway's latency. Never held while processes are started
+/// (they would inherit it).
+struct Realtime;
+
+impl Realtime {
+    fn new(priority: u8) -> Realtime {
+        scout_io::raise_priority(priority, "the bench's stopping thread");
+        Realtime
+    }
+}
+
+impl Drop for Realtime {
+    fn drop(&mut self) {
+        use thread_priority::{
+            NormalThreadSchedulePolicy, ThreadPriority, ThreadSchedulePolicy,
+            set_thread_priority_and_policy, thread_native_id,
+        };
+        let _ = set_thread_priority_and_policy(
+            thread_native_id(),
+            ThreadPriority::Crossplatform(0u8.try_into().expect("priority 0")),
+            ThreadSchedulePolicy::Normal(NormalThreadSchedulePolicy::Other),
+        );
+    }
+}
+
+/// A stop while driving to the first zero frame at the chassis, `count` times: returns the
+/// request times.
+fn stop_samples(
+    commander: &mut dyn Commander,
+    states: &StateSubscriber,
+    count: usize,
+    priority: u8,
+) -> anyhow::Result<Vec<Stop>> {
+    let _realtime = Realtime::new(priority);
+    let mut sent = Vec::new();
+    for _ in 0..count {
+        commander.take()?;
+        let deadline = Instant::now() + Duration::from_secs(5);
+        loop {
+            commander.drive(0.3)?;
+            if states
+                .try_latest()?
+                .is_some_and(|state| state.command.linear > 0.05)
+            {
+                break;
+            }
+            anyhow::ensure!(Instant::now() < deadline, "the robot never drove");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let at = monotonic_ns();
+        commander.stop()?;
+        let answered = monotonic_ns();
+        let zero = wait_state(states, |state| state.command.linear == 0.0)?;
+        sent.push(Stop {
+            at,
+            answered,
+            zero_sent: zero.command.at_ns,
+        });
+        commander.release()?;
+    }
+    Ok(sent)
+}
+
+/// One stop: when it was requested, answered, and when the gateway sent the zero command.
+struct Stop {
+    at: u64,
+    answered: u64,
+    zero_sent: u64,
+}
+
+/// The stops' latencies to the chassis, and to the gateway's zero and the answer, as figures.
+fn report_stops(report: &mut Report, key: &str, label: &str, trace: &Trace, stops: &[Stop]) {
+    let times: Vec<u64> = stops.iter().map(|stop| stop.at).collect();
+    report.latency(
+        key,
+        label,
+        &to_chassis(trace, &times, |linear| linear == 0.0),
+    );
+    let gateway: Vec<f64> = stops
+        .iter()
+        .map(|stop| us(stop.zero_sent.saturating_sub(stop.at)))
+        .collect();
+    report.latency(
+        &format!("{key}_to_gateway_send"),
+        "  of which to the gateway sending the zero",
+        &gateway,
+    );
+    let answered: Vec<f64> = stops
+        .iter()
+        .map(|stop| us(stop.answered - stop.at))
+        .collect();
+    report.latency(&format!("{key}_answered"), "  the stop's answer", &answered);
+}
+
+/// Latencies (µs) from each request time to the first command at the chassis satisfying
+/// `wanted`.
+fn to_chassis(trace: &Trace, sent: &[u64], wanted: impl Fn(f64) -> bool + Copy) -> Vec<f64> {
+    sent.iter()
+        .filter_map(|&at| {
+            trace
+                .first_command_after(at, wanted)
+                .map(|read| us(read - at))
+        })
+        .collect()
+}
+
+/// The share of drives whose value was on the first motion command after the request: sent at
+/// the next tick of the 20 ms grid, not one later.
+fn on_next_tick(trace: &Trace, sent: &[u64]) -> f64 {
+    let next = sent
+        .iter()
+        .filter(|&&at| {
+            trace.first_command_after(at, |_| true) == trace.first_command_after(at, |l| l > 0.0)
+        })
+        .count();
+    100.0 * next as f64 / sent.len().max(1) as f64
+}
+
+fn local(robot: &Robot) -> anyhow::Result<Local> {
+    Ok(Local {
+        driver: robot.controller("bench-driver", Some(Class::Teleop))?,
+        safety: robot.controller("bench-safety", None)?,
+    })
+}
+
+/// A client's drive to the chassis (at the next tick) and a stop to the wire (at once).
+fn command_latency(
+    bench: &mut Bench,
+    report: &mut Report,
+    states: &StateSubscriber,
+) -> anyhow::Result<()> {
+    progress("command latency: drive and e-stop, local");
+    let robot = connect(&bench.name)?;
+    let mut local = local(&robot)?;
+    let drives = drive_samples(&mut local, states, bench.plan.commands)?;
+    let stops = stop_samples(&mut local, states, bench.plan.stops, bench.client_priority)?;
+    let trace = trace(bench)?;
+    report.latency(
+        "command_latency_us",
+        "drive to the chassis (next 20 ms tick)",
+        &to_chassis(&trace, &drives, |linear| linear > 0.0),
+    );
+    report.value(
+        "command_on_next_tick_percent",
+        "  drives that went out on the very next tick (%)",
+        on_next_tick(&trace, &drives),
+    );
+    report_stops(
+        report,
+        "estop_latency_us",
+        "e-stop to the chassis",
+        &trace,
+        &stops,
+    );
+    Ok(())
+}
+
+/// The same through zenoh remote commands.
+fn remote_latency(
+    bench: &mut Bench,
+    report: &mut Report,
+    states: &StateSubscriber,
+) -> anyhow::Result<()> {
+    use zenoh::Wait;
+    progress("command latency: drive and e-stop, a zenoh peer");
+    let settings = scout_clients::remote::SessionSettings {
+        config_file: Some(String::new()),
+        listen: Vec::new(),
+        connect: vec![bench.endpoint.clone()],
+    };
+    let session = zenoh::open(settings.config("client")?)
+        .wait()
+        .map_err(|error| anyhow::anyhow!("opening a zenoh session: {error}"))?;
+    let mut remote = Remote {
+        session,
+        name: bench.name.clone(),
+        seq: 0,
+    };
+    let drives = drive_samples(&mut remote, states, bench.plan.commands)?;
+    let stops = stop_samples(&mut remote, states, bench.plan.stops, bench.client_priority)?;
+    let trace = trace(bench)?;
+    report.latency(
+        "remote_command_latency_us",
+        "drive through zenoh to the chassis",
+        &to_chassis(&trace, &drives, |linear| linear > 0.0),
+    );
+    report.value(
+        "remote_command_on_next_tick_percent",
+        "  remote drives that went out on the very next tick (%)",
+        on_next_tick(&trace, &drives),
+    );
+    report_stops(
+        report,
+        "remote_estop_latency_us",
+        "e-stop through zenoh to the chassis",
+        &trace,
+        &stops,
+    );
+    Ok(())
+}
+
+/// The intervals between motion commands at the chassis: idle, with both cores hogged, and
+/// under 16 clients flooding requests at 1 kHz (and the e-stop latency then).
+fn ticks(bench: &mut Bench, report: &mut Report, states: &StateSubscriber) -> anyhow::Result<()> {
+    let window = bench.plan.window;
+    let seconds = window.to_string();
+    let span = Duration::from_secs_f64(window);
+    progress("tick jitter: idle");
+    let from = monotonic_ns();
+    std::thread::sleep(span);
+    let idle = (from, monotonic_ns());
+
+    progress("tick jitter: both cores loaded by two CPU hogs");
+    let mut roles = Roles::default();
+    for _ in 0..2 {
+        roles.spawn(&["hog", &seconds])?;
+    }
+    std::thread::sleep(Duration::from_millis(200));
+    let from = monotonic_ns();
+    std::thread::sleep(span.saturating_sub(Duration::from_millis(400)));
+    let loaded = (from, monotonic_ns());
+    roles.wait()?;
+
+    progress("tick jitter: 16 clients flooding requests at 1 kHz, then e-stops during it");
+    let flood_seconds = (window * 2.0 + 10.0).to_string();
+    for _ in 0..16 {
+        roles.spawn(&["flood", &bench.name, "1000", &flood_seconds])?;
+    }
+    std::thread::sleep(Duration::from_secs(1));
+    let from = monotonic_ns();
+    std::thread::sleep(span);
+    let flood = (from, monotonic_ns());
+    let robot = connect(&bench.name)?;
+    let mut local = local(&robot)?;
+    let stops = stop_samples(&mut local, states, bench.plan.stops, bench.client_priority)?;
+    drop(roles);
+
+    let trace = trace(bench)?;
+    report_stops(
+        report,
+        "estop_latency_flood_us",
+        "e-stop to the chassis during the flood",
+        &trace,
+        &stops,
+    );
+    for (key, label, (from, to)) in [
+        ("idle", "idle", idle),
+        ("loaded", "both cores loaded", loaded),
+        ("flood", "request flood", flood),
+    ] {
+        let ticks = trace.ticks(from, to);
+        let json = ticks.json();
+        report.rows.push((
+            format!("0x130 interval, {label} (ms)"),
+            format!(
+                "mean {} / p99 dev {} / max {} / >25 ms {} / >40 ms {} ({})",
+                json["mean"],
+                json["p99_dev"],
+                json["max"],
+                json["over_25"],
+                json["over_40"],
+                json["n"]
+            ),
+        ));
+        insert(&mut report.json, &format!("tick_interval_ms.{key}"), json);
+        report.ticks.push((label.to_owned(), ticks));
+    }
+    Ok(())
+}
+
+/// A client drives; something cuts the gateway from the chassis; how long until state flows
+/// again, and how long the chassis kept moving (its own ground truth).
+fn recovery(bench: &mut Bench, report: &mut Report, states: StateSubscriber) -> anyhow::Result<()> {
+    progress("recovery: the gateway killed (SIGKILL) and started again");
+    drop(states);
+    // A real client process streaming 0.3 m/s, until the robot moves.
+    let driving = |bench: &Bench| -> anyhow::Result<std::process::Child> {
+        let driver = command("scout")?
+            .args([
+                "drive",
+                "--name",
+                &bench.name,
+                "--linear",
+                "0.3",
+                "--client",
+                "bench-streamer",
+            ])
+            .stdin(std::process::Stdio::null())
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .context("starting scout drive")?;
+        let states = connect(&bench.name)?.subscribe()?;
+        wait_state(&states, |state| f64::from(state.motion.linear_mm_s) > 200.0)?;
+        Ok(driver)
+    };
+    let mut driver = driving(bench)?;
+    let killed = monotonic_ns();
+    if let Some(gateway) = bench.gateway.take() {
+        gateway.kill();
+    }
+    let states = bench.start_gateway(true)?;
+    let restarted = monotonic_ns();
+    let _ = driver.kill();
+    let _ = driver.wait();
+    bench.release_all()?;
+    wait_state(&states, |_| true)?;
+
+    progress("recovery: the chassis unplugged for 1 s");
+    let mut driver = driving(bench)?;
+    let unplugged = monotonic_ns();
+    bench.sim.send("unplug 1000")?;
+    bench.sim.next_port_line()?;
+    let back = monotonic_ns();
+    wait_state(&states, |state| {
+        state.published_ns > back && state.link.state() == LinkState::Ok
+    })?;
+    let reconnected = monotonic_ns();
+    let _ = driver.kill();
+    let _ = driver.wait();
+    bench.release_all()?;
+
+    let trace = trace(bench)?;
+    let ms = |ns: u64| ns as f64 / 1e6;
+    report.value(
+        "recovery_ms.restart",
+        "gateway SIGKILL to a new gateway's state (ms)",
+        ms(restarted - killed),
+    );
+    report.value(
+        "recovery_ms.reconnect",
+        "port back to link ok (ms)",
+        ms(reconnected - back),
+    );
+    if let Some(rest) = trace.at_rest_after(killed) {
+        report.value(
+            "chassis_moving_ms.restart",
+            "  chassis kept moving after the kill (ms)",
+            ms(rest - killed),
+        );
+    }
+    if let Some(rest) = trace.at_rest_after(unplugged) {
+        report.value(
+            "chassis_moving_ms.reconnect",
+            "  chassis kept moving after the unplug (ms)",
+            ms(rest - unplugged),
+        );
+    }
+    Ok(())
+}
+
+/// Gateway CPU and memory at steady state with 8 subscribers, zenoh on, then off.
+fn cost(bench: &mut Bench, report: &mut Report) -> anyhow::Result<()> {
+    let seconds = bench.plan.window.to_string();
+    for zenoh in [true, false] {
+        progress(&format!(
+            "cost: 8 subscribers, zenoh {}",
+            if zenoh { "on" } else { "off" }
+        ));
+        if !zenoh {
+            if let Some(gateway) = bench.gateway.take() {
+                gateway.kill();
+            }
+            bench.start_gateway(false)?;
+        }
+        let pid = bench
+            .gateway
+            .as_ref()
+            .map(Gateway::pid)
+            .context("a gateway")?;
+        let mut roles = Roles::default();
+        for i in 0..8 {
+            roles.spawn(&[
+                "subscribe",
+                &bench.name,
+                &bench.scratch.text(&format!("cost-{i}")),
+                &seconds,
+            ])?;
+        }
+        std::thread::sleep(Duration::from_millis(500));
+        let (cpu_before, _) = usage(pid)?;
+        let start = Instant::now();
+        std::thread::sleep(Duration::from_secs_f64(bench.plan.window - 1.0));
+        let (cpu_after, rss) = usage(pid)?;
+        let percent = (cpu_after - cpu_before) / start.elapsed().as_secs_f64() * 100.0;
+        roles.wait()?;
+        let suffix = if zenoh { "" } else { "_no_zenoh" };
+        let label = if zenoh { "zenoh on" } else { "zenoh off" };
+        report.value(
+            &format!("gateway_cpu_percent{suffix}"),
+            &format!("gateway CPU, % of a core, {label}"),
+            percent,
+        );
+        report.value(
+            &format!("gateway_rss_mb{suffix}"),
+            &format!("gateway resident memory, MB, {label}"),
+            rss,
+        );
+    }
+    Ok(())
+}
+
+/// The protocol crate's CAN decode over the bundled capture of a real chassis.
+fn decode_throughput(report: &mut Report) {
+    use scout_protocol::{can, candump};
+    const CAPTURE: &str =
+        include_str!("../../../protocol/tests/fixtures/scout-v1-capture-2019.candump");
+    let frames: Vec<_> = CAPTURE
+        .lines()
+        .filter_map(|line| candump::parse(line).ok().map(|record| record.frame))
+        .collect();
+    let rounds = 2000;
+    let start = Instant::now();
+    for _ in 0..rounds {
+        for frame in &frames {
+            let _ = std::hint::black_box(can::decode(std::hint::black_box(frame)));
+        }
+    }
+    let per_second = (frames.len() * rounds) as f64 / start.elapsed().as_secs_f64();
+    report.value(
+        "decode_frames_per_second",
+        "CAN decode, frames/s (protocol crate)",
+        per_second,
+    );
+}
+
+fn print_table(report: &Report, quick: bool) {
+    println!("## scout-bench{}", if quick { " --quick" } else { "" });
+    println!();
+    println!("Latencies as p50 / p99 / p99.9 / max (samples).");
+    println!();
+    println!("| what | figures |");
+    println!("|---|---|");
+    for (what, figures) in &report.rows {
+        println!("| {what} | {figures} |");
+    }
+}
