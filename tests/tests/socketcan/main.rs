@@ -176,7 +176,7 @@ fn socketcan_tests_in_a_vm() {
     }
     let exe = std::env::current_exe().expect("this test binary");
     let status = Command::new(vm_runner())
-        .args(["--timeout", "900", "--"])
+        .args(["--timeout", "600", "--"])
         .arg("env")
         .arg(format!("{IN_VM}=1"))
         .arg(exe)
