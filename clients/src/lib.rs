@@ -14,6 +14,7 @@ pub mod control;
 pub mod decode;
 pub mod echo;
 pub mod remote;
+pub mod ros2;
 
 pub use scout_interface as interface;
 pub use scout_interface::control::{

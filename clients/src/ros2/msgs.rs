@@ -1,0 +1,394 @@
+//! The ROS 2 messages the bridge publishes and receives, with their type names and RIHS01 type
+//! hashes (REP 2016; checked against rosbags' `hash_rihs01` by the tests), written as CDR.
+
+use super::cdr::{CdrError, Reader, Writer};
+
+/// A ROS 2 message type as rmw_zenoh names it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MessageType {
+    /// `package/msg/Name`.
+    pub name: &'static str,
+    /// `package::msg::dds_::Name_`, the name in keys and liveliness tokens.
+    pub dds_name: &'static str,
+    /// `RIHS01_<sha256>` (Jazzy and later).
+    pub hash: &'static str,
+}
+
+pub const ODOMETRY: MessageType = MessageType {
+    name: "nav_msgs/msg/Odometry",
+    dds_name: "nav_msgs::msg::dds_::Odometry_",
+    hash: "RIHS01_3cc97dc7fb7502f8714462c526d369e35b603cfc34d946e3f2eda2766dfec6e0",
+};
+pub const TWIST: MessageType = MessageType {
+    name: "geometry_msgs/msg/Twist",
+    dds_name: "geometry_msgs::msg::dds_::Twist_",
+    hash: "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a",
+};
+pub const TWIST_STAMPED: MessageType = MessageType {
+    name: "geometry_msgs/msg/TwistStamped",
+    dds_name: "geometry_msgs::msg::dds_::TwistStamped_",
+    hash: "RIHS01_5f0fcd4f81d5d06ad9b4c4c63e3ea51b82d6ae4d0558f1d475229b1121db6f64",
+};
+pub const TF_MESSAGE: MessageType = MessageType {
+    name: "tf2_msgs/msg/TFMessage",
+    dds_name: "tf2_msgs::msg::dds_::TFMessage_",
+    hash: "RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d5abe85d020f087",
+};
+pub const BATTERY_STATE: MessageType = MessageType {
+    name: "sensor_msgs/msg/BatteryState",
+    dds_name: "sensor_msgs::msg::dds_::BatteryState_",
+    hash: "RIHS01_4bee5dfce981c98faa6828b868307a0a73f992ed0789f374ee96c8f840e69741",
+};
+pub const JOINT_STATE: MessageType = MessageType {
+    name: "sensor_msgs/msg/JointState",
+    dds_name: "sensor_msgs::msg::dds_::JointState_",
+    hash: "RIHS01_a13ee3a330e346c9d87b5aa18d24e11690752bd33a0350f11c5882bc9179260e",
+};
+pub const DIAGNOSTIC_ARRAY: MessageType = MessageType {
+    name: "diagnostic_msgs/msg/DiagnosticArray",
+    dds_name: "diagnostic_msgs::msg::dds_::DiagnosticArray_",
+    hash: "RIHS01_5a8a36efb05fb25070fa0fb3810290c0e6cd4862b54a8fb975a1ee8dc55a333e",
+};
+
+/// Every type the bridge speaks, for the hash test.
+pub const ALL: [MessageType; 7] = [
+    ODOMETRY,
+    TWIST,
+    TWIST_STAMPED,
+    TF_MESSAGE,
+    BATTERY_STATE,
+    JOINT_STATE,
+    DIAGNOSTIC_ARRAY,
+];
+
+/// `builtin_interfaces/Time` and `std_msgs/Header`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Header<'a> {
+    /// Since the Unix epoch.
+    pub stamp: std::time::Duration,
+    pub frame_id: &'a str,
+}
+
+impl Header<'_> {
+    fn write(&self, w: &mut Writer) {
+        w.i32(self.stamp.as_secs() as i32)
+            .u32(self.stamp.subsec_nanos())
+            .string(self.frame_id);
+    }
+}
+
+/// A planar pose and twist: what a skid-steer robot's odometry has.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Odometry<'a> {
+    pub header: Header<'a>,
+    pub child_frame_id: &'a str,
+    pub x: f64,
+    pub y: f64,
+    pub yaw: f64,
+    pub linear: f64,
+    pub angular: f64,
+    /// Row-major 6x6 diagonal (x, y, z, roll, pitch, yaw).
+    pub pose_covariance: [f64; 6],
+    pub twist_covariance: [f64; 6],
+}
+
+/// The quaternion (x, y, z, w) of a rotation by `yaw` about z.
+pub fn yaw_quaternion(yaw: f64) -> [f64; 4] {
+    [0.0, 0.0, (yaw / 2.0).sin(), (yaw / 2.0).cos()]
+}
+
+fn covariance(w: &mut Writer, diagonal: &[f64; 6]) {
+    for (row, value) in diagonal.iter().enumerate() {
+        for column in 0..6 {
+            w.f64(if row == column { *value } else { 0.0 });
+        }
+    }
+}
+
+impl Odometry<'_> {
+    pub fn encode(&self) -> Vec<u8> {
+        let mut w = Writer::new();
+        self.header.write(&mut w);
+        w.string(self.child_frame_id);
+        w.f64s(&[self.x, self.y, 0.0])
+            .f64s(&yaw_quaternion(self.yaw));
+        covariance(&mut w, &self.pose_covariance);
+        w.f64s(&[self.linear, 0.0, 0.0, 0.0, 0.0, self.angular]);
+        covariance(&mut w, &self.twist_covariance);
+        w.finish()
+    }
+}
+
+/// `tf2_msgs/TFMessage` with one planar transform.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Transform<'a> {
+    pub header: Header<'a>,
+    pub child_frame_id: &'a str,
+    pub x: f64,
+    pub y: f64,
+    pub yaw: f64,
+}
+
+impl Transform<'_> {
+    pub fn encode(&self) -> Vec<u8> {
+        let mut w = Writer::new();
+        w.sequence(1);
+        self.header.write(&mut w);
+        w.string(self.child_frame_id);
+        w.f64s(&[self.x, self.y, 0.0])
+            .f64s(&yaw_quaternion(self.yaw));
+        w.finish()
+    }
+}
+
+/// `sensor_msgs/BatteryState`: the voltage the chassis reports; the rest unknown (NaN) as the
+/// message defines.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Battery<'a> {
+    pub header: Header<'a>,
+    pub voltage: f32,
+    /// 0..1, estimated from the voltage; NaN when unknown.
+    pub percentage: f32,
+    /// POWER_SUPPLY_STATUS_* (0 unknown, 2 discharging).
+    pub status: u8,
+    /// POWER_SUPPLY_HEALTH_* (0 unknown, 1 good, 3 dead, 7 undervoltage...).
+    pub health: u8,
+    pub present: bool,
+}
+
+impl Battery<'_> {
+    /// POWER_SUPPLY_TECHNOLOGY_LIPO would be a guess: the chassis does not say.
+    const TECHNOLOGY_UNKNOWN: u8 = 0;
+
+    pub fn encode(&self) -> Vec<u8> {
+        let mut w = Writer::new();
+        self.header.write(&mut w);
+        w.f32(self.voltage)
+            .f32(f32::NAN) // temperature
+            .f32(f32::NAN) // current
+            .f32(f32::NAN) // charge
+            .f32(f32::NAN) // capacity
+            .f32(f32::NAN) // design_capacity
+            .f32(self.percentage)
+            .u8(self.status)
+            .u8(self.health)
+            .u8(Self::TECHNOLOGY_UNKNOWN)
+            .bool(self.present)
+            .sequence(0) // cell_voltage
+            .sequence(0) // cell_temperature
+            .string("") // location
+            .string(""); // serial_number
+        w.finish()
+    }
+}
+
+/// `sensor_msgs/JointState` of the four wheels.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Joints<'a> {
+    pub header: Header<'a>,
+    pub names: [&'a str; 4],
+    /// rad.
+    pub position: [f64; 4],
+    /// rad/s.
+    pub velocity: [f64; 4],
+    /// Motor current, A (the chassis gives no torque).
+    pub effort: [f64; 4],
+}
+
+impl Joints<'_> {
+    pub fn encode(&self) -> Vec<u8> {
+        let mut w = Writer::new();
+        self.header.write(&mut w);
+        w.sequence(4);
+        for name in self.names {
+            w.string(name);
+        }
+        for values in [&self.position, &self.velocity, &self.effort] {
+            w.sequence(4).f64s(values);
+        }
+        w.finish()
+    }
+}
+
+/// `diagnostic_msgs/DiagnosticStatus`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Status {
+    /// OK 0, WARN 1, ERROR 2, STALE 3.
+    pub level: u8,
+    pub name: String,
+    pub message: String,
+    pub hardware_id: String,
+    pub values: Vec<(String, String)>,
+}
+
+/// `diagnostic_msgs/DiagnosticArray`.
+pub fn encode_diagnostics(header: &Header<'_>, statuses: &[Status]) -> Vec<u8> {
+    let mut w = Writer::new();
+    header.write(&mut w);
+    w.sequence(statuses.len());
+    for status in statuses {
+        w.u8(status.level)
+            .string(&status.name)
+            .string(&status.message)
+            .string(&status.hardware_id)
+            .sequence(status.values.len());
+        for (key, value) in &status.values {
+            w.string(key).string(value);
+        }
+    }
+    w.finish()
+}
+
+/// The planar part of a `geometry_msgs/Twist`: linear x (m/s), angular z (rad/s).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlanarTwist {
+    pub linear: f64,
+    pub angular: f64,
+}
+
+/// Reads a `Twist` (or, with `stamped`, a `TwistStamped`).
+pub fn decode_twist(bytes: &[u8], stamped: bool) -> Result<PlanarTwist, CdrError> {
+    let mut r = Reader::new(bytes)?;
+    if stamped {
+        r.i32()?;
+        r.u32()?;
+        r.skip_string()?;
+    }
+    let linear = r.f64()?;
+    r.f64()?;
+    r.f64()?;
+    r.f64()?;
+    r.f64()?;
+    let angular = r.f64()?;
+    Ok(PlanarTwist { linear, angular })
+}
+
+#[cfg(test)]
+mod tests {
+    //! Golden vectors: rosbags' `serialize_cdr` (ROS 2 Jazzy type store) of the same messages,
+    //! generated once and kept here; the system test compares against rosbags live.
+    use super::*;
+    use std::time::Duration;
+
+    const ODOMETRY: &str = "0001000005000000fa000000050000006f646f6d000000000a000000626173655f6c696e6b00000000000000000000000000f83f000000000000d0bf000000000000000000000000000000000000000000000000f0054b74e8aede3f507d5b062815ec3f7b14ae47e17a843f0000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000007b14ae47e17a843f0000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000080842e410000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000080842e410000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000080842e410000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000009a9999999999a93f333333333333d33f00000000000000000000000000000000000000000000000000000000000000009a9999999999b9bf7b14ae47e17a943f0000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000080842e410000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000080842e410000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000080842e410000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000080842e410000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000007b14ae47e17aa43f";
+    const TF: &str = "000100000100000005000000fa000000050000006f646f6d000000000a000000626173655f6c696e6b000000000000000000f83f000000000000d0bf000000000000000000000000000000000000000000000000f0054b74e8aede3f507d5b062815ec3f";
+    const BATTERY: &str = "0001000005000000fa0000000a000000626173655f6c696e6b0000000000cc410000c07f0000c07f0000c07f0000c07f0000c07fcdcc4c3f02010001000000000000000001000000000000000100000000";
+    const JOINTS: &str = "0001000005000000fa0000000a000000626173655f6c696e6b000000040000001200000066726f6e745f72696768745f776865656c0000001100000066726f6e745f6c6566745f776865656c0000000010000000726561725f6c6566745f776865656c0011000000726561725f72696768745f776865656c0000000004000000000000009a9999999999b93f9a9999999999c93f333333333333d33f9a9999999999d93f0400000000000000000000000000f03f000000000000f0bf000000000000f0bf000000000000f03f04000000000000009a9999999999e93f9a9999999999e9bf9a9999999999e9bf9a9999999999e93f";
+    const DIAGNOSTICS: &str = "0001000005000000fa000000010000000000000002000000000000000c00000073636f75743a206c696e6b00030000006f6b00000600000073636f7574000000010000000a00000072785f6672616d657300000003000000313200020f00000073636f75743a20636861737369730000060000006573746f700000000600000073636f757400000000000000";
+    const TWIST: &str = "00010000333333333333d33f00000000000000000000000000000000000000000000000000000000000000009a9999999999c93f";
+    const TWIST_STAMPED: &str = "0001000005000000fa0000000a000000626173655f6c696e6b000000000000000000e0bf0000000000000000000000000000000000000000000000000000000000000000000000000000d03f";
+
+    fn hex(text: &str) -> Vec<u8> {
+        (0..text.len())
+            .step_by(2)
+            .map(|i| u8::from_str_radix(&text[i..i + 2], 16).expect("hex"))
+            .collect()
+    }
+
+    fn header(frame_id: &str) -> Header<'_> {
+        Header {
+            stamp: Duration::new(5, 250),
+            frame_id,
+        }
+    }
+
+    #[test]
+    fn odometry_and_tf_match_rosbags() {
+        let odometry = Odometry {
+            header: header("odom"),
+            child_frame_id: "base_link",
+            x: 1.5,
+            y: -0.25,
+            yaw: 1.0,
+            linear: 0.3,
+            angular: -0.1,
+            pose_covariance: [0.01, 0.01, 1e6, 1e6, 1e6, 0.05],
+            twist_covariance: [0.02, 1e6, 1e6, 1e6, 1e6, 0.04],
+        };
+        assert_eq!(odometry.encode(), hex(ODOMETRY));
+        let transform = Transform {
+            header: header("odom"),
+            child_frame_id: "base_link",
+            x: 1.5,
+            y: -0.25,
+            yaw: 1.0,
+        };
+        assert_eq!(transform.encode(), hex(TF));
+    }
+
+    #[test]
+    fn battery_joints_and_diagnostics_match_rosbags() {
+        let battery = Battery {
+            header: header("base_link"),
+            voltage: 25.5,
+            percentage: 0.8,
+            status: 2,
+            health: 1,
+            present: true,
+        };
+        assert_eq!(battery.encode(), hex(BATTERY));
+        let joints = Joints {
+            header: header("base_link"),
+            names: [
+                "front_right_wheel",
+                "front_left_wheel",
+                "rear_left_wheel",
+                "rear_right_wheel",
+            ],
+            position: [0.1, 0.2, 0.3, 0.4],
+            velocity: [1.0, -1.0, -1.0, 1.0],
+            effort: [0.8, -0.8, -0.8, 0.8],
+        };
+        assert_eq!(joints.encode(), hex(JOINTS));
+        let statuses = [
+            Status {
+                level: 0,
+                name: "scout: link".into(),
+                message: "ok".into(),
+                hardware_id: "scout".into(),
+                values: vec![("rx_frames".into(), "12".into())],
+            },
+            Status {
+                level: 2,
+                name: "scout: chassis".into(),
+                message: "estop".into(),
+                hardware_id: "scout".into(),
+                values: Vec::new(),
+            },
+        ];
+        assert_eq!(encode_diagnostics(&header(""), &statuses), hex(DIAGNOSTICS));
+    }
+
+    #[test]
+    fn twists_from_rosbags_decode() {
+        assert_eq!(
+            decode_twist(&hex(TWIST), false),
+            Ok(PlanarTwist {
+                linear: 0.3,
+                angular: 0.2
+            })
+        );
+        assert_eq!(
+            decode_twist(&hex(TWIST_STAMPED), true),
+            Ok(PlanarTwist {
+                linear: -0.5,
+                angular: 0.25
+            })
+        );
+        assert!(decode_twist(&hex(TWIST)[..20], false).is_err());
+    }
+
+    #[test]
+    fn dds_names_follow_the_type_names() {
+        for message in ALL {
+            let [package, kind, name] = message.name.split('/').collect::<Vec<_>>()[..] else {
+                panic!("{}", message.name)
+            };
+            assert_eq!(
+                message.dds_name,
+                format!("{package}::{kind}::dds_::{name}_")
+            );
+            assert_eq!(message.hash.len(), "RIHS01_".len() + 64);
+        }
+    }
+}

@@ -1,0 +1,209 @@
+//! What rmw_zenoh (ROS 2's zenoh middleware) puts on the wire besides the CDR payload: the data
+//! key of a topic, the 33-byte attachment every sample carries, and the liveliness tokens that
+//! make a node and its publishers and subscriptions appear in the ROS graph.
+
+use super::msgs::MessageType;
+
+/// Reliable, volatile, keep last 10, default deadline, lifespan and liveliness: rmw_zenoh's
+/// `qos_to_keyexpr` of ROS 2's default QoS.
+pub const DEFAULT_QOS: &str = "::,10:,:,:,,";
+
+/// Whether the peers speak Jazzy or later (type hashes) or Humble (none).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Distro {
+    /// `RIHS01_<sha256>` in keys and tokens.
+    #[default]
+    Jazzy,
+    /// `TypeHashNotSupported`.
+    Humble,
+}
+
+impl Distro {
+    pub fn hash(self, message: &MessageType) -> &'static str {
+        match self {
+            Distro::Jazzy => message.hash,
+            Distro::Humble => "TypeHashNotSupported",
+        }
+    }
+}
+
+/// A topic name without its leading slash, as in data keys.
+fn bare(topic: &str) -> &str {
+    topic.trim_start_matches('/')
+}
+
+/// `/` replaced by `%`, and an empty name as `%`, as in liveliness tokens.
+pub fn mangle(name: &str) -> String {
+    if name.is_empty() {
+        "%".into()
+    } else {
+        name.replace('/', "%")
+    }
+}
+
+/// `<domain>/<topic>/<type>/<hash>`.
+pub fn data_key(domain: u32, topic: &str, message: &MessageType, distro: Distro) -> String {
+    format!(
+        "{domain}/{}/{}/{}",
+        bare(topic),
+        message.dds_name,
+        distro.hash(message)
+    )
+}
+
+/// The node an entity belongs to.
+#[derive(Debug, Clone)]
+pub struct Node {
+    pub domain: u32,
+    /// The zenoh session id, as zenoh prints it.
+    pub zid: String,
+    pub id: u32,
+    /// `/name` or empty.
+    pub namespace: String,
+    pub name: String,
+    pub enclave: String,
+}
+
+/// What an entity is, as its token says.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EntityKind {
+    Node,
+    Publisher,
+    Subscription,
+}
+
+impl EntityKind {
+    fn code(self) -> &'static str {
+        match self {
+            EntityKind::Node => "NN",
+            EntityKind::Publisher => "MP",
+            EntityKind::Subscription => "MS",
+        }
+    }
+}
+
+impl Node {
+    fn prefix(&self, entity: u32, kind: EntityKind) -> String {
+        format!(
+            "@ros2_lv/{}/{}/{}/{entity}/{}/{}/{}/{}",
+            self.domain,
+            self.zid,
+            self.id,
+            kind.code(),
+            mangle(&self.enclave),
+            mangle(&self.namespace),
+            mangle(&self.name),
+        )
+    }
+
+    /// The node's own token (its entity id is the node id).
+    pub fn token(&self) -> String {
+        self.prefix(self.id, EntityKind::Node)
+    }
+
+    /// A publisher's or subscription's token.
+    pub fn entity_token(
+        &self,
+        entity: u32,
+        kind: EntityKind,
+        topic: &str,
+        message: &MessageType,
+        distro: Distro,
+    ) -> String {
+        format!(
+            "{}/{}/{}/{}/{DEFAULT_QOS}",
+            self.prefix(entity, kind),
+            mangle(topic),
+            message.dds_name,
+            distro.hash(message)
+        )
+    }
+}
+
+/// The attachment of one sample: sequence number (from 1), source time (ns since the Unix
+/// epoch), and the publisher's 16-byte GID with its length as a varint: zenoh-ext's
+/// serialization of `(i64, i64, [u8; 16])`, 33 bytes.
+pub fn attachment(sequence: i64, source_ns: i64, gid: &[u8; 16]) -> [u8; 33] {
+    let mut bytes = [0u8; 33];
+    bytes[..8].copy_from_slice(&sequence.to_le_bytes());
+    bytes[8..16].copy_from_slice(&source_ns.to_le_bytes());
+    bytes[16] = 16;
+    bytes[17..].copy_from_slice(gid);
+    bytes
+}
+
+/// The sequence number, source time and GID of an attachment, if it is one.
+pub fn parse_attachment(bytes: &[u8]) -> Option<(i64, i64, [u8; 16])> {
+    if bytes.len() != 33 || bytes[16] != 16 {
+        return None;
+    }
+    Some((
+        i64::from_le_bytes(bytes[..8].try_into().ok()?),
+        i64::from_le_bytes(bytes[8..16].try_into().ok()?),
+        bytes[17..].try_into().ok()?,
+    ))
+}
+
+/// A publisher's GID: 16 bytes derived from the session, node and entity, distinct per entity.
+pub fn gid(zid: &str, node: u32, entity: u32) -> [u8; 16] {
+    use std::hash::{Hash, Hasher};
+    let mut gid = [0u8; 16];
+    for (half, salt) in gid.chunks_mut(8).zip([0u8, 1]) {
+        let mut hasher = std::collections::hash_map::DefaultHasher::new();
+        (zid, node, entity, salt).hash(&mut hasher);
+        half.copy_from_slice(&hasher.finish().to_le_bytes());
+    }
+    gid
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ros2::msgs::{ODOMETRY, TWIST};
+
+    #[test]
+    fn the_issue_s_example_key() {
+        assert_eq!(
+            data_key(0, "/odom", &ODOMETRY, Distro::Jazzy),
+            "0/odom/nav_msgs::msg::dds_::Odometry_/RIHS01_3cc97dc7fb7502f8714462c526d369e35b603cfc34d946e3f2eda2766dfec6e0"
+        );
+        assert_eq!(
+            data_key(3, "/robot1/cmd_vel", &TWIST, Distro::Humble),
+            "3/robot1/cmd_vel/geometry_msgs::msg::dds_::Twist_/TypeHashNotSupported"
+        );
+    }
+
+    #[test]
+    fn tokens_mangle_slashes_and_empty_names() {
+        let node = Node {
+            domain: 0,
+            zid: "1a2b".into(),
+            id: 0,
+            namespace: String::new(),
+            name: "scout".into(),
+            enclave: String::new(),
+        };
+        assert_eq!(node.token(), "@ros2_lv/0/1a2b/0/0/NN/%/%/scout");
+        assert_eq!(
+            node.entity_token(1, EntityKind::Publisher, "/odom", &ODOMETRY, Distro::Jazzy),
+            format!(
+                "@ros2_lv/0/1a2b/0/1/MP/%/%/scout/%odom/nav_msgs::msg::dds_::Odometry_/{}/::,10:,:,:,,",
+                ODOMETRY.hash
+            )
+        );
+    }
+
+    #[test]
+    fn the_attachment_is_33_bytes_and_reads_back() {
+        let gid = gid("1a2b", 0, 1);
+        let bytes = attachment(7, 1_700_000_000_000_000_000, &gid);
+        assert_eq!(bytes.len(), 33);
+        assert_eq!(
+            parse_attachment(&bytes),
+            Some((7, 1_700_000_000_000_000_000, gid))
+        );
+        assert_ne!(gid, super::gid("1a2b", 0, 2));
+        assert_eq!(parse_attachment(&bytes[..32]), None);
+    }
+}
