@@ -40,6 +40,10 @@ fn ensure_built() {
         {
             return;
         }
+        assert!(
+            std::env::var_os("SCOUT_IN_VM").is_none(),
+            "a binary the system tests run is missing inside the VM: build them on the host first"
+        );
         let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
         let mut command = Command::new(cargo);
         command.args(["build", "--quiet", "--workspace", "--bins", "--examples"]);

@@ -174,6 +174,8 @@ fn socketcan_tests_in_a_vm() {
         skip(TEST, String::from_utf8_lossy(&check.stdout).trim());
         return;
     }
+    // Built here, on the host: inside, the emulated CPU would take an hour to compile them.
+    scout_system_tests::bin("scout-gateway");
     let exe = std::env::current_exe().expect("this test binary");
     let status = Command::new(vm_runner())
         .args(["--timeout", "600", "--"])
