@@ -16,13 +16,12 @@ use nix::poll::{PollFd, PollFlags, ppoll};
 use nix::sys::time::TimeSpec;
 use scout_interface::Ipc;
 
-/// Which of the waited-on sources are readable.
+/// What the wait found. The wake-up event needs no flag: the driver drains it every iteration
+/// (see `Driver::handle_requests`).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Ready {
     /// The port has input.
     pub port: bool,
-    /// A client notified the wake-up event.
-    pub wake: bool,
 }
 
 /// Waits at most `timeout` until `port` (if any) or `wake` is readable. A signal ends the wait
@@ -61,7 +60,6 @@ pub fn wait(
         })
     };
     Ok(Ready {
-        wake: readable(&fds[0]),
         port: port_fd.is_some() && readable(&fds[1]),
     })
 }

@@ -372,6 +372,9 @@ fn state_latency(bench: &mut Bench, report: &mut Report) -> anyhow::Result<()> {
         "  of which delivery (published to seen)",
         &one.delivery,
     );
+    report.paths.push(("direct read".into(), direct));
+    report.paths.push(("iceoryx2".into(), one.end_to_end));
+    report.paths.push(("zenoh".into(), zenoh));
     for count in [8, 32] {
         let split = iceoryx2_latencies(bench, count, &trace)?;
         report.latency(
@@ -385,9 +388,6 @@ fn state_latency(bench: &mut Bench, report: &mut Report) -> anyhow::Result<()> {
                 .push(("iceoryx2, 32 subscribers".into(), split.end_to_end));
         }
     }
-    report.paths.insert(0, ("direct read".into(), direct));
-    report.paths.insert(1, ("iceoryx2".into(), one.end_to_end));
-    report.paths.insert(2, ("zenoh".into(), zenoh));
     Ok(())
 }
 

@@ -51,6 +51,33 @@ struct Answers {
     retakes: u64,
 }
 
+impl Answers {
+    /// Counts the answer to a command sent in `phase`; returns whether it says control was
+    /// lost (so the operator takes it again).
+    fn record(&mut self, phase: u8, reply: &zenoh::query::Reply) -> bool {
+        let answer: serde_json::Value = reply
+            .result()
+            .ok()
+            .and_then(|sample| {
+                sample
+                    .payload()
+                    .try_to_string()
+                    .ok()
+                    .map(|t| t.into_owned())
+            })
+            .and_then(|text| serde_json::from_str(&text).ok())
+            .unwrap_or_default();
+        let phase = usize::from(phase);
+        if answer["accepted"] == true {
+            self.accepted[phase] += 1;
+            return false;
+        }
+        let reason = answer["reason"].as_str().unwrap_or("no reason");
+        *self.refused[phase].entry(reason_kind(reason)).or_default() += 1;
+        reason.contains("take-control") || reason.contains("revoked")
+    }
+}
+
 /// A remote teleop on its own thread: a drive command every 20 ms (life 500 ms) as zenoh
 /// queries, answers read as they come; after its control lapsed, it takes control again, as an
 /// operator still holding the stick would.
@@ -84,29 +111,7 @@ fn remote_teleop(
             let mut retake = false;
             pending.retain(|(sent_in, replies)| match replies.try_recv() {
                 Ok(Some(reply)) => {
-                    let answer: serde_json::Value = reply
-                        .result()
-                        .ok()
-                        .and_then(|sample| {
-                            sample
-                                .payload()
-                                .try_to_string()
-                                .ok()
-                                .map(|t| t.into_owned())
-                        })
-                        .and_then(|text| serde_json::from_str(&text).ok())
-                        .unwrap_or_default();
-                    let mut answers = answers.lock().expect("answers");
-                    if answer["accepted"] == true {
-                        answers.accepted[usize::from(*sent_in)] += 1;
-                    } else {
-                        let reason = answer["reason"].as_str().unwrap_or("no reason").to_owned();
-                        retake |= reason.contains("take-control") || reason.contains("revoked");
-                        let short = reason_kind(&reason);
-                        *answers.refused[usize::from(*sent_in)]
-                            .entry(short)
-                            .or_default() += 1;
-                    }
+                    retake |= answers.lock().expect("answers").record(*sent_in, &reply);
                     false
                 }
                 Ok(None) => true,
@@ -127,24 +132,7 @@ fn remote_teleop(
         for (sent_in, replies) in pending {
             let left = deadline.saturating_duration_since(Instant::now());
             if let Ok(Some(reply)) = replies.recv_timeout(left) {
-                let accepted = reply.result().ok().and_then(|sample| {
-                    let text = sample.payload().try_to_string().ok()?.into_owned();
-                    serde_json::from_str::<serde_json::Value>(&text).ok()
-                });
-                let mut answers = answers.lock().expect("answers");
-                match accepted {
-                    Some(answer) if answer["accepted"] == true => {
-                        answers.accepted[usize::from(sent_in)] += 1;
-                    }
-                    Some(answer) => {
-                        let reason = answer["reason"].as_str().unwrap_or("no reason");
-                        let short = reason_kind(reason);
-                        *answers.refused[usize::from(sent_in)]
-                            .entry(short)
-                            .or_default() += 1;
-                    }
-                    None => {}
-                }
+                answers.lock().expect("answers").record(sent_in, &reply);
             }
         }
     })
