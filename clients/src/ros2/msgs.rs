@@ -50,8 +50,16 @@ pub const DIAGNOSTIC_ARRAY: MessageType = MessageType {
     hash: "RIHS01_5a8a36efb05fb25070fa0fb3810290c0e6cd4862b54a8fb975a1ee8dc55a333e",
 };
 
+/// A service: `std_srvs/srv/Trigger` (the e-stop and release services). Its hash is the
+/// service type's (request, response and event messages), as rmw_zenoh keys services.
+pub const TRIGGER: MessageType = MessageType {
+    name: "std_srvs/srv/Trigger",
+    dds_name: "std_srvs::srv::dds_::Trigger_",
+    hash: "RIHS01_eeff2cd6fa5ad9d27cdf4dec64818317839b62f212a91e6b5304b634b2062c5f",
+};
+
 /// Every type the bridge speaks, for the hash test.
-pub const ALL: [MessageType; 7] = [
+pub const ALL: [MessageType; 8] = [
     ODOMETRY,
     TWIST,
     TWIST_STAMPED,
@@ -59,6 +67,7 @@ pub const ALL: [MessageType; 7] = [
     BATTERY_STATE,
     JOINT_STATE,
     DIAGNOSTIC_ARRAY,
+    TRIGGER,
 ];
 
 /// `builtin_interfaces/Time` and `std_msgs/Header`.
@@ -151,7 +160,7 @@ pub struct Battery<'a> {
     pub percentage: f32,
     /// POWER_SUPPLY_STATUS_* (0 unknown, 2 discharging).
     pub status: u8,
-    /// POWER_SUPPLY_HEALTH_* (0 unknown, 1 good, 3 dead, 7 undervoltage...).
+    /// POWER_SUPPLY_HEALTH_* (0 unknown, 1 good, 3 dead, 4 overvoltage...).
     pub health: u8,
     pub present: bool,
 }
@@ -239,6 +248,13 @@ pub fn encode_diagnostics(header: &Header<'_>, statuses: &[Status]) -> Vec<u8> {
     w.finish()
 }
 
+/// A `std_srvs/Trigger` response: whether it worked, and what happened.
+pub fn encode_trigger_response(success: bool, message: &str) -> Vec<u8> {
+    let mut w = Writer::new();
+    w.bool(success).string(message);
+    w.finish()
+}
+
 /// The planar part of a `geometry_msgs/Twist`: linear x (m/s), angular z (rad/s).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PlanarTwist {
@@ -276,6 +292,7 @@ mod tests {
     const JOINTS: &str = "0001000005000000fa0000000a000000626173655f6c696e6b000000040000001200000066726f6e745f72696768745f776865656c0000001100000066726f6e745f6c6566745f776865656c0000000010000000726561725f6c6566745f776865656c0011000000726561725f72696768745f776865656c0000000004000000000000009a9999999999b93f9a9999999999c93f333333333333d33f9a9999999999d93f0400000000000000000000000000f03f000000000000f0bf000000000000f0bf000000000000f03f04000000000000009a9999999999e93f9a9999999999e9bf9a9999999999e9bf9a9999999999e93f";
     const DIAGNOSTICS: &str = "0001000005000000fa000000010000000000000002000000000000000c00000073636f75743a206c696e6b00030000006f6b00000600000073636f7574000000010000000a00000072785f6672616d657300000003000000313200020f00000073636f75743a20636861737369730000060000006573746f700000000600000073636f757400000000000000";
     const TWIST: &str = "00010000333333333333d33f00000000000000000000000000000000000000000000000000000000000000009a9999999999c93f";
+    const TRIGGER_RESPONSE: &str = "00010000010000000800000073746f7070656400";
     const TWIST_STAMPED: &str = "0001000005000000fa0000000a000000626173655f6c696e6b000000000000000000e0bf0000000000000000000000000000000000000000000000000000000000000000000000000000d03f";
 
     fn hex(text: &str) -> Vec<u8> {
@@ -357,6 +374,14 @@ mod tests {
             },
         ];
         assert_eq!(encode_diagnostics(&header(""), &statuses), hex(DIAGNOSTICS));
+    }
+
+    #[test]
+    fn the_trigger_response_matches_rosbags() {
+        assert_eq!(
+            encode_trigger_response(true, "stopped"),
+            hex(TRIGGER_RESPONSE)
+        );
     }
 
     #[test]

@@ -71,6 +71,8 @@ pub enum EntityKind {
     Node,
     Publisher,
     Subscription,
+    /// A service server.
+    Service,
 }
 
 impl EntityKind {
@@ -79,6 +81,7 @@ impl EntityKind {
             EntityKind::Node => "NN",
             EntityKind::Publisher => "MP",
             EntityKind::Subscription => "MS",
+            EntityKind::Service => "SS",
         }
     }
 }

@@ -32,7 +32,7 @@ pub struct ZenohConfig {
     /// A zenoh configuration file (JSON5) for LAN, router, TLS and access control set-ups;
     /// `$ZENOH_CONFIG` when unset. Without one: peer mode, multicast scouting off.
     pub config_file: Option<String>,
-    /// Listen endpoints; default `tcp/127.0.0.1:7447` when there is no configuration file.
+    /// Listen endpoints; default `tcp/127.0.0.1:7448` when there is no configuration file.
     pub listen: Vec<String>,
     /// Endpoints to connect to (a zenoh router, for a fleet).
     pub connect: Vec<String>,

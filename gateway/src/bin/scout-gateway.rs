@@ -47,7 +47,7 @@ struct Cli {
     /// rad/s at 100 % angular command [default: 0.5235].
     #[arg(long, value_name = "RAD_S")]
     max_angular: Option<f64>,
-    /// Zenoh endpoint to listen on (repeatable) [default: tcp/127.0.0.1:7447].
+    /// Zenoh endpoint to listen on (repeatable) [default: tcp/127.0.0.1:7448].
     #[arg(long, value_name = "ENDPOINT")]
     zenoh_listen: Vec<String>,
     /// Zenoh endpoint to connect to, e.g. a router (repeatable).

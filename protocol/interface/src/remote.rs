@@ -11,8 +11,9 @@ use crate::services::prefix;
 use scout_protocol::{Light, LightCommand};
 use std::time::Duration;
 
-/// Default zenoh listen endpoint of a gateway: loopback only.
-pub const DEFAULT_LISTEN: &str = "tcp/127.0.0.1:7447";
+/// Default zenoh listen endpoint of a gateway: loopback only, and not 7447, the port of a ROS 2
+/// router (rmw_zenohd) the gateway runs beside.
+pub const DEFAULT_LISTEN: &str = "tcp/127.0.0.1:7448";
 
 /// The largest remote command payload accepted, bytes.
 pub const MAX_COMMAND_BYTES: usize = 4096;
@@ -274,7 +275,7 @@ pub struct SessionSettings {
     /// A zenoh configuration file (JSON5) for LAN, router and TLS set-ups; `$ZENOH_CONFIG` when
     /// empty. Without one: peer mode, multicast scouting off.
     pub config_file: Option<String>,
-    /// Endpoints to listen on (the default: `tcp/127.0.0.1:7447` for a gateway, none for a reader).
+    /// Endpoints to listen on (the default: `tcp/127.0.0.1:7448` for a gateway, none for a reader).
     pub listen: Vec<String>,
     /// Endpoints to connect to (a router, another gateway).
     pub connect: Vec<String>,

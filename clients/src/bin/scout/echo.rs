@@ -27,7 +27,7 @@ pub struct EchoArgs {
     /// Give up when no update arrives for this many seconds.
     #[arg(long, default_value_t = 3.0, value_name = "S")]
     timeout: f64,
-    /// Read through zenoh from this endpoint (a gateway or router, e.g. tcp/127.0.0.1:7447)
+    /// Read through zenoh from this endpoint (a gateway or router, e.g. tcp/127.0.0.1:7448)
     /// instead of iceoryx2; `--name '*'` then shows every robot.
     #[arg(long, value_name = "ENDPOINT")]
     remote: Option<String>,

@@ -7,6 +7,7 @@
 mod control;
 mod decode;
 mod echo;
+mod ros2;
 mod router;
 mod teleop;
 
@@ -58,6 +59,10 @@ enum Command {
     ResetOdometry(control::ClientArgs),
     /// Run a zenoh router for a fleet: gateways connect to it, remote readers read through it.
     Router(router::RouterArgs),
+    /// Make the chassis a ROS 2 node over rmw_zenoh: /odom, /tf, /battery_state,
+    /// /joint_states, /diagnostics out; /cmd_vel through the arbiter; e-stop and release
+    /// services. Connects to the local ROS 2 router (rmw_zenohd) in client mode.
+    Ros2(ros2::Ros2Args),
 }
 
 /// The robot to talk to.
@@ -83,6 +88,7 @@ fn main() -> ExitCode {
         Command::Status(args) => control::status(&args),
         Command::ResetOdometry(args) => control::one_shot(&args, |c| c.reset_odometry()),
         Command::Router(args) => router::run(&args),
+        Command::Ros2(args) => ros2::run(&args),
     };
     match result {
         Ok(code) => code,

@@ -12,7 +12,7 @@ use scout_clients::remote::SessionSettings;
 
 #[derive(Debug, Args)]
 pub struct RouterArgs {
-    /// Endpoint to listen on (repeatable) [default: tcp/127.0.0.1:7447].
+    /// Endpoint to listen on (repeatable) [default: tcp/127.0.0.1:7448].
     #[arg(long, value_name = "ENDPOINT")]
     listen: Vec<String>,
     /// Another router to connect to (repeatable).

@@ -1,0 +1,547 @@
+//! `scout ros2`: the driver that makes a gateway's chassis a ROS 2 node over rmw_zenoh. An
+//! ordinary local client of the gateway (state and status subscribers, controllers), and a
+//! zenoh client of the ROS 2 router: it declares the node and its endpoints as liveliness
+//! tokens, publishes what [`Messages`] makes, feeds cmd_vel through [`CmdVelStream`] into the
+//! arbiter, and serves the e-stop and release services.
+//!
+//! Three threads, each blocked on its own input, so that no one waits for another: the state
+//! (woken by the gateway's state event), the cmd_vel messages (a bounded queue the zenoh
+//! callbacks fill) and the services (another queue, with a stop port of its own).
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, TrySendError, sync_channel};
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+use scout_interface::remote::SessionSettings;
+use scout_interface::services::{monotonic, monotonic_ns};
+use serde::Serialize;
+use tracing::{info, warn};
+use zenoh::Wait;
+use zenoh::bytes::ZBytes;
+use zenoh::liveliness::LivelinessToken;
+use zenoh::pubsub::Publisher;
+use zenoh::qos::CongestionControl;
+use zenoh::query::{Query, Queryable};
+
+use super::config::{CmdVelTopic, ROS2_ROUTER, Ros2Config};
+use super::msgs::{self, MessageType};
+use super::publish::{Clocks, Messages, Topic};
+use super::rmw::{self, EntityKind, Node};
+use super::stream::{Action, CmdVelStream, Outcome};
+use crate::client::{ClientError, Robot};
+use crate::control::ControlError;
+use scout_interface::control::ReleaseTarget;
+
+/// Why the bridge stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum BridgeError {
+    /// The gateway could not be reached.
+    #[error(transparent)]
+    Client(#[from] ClientError),
+    /// The gateway stopped answering (it exited or hangs).
+    #[error(transparent)]
+    Control(#[from] ControlError),
+    /// The ROS 2 router could not be reached, or zenoh failed.
+    #[error("{0}")]
+    Zenoh(String),
+    /// A thread of the bridge could not start.
+    #[error("starting a thread: {0}")]
+    Thread(#[from] std::io::Error),
+}
+
+fn zenoh_error(what: &str) -> impl Fn(zenoh::Error) -> BridgeError + '_ {
+    move |error| BridgeError::Zenoh(format!("{what}: {error}"))
+}
+
+/// What the bridge counted, shown in its diagnostics and logged when it stops.
+#[derive(Debug, Default, Serialize)]
+pub struct Counters {
+    pub published: AtomicU64,
+    pub cmd_vel_received: AtomicU64,
+    pub cmd_vel_accepted: AtomicU64,
+    pub cmd_vel_rejected: AtomicU64,
+    /// Not CDR of the topic's type.
+    pub cmd_vel_malformed: AtomicU64,
+    /// No rmw_zenoh attachment: not from a ROS publisher (ROS subscribers drop these too).
+    pub cmd_vel_without_attachment: AtomicU64,
+    /// Ignored: the stream went on across a loss of control.
+    pub cmd_vel_mid_stream: AtomicU64,
+    /// Dropped: the command thread was [`QUEUE`] messages behind.
+    pub cmd_vel_dropped: AtomicU64,
+    pub service_calls: AtomicU64,
+    pub service_calls_dropped: AtomicU64,
+}
+
+impl Counters {
+    fn add(counter: &AtomicU64) -> u64 {
+        counter.fetch_add(1, Ordering::Relaxed) + 1
+    }
+
+    fn values(&self) -> Vec<(String, String)> {
+        serde_json::to_value(self)
+            .ok()
+            .and_then(|json| json.as_object().cloned())
+            .unwrap_or_default()
+            .into_iter()
+            .map(|(key, value)| (key, value.to_string()))
+            .collect()
+    }
+}
+
+/// Messages waiting for the command or service thread; more are dropped and counted.
+const QUEUE: usize = 64;
+
+/// A publisher with its sequence number and GID, for the attachment.
+struct RosPublisher {
+    publisher: Publisher<'static>,
+    topic: String,
+    gid: [u8; 16],
+    seq: i64,
+}
+
+impl RosPublisher {
+    fn put(&mut self, payload: Vec<u8>, counters: &Counters) {
+        self.seq += 1;
+        let attachment = rmw::attachment(self.seq, unix_now().as_nanos() as i64, &self.gid);
+        match self
+            .publisher
+            .put(payload)
+            .attachment(attachment.to_vec())
+            .wait()
+        {
+            Ok(()) => {
+                Counters::add(&counters.published);
+            }
+            Err(error) => warn!("ros2: publishing on {} failed: {error}", self.topic),
+        }
+    }
+}
+
+fn unix_now() -> Duration {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .unwrap_or_default()
+}
+
+/// The node and its endpoints' liveliness tokens; entity ids count from 1 (the node's own
+/// token uses the node id).
+struct Declared {
+    node: Node,
+    next_entity: u32,
+    tokens: Vec<LivelinessToken>,
+}
+
+impl Declared {
+    fn declare(
+        &mut self,
+        session: &zenoh::Session,
+        kind: EntityKind,
+        name: &str,
+        message: &MessageType,
+        config: &Ros2Config,
+    ) -> Result<u32, BridgeError> {
+        self.next_entity += 1;
+        let entity = self.next_entity;
+        let key = self
+            .node
+            .entity_token(entity, kind, name, message, config.distro);
+        self.tokens.push(
+            session
+                .liveliness()
+                .declare_token(key)
+                .wait()
+                .map_err(zenoh_error("declaring a liveliness token"))?,
+        );
+        Ok(entity)
+    }
+}
+
+/// The zenoh session's settings: client mode towards the ROS 2 router.
+pub fn session_settings(config: &Ros2Config) -> SessionSettings {
+    let connect = if config.connect.is_empty() && config.zenoh_config.is_none() {
+        vec![ROS2_ROUTER.to_owned()]
+    } else {
+        config.connect.clone()
+    };
+    SessionSettings {
+        config_file: config.zenoh_config.clone(),
+        listen: Vec::new(),
+        connect,
+    }
+}
+
+/// Runs the bridge for robot `robot` until `stop` is set or something fails.
+pub fn run(robot: &str, config: &Ros2Config, stop: &AtomicBool) -> Result<(), BridgeError> {
+    let gateway = Robot::connect(robot)?;
+    let settings = session_settings(config);
+    let session = settings.open("client").map_err(|error| {
+        BridgeError::Zenoh(format!(
+            "{error}: no ROS 2 router at {:?}? Start one (`ros2 run rmw_zenoh_cpp rmw_zenohd`) \
+             or give --connect ENDPOINT",
+            settings.connect
+        ))
+    })?;
+    let mut declared = Declared {
+        node: Node {
+            domain: config.domain,
+            zid: session.zid().to_string(),
+            id: 0,
+            namespace: config.namespace.clone(),
+            name: config.node.clone(),
+            enclave: String::new(),
+        },
+        next_entity: 0,
+        tokens: Vec::new(),
+    };
+    declared.tokens.push(
+        session
+            .liveliness()
+            .declare_token(declared.node.token())
+            .wait()
+            .map_err(zenoh_error("declaring the node"))?,
+    );
+    let counters = Arc::new(Counters::default());
+    let mut publishers = Vec::new();
+    for topic in Topic::ALL {
+        let Some(name) = topic.name(config) else {
+            continue;
+        };
+        let name = config.resolve(name);
+        let message = topic.message();
+        let entity = declared.declare(&session, EntityKind::Publisher, &name, &message, config)?;
+        let publisher = session
+            .declare_publisher(rmw::data_key(config.domain, &name, &message, config.distro))
+            .congestion_control(CongestionControl::Drop)
+            .wait()
+            .map_err(zenoh_error("declaring a publisher"))?;
+        publishers.push((
+            topic,
+            RosPublisher {
+                publisher,
+                gid: rmw::gid(&declared.node.zid, declared.node.id, entity),
+                topic: name,
+                seq: 0,
+            },
+        ));
+    }
+    let (twists, twist_inbox) = sync_channel::<(usize, zenoh::sample::Sample)>(QUEUE);
+    let mut subscribers = Vec::new();
+    for (index, cmd_vel) in config.cmd_vel.iter().enumerate() {
+        let name = config.resolve(&cmd_vel.topic);
+        let message = if cmd_vel.stamped {
+            msgs::TWIST_STAMPED
+        } else {
+            msgs::TWIST
+        };
+        declared.declare(&session, EntityKind::Subscription, &name, &message, config)?;
+        let (sender, counters) = (twists.clone(), Arc::clone(&counters));
+        subscribers.push(
+            session
+                .declare_subscriber(rmw::data_key(config.domain, &name, &message, config.distro))
+                .callback(move |sample| {
+                    if let Err(TrySendError::Full(_)) = sender.try_send((index, sample)) {
+                        Counters::add(&counters.cmd_vel_dropped);
+                    }
+                })
+                .wait()
+                .map_err(zenoh_error("subscribing to cmd_vel"))?,
+        );
+    }
+    drop(twists);
+    let (calls, call_inbox) = sync_channel::<(ServiceKind, Query)>(QUEUE);
+    let mut queryables: Vec<Queryable<()>> = Vec::new();
+    if config.services {
+        for kind in [ServiceKind::Estop, ServiceKind::Release] {
+            let name = config.resolve(kind.name(config));
+            declared.declare(&session, EntityKind::Service, &name, &msgs::TRIGGER, config)?;
+            let (sender, counters) = (calls.clone(), Arc::clone(&counters));
+            queryables.push(
+                session
+                    .declare_queryable(rmw::data_key(
+                        config.domain,
+                        &name,
+                        &msgs::TRIGGER,
+                        config.distro,
+                    ))
+                    .complete(true)
+                    .callback(move |query| {
+                        if let Err(TrySendError::Full(_)) = sender.try_send((kind, query)) {
+                            Counters::add(&counters.service_calls_dropped);
+                        }
+                    })
+                    .wait()
+                    .map_err(zenoh_error("declaring a service"))?,
+            );
+        }
+    }
+    drop(calls);
+    info!(
+        "scout ros2: node {}/{} in domain {} ({:?}), connected to {:?}; publishing {:?}; \
+         driving from {}",
+        config.namespace,
+        config.node,
+        config.domain,
+        config.distro,
+        settings.connect,
+        publishers
+            .iter()
+            .map(|(_, p)| p.topic.as_str())
+            .collect::<Vec<_>>(),
+        config
+            .cmd_vel
+            .iter()
+            .map(|c| format!("{} as {}", config.resolve(&c.topic), c.class))
+            .collect::<Vec<_>>()
+            .join(", "),
+    );
+    let failed = AtomicBool::new(false);
+    let halt = || stop.load(Ordering::Relaxed) || failed.load(Ordering::Relaxed);
+    let give_up = |result: Result<(), BridgeError>| {
+        if result.is_err() {
+            failed.store(true, Ordering::Relaxed);
+        }
+        result
+    };
+    let result = std::thread::scope(|scope| {
+        let (gateway, counters, halt, give_up) = (&gateway, &*counters, &halt, &give_up);
+        let commands = std::thread::Builder::new()
+            .name("ros2-cmd-vel".into())
+            .spawn_scoped(scope, move || {
+                give_up(drive(
+                    gateway,
+                    config,
+                    &config.cmd_vel,
+                    &twist_inbox,
+                    counters,
+                    halt,
+                ))
+            })?;
+        let services = std::thread::Builder::new()
+            .name("ros2-services".into())
+            .spawn_scoped(scope, move || {
+                give_up(serve(gateway, config, &call_inbox, counters, halt))
+            })?;
+        let published = give_up(publish(gateway, config, &mut publishers, counters, halt));
+        let driven = commands
+            .join()
+            .unwrap_or_else(|_| Err(BridgeError::Zenoh("the cmd_vel thread panicked".into())));
+        let served = services
+            .join()
+            .unwrap_or_else(|_| Err(BridgeError::Zenoh("the service thread panicked".into())));
+        published.and(driven).and(served)
+    });
+    info!(
+        "scout ros2: stopping; counters {}",
+        serde_json::to_string(&*counters).unwrap_or_default()
+    );
+    drop(subscribers);
+    drop(queryables);
+    drop(declared);
+    result
+}
+
+/// The state thread: each new state becomes the messages [`Messages`] makes of it.
+fn publish(
+    gateway: &Robot,
+    config: &Ros2Config,
+    publishers: &mut [(Topic, RosPublisher)],
+    counters: &Counters,
+    halt: &dyn Fn() -> bool,
+) -> Result<(), BridgeError> {
+    let states = gateway.subscribe()?;
+    let status = gateway.status()?;
+    let mut messages = Messages::new(config.clone());
+    let mut last_status = None;
+    while !halt() {
+        let Some(state) = states.next_timeout(Duration::from_millis(100))? else {
+            continue;
+        };
+        last_status = status.latest(Duration::ZERO)?.or(last_status);
+        let clocks = Clocks {
+            monotonic_ns: monotonic_ns(),
+            unix: unix_now(),
+        };
+        let bridge = counters.values();
+        for outgoing in messages.handle_state(&state, last_status.as_ref(), clocks, &bridge) {
+            if let Some((_, publisher)) = publishers.iter_mut().find(|(t, _)| *t == outgoing.topic)
+            {
+                publisher.put(outgoing.payload, counters);
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The cmd_vel thread: each message through its topic's [`CmdVelStream`] to the arbiter.
+fn drive(
+    gateway: &Robot,
+    config: &Ros2Config,
+    topics: &[CmdVelTopic],
+    inbox: &Receiver<(usize, zenoh::sample::Sample)>,
+    counters: &Counters,
+    halt: &dyn Fn() -> bool,
+) -> Result<(), BridgeError> {
+    let mut drivers = Vec::new();
+    for topic in topics {
+        let name = config.resolve(&topic.topic);
+        let client = client_name(&name);
+        drivers.push((
+            gateway.controller(&client, Some(topic.class))?,
+            CmdVelStream::new(monotonic(), config.new_stream_after()),
+            name,
+        ));
+    }
+    while !halt() {
+        let Ok((index, sample)) = inbox.recv_timeout(Duration::from_millis(100)) else {
+            continue;
+        };
+        let Some((controller, stream, name)) = drivers.get_mut(index) else {
+            continue;
+        };
+        Counters::add(&counters.cmd_vel_received);
+        if sample
+            .attachment()
+            .and_then(|a| rmw::parse_attachment(&a.to_bytes()))
+            .is_none()
+        {
+            let count = Counters::add(&counters.cmd_vel_without_attachment);
+            if count.is_power_of_two() {
+                warn!(
+                    "ros2: {name}: a message without the rmw_zenoh attachment ({count} so far): \
+                     dropped, as ROS subscribers drop it; publish through rmw_zenoh"
+                );
+            }
+            continue;
+        }
+        let twist = match msgs::decode_twist(&sample.payload().to_bytes(), topics[index].stamped) {
+            Ok(twist) => twist,
+            Err(error) => {
+                let count = Counters::add(&counters.cmd_vel_malformed);
+                if count.is_power_of_two() {
+                    warn!("ros2: {name}: not a valid message ({count} so far): {error}");
+                }
+                continue;
+            }
+        };
+        let mut action = stream.handle_twist(monotonic(), twist);
+        loop {
+            let answer = match action {
+                Action::Ignore(why) => {
+                    if why == super::stream::Ignored::MidStream {
+                        let count = Counters::add(&counters.cmd_vel_mid_stream);
+                        if count.is_power_of_two() {
+                            warn!("ros2: {name}: ignored ({count} so far): {}", why.reason());
+                        }
+                    }
+                    break;
+                }
+                Action::Take => controller.take_control(),
+                Action::Drive => controller.drive(twist.linear, twist.angular),
+            };
+            match &answer {
+                Ok(_) => {
+                    Counters::add(&counters.cmd_vel_accepted);
+                }
+                Err(error) => {
+                    let count = Counters::add(&counters.cmd_vel_rejected);
+                    if count.is_power_of_two() || action == Action::Take {
+                        info!("ros2: {name}: {error} ({count} refused so far)");
+                    }
+                }
+            }
+            let outcome = match answer {
+                Ok(_) => Outcome::Accepted,
+                Err(error @ ControlError::NoAnswer { .. }) => return Err(error.into()),
+                Err(error) if error.lost_control() => Outcome::LostControl,
+                Err(_) => Outcome::Refused,
+            };
+            match stream.handle_answer(outcome) {
+                Some(next) => action = next,
+                None => break,
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The arbiter client name of a cmd_vel topic: `ros2:/cmd_vel`, cut to the arbiter's 32 bytes.
+fn client_name(topic: &str) -> String {
+    let mut name = format!("ros2:{topic}");
+    while name.len() > scout_interface::control::MAX_CLIENT_NAME {
+        name.pop();
+    }
+    name
+}
+
+/// The two services.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum ServiceKind {
+    Estop,
+    Release,
+}
+
+impl ServiceKind {
+    fn name(self, config: &Ros2Config) -> &str {
+        match self {
+            ServiceKind::Estop => &config.topics.estop,
+            ServiceKind::Release => &config.topics.release,
+        }
+    }
+}
+
+/// The service thread: an e-stop latches a stop owned by `ros2:<node>`; a release releases
+/// that client's own stops (others' need an operator) and restarts nothing.
+fn serve(
+    gateway: &Robot,
+    config: &Ros2Config,
+    inbox: &Receiver<(ServiceKind, Query)>,
+    counters: &Counters,
+    halt: &dyn Fn() -> bool,
+) -> Result<(), BridgeError> {
+    let mut controller = gateway.controller(&client_name(&config.node), None)?;
+    while !halt() {
+        let Ok((kind, query)) = inbox.recv_timeout(Duration::from_millis(100)) else {
+            continue;
+        };
+        Counters::add(&counters.service_calls);
+        let answer = match kind {
+            ServiceKind::Estop => controller.stop("ROS 2 e-stop service"),
+            ServiceKind::Release => controller.release(ReleaseTarget::Own),
+        };
+        let (success, message) = match &answer {
+            Ok(_) => (
+                true,
+                match kind {
+                    ServiceKind::Estop => "stopped: released by the release service or an operator",
+                    ServiceKind::Release => "released: nothing moves until a client takes control",
+                }
+                .to_owned(),
+            ),
+            Err(error) => (false, error.to_string()),
+        };
+        info!("ros2: {kind:?} service: {message}");
+        let mut reply = query.reply(
+            query.key_expr().clone(),
+            msgs::encode_trigger_response(success, &message),
+        );
+        if let Some(attachment) = query.attachment() {
+            reply = reply.attachment(reply_attachment(attachment));
+        }
+        if let Err(error) = reply.wait() {
+            warn!("ros2: replying to a {kind:?} call failed: {error}");
+        }
+        if let Err(ControlError::NoAnswer { .. }) = answer {
+            answer?;
+        }
+    }
+    Ok(())
+}
+
+/// A reply carries the request's sequence number and client GID with the reply's time.
+fn reply_attachment(request: &ZBytes) -> Vec<u8> {
+    match rmw::parse_attachment(&request.to_bytes()) {
+        Some((seq, _, gid)) => rmw::attachment(seq, unix_now().as_nanos() as i64, &gid).to_vec(),
+        None => request.to_bytes().to_vec(),
+    }
+}

@@ -1,0 +1,409 @@
+//! The ROS 2 bridge's settings: one serde struct, read from a TOML file (`scout ros2 --config`),
+//! with the command line's overrides on top. Every field has a default; unknown keys are errors.
+
+use std::time::Duration;
+
+use scout_interface::control::Class;
+use serde::{Deserialize, Serialize};
+
+use super::rmw::Distro;
+
+/// The endpoint of a ROS 2 router (`rmw_zenohd`) on this host.
+pub const ROS2_ROUTER: &str = "tcp/127.0.0.1:7447";
+
+/// `scout ros2`'s settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Ros2Config {
+    /// The ROS node name.
+    pub node: String,
+    /// The node's namespace (`/robot1`), empty for none: relative topic names resolve in it.
+    pub namespace: String,
+    /// The ROS domain; `--domain`, then `$ROS_DOMAIN_ID`, override it.
+    pub domain: u32,
+    /// Zenoh endpoints to connect to, in client mode: the ROS 2 router.
+    pub connect: Vec<String>,
+    /// A zenoh configuration file (JSON5) instead of the client-mode defaults.
+    pub zenoh_config: Option<String>,
+    /// `jazzy` (type hashes, Jazzy and later) or `humble` (none).
+    pub distro: Distro,
+    /// Publish the odom -> base transform on `/tf` (off when robot_localization publishes it).
+    pub publish_tf: bool,
+    /// Frame ids.
+    pub frames: Frames,
+    /// Topic names.
+    pub topics: Topics,
+    /// The wheels' joint names, motor 1 to 4 (front right, front left, rear left, rear right).
+    pub wheel_joints: [String; 4],
+    /// Motor shaft turns per wheel turn.
+    pub gear_ratio: f64,
+    /// The topics that drive, each as a class of the arbiter.
+    pub cmd_vel: Vec<CmdVelTopic>,
+    /// How long a cmd_vel topic must be silent before its next message counts as a new stream
+    /// that may take control, ms. A stream that goes on across a stop, a takeover or a release
+    /// never takes control again by itself.
+    pub new_stream_after_ms: u64,
+    /// The e-stop and release services (std_srvs/Trigger).
+    pub services: bool,
+}
+
+/// Frame ids.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Frames {
+    pub odom: String,
+    pub base: String,
+}
+
+/// Topic names: relative ones resolve in the namespace.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Topics {
+    pub odom: String,
+    pub tf: String,
+    pub battery_state: String,
+    pub joint_states: String,
+    pub diagnostics: String,
+    /// std_srvs/Trigger: latch a stop owned by this bridge.
+    pub estop: String,
+    /// std_srvs/Trigger: release the stops this bridge latched.
+    pub release: String,
+}
+
+/// A topic that drives.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CmdVelTopic {
+    pub topic: String,
+    /// `autonomy` (armed by `scout resume`) or `teleop` (overrides autonomy).
+    #[serde(default = "autonomy")]
+    pub class: Class,
+    /// geometry_msgs/TwistStamped instead of Twist (Nav2 on Jazzy and later can send it).
+    #[serde(default)]
+    pub stamped: bool,
+}
+
+fn autonomy() -> Class {
+    Class::Autonomy
+}
+
+impl Default for Frames {
+    fn default() -> Self {
+        Self {
+            odom: "odom".into(),
+            base: "base_link".into(),
+        }
+    }
+}
+
+impl Default for Topics {
+    fn default() -> Self {
+        Self {
+            odom: "odom".into(),
+            tf: "/tf".into(),
+            battery_state: "battery_state".into(),
+            joint_states: "joint_states".into(),
+            diagnostics: "/diagnostics".into(),
+            estop: "~/estop".into(),
+            release: "~/release".into(),
+        }
+    }
+}
+
+impl Default for Ros2Config {
+    fn default() -> Self {
+        Self {
+            node: "scout".into(),
+            namespace: String::new(),
+            domain: 0,
+            connect: Vec::new(),
+            zenoh_config: None,
+            distro: Distro::Jazzy,
+            publish_tf: true,
+            frames: Frames::default(),
+            topics: Topics::default(),
+            wheel_joints: [
+                "front_right_wheel".into(),
+                "front_left_wheel".into(),
+                "rear_left_wheel".into(),
+                "rear_right_wheel".into(),
+            ],
+            gear_ratio: 32.0,
+            cmd_vel: vec![CmdVelTopic {
+                topic: "cmd_vel".into(),
+                class: Class::Autonomy,
+                stamped: false,
+            }],
+            new_stream_after_ms: 500,
+            services: true,
+        }
+    }
+}
+
+/// Why a configuration cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum Ros2ConfigError {
+    #[error("reading {path}: {source}")]
+    Read {
+        path: String,
+        source: std::io::Error,
+    },
+    #[error("{path}: {source}")]
+    Parse {
+        path: String,
+        source: Box<toml::de::Error>,
+    },
+    #[error("{what} `{name}` is not a valid ROS name: {why}")]
+    BadName {
+        what: &'static str,
+        name: String,
+        why: &'static str,
+    },
+    #[error("topic {0} is used twice: give each publisher and cmd_vel topic a name of its own")]
+    Duplicate(String),
+    #[error("gear_ratio must be a positive number, found {0}")]
+    BadGearRatio(f64),
+    #[error("new_stream_after_ms must be 100..=10000, found {0}")]
+    BadNewStream(u64),
+}
+
+impl Ros2Config {
+    /// The file's settings, or the defaults without one.
+    pub fn load(path: Option<&std::path::Path>) -> Result<Self, Ros2ConfigError> {
+        let Some(path) = path else {
+            return Ok(Self::default());
+        };
+        let shown = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|source| Ros2ConfigError::Read {
+            path: shown.clone(),
+            source,
+        })?;
+        toml::from_str(&text).map_err(|source| Ros2ConfigError::Parse {
+            path: shown,
+            source: Box::new(source),
+        })
+    }
+
+    /// How long a cmd_vel topic must be silent before a new stream may take control.
+    pub fn new_stream_after(&self) -> Duration {
+        Duration::from_millis(self.new_stream_after_ms)
+    }
+
+    /// `topic` as a fully qualified name: absolute as given, `~/x` under the node, else under
+    /// the namespace.
+    pub fn resolve(&self, topic: &str) -> String {
+        if topic.starts_with('/') {
+            topic.to_owned()
+        } else if let Some(private) = topic.strip_prefix("~/") {
+            format!("{}/{}/{private}", self.namespace, self.node)
+        } else {
+            format!("{}/{topic}", self.namespace)
+        }
+    }
+
+    /// The topics the bridge publishes, resolved, with `/tf` only when it is on.
+    pub fn published(&self) -> Vec<String> {
+        let topics = &self.topics;
+        let mut names = vec![
+            self.resolve(&topics.odom),
+            self.resolve(&topics.battery_state),
+            self.resolve(&topics.joint_states),
+            self.resolve(&topics.diagnostics),
+        ];
+        if self.publish_tf {
+            names.push(self.resolve(&topics.tf));
+        }
+        names
+    }
+
+    /// Checks names and values, so that a mistake is reported at start and not as a silent
+    /// topic.
+    pub fn validate(&self) -> Result<(), Ros2ConfigError> {
+        check_name("node name", &self.node, false)?;
+        if !self.namespace.is_empty() {
+            check_name("namespace", &self.namespace, true)?;
+            if !self.namespace.starts_with('/') {
+                return Err(Ros2ConfigError::BadName {
+                    what: "namespace",
+                    name: self.namespace.clone(),
+                    why: "it must start with `/`",
+                });
+            }
+        }
+        let mut seen = std::collections::BTreeSet::new();
+        let drives = self.cmd_vel.iter().map(|c| c.topic.as_str());
+        let services = [self.topics.estop.as_str(), self.topics.release.as_str()];
+        for topic in self
+            .published()
+            .iter()
+            .map(String::as_str)
+            .chain(drives)
+            .chain(services.into_iter().filter(|_| self.services))
+        {
+            let resolved = self.resolve(topic);
+            check_name("topic", &resolved, true)?;
+            if !seen.insert(resolved.clone()) {
+                return Err(Ros2ConfigError::Duplicate(resolved));
+            }
+        }
+        for joint in &self.wheel_joints {
+            if joint.is_empty() {
+                return Err(Ros2ConfigError::BadName {
+                    what: "wheel joint",
+                    name: joint.clone(),
+                    why: "it is empty",
+                });
+            }
+        }
+        if !(self.gear_ratio.is_finite() && self.gear_ratio > 0.0) {
+            return Err(Ros2ConfigError::BadGearRatio(self.gear_ratio));
+        }
+        if !(100..=10_000).contains(&self.new_stream_after_ms) {
+            return Err(Ros2ConfigError::BadNewStream(self.new_stream_after_ms));
+        }
+        Ok(())
+    }
+}
+
+/// ROS names: alphanumerics and `_`, tokens not starting with a digit, `/` between tokens
+/// where `path` allows it.
+fn check_name(what: &'static str, name: &str, path: bool) -> Result<(), Ros2ConfigError> {
+    let bad = |why| {
+        Err(Ros2ConfigError::BadName {
+            what,
+            name: name.to_owned(),
+            why,
+        })
+    };
+    let body = if path {
+        name.strip_prefix('/').unwrap_or(name)
+    } else {
+        name
+    };
+    if body.is_empty() {
+        return bad("it is empty");
+    }
+    for token in body.split('/') {
+        if !path && body.contains('/') {
+            return bad("it may not contain `/`");
+        }
+        if token.is_empty() {
+            return bad("it has an empty part (`//` or a trailing `/`)");
+        }
+        if token.starts_with(|c: char| c.is_ascii_digit()) {
+            return bad("a part starts with a digit");
+        }
+        if !token.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+            return bad("only letters, digits and `_` are allowed");
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_resolve_in_the_namespace_and_under_the_node() {
+        let config = Ros2Config {
+            namespace: "/robot1".into(),
+            ..Default::default()
+        };
+        assert_eq!(config.resolve("odom"), "/robot1/odom");
+        assert_eq!(config.resolve("/tf"), "/tf");
+        assert_eq!(config.resolve("~/estop"), "/robot1/scout/estop");
+        assert_eq!(Ros2Config::default().resolve("cmd_vel"), "/cmd_vel");
+        config.validate().expect("valid");
+    }
+
+    #[test]
+    fn a_file_sets_what_it_names_and_keeps_the_rest() {
+        let config: Ros2Config = toml::from_str(
+            r#"
+            namespace = "/r2"
+            publish_tf = false
+            distro = "humble"
+            [frames]
+            base = "base_footprint"
+            [[cmd_vel]]
+            topic = "cmd_vel_nav"
+            stamped = true
+            [[cmd_vel]]
+            topic = "cmd_vel_teleop"
+            class = "teleop"
+            "#,
+        )
+        .expect("valid TOML");
+        assert_eq!(config.frames.odom, "odom");
+        assert_eq!(config.frames.base, "base_footprint");
+        assert_eq!(config.distro, Distro::Humble);
+        assert_eq!(config.cmd_vel[0].class, Class::Autonomy);
+        assert!(config.cmd_vel[0].stamped);
+        assert_eq!(config.cmd_vel[1].class, Class::Teleop);
+        assert!(!config.published().contains(&"/tf".to_owned()));
+        config.validate().expect("valid");
+    }
+
+    #[test]
+    fn mistakes_are_reported_at_start() {
+        let error = toml::from_str::<Ros2Config>("frame = 1").expect_err("unknown key");
+        assert!(
+            error.to_string().contains("unknown field `frame`"),
+            "{error}"
+        );
+        let error = toml::from_str::<Ros2Config>("[[cmd_vel]]\ntopic = \"x\"\nclass = \"boss\"")
+            .expect_err("unknown class");
+        assert!(
+            error.to_string().contains("unknown variant `boss`"),
+            "{error}"
+        );
+        for (config, wanted) in [
+            (
+                Ros2Config {
+                    node: "scout-1".into(),
+                    ..Default::default()
+                },
+                "only letters",
+            ),
+            (
+                Ros2Config {
+                    namespace: "robot".into(),
+                    ..Default::default()
+                },
+                "must start with `/`",
+            ),
+            (
+                Ros2Config {
+                    cmd_vel: vec![CmdVelTopic {
+                        topic: "/odom".into(),
+                        class: Class::Teleop,
+                        stamped: false,
+                    }],
+                    ..Default::default()
+                },
+                "used twice",
+            ),
+            (
+                Ros2Config {
+                    topics: Topics {
+                        odom: "2d//odom".into(),
+                        ..Default::default()
+                    },
+                    ..Default::default()
+                },
+                "empty part",
+            ),
+            (
+                Ros2Config {
+                    gear_ratio: 0.0,
+                    ..Default::default()
+                },
+                "gear_ratio",
+            ),
+        ] {
+            let error = config.validate().expect_err(wanted).to_string();
+            assert!(error.contains(wanted), "{error}");
+        }
+    }
+}

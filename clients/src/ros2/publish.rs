@@ -1,0 +1,577 @@
+//! The ROS 2 messages made from the gateway's state and status (sans-IO: the state, the status
+//! and both clocks in, CDR payloads out): odometry and its transform on each new 0x131, the
+//! battery on each new 0x151, the wheels with each odometry, diagnostics once a second and on
+//! every change of level.
+
+use std::time::Duration;
+
+use scout_interface::StatePayload;
+use scout_interface::control::StatusPayload;
+use scout_interface::json::{state_json, status_json};
+use scout_interface::state::{LinkState, Received};
+use scout_protocol::{ChassisState, Fault, FaultBits, Severity};
+use serde_json::Value;
+
+use super::config::Ros2Config;
+use super::msgs::{self, Battery, Header, Joints, Odometry, Status, Transform};
+
+/// The topics the bridge publishes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Topic {
+    Odom,
+    Tf,
+    BatteryState,
+    JointStates,
+    Diagnostics,
+}
+
+impl Topic {
+    pub const ALL: [Topic; 5] = [
+        Topic::Odom,
+        Topic::Tf,
+        Topic::BatteryState,
+        Topic::JointStates,
+        Topic::Diagnostics,
+    ];
+
+    pub fn message(self) -> msgs::MessageType {
+        match self {
+            Topic::Odom => msgs::ODOMETRY,
+            Topic::Tf => msgs::TF_MESSAGE,
+            Topic::BatteryState => msgs::BATTERY_STATE,
+            Topic::JointStates => msgs::JOINT_STATE,
+            Topic::Diagnostics => msgs::DIAGNOSTIC_ARRAY,
+        }
+    }
+
+    /// Its name as configured (unresolved), or `None` when it is switched off.
+    pub fn name(self, config: &Ros2Config) -> Option<&str> {
+        let topics = &config.topics;
+        match self {
+            Topic::Odom => Some(&topics.odom),
+            Topic::Tf => config.publish_tf.then_some(topics.tf.as_str()),
+            Topic::BatteryState => Some(&topics.battery_state),
+            Topic::JointStates => Some(&topics.joint_states),
+            Topic::Diagnostics => Some(&topics.diagnostics),
+        }
+    }
+}
+
+/// Both clocks read at one instant: the gateway's times are CLOCK_MONOTONIC, ROS stamps are
+/// wall-clock time since the Unix epoch.
+#[derive(Debug, Clone, Copy)]
+pub struct Clocks {
+    pub monotonic_ns: u64,
+    pub unix: Duration,
+}
+
+impl Clocks {
+    /// The wall-clock time of a CLOCK_MONOTONIC instant.
+    pub fn stamp(&self, at_ns: u64) -> Duration {
+        self.unix.saturating_sub(Duration::from_nanos(
+            self.monotonic_ns.saturating_sub(at_ns),
+        ))
+    }
+}
+
+/// Diagnostics go out at least this often (ROS' diagnostic_updater's rate).
+pub const DIAGNOSTICS_PERIOD: Duration = Duration::from_secs(1);
+
+/// Odometry's covariance diagonals (x, y, z, roll, pitch, yaw): planar, so z, roll and pitch
+/// are unknown (1e6, robot_localization ignores them); wheel slip makes skid-steer yaw the
+/// weakest.
+const POSE_COVARIANCE: [f64; 6] = [1e-3, 1e-3, 1e6, 1e6, 1e6, 1e-2];
+const TWIST_COVARIANCE: [f64; 6] = [1e-3, 1e-3, 1e6, 1e6, 1e6, 1e-2];
+
+/// diagnostic_msgs/DiagnosticStatus levels.
+const OK: u8 = 0;
+const WARN: u8 = 1;
+const ERROR: u8 = 2;
+const STALE: u8 = 3;
+
+/// sensor_msgs/BatteryState health.
+const HEALTH_UNKNOWN: u8 = 0;
+const HEALTH_GOOD: u8 = 1;
+const HEALTH_DEAD: u8 = 3;
+const HEALTH_OVERVOLTAGE: u8 = 4;
+const STATUS_UNKNOWN: u8 = 0;
+
+/// Makes the messages, remembering what it already sent.
+#[derive(Debug)]
+pub struct Messages {
+    config: Ros2Config,
+    last_motion: Option<u64>,
+    last_system: Option<u64>,
+    /// Wheel angles integrated from the motors' speeds, rad.
+    wheel_angles: [f64; 4],
+    last_motors: [Option<u64>; 4],
+    last_diagnostics: Option<(u64, [u8; 3])>,
+}
+
+/// One message to publish.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Outgoing {
+    pub topic: Topic,
+    pub payload: Vec<u8>,
+}
+
+impl Messages {
+    pub fn new(config: Ros2Config) -> Self {
+        Self {
+            config,
+            last_motion: None,
+            last_system: None,
+            wheel_angles: [0.0; 4],
+            last_motors: [None; 4],
+            last_diagnostics: None,
+        }
+    }
+
+    /// What to publish for a state (and the arbiter's latest status, if known); `bridge` is
+    /// what the bridge itself counted, for its diagnostics.
+    pub fn handle_state(
+        &mut self,
+        state: &StatePayload,
+        status: Option<&StatusPayload>,
+        clocks: Clocks,
+        bridge: &[(String, String)],
+    ) -> Vec<Outgoing> {
+        let mut out = Vec::new();
+        if let Some(at_ns) = fresh(state.motion.received, &mut self.last_motion) {
+            self.odometry(state, clocks.stamp(at_ns), &mut out);
+            self.joints(state, clocks, &mut out);
+        }
+        if let Some(at_ns) = fresh(state.system.received, &mut self.last_system) {
+            self.battery(state, clocks.stamp(at_ns), &mut out);
+        }
+        self.diagnostics(state, status, clocks, bridge, &mut out);
+        out
+    }
+
+    fn odometry(&self, state: &StatePayload, stamp: Duration, out: &mut Vec<Outgoing>) {
+        let frames = &self.config.frames;
+        let header = Header {
+            stamp,
+            frame_id: &frames.odom,
+        };
+        let odometry = &state.odometry;
+        out.push(Outgoing {
+            topic: Topic::Odom,
+            payload: Odometry {
+                header: header.clone(),
+                child_frame_id: &frames.base,
+                x: odometry.x,
+                y: odometry.y,
+                yaw: odometry.yaw,
+                linear: f64::from(state.motion.linear_mm_s) / 1000.0,
+                angular: f64::from(state.motion.angular_mrad_s) / 1000.0,
+                pose_covariance: POSE_COVARIANCE,
+                twist_covariance: TWIST_COVARIANCE,
+            }
+            .encode(),
+        });
+        if self.config.publish_tf {
+            out.push(Outgoing {
+                topic: Topic::Tf,
+                payload: Transform {
+                    header,
+                    child_frame_id: &frames.base,
+                    x: odometry.x,
+                    y: odometry.y,
+                    yaw: odometry.yaw,
+                }
+                .encode(),
+            });
+        }
+    }
+
+    /// The wheels: speed from the motor shaft's rpm through the gearbox, angle integrated from
+    /// it (the chassis reports no wheel positions), effort as the motor current (A).
+    fn joints(&mut self, state: &StatePayload, clocks: Clocks, out: &mut Vec<Outgoing>) {
+        let mut velocity = [0.0; 4];
+        let mut effort = [0.0; 4];
+        let mut newest = 0;
+        for (i, motor) in state.motors.iter().enumerate() {
+            if !motor.received.valid {
+                continue;
+            }
+            velocity[i] =
+                f64::from(motor.rpm) / self.config.gear_ratio * std::f64::consts::TAU / 60.0;
+            effort[i] = f64::from(motor.current_deciamps) / 10.0;
+            let at = motor.received.at_ns;
+            if let Some(last) = self.last_motors[i]
+                && at > last
+            {
+                let dt = Duration::from_nanos(at - last).as_secs_f64().min(0.1);
+                self.wheel_angles[i] += velocity[i] * dt;
+            }
+            self.last_motors[i] = Some(at);
+            newest = newest.max(at);
+        }
+        if newest == 0 {
+            return;
+        }
+        let joints = &self.config.wheel_joints;
+        out.push(Outgoing {
+            topic: Topic::JointStates,
+            payload: Joints {
+                header: Header {
+                    stamp: clocks.stamp(newest),
+                    frame_id: "",
+                },
+                names: [&joints[0], &joints[1], &joints[2], &joints[3]],
+                position: self.wheel_angles,
+                velocity,
+                effort,
+            }
+            .encode(),
+        });
+    }
+
+    /// The voltage the chassis reports; the charge is unmeasured (NaN), as the message defines.
+    fn battery(&self, state: &StatePayload, stamp: Duration, out: &mut Vec<Outgoing>) {
+        let faults = FaultBits(state.system.fault_bits);
+        let health = if faults.contains(Fault::BatteryOvervoltageFault) {
+            HEALTH_OVERVOLTAGE
+        } else if faults.contains(Fault::BatteryUndervoltageFault) {
+            HEALTH_DEAD
+        } else if state.system.received.valid {
+            HEALTH_GOOD
+        } else {
+            HEALTH_UNKNOWN
+        };
+        out.push(Outgoing {
+            topic: Topic::BatteryState,
+            payload: Battery {
+                header: Header {
+                    stamp,
+                    frame_id: &self.config.frames.base,
+                },
+                voltage: f32::from(state.system.battery_decivolts) / 10.0,
+                percentage: f32::NAN,
+                status: STATUS_UNKNOWN,
+                health,
+                present: state.system.received.valid,
+            }
+            .encode(),
+        });
+    }
+
+    fn diagnostics(
+        &mut self,
+        state: &StatePayload,
+        status: Option<&StatusPayload>,
+        clocks: Clocks,
+        bridge: &[(String, String)],
+        out: &mut Vec<Outgoing>,
+    ) {
+        let node = &self.config.node;
+        let statuses = diagnostic_statuses(node, state, status, clocks.monotonic_ns);
+        let levels = [statuses[0].level, statuses[1].level, statuses[2].level];
+        let due = match self.last_diagnostics {
+            None => true,
+            Some((at, last_levels)) => {
+                last_levels != levels
+                    || clocks.monotonic_ns.saturating_sub(at)
+                        >= DIAGNOSTICS_PERIOD.as_nanos() as u64
+            }
+        };
+        if !due {
+            return;
+        }
+        self.last_diagnostics = Some((clocks.monotonic_ns, levels));
+        let header = Header {
+            stamp: clocks.unix,
+            frame_id: "",
+        };
+        let mut statuses = statuses.to_vec();
+        statuses.push(Status {
+            level: OK,
+            name: format!("{node}: ros2 bridge"),
+            message: "counters".into(),
+            hardware_id: state.robot.as_str().to_owned(),
+            values: bridge.to_vec(),
+        });
+        out.push(Outgoing {
+            topic: Topic::Diagnostics,
+            payload: msgs::encode_diagnostics(&header, &statuses),
+        });
+    }
+}
+
+/// The receive time of a frame newer than the one last used.
+fn fresh(received: Received, last: &mut Option<u64>) -> Option<u64> {
+    if !received.valid || last.is_some_and(|last| received.at_ns <= last) {
+        return None;
+    }
+    *last = Some(received.at_ns);
+    Some(received.at_ns)
+}
+
+/// The link, the chassis and the arbiter, each a DiagnosticStatus named `<node>: <part>`.
+pub fn diagnostic_statuses(
+    node: &str,
+    state: &StatePayload,
+    status: Option<&StatusPayload>,
+    now_ns: u64,
+) -> [Status; 3] {
+    let robot = state.robot.as_str().to_owned();
+    let json = state_json(state, now_ns);
+    let link_state = state.link.state();
+    let link = Status {
+        level: match link_state {
+            LinkState::Ok => OK,
+            LinkState::Silent | LinkState::Disconnected | LinkState::ProtocolV2 => ERROR,
+        },
+        name: format!("{node}: link"),
+        message: link_state.name().to_owned(),
+        hardware_id: robot.clone(),
+        values: flatten(&json["link"]),
+    };
+    let system = &state.system;
+    let faults = FaultBits(system.fault_bits);
+    let chassis_state = ChassisState::from_raw(system.state);
+    let worst = faults
+        .iter()
+        .map(|fault| fault.severity())
+        .fold(OK, |level, severity| {
+            level.max(match severity {
+                Severity::Warning | Severity::Reserved => WARN,
+                Severity::Fault | Severity::Protection => ERROR,
+            })
+        });
+    let (level, message) = if !system.received.valid || link_state != LinkState::Ok {
+        (STALE, "no system status from the chassis".to_owned())
+    } else {
+        let named: Vec<&str> = faults.iter().map(|fault| fault.name()).collect();
+        let level = match chassis_state {
+            ChassisState::Normal => worst,
+            _ => ERROR,
+        };
+        let mut message = chassis_state.name().to_owned();
+        if !named.is_empty() {
+            message = format!("{message}: {}", named.join(", "));
+        }
+        (level, message)
+    };
+    let mut chassis_values = flatten(&json["system"]);
+    chassis_values.extend(flatten(&serde_json::json!({ "motion": json["motion"] })));
+    let chassis = Status {
+        level,
+        name: format!("{node}: chassis"),
+        message,
+        hardware_id: robot.clone(),
+        values: chassis_values,
+    };
+    let arbiter = match status {
+        Some(status) => {
+            let json = status_json(status, now_ns);
+            let stops: Vec<String> = status
+                .stops()
+                .iter()
+                .map(|stop| format!("{}: {}", stop.owner.as_str(), stop.reason.as_str()))
+                .collect();
+            let (level, message) = if status.stopped() {
+                (WARN, format!("stopped by {}", stops.join("; ")))
+            } else {
+                let driving = json["selected"]["client"].as_str().unwrap_or("nobody");
+                (OK, format!("driving: {driving}"))
+            };
+            let mut values = flatten(&serde_json::json!({
+                "latched": json["latched"],
+                "stop_total": json["stop_total"],
+                "selected": json["selected"],
+                "output": json["output"],
+                "autonomy_armed": json["autonomy_armed"],
+                "tick": json["tick"],
+            }));
+            values.extend(flatten(
+                &serde_json::json!({ "rejections": json["rejections"] }),
+            ));
+            Status {
+                level,
+                name: format!("{node}: arbiter"),
+                message,
+                hardware_id: robot,
+                values,
+            }
+        }
+        None => Status {
+            level: STALE,
+            name: format!("{node}: arbiter"),
+            message: "no status from the gateway yet".into(),
+            hardware_id: robot,
+            values: Vec::new(),
+        },
+    };
+    [link, chassis, arbiter]
+}
+
+/// `{"a": {"b": 1}}` as `[("a.b", "1")]`; strings without their quotes.
+fn flatten(value: &Value) -> Vec<(String, String)> {
+    fn walk(prefix: &str, value: &Value, out: &mut Vec<(String, String)>) {
+        match value {
+            Value::Object(fields) => {
+                for (key, value) in fields {
+                    let key = if prefix.is_empty() {
+                        key.clone()
+                    } else {
+                        format!("{prefix}.{key}")
+                    };
+                    walk(&key, value, out);
+                }
+            }
+            Value::String(text) => out.push((prefix.to_owned(), text.clone())),
+            other => out.push((prefix.to_owned(), other.to_string())),
+        }
+    }
+    let mut out = Vec::new();
+    walk("", value, &mut out);
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ros2::cdr::Reader;
+
+    const SECOND: u64 = 1_000_000_000;
+
+    fn clocks(monotonic_ns: u64) -> Clocks {
+        Clocks {
+            monotonic_ns,
+            unix: Duration::from_secs(1_700_000_000) + Duration::from_nanos(monotonic_ns),
+        }
+    }
+
+    fn received(at_ns: u64) -> Received {
+        Received {
+            valid: true,
+            count: 0,
+            at_ns,
+        }
+    }
+
+    fn state(at_ns: u64) -> StatePayload {
+        let mut state = StatePayload::default();
+        state.robot = scout_interface::FixedText::new("r1");
+        state.link.state = LinkState::Ok.raw();
+        state.motion.received = received(at_ns);
+        state.motion.linear_mm_s = 500;
+        state.motion.angular_mrad_s = -100;
+        state.system.received = received(at_ns);
+        state.system.battery_decivolts = 255;
+        state.odometry.x = 1.5;
+        for motor in &mut state.motors {
+            motor.received = received(at_ns);
+            motor.rpm = 3200;
+            motor.current_deciamps = 12;
+        }
+        state
+    }
+
+    fn topics(out: &[Outgoing]) -> Vec<Topic> {
+        out.iter().map(|o| o.topic).collect()
+    }
+
+    #[test]
+    fn each_frame_is_published_once_with_its_receive_time() {
+        let mut messages = Messages::new(Ros2Config::default());
+        let first = messages.handle_state(&state(SECOND), None, clocks(SECOND + 2_000_000), &[]);
+        assert_eq!(
+            topics(&first),
+            [
+                Topic::Odom,
+                Topic::Tf,
+                Topic::JointStates,
+                Topic::BatteryState,
+                Topic::Diagnostics
+            ]
+        );
+        // The odometry is stamped when its 0x131 arrived, 2 ms before now.
+        let mut odom = Reader::new(&first[0].payload).expect("CDR");
+        assert_eq!(odom.i32(), Ok(1_700_000_001));
+        assert_eq!(odom.u32(), Ok(0));
+        // The same frames again: nothing new, and diagnostics only once a second.
+        let again = messages.handle_state(&state(SECOND), None, clocks(SECOND + 20_000_000), &[]);
+        assert!(again.is_empty(), "{:?}", topics(&again));
+        let later = messages.handle_state(
+            &state(SECOND + 20_000_000),
+            None,
+            clocks(SECOND + 22_000_000),
+            &[],
+        );
+        assert_eq!(
+            topics(&later),
+            [
+                Topic::Odom,
+                Topic::Tf,
+                Topic::JointStates,
+                Topic::BatteryState
+            ]
+        );
+        assert_eq!(
+            topics(&messages.handle_state(&state(SECOND), None, clocks(3 * SECOND), &[])),
+            [Topic::Diagnostics]
+        );
+    }
+
+    #[test]
+    fn the_tf_switch_and_a_change_of_level() {
+        let config = Ros2Config {
+            publish_tf: false,
+            ..Default::default()
+        };
+        let mut messages = Messages::new(config);
+        let out = messages.handle_state(&state(SECOND), None, clocks(SECOND), &[]);
+        assert!(!topics(&out).contains(&Topic::Tf));
+        let mut estop = state(SECOND);
+        estop.system.state = ChassisState::EStop.raw();
+        // A change of level goes out at once.
+        let out = messages.handle_state(&estop, None, clocks(SECOND + 1), &[]);
+        assert_eq!(topics(&out), [Topic::Diagnostics]);
+    }
+
+    #[test]
+    fn diagnostics_say_what_is_wrong() {
+        let mut chassis = state(SECOND);
+        chassis.system.fault_bits = 0x0800 | 0x0001; // under-voltage warning and fault
+        let [link, system, arbiter] = diagnostic_statuses("scout", &chassis, None, SECOND);
+        assert_eq!((link.level, link.message.as_str()), (OK, "ok"));
+        assert!(
+            link.values
+                .contains(&("transport".into(), "unknown".into()))
+        );
+        assert_eq!(system.level, ERROR);
+        assert!(
+            system.message.contains("battery_undervoltage_fault"),
+            "{}",
+            system.message
+        );
+        assert!(
+            system
+                .values
+                .contains(&("battery_voltage".into(), "25.5".into()))
+        );
+        assert_eq!(arbiter.level, STALE);
+        let mut silent = state(SECOND);
+        silent.link.state = LinkState::Silent.raw();
+        let [link, system, _] = diagnostic_statuses("scout", &silent, None, SECOND);
+        assert_eq!((link.level, system.level), (ERROR, STALE));
+    }
+
+    #[test]
+    fn wheels_turn_through_the_gearbox() {
+        let mut messages = Messages::new(Ros2Config::default());
+        messages.handle_state(&state(SECOND), None, clocks(SECOND), &[]);
+        messages.handle_state(
+            &state(SECOND + 20_000_000),
+            None,
+            clocks(SECOND + 20_000_000),
+            &[],
+        );
+        // 3200 rpm / 32 = 100 rpm = 10.47 rad/s, for 20 ms.
+        let expected = 100.0 * std::f64::consts::TAU / 60.0 * 0.02;
+        assert!((messages.wheel_angles[0] - expected).abs() < 1e-9);
+    }
+}
