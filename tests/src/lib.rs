@@ -430,13 +430,18 @@ impl Background {
 
     /// Starts `scout ARGS`.
     pub fn scout(args: &[&str]) -> Background {
-        let child = command("scout")
+        let mut scout = command("scout");
+        scout
             .args(args)
             .stdin(Stdio::null())
             .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("spawn scout");
+            .stderr(Stdio::null());
+        Self::spawn(scout)
+    }
+
+    /// Starts `command`.
+    pub fn spawn(mut command: Command) -> Background {
+        let child = command.spawn().expect("spawn a background process");
         Background { child }
     }
 

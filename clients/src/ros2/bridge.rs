@@ -354,8 +354,11 @@ fn publish(
     let mut messages = Messages::new(config.clone());
     let mut last_status = None;
     while !halt() {
-        let Some(state) = states.next_timeout(Duration::from_millis(100))? else {
-            continue;
+        let state = match states.next_timeout(Duration::from_millis(100)) {
+            Ok(Some(state)) => state,
+            // A signal interrupted the wait: Ctrl-C sets `halt` on its own thread.
+            Ok(None) | Err(ClientError::Wait(_)) => continue,
+            Err(error) => return Err(error.into()),
         };
         last_status = status.latest(Duration::ZERO)?.or(last_status);
         let clocks = Clocks {

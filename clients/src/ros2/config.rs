@@ -387,7 +387,7 @@ mod tests {
             (
                 Ros2Config {
                     topics: Topics {
-                        odom: "2d//odom".into(),
+                        odom: "base//odom".into(),
                         ..Default::default()
                     },
                     ..Default::default()

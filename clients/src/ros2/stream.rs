@@ -272,7 +272,7 @@ mod tests {
                             eligible = true;
                         }
                         let holding = stream.holding();
-                        let twist = if zero { super::zero() } else { go() };
+                        let twist = if zero { self::zero() } else { go() };
                         let mut action = stream.handle_twist(now, twist);
                         if starts && !zero && !holding {
                             prop_assert_eq!(action, Action::Take, "a new stream did not take control");

@@ -7,6 +7,7 @@ mod decode;
 mod examples;
 mod gateway;
 mod remote;
+mod ros2;
 mod safety;
 mod sim;
 mod teleop;

@@ -1,7 +1,7 @@
 //! `scout`: the command-line tool for a SCOUT chassis behind scout-gateway.
 //!
 //! Exit codes: 0 success; 1 something failed (a line `scout decode` could not decode, an I/O
-//! error); 2 usage error; 3 no gateway with that name runs, or it stopped answering; 4 the
+//! error, no ROS 2 router to connect to); 2 usage error (also a bad `scout ros2` setting); 3 no gateway with that name runs, or it stopped answering; 4 the
 //! gateway rejected the request (the reason is printed).
 
 mod control;
@@ -19,6 +19,7 @@ use scout_clients::client::ClientError;
 use scout_clients::control::ControlError;
 use scout_clients::echo::EchoError;
 use scout_clients::interface::services::ServiceError;
+use scout_clients::ros2::config::Ros2ConfigError;
 
 /// Command-line tool for an AgileX SCOUT chassis.
 #[derive(Debug, Parser)]
@@ -126,6 +127,9 @@ fn exit_code(error: &anyhow::Error) -> u8 {
         }
         if matches!(cause.downcast_ref(), Some(ControlError::Rejected(_))) {
             return 4;
+        }
+        if cause.downcast_ref::<Ros2ConfigError>().is_some() {
+            return 2;
         }
     }
     1
