@@ -346,6 +346,23 @@ mod tests {
     }
 
     #[test]
+    fn the_example_file_is_valid_and_states_the_defaults() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../config/scout-ros2.toml");
+        let example = Ros2Config::load(Some(&path)).expect("the example loads");
+        example.validate().expect("the example is valid");
+        // What it marks as not the default: the namespace and the second cmd_vel topic.
+        let defaults = Ros2Config {
+            namespace: String::new(),
+            cmd_vel: example.cmd_vel[..1].to_vec(),
+            connect: Vec::new(),
+            ..example.clone()
+        };
+        assert_eq!(defaults, Ros2Config::default());
+        assert_eq!(example.connect, [ROS2_ROUTER]);
+    }
+
+    #[test]
     fn mistakes_are_reported_at_start() {
         let error = toml::from_str::<Ros2Config>("frame = 1").expect_err("unknown key");
         assert!(
