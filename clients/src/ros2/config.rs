@@ -347,8 +347,8 @@ mod tests {
 
     #[test]
     fn the_example_file_is_valid_and_states_the_defaults() {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../config/scout-ros2.toml");
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/scout-ros2.toml");
         let example = Ros2Config::load(Some(&path)).expect("the example loads");
         example.validate().expect("the example is valid");
         // What it marks as not the default: the namespace and the second cmd_vel topic.

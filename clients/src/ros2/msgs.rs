@@ -416,4 +416,32 @@ mod tests {
             assert_eq!(message.hash.len(), "RIHS01_".len() + 64);
         }
     }
+
+    proptest::proptest! {
+        /// Any bytes from the network: a twist or an error, never a panic.
+        #[test]
+        fn any_bytes_decode_or_fail_cleanly(bytes in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..128)) {
+            let _ = decode_twist(&bytes, false);
+            let _ = decode_twist(&bytes, true);
+            let _ = crate::ros2::rmw::parse_attachment(&bytes);
+        }
+
+        /// What a ROS publisher writes reads back: any speeds, any frame id.
+        #[test]
+        fn twists_round_trip(
+            linear in proptest::prelude::any::<f64>(),
+            angular in proptest::prelude::any::<f64>(),
+            frame in "[a-z_]{0,20}",
+            stamped in proptest::prelude::any::<bool>(),
+        ) {
+            let mut w = Writer::new();
+            if stamped {
+                Header { stamp: Duration::new(7, 9), frame_id: &frame }.write(&mut w);
+            }
+            w.f64s(&[linear, 0.1, 0.2, 0.3, 0.4, angular]);
+            let twist = decode_twist(&w.finish(), stamped).expect("decodes");
+            proptest::prop_assert_eq!(twist.linear.to_bits(), linear.to_bits());
+            proptest::prop_assert_eq!(twist.angular.to_bits(), angular.to_bits());
+        }
+    }
 }

@@ -107,6 +107,13 @@ impl RosNode {
         assert_eq!(samples.len(), count, "{answer}");
         for sample in &samples {
             assert!(sample.get("error").is_none(), "{sample}");
+            // rosbags writes the very bytes the bridge wrote, and every sample has the
+            // attachment rmw_zenoh subscribers require.
+            assert_eq!(sample["rosbags_same_bytes"], true, "{topic}: {sample}");
+            assert!(
+                sample["attachment"]["sequence"].as_i64() > Some(0),
+                "{sample}"
+            );
         }
         samples
     }

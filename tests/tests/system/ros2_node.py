@@ -194,8 +194,11 @@ def parse_token(token, problems):
 
 
 def decode(sample, type_name):
-    message = STORE.deserialize_cdr(sample.payload.to_bytes(), type_name)
-    return message, parse_attachment(sample.attachment)
+    """The message, its attachment, and whether rosbags writes the very same bytes for it."""
+    payload = sample.payload.to_bytes()
+    message = STORE.deserialize_cdr(payload, type_name)
+    same = bytes(STORE.serialize_cdr(message, type_name)) == bytes(payload)
+    return message, parse_attachment(sample.attachment), same
 
 
 def summary(message, type_name):
@@ -252,8 +255,9 @@ class Node:
             if done.is_set():
                 return
             try:
-                message, attachment = decode(sample, type_name)
-                received.append({"attachment": attachment, **summary(message, type_name)})
+                message, attachment, same = decode(sample, type_name)
+                received.append({"attachment": attachment, "rosbags_same_bytes": same,
+                                 **summary(message, type_name)})
             except Exception as error:  # noqa: BLE001 - reported to the test
                 received.append({"error": f"{type(error).__name__}: {error}"})
             if len(received) >= command.get("count", 1):
