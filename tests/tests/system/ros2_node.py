@@ -143,7 +143,8 @@ def parse_qos(text, problems, token):
 
 
 def parse_token(token, problems):
-    """A liveliness token by rmw_zenoh's rules (liveliness_utils.cpp)."""
+    """A liveliness token by rmw_zenoh's rules (rmw_zenoh_cpp/src/detail/liveliness_utils.cpp,
+    Entity::make and keyexpr_to_qos)."""
     parts = token.split("/")
     if parts[0] != "@ros2_lv":
         problems.append(f"{token}: not under @ros2_lv")
@@ -151,6 +152,8 @@ def parse_token(token, problems):
     if len(parts) not in (9, 13):
         problems.append(f"{token}: {len(parts)} parts, not 9 (node) or 13 (endpoint)")
         return None
+    if any(not part for part in parts):
+        problems.append(f"{token}: an empty part (rmw_zenoh drops such tokens)")
     domain, zid, node_id, entity_id, kind, enclave, namespace, node = parts[1:9]
     entity = {
         "domain": int(domain) if domain.isdigit() else problems.append(f"{token}: domain") or -1,
