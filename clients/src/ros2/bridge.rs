@@ -28,7 +28,7 @@ use super::config::{CmdVelTopic, ROS2_ROUTER, Ros2Config};
 use super::msgs::{self, MessageType};
 use super::publish::{Clocks, Messages, Topic};
 use super::rmw::{self, EntityKind, Node};
-use super::stream::{Action, CmdVelStream, Outcome};
+use super::stream::{Action, CmdVelStream, Ignored, Origin, Outcome};
 use crate::client::{ClientError, Robot};
 use crate::control::ControlError;
 use scout_interface::control::ReleaseTarget;
@@ -70,7 +70,10 @@ pub struct Counters {
     /// Dropped: the command thread was [`QUEUE`] messages behind.
     pub cmd_vel_dropped: AtomicU64,
     pub service_calls: AtomicU64,
+    /// Answered `busy` without being served: the service's queue was [`QUEUE`] calls behind.
     pub service_calls_dropped: AtomicU64,
+    /// Refused: a wildcard query, or no Trigger request with the rmw_zenoh attachment.
+    pub service_calls_malformed: AtomicU64,
 }
 
 impl Counters {
@@ -249,33 +252,53 @@ pub fn run(robot: &str, config: &Ros2Config, stop: &AtomicBool) -> Result<(), Br
         );
     }
     drop(twists);
-    let (calls, call_inbox) = sync_channel::<(ServiceKind, Query)>(QUEUE);
+    // A queue per service, the e-stop's served first: a flood of release calls never holds an
+    // e-stop up. The senders live as long as the bridge, so the queues never disconnect.
+    let (estops, estop_inbox) = crossbeam_channel::bounded::<Query>(QUEUE);
+    let (releases, release_inbox) = crossbeam_channel::bounded::<Query>(QUEUE);
     let mut queryables: Vec<Queryable<()>> = Vec::new();
-    if config.services {
-        for kind in [ServiceKind::Estop, ServiceKind::Release] {
-            let name = config.resolve(kind.name(config));
-            declared.declare(&session, EntityKind::Service, &name, &msgs::TRIGGER, config)?;
-            let (sender, counters) = (calls.clone(), Arc::clone(&counters));
-            queryables.push(
-                session
-                    .declare_queryable(rmw::data_key(
-                        config.domain,
-                        &name,
-                        &msgs::TRIGGER,
-                        config.distro,
-                    ))
-                    .complete(true)
-                    .callback(move |query| {
-                        if let Err(TrySendError::Full(_)) = sender.try_send((kind, query)) {
-                            Counters::add(&counters.service_calls_dropped);
-                        }
-                    })
-                    .wait()
-                    .map_err(zenoh_error("declaring a service"))?,
-            );
-        }
+    let services = match (config.services, config.release_service) {
+        (false, _) => &[][..],
+        (true, false) => &[ServiceKind::Estop][..],
+        (true, true) => &[ServiceKind::Estop, ServiceKind::Release][..],
+    };
+    for &kind in services {
+        let name = config.resolve(kind.name(config));
+        declared.declare(&session, EntityKind::Service, &name, &msgs::TRIGGER, config)?;
+        let key = rmw::data_key(config.domain, &name, &msgs::TRIGGER, config.distro);
+        let sender = match kind {
+            ServiceKind::Estop => estops.clone(),
+            ServiceKind::Release => releases.clone(),
+        };
+        let counters = Arc::clone(&counters);
+        queryables.push(
+            session
+                .declare_queryable(key.clone())
+                .complete(true)
+                .callback(move |query| {
+                    // A wildcard query (`**`, a diagnostic tool's) is no call.
+                    if query.key_expr().as_str() != key {
+                        Counters::add(&counters.service_calls_malformed);
+                        refuse(&query, "not a service call: query the service's exact key");
+                        return;
+                    }
+                    if let Err(crossbeam_channel::TrySendError::Full(query)) =
+                        sender.try_send(query)
+                    {
+                        Counters::add(&counters.service_calls_dropped);
+                        let message = match kind {
+                            ServiceKind::Estop => {
+                                "busy: the e-stop calls already waiting latch the stop"
+                            }
+                            ServiceKind::Release => "busy: too many calls waiting, call again",
+                        };
+                        answer(&query, kind, false, message);
+                    }
+                })
+                .wait()
+                .map_err(zenoh_error("declaring a service"))?,
+        );
     }
-    drop(calls);
     info!(
         "scout ros2: node {}/{} in domain {} ({:?}), connected to {:?}; publishing {:?}; \
          driving from {}",
@@ -320,7 +343,13 @@ pub fn run(robot: &str, config: &Ros2Config, stop: &AtomicBool) -> Result<(), Br
         let services = std::thread::Builder::new()
             .name("ros2-services".into())
             .spawn_scoped(scope, move || {
-                give_up(serve(gateway, config, &call_inbox, counters, halt))
+                give_up(serve(
+                    gateway,
+                    config,
+                    [&estop_inbox, &release_inbox],
+                    counters,
+                    halt,
+                ))
             })?;
         let published = give_up(publish(gateway, config, &mut publishers, counters, halt));
         let driven = commands
@@ -353,20 +382,29 @@ fn publish(
     let status = gateway.status()?;
     let mut messages = Messages::new(config.clone());
     let mut last_status = None;
+    let mut last_state_ns = monotonic_ns();
     while !halt() {
-        let state = match states.next_timeout(Duration::from_millis(100)) {
-            Ok(Some(state)) => state,
-            // A signal interrupted the wait: Ctrl-C sets `halt` on its own thread.
-            Ok(None) | Err(ClientError::Wait(_)) => continue,
-            Err(error) => return Err(error.into()),
-        };
-        last_status = status.latest(Duration::ZERO)?.or(last_status);
-        let clocks = Clocks {
+        let clocks = || Clocks {
             monotonic_ns: monotonic_ns(),
             unix: unix_now(),
         };
-        let bridge = counters.values();
-        for outgoing in messages.handle_state(&state, last_status.as_ref(), clocks, &bridge) {
+        let outgoing = match states.next_timeout(Duration::from_millis(100)) {
+            Ok(Some(state)) => {
+                last_state_ns = monotonic_ns();
+                last_status = status.latest(Duration::ZERO)?.or(last_status);
+                let bridge = counters.values();
+                messages.handle_state(&state, last_status.as_ref(), clocks(), &bridge)
+            }
+            // No state (the gateway stopped or hangs), or a signal interrupted the wait
+            // (Ctrl-C sets `halt` on its own thread).
+            Ok(None) | Err(ClientError::Wait(_)) => {
+                let robot = gateway.name();
+                let bridge = counters.values();
+                messages.handle_silence(robot, last_state_ns, clocks(), &bridge)
+            }
+            Err(error) => return Err(error.into()),
+        };
+        for outgoing in outgoing {
             if let Some((_, publisher)) = publishers.iter_mut().find(|(t, _)| *t == outgoing.topic)
             {
                 publisher.put(outgoing.payload, counters);
@@ -388,7 +426,7 @@ fn drive(
     let mut drivers = Vec::new();
     for topic in topics {
         let name = config.resolve(&topic.topic);
-        let client = client_name(&name);
+        let client = config.cmd_vel_client(topic);
         drivers.push((
             gateway.controller(&client, Some(topic.class))?,
             CmdVelStream::new(monotonic(), config.new_stream_after()),
@@ -403,11 +441,10 @@ fn drive(
             continue;
         };
         Counters::add(&counters.cmd_vel_received);
-        if sample
+        let Some((sequence, _, gid)) = sample
             .attachment()
             .and_then(|a| rmw::parse_attachment(&a.to_bytes()))
-            .is_none()
-        {
+        else {
             let count = Counters::add(&counters.cmd_vel_without_attachment);
             if count.is_power_of_two() {
                 warn!(
@@ -416,7 +453,7 @@ fn drive(
                 );
             }
             continue;
-        }
+        };
         let twist = match msgs::decode_twist(&sample.payload().to_bytes(), topics[index].stamped) {
             Ok(twist) => twist,
             Err(error) => {
@@ -427,15 +464,20 @@ fn drive(
                 continue;
             }
         };
-        let mut action = stream.handle_twist(monotonic(), twist);
+        let origin = Origin { gid, sequence };
+        let mut action = stream.handle_twist(monotonic(), origin, twist);
         loop {
             let answer = match action {
                 Action::Ignore(why) => {
-                    if why == super::stream::Ignored::MidStream {
-                        let count = Counters::add(&counters.cmd_vel_mid_stream);
-                        if count.is_power_of_two() {
-                            warn!("ros2: {name}: ignored ({count} so far): {}", why.reason());
-                        }
+                    let counter = match why {
+                        Ignored::MidStream => Some(&counters.cmd_vel_mid_stream),
+                        Ignored::NotFinite => Some(&counters.cmd_vel_malformed),
+                        Ignored::Zero => None,
+                    };
+                    if let Some(count) = counter.map(Counters::add)
+                        && count.is_power_of_two()
+                    {
+                        warn!("ros2: {name}: ignored ({count} so far): {}", why.reason());
                     }
                     break;
                 }
@@ -468,15 +510,6 @@ fn drive(
     Ok(())
 }
 
-/// The arbiter client name of a cmd_vel topic: `ros2:/cmd_vel`, cut to the arbiter's 32 bytes.
-fn client_name(topic: &str) -> String {
-    let mut name = format!("ros2:{topic}");
-    while name.len() > scout_interface::control::MAX_CLIENT_NAME {
-        name.pop();
-    }
-    name
-}
-
 /// The two services.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum ServiceKind {
@@ -493,52 +526,97 @@ impl ServiceKind {
     }
 }
 
-/// The service thread: an e-stop latches a stop owned by `ros2:<node>`; a release releases
-/// that client's own stops (others' need an operator) and restarts nothing.
+/// The service thread: an e-stop latches a stop owned by [`Ros2Config::service_client`]; a
+/// release releases that client's own stops (others' need an operator) and restarts nothing.
+/// E-stop calls are served before release calls.
 fn serve(
     gateway: &Robot,
     config: &Ros2Config,
-    inbox: &Receiver<(ServiceKind, Query)>,
+    [estops, releases]: [&crossbeam_channel::Receiver<Query>; 2],
     counters: &Counters,
     halt: &dyn Fn() -> bool,
 ) -> Result<(), BridgeError> {
-    let mut controller = gateway.controller(&client_name(&config.node), None)?;
+    let mut controller = gateway.controller(&config.service_client(), None)?;
     while !halt() {
-        let Ok((kind, query)) = inbox.recv_timeout(Duration::from_millis(100)) else {
-            continue;
+        let (kind, query) = match estops.try_recv() {
+            Ok(query) => (ServiceKind::Estop, query),
+            Err(_) => crossbeam_channel::select! {
+                recv(estops) -> query => match query {
+                    Ok(query) => (ServiceKind::Estop, query),
+                    Err(_) => continue,
+                },
+                recv(releases) -> query => match query {
+                    Ok(query) => (ServiceKind::Release, query),
+                    Err(_) => continue,
+                },
+                default(Duration::from_millis(100)) => continue,
+            },
         };
         Counters::add(&counters.service_calls);
-        let answer = match kind {
+        if let Err(why) = trigger_request(&query) {
+            Counters::add(&counters.service_calls_malformed);
+            warn!("ros2: a {kind:?} call refused: {why}");
+            refuse(&query, &why);
+            continue;
+        }
+        let result = match kind {
             ServiceKind::Estop => controller.stop("ROS 2 e-stop service"),
             ServiceKind::Release => controller.release(ReleaseTarget::Own),
         };
-        let (success, message) = match &answer {
-            Ok(_) => (
-                true,
-                match kind {
-                    ServiceKind::Estop => "stopped: released by the release service or an operator",
-                    ServiceKind::Release => "released: nothing moves until a client takes control",
-                }
-                .to_owned(),
-            ),
-            Err(error) => (false, error.to_string()),
+        let message = match (&result, kind) {
+            (Ok(_), ServiceKind::Estop) => {
+                "stopped: the release service or an operator (`scout release`) releases it".into()
+            }
+            (Ok(_), ServiceKind::Release) => {
+                "released: nothing moves until a client takes control".into()
+            }
+            (Err(error), _) => error.to_string(),
         };
         info!("ros2: {kind:?} service: {message}");
-        let mut reply = query.reply(
-            query.key_expr().clone(),
-            msgs::encode_trigger_response(success, &message),
-        );
-        if let Some(attachment) = query.attachment() {
-            reply = reply.attachment(reply_attachment(attachment));
-        }
-        if let Err(error) = reply.wait() {
-            warn!("ros2: replying to a {kind:?} call failed: {error}");
-        }
-        if let Err(ControlError::NoAnswer { .. }) = answer {
-            answer?;
+        answer(&query, kind, result.is_ok(), &message);
+        if let Err(error @ ControlError::NoAnswer { .. }) = result {
+            return Err(error.into());
         }
     }
     Ok(())
+}
+
+/// Whether a query is a std_srvs/srv/Trigger request as an rmw_zenoh client sends it: CDR of
+/// the request (its one placeholder byte) and the attachment.
+fn trigger_request(query: &Query) -> Result<(), String> {
+    query
+        .attachment()
+        .and_then(|attachment| rmw::parse_attachment(&attachment.to_bytes()))
+        .ok_or("no rmw_zenoh attachment: call the service through rmw_zenoh")?;
+    let payload = query.payload().map(ZBytes::to_bytes).unwrap_or_default();
+    match &payload[..] {
+        [0x00, 0x01, _, _, _, ..] => Ok(()),
+        _ => Err(format!(
+            "{} bytes are no std_srvs/srv/Trigger request (CDR little endian, 5 bytes)",
+            payload.len()
+        )),
+    }
+}
+
+/// The Trigger response to a call.
+fn answer(query: &Query, kind: ServiceKind, success: bool, message: &str) {
+    let mut reply = query.reply(
+        query.key_expr().clone(),
+        msgs::encode_trigger_response(success, message),
+    );
+    if let Some(attachment) = query.attachment() {
+        reply = reply.attachment(reply_attachment(attachment));
+    }
+    if let Err(error) = reply.wait() {
+        warn!("ros2: replying to a {kind:?} call failed: {error}");
+    }
+}
+
+/// An error reply, with the reason.
+fn refuse(query: &Query, why: &str) {
+    if let Err(error) = query.reply_err(why.to_owned()).wait() {
+        warn!("ros2: refusing a call failed: {error}");
+    }
 }
 
 /// A reply carries the request's sequence number and client GID with the reply's time.

@@ -90,6 +90,8 @@ pub enum CdrError {
     Encapsulation([u8; 2]),
     #[error("payload ends at byte {0}, before the message does")]
     Truncated(usize),
+    #[error("{0} bytes follow the message")]
+    Trailing(usize),
 }
 
 /// Reads a CDR payload, the encapsulation header first.
@@ -102,6 +104,7 @@ pub struct Reader<'a> {
 impl<'a> Reader<'a> {
     pub fn new(bytes: &'a [u8]) -> Result<Self, CdrError> {
         match bytes {
+            _ if bytes.len() < ENCAPSULATION.len() => Err(CdrError::Truncated(bytes.len())),
             [0x00, 0x01, _, _, ..] => Ok(Self {
                 bytes: &bytes[ENCAPSULATION.len()..],
                 at: 0,
@@ -132,6 +135,14 @@ impl<'a> Reader<'a> {
 
     pub fn f64(&mut self) -> Result<f64, CdrError> {
         self.take::<8>().map(f64::from_le_bytes)
+    }
+
+    /// Checks that nothing but alignment padding (less than 8 bytes) follows what was read.
+    pub fn finish(&self) -> Result<(), CdrError> {
+        match self.bytes.len() - self.at.min(self.bytes.len()) {
+            left if left < 8 => Ok(()),
+            left => Err(CdrError::Trailing(left)),
+        }
     }
 
     /// Skips a string.

@@ -3,7 +3,7 @@
 
 use std::time::Duration;
 
-use scout_interface::control::Class;
+use scout_interface::control::{Class, MAX_CLIENT_NAME};
 use serde::{Deserialize, Serialize};
 
 use super::rmw::Distro;
@@ -45,6 +45,9 @@ pub struct Ros2Config {
     pub new_stream_after_ms: u64,
     /// The e-stop and release services (std_srvs/Trigger).
     pub services: bool,
+    /// The release service (any ROS node may call it: ROS has no identities; it releases
+    /// only the stops the e-stop service latched). Off: only `scout release` releases them.
+    pub release_service: bool,
 }
 
 /// Frame ids.
@@ -136,6 +139,7 @@ impl Default for Ros2Config {
             }],
             new_stream_after_ms: 500,
             services: true,
+            release_service: true,
         }
     }
 }
@@ -163,8 +167,15 @@ pub enum Ros2ConfigError {
     Duplicate(String),
     #[error("gear_ratio must be a positive number, found {0}")]
     BadGearRatio(f64),
-    #[error("new_stream_after_ms must be 100..=10000, found {0}")]
+    #[error(
+        "new_stream_after_ms must be 500..=10000 (at least a command's longest life), found {0}"
+    )]
     BadNewStream(u64),
+    #[error(
+        "the arbiter client name `{0}` is longer than {MAX_CLIENT_NAME} bytes: shorten the \
+         namespace, node or topic name"
+    )]
+    LongClientName(String),
 }
 
 impl Ros2Config {
@@ -201,6 +212,17 @@ impl Ros2Config {
         }
     }
 
+    /// The arbiter client a cmd_vel topic drives as: `ros2:<domain>:<topic>`.
+    pub fn cmd_vel_client(&self, topic: &CmdVelTopic) -> String {
+        format!("ros2:{}:{}", self.domain, self.resolve(&topic.topic))
+    }
+
+    /// The arbiter client of the services, the owner of the stops they latch:
+    /// `ros2:<domain>:<namespace>/<node>`, so that two bridges never share stops.
+    pub fn service_client(&self) -> String {
+        format!("ros2:{}:{}/{}", self.domain, self.namespace, self.node)
+    }
+
     /// The topics the bridge publishes, resolved, with `/tf` only when it is on.
     pub fn published(&self) -> Vec<String> {
         let topics = &self.topics;
@@ -233,12 +255,15 @@ impl Ros2Config {
         let mut seen = std::collections::BTreeSet::new();
         let drives = self.cmd_vel.iter().map(|c| c.topic.as_str());
         let services = [self.topics.estop.as_str(), self.topics.release.as_str()];
+        let services = services
+            .into_iter()
+            .take(if self.release_service { 2 } else { 1 });
         for topic in self
             .published()
             .iter()
             .map(String::as_str)
             .chain(drives)
-            .chain(services.into_iter().filter(|_| self.services))
+            .chain(services.filter(|_| self.services))
         {
             let resolved = self.resolve(topic);
             check_name("topic", &resolved, true)?;
@@ -258,8 +283,14 @@ impl Ros2Config {
         if !(self.gear_ratio.is_finite() && self.gear_ratio > 0.0) {
             return Err(Ros2ConfigError::BadGearRatio(self.gear_ratio));
         }
-        if !(100..=10_000).contains(&self.new_stream_after_ms) {
+        if !(500..=10_000).contains(&self.new_stream_after_ms) {
             return Err(Ros2ConfigError::BadNewStream(self.new_stream_after_ms));
+        }
+        let clients = self.cmd_vel.iter().map(|topic| self.cmd_vel_client(topic));
+        for name in clients.chain([self.service_client()]) {
+            if name.len() > MAX_CLIENT_NAME {
+                return Err(Ros2ConfigError::LongClientName(name));
+            }
         }
         Ok(())
     }

@@ -276,6 +276,7 @@ pub fn decode_twist(bytes: &[u8], stamped: bool) -> Result<PlanarTwist, CdrError
     r.f64()?;
     r.f64()?;
     let angular = r.f64()?;
+    r.finish()?;
     Ok(PlanarTwist { linear, angular })
 }
 
@@ -401,6 +402,16 @@ mod tests {
             })
         );
         assert!(decode_twist(&hex(TWIST)[..20], false).is_err());
+        assert_eq!(
+            decode_twist(&[0, 1, 0], false),
+            Err(crate::ros2::cdr::CdrError::Truncated(3))
+        );
+        let mut long = hex(TWIST);
+        long.extend([0; 64]);
+        assert_eq!(
+            decode_twist(&long, false),
+            Err(crate::ros2::cdr::CdrError::Trailing(64))
+        );
     }
 
     #[test]

@@ -74,6 +74,9 @@ impl Clocks {
     }
 }
 
+/// No state for this long: the gateway is reported gone.
+pub const SILENT_AFTER: Duration = Duration::from_secs(1);
+
 /// Diagnostics go out at least this often (ROS' diagnostic_updater's rate).
 pub const DIAGNOSTICS_PERIOD: Duration = Duration::from_secs(1);
 
@@ -145,6 +148,43 @@ impl Messages {
             self.battery(state, clocks.stamp(at_ns), &mut out);
         }
         self.diagnostics(state, status, clocks, bridge, &mut out);
+        out
+    }
+
+    /// What to publish while no state arrives (the gateway stopped, hangs or restarts): after
+    /// [`SILENT_AFTER`], diagnostics saying so, at their usual rate.
+    pub fn handle_silence(
+        &mut self,
+        robot: &str,
+        last_state_ns: u64,
+        clocks: Clocks,
+        bridge: &[(String, String)],
+    ) -> Vec<Outgoing> {
+        let silent = Duration::from_nanos(clocks.monotonic_ns.saturating_sub(last_state_ns));
+        if silent < SILENT_AFTER {
+            return Vec::new();
+        }
+        let node = &self.config.node;
+        let gateway = Status {
+            level: ERROR,
+            name: format!("{node}: link"),
+            message: format!(
+                "no state from gateway '{robot}' for {:.1} s: is scout-gateway running?",
+                silent.as_secs_f64()
+            ),
+            hardware_id: robot.to_owned(),
+            values: Vec::new(),
+        };
+        let stale = |part: &str| Status {
+            level: STALE,
+            name: format!("{node}: {part}"),
+            message: "no state from the gateway".into(),
+            hardware_id: robot.to_owned(),
+            values: Vec::new(),
+        };
+        let statuses = [gateway, stale("chassis"), stale("arbiter")];
+        let mut out = Vec::new();
+        self.publish_diagnostics(statuses, robot, clocks, bridge, &mut out);
         out
     }
 
@@ -265,9 +305,21 @@ impl Messages {
         bridge: &[(String, String)],
         out: &mut Vec<Outgoing>,
     ) {
-        let node = &self.config.node;
-        let statuses = diagnostic_statuses(node, state, status, clocks.monotonic_ns);
-        let levels = [statuses[0].level, statuses[1].level, statuses[2].level];
+        let statuses = diagnostic_statuses(&self.config.node, state, status, clocks.monotonic_ns);
+        self.publish_diagnostics(statuses, state.robot.as_str(), clocks, bridge, out);
+    }
+
+    /// The diagnostics, with the bridge's own counters, when a second has passed or a level
+    /// changed.
+    fn publish_diagnostics(
+        &mut self,
+        statuses: [Status; 3],
+        robot: &str,
+        clocks: Clocks,
+        bridge: &[(String, String)],
+        out: &mut Vec<Outgoing>,
+    ) {
+        let levels = statuses.each_ref().map(|status| status.level);
         let due = match self.last_diagnostics {
             None => true,
             Some((at, last_levels)) => {
@@ -287,9 +339,9 @@ impl Messages {
         let mut statuses = statuses.to_vec();
         statuses.push(Status {
             level: OK,
-            name: format!("{node}: ros2 bridge"),
+            name: format!("{}: ros2 bridge", self.config.node),
             message: "counters".into(),
-            hardware_id: state.robot.as_str().to_owned(),
+            hardware_id: robot.to_owned(),
             values: bridge.to_vec(),
         });
         out.push(Outgoing {
@@ -557,6 +609,26 @@ mod tests {
         silent.link.state = LinkState::Silent.raw();
         let [link, system, _] = diagnostic_statuses("scout", &silent, None, SECOND);
         assert_eq!((link.level, system.level), (ERROR, STALE));
+    }
+
+    #[test]
+    fn a_silent_gateway_is_reported() {
+        let mut messages = Messages::new(Ros2Config::default());
+        assert!(
+            messages
+                .handle_silence("r1", SECOND, clocks(SECOND + 500_000_000), &[])
+                .is_empty()
+        );
+        let out = messages.handle_silence("r1", SECOND, clocks(3 * SECOND), &[]);
+        assert_eq!(topics(&out), [Topic::Diagnostics]);
+        let text = String::from_utf8_lossy(&out[0].payload);
+        assert!(
+            text.contains("no state from gateway 'r1' for 2.0 s"),
+            "{text}"
+        );
+        // The gateway back: a change of level goes out at once.
+        let back = messages.handle_state(&state(3 * SECOND), None, clocks(3 * SECOND + 1), &[]);
+        assert!(topics(&back).contains(&Topic::Diagnostics));
     }
 
     #[test]

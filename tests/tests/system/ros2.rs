@@ -317,6 +317,12 @@ fn a_ros_2_node_sees_the_graph_reads_odometry_and_drives_through_the_arbiter() {
     ok(&["release", "--name", &name]);
     ok(&["resume", "--name", &name]);
     chassis_stays_still(&mut sim, Duration::from_millis(1500));
+    // Zeros mid-stream (a collision monitor's) do not re-arm it either: a new publisher
+    // takes over without a pause, first zeros, then motion.
+    node.ask(json!({"cmd": "publish", "linear": 0.0, "angular": 0.0}));
+    std::thread::sleep(Duration::from_millis(200));
+    node.ask(json!({"cmd": "publish", "linear": 0.5, "angular": 0.0}));
+    chassis_stays_still(&mut sim, Duration::from_millis(1000));
     assert!(counter(&node.counters(), "cmd_vel_mid_stream") > 0);
     // A pause, then publishing again: a deliberate act.
     node.ask(json!({"cmd": "quiet"}));
@@ -332,13 +338,33 @@ fn a_ros_2_node_sees_the_graph_reads_odometry_and_drives_through_the_arbiter() {
         "{estop}"
     );
     comes_to_rest(&mut sim, LIMIT);
+    let owner = format!("ros2:{domain}:/scout");
     let (_, status, _) = scout(&["status", "--name", &name, "--json"]);
-    assert!(status.contains("ros2:scout"), "{status}");
+    assert!(status.contains(&owner), "{status}");
     let release = node.call("/scout/release");
     assert_eq!(release["success"], true, "{release}");
     ok(&["resume", "--name", &name]);
     chassis_stays_still(&mut sim, Duration::from_millis(1000));
     node.ask(json!({"cmd": "quiet"}));
+
+    // A plain wildcard query (a diagnostic tool's) calls no service, and says so.
+    let answer = node.ask(json!({"cmd": "get", "key": format!("{domain}/**")}));
+    assert!(
+        answer["replies"]
+            .as_array()
+            .is_some_and(|replies| !replies.is_empty()
+                && replies.iter().all(|r| r["err"]
+                    .as_str()
+                    .is_some_and(|e| e.contains("not a service call")))),
+        "{answer}"
+    );
+    let (_, status, _) = scout(&["status", "--name", &name, "--json"]);
+    let status: Value = serde_json::from_str(&status).expect("status JSON");
+    assert_eq!(
+        status["stops"],
+        json!([]),
+        "a wildcard query latched a stop: {status}"
+    );
 
     // Bad input is counted, not obeyed: a payload that is no Twist, a sample without the
     // attachment rmw_zenoh publishers send.

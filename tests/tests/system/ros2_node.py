@@ -15,6 +15,8 @@ on standard input, answering each with one JSON line on standard output:
       stops publishing
   {"cmd": "call", "service": "/scout/estop"}
       calls a std_srvs/srv/Trigger service, answers its response
+  {"cmd": "get", "key": "0/**"}
+      a plain zenoh query (no payload, no attachment), answers the replies' payloads
   {"cmd": "raw", "topic": "/cmd_vel", "type": "geometry_msgs/msg/Twist", "payload": "00..",
    "attachment": true}
       publishes one sample of arbitrary bytes (hex), with or without an attachment
@@ -312,6 +314,15 @@ class Node:
         attachment = Attachments().next() if command.get("attachment", True) else None
         self.session.put(key, bytes.fromhex(command["payload"]), attachment=attachment)
         return {"key": key}
+
+    def get(self, command):
+        replies = []
+        for reply in self.session.get(command["key"], timeout=3.0):
+            if reply.ok is not None:
+                replies.append({"ok": reply.ok.payload.to_bytes().hex()})
+            else:
+                replies.append({"err": reply.err.payload.to_string()})
+        return {"replies": replies}
 
     def call(self, command):
         type_name = "std_srvs/srv/Trigger"
