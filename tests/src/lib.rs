@@ -152,6 +152,21 @@ pub struct Sim {
 /// How long a test waits for a line from a child process.
 pub const LINE_TIMEOUT: Duration = Duration::from_secs(10);
 
+/// The lines a child writes to `pipe`, read on a thread of their own as they come.
+pub fn line_reader(pipe: impl std::io::Read + Send + 'static) -> std::sync::mpsc::Receiver<String> {
+    let (sender, lines) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        use std::io::BufRead;
+        for line in std::io::BufReader::new(pipe).lines() {
+            let Ok(line) = line else { return };
+            if sender.send(line).is_err() {
+                return;
+            }
+        }
+    });
+    lines
+}
+
 impl Sim {
     /// Starts `scout-sim` with `args` (e.g. `--serial`) and waits for its port line.
     pub fn start(args: &[&str]) -> Sim {
@@ -163,17 +178,7 @@ impl Sim {
             .spawn()
             .expect("spawn scout-sim");
         let stdin = child.stdin.take().expect("stdin");
-        let stdout = child.stdout.take().expect("stdout");
-        let (sender, lines) = std::sync::mpsc::channel();
-        std::thread::spawn(move || {
-            use std::io::BufRead;
-            for line in std::io::BufReader::new(stdout).lines() {
-                let Ok(line) = line else { return };
-                if sender.send(line).is_err() {
-                    return;
-                }
-            }
-        });
+        let lines = line_reader(child.stdout.take().expect("stdout"));
         let mut sim = Sim {
             child,
             stdin,
@@ -481,6 +486,11 @@ pub fn scout(args: &[&str]) -> (Option<i32>, String, String) {
         String::from_utf8_lossy(&output.stdout).into_owned(),
         String::from_utf8_lossy(&output.stderr).into_owned(),
     )
+}
+
+/// The zenoh endpoint of `port` on 127.0.0.1.
+pub fn tcp(port: u16) -> String {
+    format!("tcp/127.0.0.1:{port}")
 }
 
 /// A TCP port on 127.0.0.1 that was free a moment ago.

@@ -6,8 +6,8 @@ use std::time::{Duration, Instant};
 
 use nix::sys::signal::Signal;
 use scout_system_tests::{
-    Background, Gateway, Sim, connect, free_port, robot_name, scout, wait_for_status, zenoh_query,
-    zenoh_session,
+    Background, Gateway, Sim, connect, free_port, robot_name, scout, tcp, wait_for_status,
+    zenoh_query, zenoh_session,
 };
 use serde_json::Value;
 use zenoh::Wait;
@@ -15,10 +15,6 @@ use zenoh::sample::SampleKind;
 
 const LIMIT: Duration = Duration::from_secs(10);
 const QUERY: Duration = Duration::from_secs(3);
-
-fn tcp(port: u16) -> String {
-    format!("tcp/127.0.0.1:{port}")
-}
 
 /// Queries until the gateway's queryable answers (it starts after the session opens).
 fn query_until_answered(session: &zenoh::Session, key: &str) -> Value {

@@ -6,25 +6,21 @@
 //! (`.ci/run` installs them). Without them the test skips, saying why, unless
 //! `SCOUT_REQUIRE_ROS2_STANDIN` is set (as in CI): then it fails.
 
-use std::io::{BufRead, Write};
+use std::io::Write;
 use std::process::{Child, ChildStdin, Command, Stdio};
 use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
 
 use nix::sys::signal::Signal;
 use scout_system_tests::{
-    Background, Gateway, Sim, chassis_stays_still, connect, free_port, moving, robot_name, scout,
-    skip,
+    Background, Gateway, Sim, chassis_stays_still, connect, free_port, line_reader, moving,
+    robot_name, scout, skip, tcp,
 };
 use serde_json::{Value, json};
 
 const LIMIT: Duration = Duration::from_secs(10);
 /// The bridge's default `new_stream_after_ms`, with a margin.
 const NEW_STREAM_AFTER: Duration = Duration::from_millis(600);
-
-fn tcp(port: u16) -> String {
-    format!("tcp/127.0.0.1:{port}")
-}
 
 fn python() -> String {
     std::env::var("SCOUT_PYTHON").unwrap_or_else(|_| "python3".into())
@@ -65,16 +61,7 @@ impl RosNode {
             .spawn()
             .expect("spawn the ROS 2 stand-in");
         let stdin = child.stdin.take().expect("stdin");
-        let stdout = child.stdout.take().expect("stdout");
-        let (sender, lines) = std::sync::mpsc::channel();
-        std::thread::spawn(move || {
-            for line in std::io::BufReader::new(stdout).lines() {
-                let Ok(line) = line else { return };
-                if sender.send(line).is_err() {
-                    return;
-                }
-            }
-        });
+        let lines = line_reader(child.stdout.take().expect("stdout"));
         let mut node = RosNode {
             child,
             stdin,
