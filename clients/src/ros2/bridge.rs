@@ -72,7 +72,8 @@ pub struct Counters {
     pub service_calls: AtomicU64,
     /// Answered `busy` without being served: the service's queue was [`QUEUE`] calls behind.
     pub service_calls_dropped: AtomicU64,
-    /// Refused: a wildcard query, or no Trigger request with the rmw_zenoh attachment.
+    /// Refused with the reason: a wildcard query, or no Trigger request with the rmw_zenoh
+    /// attachment.
     pub service_calls_malformed: AtomicU64,
 }
 
@@ -282,6 +283,12 @@ pub fn run(robot: &str, config: &Ros2Config, stop: &AtomicBool) -> Result<(), Br
                         refuse(&query, "not a service call: query the service's exact key");
                         return;
                     }
+                    // Checked here, so that only real calls wait in the queue.
+                    if let Err(why) = trigger_request(&query) {
+                        Counters::add(&counters.service_calls_malformed);
+                        refuse(&query, &why);
+                        return;
+                    }
                     if let Err(crossbeam_channel::TrySendError::Full(query)) =
                         sender.try_send(query)
                     {
@@ -429,7 +436,7 @@ fn drive(
         let client = config.cmd_vel_client(topic);
         drivers.push((
             gateway.controller(&client, Some(topic.class))?,
-            CmdVelStream::new(monotonic(), config.new_stream_after()),
+            CmdVelStream::new(monotonic(), config.pauses()),
             name,
         ));
     }
@@ -441,7 +448,7 @@ fn drive(
             continue;
         };
         Counters::add(&counters.cmd_vel_received);
-        let Some((sequence, _, gid)) = sample
+        let Some((sequence, sent_ns, gid)) = sample
             .attachment()
             .and_then(|a| rmw::parse_attachment(&a.to_bytes()))
         else {
@@ -464,7 +471,11 @@ fn drive(
                 continue;
             }
         };
-        let origin = Origin { gid, sequence };
+        let origin = Origin {
+            gid,
+            sequence,
+            sent_ns,
+        };
         let mut action = stream.handle_twist(monotonic(), origin, twist);
         loop {
             let answer = match action {
@@ -553,12 +564,6 @@ fn serve(
             },
         };
         Counters::add(&counters.service_calls);
-        if let Err(why) = trigger_request(&query) {
-            Counters::add(&counters.service_calls_malformed);
-            warn!("ros2: a {kind:?} call refused: {why}");
-            refuse(&query, &why);
-            continue;
-        }
         let result = match kind {
             ServiceKind::Estop => controller.stop("ROS 2 e-stop service"),
             ServiceKind::Release => controller.release(ReleaseTarget::Own),

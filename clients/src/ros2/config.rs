@@ -7,6 +7,7 @@ use scout_interface::control::{Class, MAX_CLIENT_NAME};
 use serde::{Deserialize, Serialize};
 
 use super::rmw::Distro;
+use super::stream::Pauses;
 
 /// The endpoint of a ROS 2 router (`rmw_zenohd`) on this host.
 pub const ROS2_ROUTER: &str = "tcp/127.0.0.1:7447";
@@ -39,10 +40,13 @@ pub struct Ros2Config {
     pub gear_ratio: f64,
     /// The topics that drive, each as a class of the arbiter.
     pub cmd_vel: Vec<CmdVelTopic>,
-    /// How long a cmd_vel topic must be silent before its next message counts as a new stream
-    /// that may take control, ms. A stream that goes on across a stop, a takeover or a release
-    /// never takes control again by itself.
+    /// How long a cmd_vel stream that let its control lapse by its own silence must pause
+    /// before its next message takes control again, ms (a teleop key pressed again).
     pub new_stream_after_ms: u64,
+    /// How long a stream that went on across a stop, a takeover, a release or a refusal (or
+    /// that may have been going when the bridge started) must pause before it may take
+    /// control, ms: a controller's stall must not restart the robot.
+    pub blocked_pause_ms: u64,
     /// The e-stop and release services (std_srvs/Trigger).
     pub services: bool,
     /// The release service (any ROS node may call it: ROS has no identities; it releases
@@ -138,6 +142,7 @@ impl Default for Ros2Config {
                 stamped: false,
             }],
             new_stream_after_ms: 500,
+            blocked_pause_ms: 2000,
             services: true,
             release_service: true,
         }
@@ -168,9 +173,10 @@ pub enum Ros2ConfigError {
     #[error("gear_ratio must be a positive number, found {0}")]
     BadGearRatio(f64),
     #[error(
-        "new_stream_after_ms must be 500..=10000 (at least a command's longest life), found {0}"
+        "new_stream_after_ms must be 500..=10000 (at least a command's longest life) and \
+         blocked_pause_ms new_stream_after_ms..=60000, found {0} and {1}"
     )]
-    BadNewStream(u64),
+    BadPauses(u64, u64),
     #[error(
         "the arbiter client name `{0}` is longer than {MAX_CLIENT_NAME} bytes: shorten the \
          namespace, node or topic name"
@@ -195,9 +201,12 @@ impl Ros2Config {
         })
     }
 
-    /// How long a cmd_vel topic must be silent before a new stream may take control.
-    pub fn new_stream_after(&self) -> Duration {
-        Duration::from_millis(self.new_stream_after_ms)
+    /// The pauses a cmd_vel stream must make before it may take control.
+    pub fn pauses(&self) -> Pauses {
+        Pauses {
+            new_stream: Duration::from_millis(self.new_stream_after_ms),
+            blocked: Duration::from_millis(self.blocked_pause_ms),
+        }
     }
 
     /// `topic` as a fully qualified name: absolute as given, `~/x` under the node, else under
@@ -283,8 +292,9 @@ impl Ros2Config {
         if !(self.gear_ratio.is_finite() && self.gear_ratio > 0.0) {
             return Err(Ros2ConfigError::BadGearRatio(self.gear_ratio));
         }
-        if !(500..=10_000).contains(&self.new_stream_after_ms) {
-            return Err(Ros2ConfigError::BadNewStream(self.new_stream_after_ms));
+        let (new, blocked) = (self.new_stream_after_ms, self.blocked_pause_ms);
+        if !(500..=10_000).contains(&new) || !(new..=60_000).contains(&blocked) {
+            return Err(Ros2ConfigError::BadPauses(new, blocked));
         }
         let clients = self.cmd_vel.iter().map(|topic| self.cmd_vel_client(topic));
         for name in clients.chain([self.service_client()]) {

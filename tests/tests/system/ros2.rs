@@ -19,8 +19,9 @@ use scout_system_tests::{
 use serde_json::{Value, json};
 
 const LIMIT: Duration = Duration::from_secs(10);
-/// The bridge's default `new_stream_after_ms`, with a margin.
-const NEW_STREAM_AFTER: Duration = Duration::from_millis(600);
+/// The bridge's default `blocked_pause_ms`, with a margin: the pause a stream must make
+/// after a stop (or the bridge's start) before it may take control.
+const BLOCKED_PAUSE: Duration = Duration::from_millis(2100);
 
 fn python() -> String {
     std::env::var("SCOUT_PYTHON").unwrap_or_else(|_| "python3".into())
@@ -204,7 +205,7 @@ fn a_ros_2_node_sees_the_graph_reads_odometry_and_drives_through_the_arbiter() {
     let _gateway = Gateway::start(&["--serial", &device, "--name", &name]);
     connect(&name);
     let router = tcp(free_port());
-    let _router = Background::scout(&["router", "--listen", &router]);
+    let router_process = Background::scout(&["router", "--listen", &router]);
     let mut node = RosNode::start(&router, domain);
     let started = Instant::now();
     let mut bridge = Bridge::start(&[
@@ -282,7 +283,7 @@ fn a_ros_2_node_sees_the_graph_reads_odometry_and_drives_through_the_arbiter() {
 
     // cmd_vel drives as autonomy once autonomy is armed; silence stops the robot. A stream is
     // new only after a pause since the bridge started (else it may have been going before).
-    std::thread::sleep(NEW_STREAM_AFTER.saturating_sub(started.elapsed()));
+    std::thread::sleep(BLOCKED_PAUSE.saturating_sub(started.elapsed()));
     ok(&["resume", "--name", &name]);
     node.ask(json!({"cmd": "publish", "linear": 0.5, "angular": 0.0}));
     moving(&mut sim, LIMIT);
@@ -310,10 +311,16 @@ fn a_ros_2_node_sees_the_graph_reads_odometry_and_drives_through_the_arbiter() {
     std::thread::sleep(Duration::from_millis(200));
     node.ask(json!({"cmd": "publish", "linear": 0.5, "angular": 0.0}));
     chassis_stays_still(&mut sim, Duration::from_millis(1000));
+    // Nor does a network freeze: the router stops for longer than the pause, then delivers
+    // what it held (late, in a burst, with no message lost): no pause on the sender's clock.
+    router_process.signal(Signal::SIGSTOP);
+    std::thread::sleep(BLOCKED_PAUSE + Duration::from_millis(500));
+    router_process.signal(Signal::SIGCONT);
+    chassis_stays_still(&mut sim, Duration::from_millis(1500));
     assert!(counter(&node.counters(), "cmd_vel_mid_stream") > 0);
     // A pause, then publishing again: a deliberate act.
     node.ask(json!({"cmd": "quiet"}));
-    std::thread::sleep(NEW_STREAM_AFTER);
+    std::thread::sleep(BLOCKED_PAUSE);
     node.ask(json!({"cmd": "publish", "linear": 0.5, "angular": 0.0}));
     moving(&mut sim, LIMIT);
 
