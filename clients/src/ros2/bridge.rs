@@ -24,7 +24,7 @@ use zenoh::pubsub::Publisher;
 use zenoh::qos::CongestionControl;
 use zenoh::query::{Query, Queryable};
 
-use super::config::{CmdVelTopic, ROS2_ROUTER, Ros2Config};
+use super::config::{ROS2_ROUTER, Ros2Config};
 use super::msgs::{self, MessageType};
 use super::publish::{Clocks, Messages, Topic};
 use super::rmw::{self, EntityKind, Node};
@@ -338,14 +338,7 @@ pub fn run(robot: &str, config: &Ros2Config, stop: &AtomicBool) -> Result<(), Br
         let commands = std::thread::Builder::new()
             .name("ros2-cmd-vel".into())
             .spawn_scoped(scope, move || {
-                give_up(drive(
-                    gateway,
-                    config,
-                    &config.cmd_vel,
-                    &twist_inbox,
-                    counters,
-                    halt,
-                ))
+                give_up(drive(gateway, config, &twist_inbox, counters, halt))
             })?;
         let services = std::thread::Builder::new()
             .name("ros2-services".into())
@@ -395,19 +388,19 @@ fn publish(
             monotonic_ns: monotonic_ns(),
             unix: unix_now(),
         };
+        let bridge = || counters.values();
         let outgoing = match states.next_timeout(Duration::from_millis(100)) {
             Ok(Some(state)) => {
+                // The newest of a burst: each message is made from the frames it holds.
+                let state = states.try_latest()?.unwrap_or(state);
                 last_state_ns = monotonic_ns();
                 last_status = status.latest(Duration::ZERO)?.or(last_status);
-                let bridge = counters.values();
                 messages.handle_state(&state, last_status.as_ref(), clocks(), &bridge)
             }
             // No state (the gateway stopped or hangs), or a signal interrupted the wait
             // (Ctrl-C sets `halt` on its own thread).
             Ok(None) | Err(ClientError::Wait(_)) => {
-                let robot = gateway.name();
-                let bridge = counters.values();
-                messages.handle_silence(robot, last_state_ns, clocks(), &bridge)
+                messages.handle_silence(gateway.name(), last_state_ns, clocks(), &bridge)
             }
             Err(error) => return Err(error.into()),
         };
@@ -425,12 +418,12 @@ fn publish(
 fn drive(
     gateway: &Robot,
     config: &Ros2Config,
-    topics: &[CmdVelTopic],
     inbox: &Receiver<(usize, zenoh::sample::Sample)>,
     counters: &Counters,
     halt: &dyn Fn() -> bool,
 ) -> Result<(), BridgeError> {
     let mut drivers = Vec::new();
+    let topics = &config.cmd_vel;
     for topic in topics {
         let name = config.resolve(&topic.topic);
         let client = config.cmd_vel_client(topic);

@@ -6,6 +6,7 @@ use std::time::Duration;
 use scout_interface::control::{Class, MAX_CLIENT_NAME};
 use serde::{Deserialize, Serialize};
 
+use super::publish::Topic;
 use super::rmw::Distro;
 use super::stream::Pauses;
 
@@ -234,17 +235,11 @@ impl Ros2Config {
 
     /// The topics the bridge publishes, resolved, with `/tf` only when it is on.
     pub fn published(&self) -> Vec<String> {
-        let topics = &self.topics;
-        let mut names = vec![
-            self.resolve(&topics.odom),
-            self.resolve(&topics.battery_state),
-            self.resolve(&topics.joint_states),
-            self.resolve(&topics.diagnostics),
-        ];
-        if self.publish_tf {
-            names.push(self.resolve(&topics.tf));
-        }
-        names
+        Topic::ALL
+            .iter()
+            .filter_map(|topic| topic.name(self))
+            .map(|name| self.resolve(name))
+            .collect()
     }
 
     /// Checks names and values, so that a mistake is reported at start and not as a silent
@@ -324,10 +319,10 @@ fn check_name(what: &'static str, name: &str, path: bool) -> Result<(), Ros2Conf
     if body.is_empty() {
         return bad("it is empty");
     }
+    if !path && body.contains('/') {
+        return bad("it may not contain `/`");
+    }
     for token in body.split('/') {
-        if !path && body.contains('/') {
-            return bad("it may not contain `/`");
-        }
         if token.is_empty() {
             return bad("it has an empty part (`//` or a trailing `/`)");
         }

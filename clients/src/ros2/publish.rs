@@ -111,6 +111,9 @@ pub struct Messages {
     last_diagnostics: Option<(u64, [u8; 3])>,
 }
 
+/// The bridge's own counters as diagnostic values, read when they are needed.
+pub type Counted<'a> = &'a dyn Fn() -> Vec<(String, String)>;
+
 /// One message to publish.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Outgoing {
@@ -130,14 +133,14 @@ impl Messages {
         }
     }
 
-    /// What to publish for a state (and the arbiter's latest status, if known); `bridge` is
-    /// what the bridge itself counted, for its diagnostics.
+    /// What to publish for a state (and the arbiter's latest status, if known); `bridge` gives
+    /// what the bridge itself counted, asked only when diagnostics go out.
     pub fn handle_state(
         &mut self,
         state: &StatePayload,
         status: Option<&StatusPayload>,
         clocks: Clocks,
-        bridge: &[(String, String)],
+        bridge: Counted<'_>,
     ) -> Vec<Outgoing> {
         let mut out = Vec::new();
         if let Some(at_ns) = fresh(state.motion.received, &mut self.last_motion) {
@@ -158,7 +161,7 @@ impl Messages {
         robot: &str,
         last_state_ns: u64,
         clocks: Clocks,
-        bridge: &[(String, String)],
+        bridge: Counted<'_>,
     ) -> Vec<Outgoing> {
         let silent = Duration::from_nanos(clocks.monotonic_ns.saturating_sub(last_state_ns));
         if silent < SILENT_AFTER {
@@ -302,7 +305,7 @@ impl Messages {
         state: &StatePayload,
         status: Option<&StatusPayload>,
         clocks: Clocks,
-        bridge: &[(String, String)],
+        bridge: Counted<'_>,
         out: &mut Vec<Outgoing>,
     ) {
         let statuses = diagnostic_statuses(&self.config.node, state, status, clocks.monotonic_ns);
@@ -316,7 +319,7 @@ impl Messages {
         statuses: [Status; 3],
         robot: &str,
         clocks: Clocks,
-        bridge: &[(String, String)],
+        bridge: Counted<'_>,
         out: &mut Vec<Outgoing>,
     ) {
         let levels = statuses.each_ref().map(|status| status.level);
@@ -342,7 +345,7 @@ impl Messages {
             name: format!("{}: ros2 bridge", self.config.node),
             message: "counters".into(),
             hardware_id: robot.to_owned(),
-            values: bridge.to_vec(),
+            values: bridge(),
         });
         out.push(Outgoing {
             topic: Topic::Diagnostics,
@@ -531,7 +534,8 @@ mod tests {
     #[test]
     fn each_frame_is_published_once_with_its_receive_time() {
         let mut messages = Messages::new(Ros2Config::default());
-        let first = messages.handle_state(&state(SECOND), None, clocks(SECOND + 2_000_000), &[]);
+        let first =
+            messages.handle_state(&state(SECOND), None, clocks(SECOND + 2_000_000), &Vec::new);
         assert_eq!(
             topics(&first),
             [
@@ -547,13 +551,14 @@ mod tests {
         assert_eq!(odom.i32(), Ok(1_700_000_001));
         assert_eq!(odom.u32(), Ok(0));
         // The same frames again: nothing new, and diagnostics only once a second.
-        let again = messages.handle_state(&state(SECOND), None, clocks(SECOND + 20_000_000), &[]);
+        let again =
+            messages.handle_state(&state(SECOND), None, clocks(SECOND + 20_000_000), &Vec::new);
         assert!(again.is_empty(), "{:?}", topics(&again));
         let later = messages.handle_state(
             &state(SECOND + 20_000_000),
             None,
             clocks(SECOND + 22_000_000),
-            &[],
+            &Vec::new,
         );
         assert_eq!(
             topics(&later),
@@ -565,7 +570,7 @@ mod tests {
             ]
         );
         assert_eq!(
-            topics(&messages.handle_state(&state(SECOND), None, clocks(3 * SECOND), &[])),
+            topics(&messages.handle_state(&state(SECOND), None, clocks(3 * SECOND), &Vec::new)),
             [Topic::Diagnostics]
         );
     }
@@ -577,12 +582,12 @@ mod tests {
             ..Default::default()
         };
         let mut messages = Messages::new(config);
-        let out = messages.handle_state(&state(SECOND), None, clocks(SECOND), &[]);
+        let out = messages.handle_state(&state(SECOND), None, clocks(SECOND), &Vec::new);
         assert!(!topics(&out).contains(&Topic::Tf));
         let mut estop = state(SECOND);
         estop.system.state = ChassisState::EStop.raw();
         // A change of level goes out at once.
-        let out = messages.handle_state(&estop, None, clocks(SECOND + 1), &[]);
+        let out = messages.handle_state(&estop, None, clocks(SECOND + 1), &Vec::new);
         assert_eq!(topics(&out), [Topic::Diagnostics]);
     }
 
@@ -616,10 +621,10 @@ mod tests {
         let mut messages = Messages::new(Ros2Config::default());
         assert!(
             messages
-                .handle_silence("r1", SECOND, clocks(SECOND + 500_000_000), &[])
+                .handle_silence("r1", SECOND, clocks(SECOND + 500_000_000), &Vec::new)
                 .is_empty()
         );
-        let out = messages.handle_silence("r1", SECOND, clocks(3 * SECOND), &[]);
+        let out = messages.handle_silence("r1", SECOND, clocks(3 * SECOND), &Vec::new);
         assert_eq!(topics(&out), [Topic::Diagnostics]);
         let text = String::from_utf8_lossy(&out[0].payload);
         assert!(
@@ -627,19 +632,20 @@ mod tests {
             "{text}"
         );
         // The gateway back: a change of level goes out at once.
-        let back = messages.handle_state(&state(3 * SECOND), None, clocks(3 * SECOND + 1), &[]);
+        let back =
+            messages.handle_state(&state(3 * SECOND), None, clocks(3 * SECOND + 1), &Vec::new);
         assert!(topics(&back).contains(&Topic::Diagnostics));
     }
 
     #[test]
     fn wheels_turn_through_the_gearbox() {
         let mut messages = Messages::new(Ros2Config::default());
-        messages.handle_state(&state(SECOND), None, clocks(SECOND), &[]);
+        messages.handle_state(&state(SECOND), None, clocks(SECOND), &Vec::new);
         messages.handle_state(
             &state(SECOND + 20_000_000),
             None,
             clocks(SECOND + 20_000_000),
-            &[],
+            &Vec::new,
         );
         // 3200 rpm / 32 = 100 rpm = 10.47 rad/s, for 20 ms.
         let expected = 100.0 * std::f64::consts::TAU / 60.0 * 0.02;
