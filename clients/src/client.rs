@@ -38,6 +38,9 @@ pub enum ClientError {
     /// A control port could not be created.
     #[error(transparent)]
     ControlPort(#[from] services::ControlPortError),
+    /// The stop endpoint's socket could not be made.
+    #[error(transparent)]
+    StopSocket(scout_interface::stop_socket::StopSocketError),
 }
 
 /// A connection to one robot's gateway.

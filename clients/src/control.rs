@@ -9,6 +9,7 @@ use scout_interface::control::{
     Request, StatusPayload,
 };
 use scout_interface::services::{self, ControlPort, Ipc, RequestError, Role, Way};
+use scout_interface::stop_socket::{Ask, StopClient, StopSocketError};
 use scout_protocol::FaultClear;
 
 use crate::client::{ClientError, Robot};
@@ -35,6 +36,18 @@ pub enum ControlError {
     /// Opening or reading the gateway's services failed.
     #[error(transparent)]
     Client(#[from] ClientError),
+    /// The stop endpoint failed (no gateway, no answer, a socket error).
+    #[error(transparent)]
+    Stop(StopSocketError),
+}
+
+impl From<StopSocketError> for ControlError {
+    fn from(error: StopSocketError) -> Self {
+        match error {
+            StopSocketError::NoAnswer { robot, timeout } => Self::NoAnswer { robot, timeout },
+            other => Self::Stop(other),
+        }
+    }
 }
 
 impl ControlError {
@@ -42,7 +55,7 @@ impl ControlError {
     pub fn rejection(&self) -> Option<RejectionKind> {
         match self {
             Self::Rejected(rejected) => rejected.kind,
-            Self::NoAnswer { .. } | Self::Request(_) | Self::Client(_) => None,
+            Self::NoAnswer { .. } | Self::Request(_) | Self::Client(_) | Self::Stop(_) => None,
         }
     }
 
@@ -51,7 +64,7 @@ impl ControlError {
     pub fn lost_control(&self) -> bool {
         match self {
             Self::Rejected(rejected) => rejected.lost_control(),
-            Self::NoAnswer { .. } | Self::Request(_) | Self::Client(_) => false,
+            Self::NoAnswer { .. } | Self::Request(_) | Self::Client(_) | Self::Stop(_) => false,
         }
     }
 }
@@ -70,28 +83,59 @@ impl From<RequestError> for ControlError {
 pub type Lights = LightsSetting;
 
 /// A named client of the arbiter. With a class it may take control and drive; any controller
-/// may stop (through the stop service, which a full control service cannot block).
+/// may stop and release (through the stop endpoint, which needs no shared memory and no slot).
 #[derive(Debug)]
 pub struct Controller {
     class: Option<Class>,
     port: ControlPort,
-    stop: ControlPort,
+    safety: Stopper,
     lease: Option<u64>,
 }
 
-/// A client that only stops: a safety monitor, an e-stop button. Its port is on the stop
-/// service, apart from the control service's slots.
+/// A client that only stops and releases: a safety monitor, an e-stop button. It talks to the
+/// gateway's stop endpoint, a Unix datagram socket beside iceoryx2: a stop needs no shared
+/// memory (a full `/dev/shm` cannot keep it from latching), no client slot and no set-up
+/// beyond this value. Make it ahead of time; a stop then costs one datagram each way.
 #[derive(Debug)]
 pub struct Stopper {
-    port: ControlPort,
+    client: StopClient,
 }
 
 impl Stopper {
-    /// Latches a stop owned by this client's name: zero speed at once, until released.
+    /// A stopper named `name` (1 to 32 bytes; the owner of its stops) for robot `robot`. It
+    /// opens no iceoryx2 service: it works wherever the gateway's stop socket can be reached.
+    pub fn new(robot: &str, name: &str) -> Result<Self, ClientError> {
+        services::check_robot_name(robot)?;
+        if name.is_empty() || name.len() > MAX_CLIENT_NAME {
+            return Err(ClientError::BadClientName(name.to_owned()));
+        }
+        let client = StopClient::new(robot, name).map_err(ClientError::StopSocket)?;
+        Ok(Self { client })
+    }
+
+    /// Latches a stop owned by this client's name: zero speed at once, until released. The
+    /// answer's `stop` is its id.
     pub fn stop(&mut self, reason: &str) -> Result<Accepted, ControlError> {
-        Ok(self.port.request(&Request::Stop {
+        self.ask(Ask::Stop {
             reason: reason.to_owned(),
-        })?)
+        })
+    }
+
+    /// Releases the stops `target` names (this client's own; another owner's or all need the
+    /// operator role) that latched no later than stop `through`: the newest stop id its sender
+    /// saw (the status' `newest_stop`, or the id a stop answered). A stop latched after that
+    /// survives. Nothing moves until clients take control again (and autonomy is resumed).
+    pub fn release(
+        &mut self,
+        target: ReleaseTarget,
+        through: u64,
+    ) -> Result<Accepted, ControlError> {
+        self.ask(Ask::Release { target, through })
+    }
+
+    fn ask(&mut self, ask: Ask) -> Result<Accepted, ControlError> {
+        let reply = self.client.request(ask, ANSWER_TIMEOUT)?;
+        reply.answer.map_err(ControlError::Rejected)
     }
 }
 
@@ -105,19 +149,14 @@ impl Robot {
         Ok(Controller {
             class,
             port: ControlPort::open(self.node(), self.name(), Way::Control, name)?,
-            stop: ControlPort::open(self.node(), self.name(), Way::Stop, name)?,
+            safety: Stopper::new(self.name(), name)?,
             lease: None,
         })
     }
 
-    /// A client named `name` that only stops.
+    /// A client named `name` that only stops and releases ([`Stopper::new`]).
     pub fn stopper(&self, name: &str) -> Result<Stopper, ClientError> {
-        if name.is_empty() || name.len() > MAX_CLIENT_NAME {
-            return Err(ClientError::BadClientName(name.to_owned()));
-        }
-        Ok(Stopper {
-            port: ControlPort::open(self.node(), self.name(), Way::Stop, name)?,
-        })
+        Stopper::new(self.name(), name)
     }
 
     /// Reads the arbiter's status.
@@ -142,16 +181,17 @@ impl Controller {
         self.lease
     }
 
-    /// Sends one request and waits for its answer.
+    /// Sends one request and waits for its answer: stops and releases through the stop
+    /// endpoint, the rest through the control service.
     pub fn request(&mut self, request: &Request) -> Result<Accepted, ControlError> {
         let answer: Result<Accepted, ControlError> = match request {
-            Request::Stop { .. } => self.stop.request(request),
-            _ => self.port.request(request),
-        }
-        .map_err(ControlError::from);
+            Request::Stop { reason } => self.safety.stop(reason),
+            Request::Release { target, through } => self.safety.release(target.clone(), *through),
+            _ => self.port.request(request).map_err(ControlError::from),
+        };
         match (&answer, request) {
             (Ok(accepted), Request::TakeControl { .. }) => self.lease = accepted.lease,
-            (Ok(_), Request::Relinquish | Request::Release { .. }) => self.lease = None,
+            (Ok(_), Request::Relinquish) => self.lease = None,
             (Err(error), _) if error.lost_control() => self.lease = None,
             _ => {}
         }
@@ -207,10 +247,14 @@ impl Controller {
     }
 
     /// Releases the stops `target` names (this controller's own; another owner's or all need
-    /// the operator role) and gives up this controller's control. Nothing moves until clients
-    /// take control again (and autonomy is resumed).
-    pub fn release(&mut self, target: ReleaseTarget) -> Result<Accepted, ControlError> {
-        self.request(&Request::Release { target })
+    /// the operator role) that latched no later than stop `through` ([`Stopper::release`]).
+    /// Nothing moves until clients take control again (and autonomy is resumed).
+    pub fn release(
+        &mut self,
+        target: ReleaseTarget,
+        through: u64,
+    ) -> Result<Accepted, ControlError> {
+        self.request(&Request::Release { target, through })
     }
 
     /// Gives up this controller's control: the output ramps to zero. Leaves the stop alone (a

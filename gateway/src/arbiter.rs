@@ -38,6 +38,10 @@ pub const HISTORY: usize = scout_interface::control::STATUS_EVENTS;
 pub const GATEWAY: &str = "gateway";
 /// The owner of merged stops once [`MAX_STOPS`] are kept.
 pub const OTHERS: &str = "(others)";
+/// How far a command's stamp may lie after its arrival: the driver reads the clock once per
+/// iteration, so a request sent while an iteration runs carries a stamp after that reading;
+/// an iteration that runs longer than a command period is a stall.
+pub const FUTURE_TOLERANCE: Duration = Duration::from_millis(20);
 
 /// The most clients the arbiter tracks at once.
 pub use scout_interface::control::MAX_CLIENTS as MAX_SOURCES;
@@ -90,9 +94,35 @@ pub struct ArbiterConfig {
     pub request_rate_hz: f64,
     /// Requests one client may send in a burst above the sustained rate.
     pub request_burst: u32,
-    /// Programs whose clients have the operator role (may release others' stops and all stops),
-    /// by the file name of their executable: the `scout` tool, a person at a terminal.
-    pub operator_programs: Vec<String>,
+    /// Who has the operator role (may release others' stops and all stops): see
+    /// [`OperatorConfig`].
+    pub operators: OperatorConfig,
+}
+
+/// Who has the operator role, by the operating system's identity of the requesting process,
+/// never by a name it chose: its executable is one of `programs` (the same file, by device and
+/// inode: a copy elsewhere is not), or its user is one of `uids`, or one of its groups is in
+/// `gids`.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct OperatorConfig {
+    /// Executables whose processes are operators, as paths; a relative path is taken beside
+    /// the gateway's own executable (default `["scout"]`: the `scout` tool installed with it).
+    pub programs: Vec<String>,
+    /// User ids whose processes are operators (real or effective).
+    pub uids: Vec<u32>,
+    /// Group ids whose members' processes are operators (primary or supplementary).
+    pub gids: Vec<u32>,
+}
+
+impl Default for OperatorConfig {
+    fn default() -> Self {
+        Self {
+            programs: vec!["scout".into()],
+            uids: Vec::new(),
+            gids: Vec::new(),
+        }
+    }
 }
 
 impl Default for ArbiterConfig {
@@ -117,7 +147,7 @@ impl Default for ArbiterConfig {
             },
             request_rate_hz: 500.0,
             request_burst: 50,
-            operator_programs: vec!["scout".into()],
+            operators: OperatorConfig::default(),
         }
     }
 }
@@ -185,8 +215,11 @@ pub struct ClientKey {
 pub struct Origin {
     /// Who.
     pub key: ClientKey,
-    /// May release others' stops and all stops.
+    /// May release others' stops and all stops (from the process's identity).
     pub operator: bool,
+    /// The gateway's own zenoh bridge: its stops and releases name the remote peer they are
+    /// sent for.
+    pub bridge: bool,
 }
 
 /// The motion command for one tick.
@@ -215,6 +248,9 @@ impl Output {
 /// A stop that holds the robot.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Stop {
+    /// Its id: stops are numbered from 1 as they latch; a stop latched again (same owner and
+    /// cause) takes a new id, so a release decided before it does not clear it.
+    pub id: u64,
     /// A client's name, or [`GATEWAY`] for a gap.
     pub owner: String,
     /// Why it holds.
@@ -223,14 +259,32 @@ pub struct Stop {
     pub reason: String,
     /// When it latched.
     pub at: Duration,
+    /// Latched by an operator: only an operator releases it, whatever name another client
+    /// takes.
+    pub by_operator: bool,
     /// For a heartbeat stop: the source's port, while the cause is its silence.
     source: Option<u128>,
 }
 
 impl std::fmt::Display for Stop {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{} ({}): {}", self.owner, self.cause, self.reason)
+        write!(
+            f,
+            "#{} {} ({}): {}",
+            self.id, self.owner, self.cause, self.reason
+        )
     }
+}
+
+/// A stop to latch.
+#[derive(Debug, Clone, Copy)]
+struct Latch<'a> {
+    owner: &'a str,
+    cause: StopCause,
+    reason: &'a str,
+    /// For a heartbeat stop: the source's port, while the cause is its silence.
+    source: Option<u128>,
+    by_operator: bool,
 }
 
 /// A command a client sent under its lease.
@@ -320,7 +374,7 @@ pub struct Arbiter {
     lights: Option<LightsSetting>,
     rejections: [u64; REJECTION_COUNTERS],
     urgent_stop: bool,
-    last_stop: Option<Duration>,
+    newest_stop: u64,
     next_lease: u64,
     history: VecDeque<(Duration, String)>,
 }
@@ -344,7 +398,7 @@ impl Arbiter {
             lights: None,
             rejections: [0; REJECTION_COUNTERS],
             urgent_stop: false,
-            last_stop: None,
+            newest_stop: 0,
             next_lease: (u64::from(instance) << 32) | 1,
             history: VecDeque::with_capacity(HISTORY),
         }
@@ -353,6 +407,11 @@ impl Arbiter {
     /// The stops that hold the robot, oldest first.
     pub fn stops(&self) -> &[Stop] {
         &self.stops
+    }
+
+    /// The id of the newest stop latched so far (0: none yet).
+    pub fn newest_stop(&self) -> u64 {
+        self.newest_stop
     }
 
     /// Whether a stop's cause persists (it cannot be released yet).
@@ -465,6 +524,8 @@ impl Arbiter {
         let answer = match request {
             // Never refused, never limited, never needs a client slot.
             Request::Stop { reason } => self.client_stop(now, origin, &reason),
+            // Never needs a client slot either: with every slot taken, stops can still go.
+            Request::Release { target, through } => self.release(now, origin, &target, through),
             other => self.decide(now, origin, other, sent),
         };
         if let Err(rejection) = &answer {
@@ -491,6 +552,7 @@ impl Arbiter {
         let accepted = Ok(Accepted::default());
         match request {
             Request::Stop { reason } => self.client_stop(now, origin, &reason),
+            Request::Release { target, through } => self.release(now, origin, &target, through),
             Request::TakeControl { class } => self.take_control(now, index, class),
             Request::Drive {
                 lease,
@@ -498,7 +560,6 @@ impl Arbiter {
                 angular,
                 ttl,
             } => self.drive(now, index, lease, (linear, angular), ttl, sent),
-            Request::Release { target } => self.release(now, index, origin, &target),
             Request::Relinquish => {
                 self.end_lease(now, index, "relinquished");
                 accepted
@@ -563,10 +624,22 @@ impl Arbiter {
         }
     }
 
-    /// A client's stop, owned by its name: never refused.
+    /// A client's stop, owned by its name: never refused. The answer carries its id.
     fn client_stop(&mut self, now: Duration, origin: &Origin, reason: &str) -> Answer {
-        self.latch(now, &origin.key.name, StopCause::Client, reason, None);
-        Ok(Accepted::default())
+        let id = self.latch(
+            now,
+            Latch {
+                owner: &origin.key.name,
+                cause: StopCause::Client,
+                reason,
+                source: None,
+                by_operator: origin.operator,
+            },
+        );
+        Ok(Accepted {
+            stop: Some(id),
+            ..Accepted::default()
+        })
     }
 
     /// The rejection that lists what holds the robot.
@@ -616,8 +689,8 @@ impl Arbiter {
         }
         if let Some(lease) = self.sources[index].lease.filter(|l| l.class == class) {
             return Ok(Accepted {
-                clamped: false,
                 lease: Some(lease.id),
+                ..Accepted::default()
             });
         }
         let id = self.next_lease;
@@ -639,8 +712,8 @@ impl Arbiter {
             self.disarm_autonomy(now, &format!("teleop {name} took over"));
         }
         Ok(Accepted {
-            clamped: false,
             lease: Some(id),
+            ..Accepted::default()
         })
     }
 
@@ -669,7 +742,11 @@ impl Arbiter {
         let life = ttl.map_or(self.config.max_age(class), |ttl| {
             ttl.min(self.config.max_age(class))
         });
-        // A command lives from when it was sent, not from when it was read.
+        // A command lives from when it was sent, not from when it was read; a stamp after its
+        // arrival is another clock's (or a lie), and would make the command live longer.
+        if sent > now + FUTURE_TOLERANCE {
+            return Err(Rejection::Future { ahead: sent - now });
+        }
         let sent = sent.min(now);
         let age = now - sent;
         if age > life {
@@ -693,23 +770,24 @@ impl Arbiter {
         }
         Ok(Accepted {
             clamped,
-            lease: None,
+            ..Accepted::default()
         })
     }
 
+    /// Releases the stops `target` names that latched no later than `through` (the newest
+    /// stop the sender saw). Needs no client slot and touches no lease: every lease ended when
+    /// the stops latched. With nothing latched it does nothing.
     fn release(
         &mut self,
         now: Duration,
-        index: usize,
         origin: &Origin,
         target: &ReleaseTarget,
+        through: u64,
     ) -> Answer {
-        let name = &origin.key.name;
-        if self.last_stop == Some(now) {
-            return Err(Rejection::NotAllowed {
-                why: "a stop arrived at the same instant: the stop wins".into(),
-            });
+        if self.stops.is_empty() {
+            return Ok(Accepted::default());
         }
+        let name = &origin.key.name;
         // The gateway's and merged stops belong to no client: only an operator releases them.
         let reserved = name == GATEWAY || name == OTHERS;
         let own = !reserved
@@ -726,22 +804,36 @@ impl Arbiter {
                 ),
             });
         }
-        let named = |stop: &Stop| match target {
-            ReleaseTarget::Own => stop.owner == *name,
-            ReleaseTarget::Owner(owner) => stop.owner == *owner,
+        let owner = match target {
+            ReleaseTarget::Owner(owner) => owner.as_str(),
+            ReleaseTarget::Own | ReleaseTarget::All => name.as_str(),
+        };
+        // Whose stops the target names, at any time.
+        let targeted = |stop: &Stop| match target {
+            ReleaseTarget::Own | ReleaseTarget::Owner(_) => {
+                stop.owner == owner && (origin.operator || !stop.by_operator)
+            }
             ReleaseTarget::All => true,
         };
-        if !self.stops.is_empty() && !self.stops.iter().any(named) {
-            return Err(Rejection::NotAllowed {
-                why: format!(
-                    "no stop of {} to release; held by: {}",
-                    match target {
-                        ReleaseTarget::Owner(owner) => owner.as_str(),
-                        ReleaseTarget::Own | ReleaseTarget::All => name.as_str(),
-                    },
+        let named = |stop: &Stop| targeted(stop) && stop.id <= through;
+        if !self.stops.iter().any(named) {
+            let why = if let Some(newer) = self.stops.iter().find(|stop| targeted(stop)) {
+                format!(
+                    "stop #{} ({newer}) latched after the status this release was decided on \
+                     (newest seen: #{through}): look again, then release",
+                    newer.id
+                )
+            } else if self.stops.iter().any(|stop| stop.owner == owner) {
+                format!(
+                    "the stops of {owner} were latched by an operator: only an operator releases them"
+                )
+            } else {
+                format!(
+                    "no stop of {owner} to release; held by: {}",
                     self.describe(self.stops.iter())
-                ),
-            });
+                )
+            };
+            return Err(Rejection::NotAllowed { why });
         }
         let persisting: Vec<&Stop> = self
             .stops
@@ -760,9 +852,8 @@ impl Arbiter {
             std::mem::take(&mut self.stops).into_iter().partition(named);
         self.stops = kept;
         for stop in &released {
-            self.audit(now, format!("stop released by {name}: {stop}"));
+            self.audit(now, format!("stop #{} released by {name}: {stop}", stop.id));
         }
-        self.end_lease(now, index, "released");
         self.disarm_autonomy(now, "a release");
         Ok(Accepted::default())
     }
@@ -799,56 +890,55 @@ impl Arbiter {
         }
     }
 
-    /// Latches a stop (owner, cause, reason): zero at once, every lease revoked, autonomy
-    /// disarmed. The same owner and cause again only refreshes the reason.
-    fn latch(
-        &mut self,
-        now: Duration,
-        owner: &str,
-        cause: StopCause,
-        reason: &str,
-        source: Option<u128>,
-    ) {
-        self.last_stop = Some(now);
+    /// Latches a stop: zero at once, every lease revoked, autonomy disarmed. The same owner and
+    /// cause again refreshes the reason and takes a new id. Returns the stop's id.
+    fn latch(&mut self, now: Duration, latch: Latch<'_>) -> u64 {
+        self.newest_stop += 1;
+        let id = self.newest_stop;
         self.urgent_stop = true;
         self.output = Output::STOP;
-        let known = self
-            .stops
-            .iter_mut()
-            .find(|stop| stop.owner == owner && stop.cause == cause);
+        let Latch {
+            owner,
+            cause,
+            reason,
+            source,
+            by_operator,
+        } = latch;
         let why = format!("{owner} ({cause}): {reason}");
-        match known {
-            Some(stop) => {
+        // Past MAX_STOPS, a new owner's stop merges into one entry.
+        let known = |stops: &[Stop], owner: &str| {
+            stops
+                .iter()
+                .position(|stop| stop.owner == owner && stop.cause == cause)
+        };
+        let owner = match known(&self.stops, owner) {
+            None if self.stops.len() >= MAX_STOPS => OTHERS,
+            _ => owner,
+        };
+        match known(&self.stops, owner) {
+            Some(index) => {
+                let stop = &mut self.stops[index];
+                stop.id = id;
                 stop.reason = reason.to_owned();
                 stop.source = source;
+                stop.by_operator |= by_operator;
             }
             None => {
-                let owner = if self.stops.len() >= MAX_STOPS {
-                    OTHERS
-                } else {
-                    owner
-                };
-                if let Some(merged) = self
-                    .stops
-                    .iter_mut()
-                    .find(|s| s.owner == owner && s.cause == cause)
-                {
-                    merged.reason = reason.to_owned();
-                    merged.source = source;
-                } else {
-                    self.stops.push(Stop {
-                        owner: owner.to_owned(),
-                        cause,
-                        reason: reason.to_owned(),
-                        at: now,
-                        source,
-                    });
-                }
-                self.audit(now, format!("STOP latched by {why}"));
+                self.stops.push(Stop {
+                    id,
+                    owner: owner.to_owned(),
+                    cause,
+                    reason: reason.to_owned(),
+                    at: now,
+                    by_operator,
+                    source,
+                });
+                self.audit(now, format!("STOP #{id} latched by {why}"));
             }
         }
         self.revoke(now, None, &format!("stop by {why}"));
         self.disarm_autonomy(now, "the stop");
+        id
     }
 
     /// A gap: the gateway lost control or knowledge of the chassis. Latches a stop owned by the
@@ -858,7 +948,16 @@ impl Arbiter {
         if present && !self.present.contains(&cause) {
             self.present.push(cause);
         }
-        self.latch(now, GATEWAY, cause, detail, None);
+        self.latch(
+            now,
+            Latch {
+                owner: GATEWAY,
+                cause,
+                reason: detail,
+                source: None,
+                by_operator: false,
+            },
+        );
     }
 
     /// A gap's cause is gone: its stop can be released (it is not released by itself).
@@ -953,10 +1052,13 @@ impl Arbiter {
             if source.heartbeat.is_some() {
                 self.latch(
                     now,
-                    &source.key.name,
-                    StopCause::Heartbeat,
-                    "heartbeat source died",
-                    None,
+                    Latch {
+                        owner: &source.key.name,
+                        cause: StopCause::Heartbeat,
+                        reason: "heartbeat source died",
+                        source: None,
+                        by_operator: false,
+                    },
                 );
             }
         }
@@ -990,7 +1092,16 @@ impl Arbiter {
         }
         for (name, port, period) in missed {
             let reason = format!("heartbeat missed (period {} ms)", period.as_millis());
-            self.latch(now, &name, StopCause::Heartbeat, &reason, Some(port));
+            self.latch(
+                now,
+                Latch {
+                    owner: &name,
+                    cause: StopCause::Heartbeat,
+                    reason: &reason,
+                    source: Some(port),
+                    by_operator: false,
+                },
+            );
         }
     }
 

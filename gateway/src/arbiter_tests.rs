@@ -22,6 +22,7 @@ fn client(name: &str, port: u128) -> Origin {
             name: name.into(),
         },
         operator: false,
+        bridge: false,
     }
 }
 
@@ -94,8 +95,10 @@ impl Bench {
         self.release_at_once(who, target)
     }
 
+    /// A release decided on what the status shows now.
     fn release_at_once(&mut self, who: &Origin, target: ReleaseTarget) -> Answer {
-        self.request(who, Request::Release { target })
+        let through = self.arbiter.newest_stop();
+        self.request(who, Request::Release { target, through })
     }
 
     fn tick(&mut self) -> Output {
@@ -373,26 +376,151 @@ fn a_release_is_refused_while_the_cause_persists() {
 }
 
 #[test]
-fn a_stop_and_a_release_at_the_same_instant_the_stop_wins() {
+fn a_release_clears_only_the_stops_its_sender_saw() {
     let mut bench = Bench::new();
     let officer = client("officer", 1);
+    let op = operator("op", 3);
     bench.stop(&officer, "first");
-    bench.now += ms(5);
-    // The release first, then a stop, in one batch: the stop holds.
+    // The operator reads the status (the newest stop is the officer's), then a guard stops
+    // 0.2 ms before the operator's release arrives: the guard's stop survives.
+    let seen = bench.arbiter.newest_stop();
+    bench.now += Duration::from_micros(200);
+    bench.stop(&client("guard", 2), "person ahead");
+    bench.now += Duration::from_micros(200);
     bench
-        .release_at_once(&officer, ReleaseTarget::Own)
-        .expect("released");
+        .request(
+            &op,
+            Request::Release {
+                target: ReleaseTarget::All,
+                through: seen,
+            },
+        )
+        .expect("what it saw is released");
+    let left: Vec<&str> = bench
+        .arbiter
+        .stops()
+        .iter()
+        .map(|s| s.owner.as_str())
+        .collect();
+    assert_eq!(left, ["guard"]);
+    // The same for one owner: the officer stops again after the release was decided.
+    let seen = bench.arbiter.newest_stop();
     bench.stop(&officer, "again");
-    assert_eq!(bench.arbiter.stops().len(), 1);
-    // A stop, then a release, in one batch: the release is refused.
+    let refused = bench
+        .request(
+            &op,
+            Request::Release {
+                target: ReleaseTarget::Owner("officer".into()),
+                through: seen,
+            },
+        )
+        .expect_err("the officer's stop is newer than what the operator saw");
+    assert!(refused.to_string().contains("look again"), "{refused}");
+    assert_eq!(bench.arbiter.stops().len(), 2);
+    // A stop latched again by its owner takes a new id: a release decided before it leaves it.
     bench.now += ms(5);
-    bench.stop(&client("guard", 2), "third");
+    let seen = bench.arbiter.newest_stop();
+    bench.stop(&client("guard", 2), "still there");
     assert!(
         bench
-            .release_at_once(&operator("op", 3), ReleaseTarget::All)
-            .is_err()
+            .request(
+                &officer,
+                Request::Release {
+                    target: ReleaseTarget::Own,
+                    through: seen,
+                }
+            )
+            .is_ok()
     );
-    assert_eq!(bench.arbiter.stops().len(), 2);
+    let left: Vec<&str> = bench
+        .arbiter
+        .stops()
+        .iter()
+        .map(|s| s.owner.as_str())
+        .collect();
+    assert_eq!(left, ["guard"]);
+    let refreshed = bench
+        .request(
+            &op,
+            Request::Release {
+                target: ReleaseTarget::Owner("guard".into()),
+                through: seen,
+            },
+        )
+        .expect_err("refreshed after the decision");
+    assert_eq!(refreshed.kind(), RejectionKind::NotAllowed);
+}
+
+#[test]
+fn a_release_with_nothing_latched_changes_nothing() {
+    let mut bench = Bench::new();
+    let op = operator("op", 3);
+    bench.request(&op, Request::Resume).expect("armed");
+    bench
+        .release(&op, ReleaseTarget::All)
+        .expect("nothing to do");
+    assert!(bench.arbiter.autonomy_armed(), "no release, no disarm");
+}
+
+#[test]
+fn an_operators_stop_is_released_only_by_an_operator_whatever_the_name() {
+    let mut bench = Bench::new();
+    bench.stop(&operator("operator", 3), "scout estop");
+    let impostor = client("operator", 4);
+    let refused = bench
+        .release(&impostor, ReleaseTarget::Own)
+        .expect_err("a library client named operator");
+    assert!(
+        refused.to_string().contains("latched by an operator"),
+        "{refused}"
+    );
+    bench
+        .release(&impostor, ReleaseTarget::Owner("operator".into()))
+        .expect_err("by owner either");
+    assert_eq!(bench.arbiter.stops().len(), 1);
+    bench
+        .release(
+            &operator("someone", 5),
+            ReleaseTarget::Owner("operator".into()),
+        )
+        .expect("another operator may");
+}
+
+#[test]
+fn a_command_stamped_in_the_future_is_refused_and_counted() {
+    let mut bench = Bench::new();
+    let joy = client("joy", 1);
+    let lease = bench.take(&joy, Class::Teleop);
+    let drive = Request::Drive {
+        lease,
+        linear: 0.5,
+        angular: 0.0,
+        ttl: None,
+    };
+    let ahead = bench.now + Duration::from_secs(10);
+    let refused = bench
+        .arbiter
+        .handle_request(bench.now, &joy, drive.clone(), ahead)
+        .expect_err("ten seconds ahead");
+    assert_eq!(refused.kind(), RejectionKind::Future);
+    assert!(
+        refused.to_string().contains("10000 ms after its arrival"),
+        "{refused}"
+    );
+    assert_eq!(
+        bench.arbiter.rejections()[usize::from(RejectionKind::Future.raw())],
+        1
+    );
+    // Within the tolerance (a request sent while the iteration ran): taken as sent now.
+    let slightly = bench.now + FUTURE_TOLERANCE;
+    bench
+        .arbiter
+        .handle_request(bench.now, &joy, drive, slightly)
+        .expect("within the tolerance");
+    bench.tick();
+    // It lives from now, not from its stamp: it expires within its life.
+    let output = bench.idle(ms(500));
+    assert_eq!(output.linear, 0.0, "{output:?}");
 }
 
 #[test]
@@ -739,4 +867,60 @@ fn autonomy_cannot_wait_behind_a_teleop_holder() {
         ),
         Some(RejectionKind::Held)
     );
+}
+
+/// One act of the release property: a stop by client `who` (of four names, two of them taken
+/// by both an operator and a non-operator), or a release by `who` with a view `lag` stops old.
+#[derive(Debug, Clone)]
+enum Act {
+    Stop(usize),
+    Release(usize, u8, u64),
+}
+
+fn any_act() -> impl Strategy<Value = Act> {
+    prop_oneof![
+        (0usize..6).prop_map(Act::Stop),
+        (0usize..6, 0u8..3, 0u64..4).prop_map(|(who, target, lag)| Act::Release(who, target, lag)),
+    ]
+}
+
+proptest! {
+    /// Whatever names clients take and whenever releases arrive: a release never clears a stop
+    /// latched after the view it was decided on, and a non-operator never clears a stop an
+    /// operator latched, nor anyone else's.
+    #[test]
+    fn releases_clear_only_what_their_sender_saw_and_may_release(acts in prop::collection::vec(any_act(), 1..60)) {
+        let mut bench = Bench::new();
+        // Operators and non-operators under the same names ("operator", "guard").
+        let who = [
+            operator("operator", 1), client("operator", 2),
+            operator("guard", 3), client("guard", 4),
+            client("planner", 5), client("gateway", 6),
+        ];
+        for act in acts {
+            bench.now += ms(1);
+            match act {
+                Act::Stop(w) => bench.stop(&who[w], "p"),
+                Act::Release(w, target, lag) => {
+                    let origin = &who[w];
+                    let target = match target {
+                        0 => ReleaseTarget::Own,
+                        1 => ReleaseTarget::Owner("operator".into()),
+                        _ => ReleaseTarget::All,
+                    };
+                    let through = bench.arbiter.newest_stop().saturating_sub(lag);
+                    let before: Vec<Stop> = bench.arbiter.stops().to_vec();
+                    let _ = bench.request(origin, Request::Release { target, through });
+                    let after = bench.arbiter.stops();
+                    for stop in before.iter().filter(|s| !after.contains(s)) {
+                        prop_assert!(stop.id <= through, "released #{} seen through #{}", stop.id, through);
+                        if !origin.operator {
+                            prop_assert!(!stop.by_operator, "a non-operator released an operator's stop");
+                            prop_assert_eq!(&stop.owner, &origin.key.name, "a non-operator released another's stop");
+                        }
+                    }
+                }
+            }
+        }
+    }
 }

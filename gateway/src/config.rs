@@ -81,6 +81,10 @@ pub struct SafetyConfig {
     pub runaway_time_ms: u64,
     /// The braking the chassis manages at least after a command drops, m/s².
     pub runaway_braking: f64,
+    /// How much faster than commanded (beyond braking) the chassis may turn, rad/s.
+    pub runaway_angular_tolerance: f64,
+    /// The angular braking the chassis manages at least after a command drops, rad/s².
+    pub runaway_angular_braking: f64,
 }
 
 impl Default for SafetyConfig {
@@ -89,6 +93,8 @@ impl Default for SafetyConfig {
             runaway_tolerance: 0.3,
             runaway_time_ms: 500,
             runaway_braking: 0.5,
+            runaway_angular_tolerance: 0.15,
+            runaway_angular_braking: 0.5,
         }
     }
 }
@@ -174,14 +180,20 @@ impl GatewayConfig {
         }
         self.arbiter.validate().map_err(ConfigError::Invalid)?;
         let safety = &self.safety;
-        if !(safety.runaway_tolerance.is_finite()
-            && safety.runaway_tolerance > 0.0
-            && safety.runaway_braking.is_finite()
-            && safety.runaway_braking > 0.0
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        if !([
+            safety.runaway_tolerance,
+            safety.runaway_braking,
+            safety.runaway_angular_tolerance,
+            safety.runaway_angular_braking,
+        ]
+        .into_iter()
+        .all(positive)
             && safety.runaway_time_ms > 0)
         {
             return Err(ConfigError::Invalid(
-                "safety.runaway_tolerance, runaway_time_ms and runaway_braking must be positive"
+                "safety.runaway_tolerance, runaway_braking, runaway_angular_tolerance, \
+                 runaway_angular_braking and runaway_time_ms must be positive"
                     .into(),
             ));
         }

@@ -14,8 +14,10 @@ use scout_interface::control::{
     ControlRequest, ControlResponse, EventPayload, LightsControl, MAX_STATUS_STOPS, Rejection,
     Request, RequestKind, SourcePayload, StatusPayload, StopCause, StopPayload,
 };
+use scout_interface::remote::REMOTE_PREFIX;
 use scout_interface::services::Way;
 use scout_interface::state::{LinkState, StatePayload};
+use scout_interface::stop_socket;
 use scout_interface::{FixedText, Transport};
 use scout_protocol::link::RxEvent;
 use scout_protocol::sequence::RollingCounter;
@@ -26,7 +28,7 @@ use scout_protocol::{
 };
 use tracing::{debug, info, warn};
 
-use crate::arbiter::{Arbiter, LightsSetting, Origin, Output};
+use crate::arbiter::{Accepted, Answer, Arbiter, LightsSetting, Origin, Output};
 use crate::config::{GatewayConfig, SafetyConfig};
 use crate::state::{Publish, StateTracker};
 
@@ -41,8 +43,17 @@ pub const STATUS_HEARTBEAT: Duration = Duration::from_secs(1);
 pub const FIRST_BACKOFF: Duration = Duration::from_millis(50);
 
 /// The chassis stops after this long without a valid motion command: feedback silent for
-/// longer, or a tick later than this, is a gap.
+/// longer is a gap.
 pub const CHASSIS_TIMEOUT: Duration = Duration::from_millis(500);
+
+/// The longest time between two motion commands written to the port before the gateway
+/// assumes the chassis may have timed out, and latches an `overrun` stop. The chassis counts
+/// its 500 ms from the last frame it *received*; 100 ms of margin covers what lies between our
+/// write and its count: the adapter's and kernel's queues (an slcan adapter's USB frames, a
+/// CAN qdisc), the frame's time on the wire, and the chassis checking its timeout on its own
+/// control cycle, whose phase we do not know. A stall shorter than this resumes; a longer one
+/// stops the robot until a release and a new take.
+pub const WIRE_GAP_LIMIT: Duration = Duration::from_millis(400);
 
 /// How the previous gateway of this robot ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -123,16 +134,41 @@ pub struct Core {
     last_lateness: Duration,
     safety: SafetyConfig,
     runaway: Runaway,
+    /// When the last motion command was handed to the open port.
+    last_motion_written: Option<Duration>,
 }
 
-/// Watching the chassis move faster than commanded.
+/// Watching the chassis move or turn faster than commanded.
 #[derive(Debug, Clone, Copy, Default)]
 struct Runaway {
-    /// The fastest the chassis may still be going, braking since the command dropped, m/s.
-    envelope: f64,
-    /// When the feedback left the envelope.
+    linear: Envelope,
+    angular: Envelope,
+    /// When the feedback left an envelope.
     since: Option<Duration>,
     last: Option<Duration>,
+}
+
+/// How fast one axis may still be going, braking since its command dropped.
+#[derive(Debug, Clone, Copy, Default)]
+struct Envelope {
+    limit: f64,
+}
+
+impl Envelope {
+    /// Follows the command for `dt` s of braking at `braking`; whether `actual` is outside by
+    /// more than `tolerance`, or goes the wrong way.
+    fn outside(
+        &mut self,
+        command: f64,
+        actual: f64,
+        braking: f64,
+        tolerance: f64,
+        dt: f64,
+    ) -> bool {
+        self.limit = command.abs().max(self.limit - braking * dt);
+        actual.abs() > self.limit + tolerance
+            || (actual * command < 0.0 && actual.abs() > tolerance)
+    }
 }
 
 impl Core {
@@ -184,6 +220,7 @@ impl Core {
             last_lateness: Duration::ZERO,
             safety: config.safety.clone(),
             runaway: Runaway::default(),
+            last_motion_written: None,
         }
     }
 
@@ -245,9 +282,9 @@ impl Core {
         );
     }
 
-    /// The chassis moving faster than commanded (beyond what braking explains), or the wrong
-    /// way, for longer than the configured time, is a runaway.
-    fn observe_motion(&mut self, now: Duration, linear: f64) {
+    /// The chassis moving or turning faster than commanded (beyond what braking explains), or
+    /// the wrong way, for longer than the configured time, is a runaway.
+    fn observe_motion(&mut self, now: Duration, linear: f64, angular: f64) {
         let quiet = [
             StopCause::ChassisEstop,
             StopCause::RcOverride,
@@ -255,26 +292,37 @@ impl Core {
         ]
         .iter()
         .any(|cause| self.arbiter.present(*cause));
-        let command = self.tracker.state().command.linear;
+        let command = self.tracker.state().command;
         let dt = self
             .runaway
             .last
             .map_or(0.0, |last| now.saturating_sub(last).as_secs_f64().min(0.1));
         self.runaway.last = Some(now);
         let safety = &self.safety;
-        let braking = self.runaway.envelope - safety.runaway_braking * dt;
-        self.runaway.envelope = command.abs().max(braking);
-        let tolerance = safety.runaway_tolerance;
-        let away = linear.abs() > self.runaway.envelope + tolerance
-            || (linear * command < 0.0 && linear.abs() > tolerance);
-        if quiet || !away {
+        let linear_away = self.runaway.linear.outside(
+            command.linear,
+            linear,
+            safety.runaway_braking,
+            safety.runaway_tolerance,
+            dt,
+        );
+        let angular_away = self.runaway.angular.outside(
+            command.angular,
+            angular,
+            safety.runaway_angular_braking,
+            safety.runaway_angular_tolerance,
+            dt,
+        );
+        if quiet || !(linear_away || angular_away) {
             self.runaway.since = None;
             return;
         }
         let since = *self.runaway.since.get_or_insert(now);
         if now - since >= Duration::from_millis(safety.runaway_time_ms) {
             let detail = format!(
-                "the chassis moves at {linear:.2} m/s against a command of {command:.2} m/s"
+                "the chassis moves at {linear:.2} m/s, {angular:.2} rad/s against a command of \
+                 {:.2} m/s, {:.2} rad/s",
+                command.linear, command.angular
             );
             self.arbiter
                 .handle_gap(now, StopCause::Runaway, &detail, false);
@@ -314,6 +362,8 @@ impl Core {
         info!("{} {} open", self.transport, self.device());
         self.link = Link::Open;
         self.opened_at = now;
+        // A new port: the time it was closed is the link's gap, not the wire's.
+        self.last_motion_written = None;
         let reconnect = std::mem::replace(&mut self.opened_before, true);
         let publish = self.tracker.handle_connected(reconnect);
         self.publish_if(publish);
@@ -391,7 +441,9 @@ impl Core {
         if let RxEvent::Message(counted) = event {
             match &counted.message {
                 Message::SystemStatus(status) => self.observe_system(now, status),
-                Message::MotionFeedback(motion) => self.observe_motion(now, motion.linear()),
+                Message::MotionFeedback(motion) => {
+                    self.observe_motion(now, motion.linear(), motion.angular());
+                }
                 Message::MotorFeedback(_)
                 | Message::LightFeedback(_)
                 | Message::MotionCommand(_)
@@ -414,16 +466,24 @@ impl Core {
         way: Way,
         wire: &ControlRequest,
     ) -> ControlResponse {
+        // One copy out of the client's shared memory, which it can still write: every check
+        // below reads the copy.
+        let wire = *wire;
         self.stats.requests += 1;
         self.status_due = true;
-        let client = &origin.key;
-        if self.watched.insert(client.node) {
-            self.new_clients.push(client.node);
+        if self.watched.insert(origin.key.node) {
+            self.new_clients.push(origin.key.node);
         }
+        let origin = &speaking_for(origin, &wire);
+        let client = &origin.key;
         let decoded = match (way, RequestKind::from_raw(wire.kind)) {
-            (Way::Stop, Some(RequestKind::Stop)) | (Way::Control, _) => Request::decode(wire),
+            (Way::Stop, Some(RequestKind::Stop | RequestKind::Release)) | (Way::Control, _) => {
+                Request::decode(&wire)
+            }
             (Way::Stop, _) => Err(Rejection::Malformed(
-                "the stop service takes stops only: send the rest on the control service".into(),
+                "the stop service takes stops and releases only: send the rest on the control \
+                 service"
+                    .into(),
             )),
         };
         let sent = Duration::from_nanos(wire.sent_ns);
@@ -447,6 +507,35 @@ impl Core {
             debug!("rejected {} from {}: {rejection}", wire.kind, client.name);
         }
         ControlResponse::new(wire.seq, &answer)
+    }
+
+    /// A datagram on the stop endpoint, from `origin` (named by the datagram, identified by
+    /// the kernel's credentials): a stop, a release, or a ping that changes nothing. Such a
+    /// sender holds no slot and is not watched: stops and releases need neither.
+    pub fn handle_stop_datagram(
+        &mut self,
+        now: Duration,
+        origin: &Origin,
+        ask: stop_socket::Ask,
+    ) -> Answer {
+        let request = match ask {
+            stop_socket::Ask::Ping => return Ok(Accepted::default()),
+            stop_socket::Ask::Stop { reason } => Request::Stop { reason },
+            stop_socket::Ask::Release { target, through } => Request::Release { target, through },
+        };
+        self.stats.requests += 1;
+        self.status_due = true;
+        let answer = self.arbiter.handle_request(now, origin, request, now);
+        if let Err(rejection) = &answer {
+            debug!("rejected a datagram from {}: {rejection}", origin.key.name);
+        }
+        answer
+    }
+
+    /// Counts a datagram on the stop endpoint that was refused before the arbiter.
+    pub fn count_malformed_datagram(&mut self, rejection: &Rejection) {
+        self.arbiter.count_rejection(rejection);
+        self.status_due = true;
     }
 
     /// A client process died.
@@ -484,6 +573,7 @@ impl Core {
     /// due, the light command when its period is due. Call until `None`; a frame that fails to
     /// go out is reported with [`Core::handle_link_failed`].
     pub fn poll_transmit(&mut self, now: Duration) -> Option<Counted> {
+        self.check_wire_gap(now);
         if self.arbiter.take_urgent_stop() {
             self.stats.urgent_stops += 1;
             if let Some(frame) = self.motion(&Output::STOP, now) {
@@ -608,18 +698,33 @@ impl Core {
         let lateness = now.saturating_sub(self.next_command);
         self.last_lateness = lateness;
         self.stats.max_lateness = self.stats.max_lateness.max(lateness);
-        if lateness > CHASSIS_TIMEOUT {
-            let detail = format!(
-                "a motion command went out {} ms late: the chassis stopped by its timeout",
-                lateness.as_millis()
-            );
-            self.arbiter
-                .handle_gap(now, StopCause::Overrun, &detail, false);
-        }
         self.next_command += self.period;
         while self.next_command <= now {
             self.next_command += self.period;
             self.stats.missed_ticks += 1;
+        }
+    }
+
+    /// No motion command written for longer than [`WIRE_GAP_LIMIT`] while the port is open (the
+    /// gateway stalled: frozen, starved of CPU, swapped out): the chassis may have timed out and
+    /// braked, so nothing resumes without a release and a new take. Checked before the next
+    /// frame is made, so that frame is already a stop; once per gap.
+    fn check_wire_gap(&mut self, now: Duration) {
+        let Some(last) = self.last_motion_written else {
+            return;
+        };
+        let gap = now.saturating_sub(last);
+        if self.link == Link::Open && gap > WIRE_GAP_LIMIT {
+            let detail = format!(
+                "no motion command written for {} ms: the chassis may have stopped by its \
+                 {} ms timeout",
+                gap.as_millis(),
+                CHASSIS_TIMEOUT.as_millis()
+            );
+            self.arbiter
+                .handle_gap(now, StopCause::Overrun, &detail, false);
+            self.status_due = true;
+            self.last_motion_written = None;
         }
     }
 
@@ -637,6 +742,7 @@ impl Core {
             angular_percent: percent(output.angular, self.max_angular),
         };
         self.stats.commands_sent += 1;
+        self.last_motion_written = Some(now);
         self.tracker.handle_sent_motion(&command, now);
         Some(Counted {
             message: Message::MotionCommand(command),
@@ -661,8 +767,10 @@ impl Core {
             ..StatusPayload::default()
         };
         status.stop_total = arbiter.stops().len() as u32;
+        status.newest_stop = arbiter.newest_stop();
         for (slot, stop) in status.stops.iter_mut().zip(arbiter.stops()) {
             *slot = StopPayload {
+                id: stop.id,
                 owner: FixedText::new(&stop.owner),
                 cause: stop.cause.raw(),
                 persists: arbiter.persists(stop),
@@ -707,6 +815,20 @@ impl Core {
         status.rejections = *arbiter.rejections();
         status
     }
+}
+
+/// The origin a request speaks for: the zenoh bridge's stops and releases are a remote peer's
+/// (`remote:PEER`, as the bridge names it from the command's key, which zenoh's access control
+/// binds to the peer); anyone else's `peer` field is ignored.
+fn speaking_for(origin: &Origin, wire: &ControlRequest) -> Origin {
+    let peer = wire.peer.as_str();
+    if !origin.bridge || !peer.starts_with(REMOTE_PREFIX) || peer.len() == REMOTE_PREFIX.len() {
+        return origin.clone();
+    }
+    let mut speaking = origin.clone();
+    speaking.key.name = peer.to_owned();
+    speaking.operator = false;
+    speaking
 }
 
 fn millis(duration: Duration) -> f64 {

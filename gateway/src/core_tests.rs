@@ -23,6 +23,7 @@ use crate::arbiter::{ClientKey, Origin};
 use crate::config::GatewayConfig;
 use crate::core::{
     CHASSIS_TIMEOUT, Core, FIRST_BACKOFF, Publication, STATE_HEARTBEAT, STATUS_HEARTBEAT, Start,
+    WIRE_GAP_LIMIT,
 };
 
 const TICK: Duration = Duration::from_millis(20);
@@ -44,6 +45,7 @@ impl Client {
                 name: self.0.to_owned(),
             },
             operator: self.2,
+            bridge: false,
         }
     }
 }
@@ -634,7 +636,7 @@ proptest! {
                     stops.push(pair.now);
                     pair.request(CLIENTS[c].0, &Request::Stop { reason: "p".into() }).expect("a stop is never refused");
                 }
-                Event::Release(c) => { let _ = pair.request(CLIENTS[c].0, &Request::Release { target: ReleaseTarget::All }); }
+                Event::Release(c) => { let _ = pair.request(CLIENTS[c].0, &Request::Release { target: ReleaseTarget::All, through: u64::MAX }); }
                 Event::Resume(c) => { let _ = pair.request(CLIENTS[c].0, &Request::Resume); }
                 Event::Dies(c) => {
                     pair.core.handle_client_gone(pair.now, CLIENTS[c].0.1);
@@ -692,6 +694,7 @@ fn release_and_check_nothing_restarts(pair: &mut Pair, client: Client) {
         OPERATOR,
         &Request::Release {
             target: ReleaseTarget::All,
+            through: u64::MAX,
         },
     )
     .expect("the operator releases once the causes are gone");
@@ -733,6 +736,7 @@ fn a_silent_chassis_is_a_gap_that_holds_until_it_speaks_again() {
             OPERATOR,
             &Request::Release {
                 target: ReleaseTarget::All,
+                through: u64::MAX,
             },
         )
         .expect_err("the chassis is still silent");
@@ -756,6 +760,7 @@ fn a_chassis_estop_episode_does_not_restart_motion() {
             OPERATOR,
             &Request::Release {
                 target: ReleaseTarget::All,
+                through: u64::MAX,
             },
         )
         .expect_err("the e-stop is still pressed");
@@ -842,6 +847,92 @@ fn a_tick_later_than_the_chassis_timeout_is_an_overrun() {
     );
 }
 
+/// Streams, freezes the gateway for `stall` (SIGSTOP, starved of CPU) at `phase` into a tick,
+/// and streams on; returns whether an overrun latched, the largest gap between two motion
+/// commands written, and whether a command after the stall moved the robot.
+fn stall_and_stream_on(stall: Duration, phase: Duration) -> (bool, Duration, bool) {
+    let mut pair = Pair::new(Transport::Sim);
+    pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(1));
+    pair.now += phase;
+    pair.step();
+    pair.stall(stall);
+    let before = pair.motion_commands().len();
+    let answers = pair.keep_streaming(TELEOP, 0.5, ms(300));
+    let after = pair.motion_commands();
+    let times: Vec<Duration> = after.iter().map(|(at, _)| *at).collect();
+    let widest = intervals(&times).into_iter().max().unwrap_or_default();
+    let moved_after = after[before..]
+        .iter()
+        .any(|(_, command)| command.linear_percent != 0);
+    let overrun = pair
+        .stops()
+        .contains(&("gateway".into(), StopCause::Overrun));
+    assert!(
+        !overrun || answers.iter().all(Result::is_err),
+        "after an overrun every command is refused"
+    );
+    (overrun, widest, moved_after)
+}
+
+#[test]
+fn a_stall_that_may_have_let_the_chassis_time_out_latches_an_overrun() {
+    // The review's SIGSTOP of 487-497 ms: wire gaps of 500-511 ms, and the old speed resumed.
+    for stall in [410, 450, 487, 497, 600] {
+        let (overrun, widest, moved) = stall_and_stream_on(ms(stall), ms(7));
+        assert!(
+            overrun,
+            "a {stall} ms stall (a {widest:?} wire gap) latches"
+        );
+        assert!(!moved, "nothing moves after a {stall} ms stall");
+    }
+    // An ordinary stall (the review saw 109 ms) resumes.
+    let (overrun, widest, moved) = stall_and_stream_on(ms(109), ms(7));
+    assert!(!overrun && moved, "{widest:?}");
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+    /// Any stall at any phase: a wire gap the chassis could have timed out on (over
+    /// WIRE_GAP_LIMIT) always latches, and only a gap over it does.
+    #[test]
+    fn every_wire_gap_beyond_the_limit_latches(stall_ms in 0u64..900, phase_us in 0u64..20_000) {
+        let (overrun, widest, moved) =
+            stall_and_stream_on(ms(stall_ms), Duration::from_micros(phase_us));
+        prop_assert_eq!(overrun, widest > WIRE_GAP_LIMIT, "stall {} ms, widest gap {:?}", stall_ms, widest);
+        if widest >= CHASSIS_TIMEOUT {
+            prop_assert!(overrun && !moved);
+        }
+    }
+}
+
+#[test]
+fn a_chassis_turning_faster_than_commanded_is_a_runaway() {
+    let mut pair = Pair::new(Transport::Sim);
+    pair.run(ms(200));
+    // The review's case: still turning at 0.27 rad/s long after the command fell to zero.
+    let turning = |count: u8| {
+        RxEvent::Message(Counted {
+            message: Message::MotionFeedback(MotionFeedback {
+                linear_mm_s: 0,
+                angular_mrad_s: 270,
+            }),
+            count,
+        })
+    };
+    pair.feedback = false;
+    for i in 0..40u8 {
+        pair.core.handle_rx(pair.now, &turning(100 + i));
+        pair.now += TICK;
+        pair.step();
+    }
+    assert!(
+        pair.stops()
+            .contains(&("gateway".into(), StopCause::Runaway)),
+        "{:?}",
+        pair.stops()
+    );
+}
+
 #[test]
 fn a_chassis_faster_than_commanded_is_a_runaway() {
     let mut pair = Pair::new(Transport::Sim);
@@ -917,7 +1008,7 @@ fn a_stop_comes_through_the_stop_service_with_every_control_slot_taken() {
     )
     .expect("never refused");
     assert_eq!(pair.stops(), [("late-guard".into(), StopCause::Client)]);
-    // The stop service takes stops only.
+    // The stop service takes stops and releases only.
     let wire = Request::Resume.encode(1);
     let answer = pair
         .core
@@ -927,7 +1018,7 @@ fn a_stop_comes_through_the_stop_service_with_every_control_slot_taken() {
         answer
             .expect_err("not a stop")
             .reason
-            .contains("stops only")
+            .contains("stops and releases only")
     );
 }
 

@@ -193,13 +193,14 @@ impl Device {
         now: Duration,
         deadline: Duration,
         wake: &Listener<Ipc>,
+        stops: std::os::fd::BorrowedFd<'_>,
     ) -> io::Result<Ready> {
         match self {
             Self::Sim { chassis, epoch } => {
                 let due = chassis.next_feedback_at() + *epoch;
-                wait(None, wake, deadline.min(due).saturating_sub(now))
+                wait(None, wake, stops, deadline.min(due).saturating_sub(now))
             }
-            Self::Port { port, .. } => wait(Some(port), wake, deadline.saturating_sub(now)),
+            Self::Port { port, .. } => wait(Some(port), wake, stops, deadline.saturating_sub(now)),
         }
     }
 

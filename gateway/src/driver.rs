@@ -16,16 +16,19 @@ use iceoryx2::port::server::Server;
 use iceoryx2::prelude::BackpressureStrategy;
 use iceoryx2::prelude::CallbackProgression;
 use iceoryx2::service::port_factory::PortFactory;
-use scout_interface::control::{ControlRequest, ControlResponse, StatusPayload};
+use scout_interface::control::{ControlRequest, ControlResponse, Rejection, StatusPayload};
 use scout_interface::services::{self, ControlService, Ipc, Role, Way, monotonic};
 use scout_interface::state::{LinkState, StatePayload};
+use scout_interface::stop_socket::{ParseError, StopReply};
 use tracing::{debug, error, info, warn};
 
 use crate::arbiter::{ClientKey, GATEWAY, OTHERS, Origin};
 use crate::config::GatewayConfig;
 use crate::core::{Core, Publication, Start};
 use crate::device::{Device, DeviceSpec, OpenError};
+use crate::identity::Operators;
 use crate::monitor::NodeMonitor;
+use crate::stop_endpoint::StopEndpoint;
 use crate::wait::Ready;
 use scout_interface::remote::REMOTE_PREFIX;
 
@@ -135,10 +138,13 @@ struct RequestServer {
 impl RequestServer {
     fn create(node: &Node<Ipc>, robot: &str, way: Way) -> anyhow::Result<Self> {
         let (service, _) = services::request_services(node, robot, way, Role::Gateway)?;
-        let server = service
-            .server_builder()
-            .create()
-            .with_context(|| format!("creating the {way:?} server"))?;
+        let server = service.server_builder().create().map_err(|error| {
+            anyhow::anyhow!(
+                "creating the {way:?} server of robot '{robot}' failed ({error:?}): another \
+                     scout-gateway serves this robot name (in another network namespace or \
+                     container?); stop it, or give this one another --name"
+            )
+        })?;
         Ok(Self {
             way,
             service,
@@ -146,12 +152,13 @@ impl RequestServer {
         })
     }
 
-    /// Who sent a request: the port, its node and its name as iceoryx2 records them.
-    fn origin(&self, port: u128, operators: &[String]) -> Origin {
+    /// Who sent a request: the port, its node and its name as iceoryx2 records them, and the
+    /// operator role from its process's identity.
+    fn origin(&self, port: u128, operators: &Operators) -> Origin {
         let mut key = ClientKey {
             port,
             node: 0,
-            name: format!("client-{:x}", port as u32),
+            name: String::new(),
         };
         let mut pid = None;
         self.service.dynamic_config().list_clients(|client| {
@@ -159,33 +166,49 @@ impl RequestServer {
                 return CallbackProgression::Continue;
             }
             key.node = client.node_id.value();
-            if !client.client_name.as_str().is_empty() {
-                key.name = client.client_name.as_str().to_owned();
-            }
+            key.name = client.client_name.as_str().to_owned();
             pid = client.node_id.pid::<Ipc>().ok().map(|pid| pid.value());
             CallbackProgression::Stop
         });
-        // Names that stand for the gateway itself, or for remote peers, are not for clients to
-        // take (only the bridge, in this process, speaks for remote peers).
-        let in_this_process = pid.is_some_and(|pid| u32::try_from(pid) == Ok(std::process::id()));
-        let reserved = key.name == GATEWAY
-            || key.name == OTHERS
-            || (key.name.starts_with(REMOTE_PREFIX) && !in_this_process);
-        if reserved {
-            key.name = format!("client-{:x}", port as u32);
+        let pid = pid.and_then(|pid| u32::try_from(pid).ok());
+        let in_this_process = pid == Some(std::process::id());
+        let bridge = in_this_process && key.name == REMOTE_PREFIX;
+        key.name = client_name(&key.name, pid, key.node, in_this_process);
+        Origin {
+            key,
+            operator: pid.is_some_and(|pid| !in_this_process && operators.is_operator_pid(pid)),
+            bridge,
         }
-        let program = pid.and_then(|pid| std::fs::read_link(format!("/proc/{pid}/exe")).ok());
-        let operator = program
-            .as_deref()
-            .and_then(std::path::Path::file_name)
-            .and_then(|name| name.to_str())
-            .is_some_and(|name| operators.iter().any(|op| op == name));
-        Origin { key, operator }
+    }
+}
+
+/// The name a client goes by: the one it chose, unless that is empty or reserved (the
+/// gateway's own, merged stops', or a remote peer's, which only the bridge in this process
+/// speaks for); then `client-PID`, the same for every port of one process, so that such a
+/// client can still release its own stops.
+fn client_name(chosen: &str, pid: Option<u32>, node: u128, in_this_process: bool) -> String {
+    let reserved = chosen.is_empty()
+        || chosen == GATEWAY
+        || chosen == OTHERS
+        || (chosen.starts_with(REMOTE_PREFIX) && !in_this_process);
+    if !reserved {
+        return chosen.to_owned();
+    }
+    match pid {
+        Some(pid) => format!("client-{pid}"),
+        None => format!("client-node-{:x}", (node as u64) ^ ((node >> 64) as u64)),
     }
 }
 
 /// Control requests handled per iteration at most: a flood cannot hold up the tick.
 const MAX_REQUESTS_PER_ITERATION: usize = 64;
+
+/// Stop-endpoint datagrams handled per iteration at most (each reads its sender's identity
+/// from `/proc`): a flood cannot hold up the tick, and every one of them is a stop anyway.
+const MAX_DATAGRAMS_PER_ITERATION: usize = 64;
+
+/// The client key of a stop-endpoint sender: no iceoryx2 port, so a number of its own.
+const DATAGRAM_PORT: u128 = 1 << 127;
 
 /// The gateway's control thread.
 pub struct Driver {
@@ -196,7 +219,8 @@ pub struct Driver {
     monitor: NodeMonitor,
     buffer: Box<[u8; 4096]>,
     publish_errors: u64,
-    operators: Vec<String>,
+    operators: Operators,
+    stop_endpoint: StopEndpoint,
     origins: std::collections::HashMap<u128, Origin>,
     backlog: bool,
     realtime_priority: u8,
@@ -212,7 +236,13 @@ impl std::fmt::Debug for Driver {
 
 impl Driver {
     /// Sets up the iceoryx2 services for `config.name`; the port is opened by [`Driver::run`].
-    pub fn new(config: &GatewayConfig, spec: DeviceSpec, start: Start) -> anyhow::Result<Self> {
+    /// `stop_endpoint` is the robot's bound stop socket (taken first: it is the name's lock).
+    pub fn new(
+        config: &GatewayConfig,
+        spec: DeviceSpec,
+        start: Start,
+        stop_endpoint: StopEndpoint,
+    ) -> anyhow::Result<Self> {
         let endpoints = Endpoints::create(&config.name)?;
         let now = monotonic();
         let instance = std::process::id() ^ (now.subsec_nanos() << 8);
@@ -226,7 +256,8 @@ impl Driver {
             monitor,
             buffer: Box::new([0; 4096]),
             publish_errors: 0,
-            operators: config.arbiter.operator_programs.clone(),
+            operators: Operators::for_this_gateway(&config.arbiter.operators),
+            stop_endpoint,
             origins: std::collections::HashMap::new(),
             backlog: false,
             realtime_priority: config.timing.realtime_priority,
@@ -337,6 +368,7 @@ impl Driver {
         if let Err(error) = self.endpoints.wake.try_wait(|_| {}) {
             debug!("draining the wake-up event failed: {error:?}");
         }
+        let datagrams_waiting = self.serve_datagrams(now);
         let mut stops_waiting = self.serve_stops(now);
         let mut requests_waiting = false;
         for _ in 0..MAX_REQUESTS_PER_ITERATION {
@@ -346,7 +378,49 @@ impl Driver {
             }
             stops_waiting = self.serve_stops(now);
         }
-        self.backlog = stops_waiting || requests_waiting;
+        self.backlog = datagrams_waiting || stops_waiting || requests_waiting;
+    }
+
+    /// Answers the datagrams waiting on the stop endpoint (bounded), then sends their zero;
+    /// returns whether more wait.
+    fn serve_datagrams(&mut self, now: Duration) -> bool {
+        let mut more = true;
+        for _ in 0..MAX_DATAGRAMS_PER_ITERATION {
+            let Some(received) = self.stop_endpoint.try_receive() else {
+                more = false;
+                break;
+            };
+            let pid = (received.pid != 0).then_some(received.pid);
+            let (seq, answer) = match received.request {
+                Ok(request) => {
+                    let chosen = request.name.as_deref().unwrap_or("");
+                    let origin = Origin {
+                        key: ClientKey {
+                            port: DATAGRAM_PORT | u128::from(received.pid),
+                            node: 0,
+                            name: client_name(chosen, pid, 0, false),
+                        },
+                        operator: pid.is_some_and(|pid| self.operators.is_operator_pid(pid)),
+                        bridge: false,
+                    };
+                    let answer = self.core.handle_stop_datagram(now, &origin, request.ask);
+                    (request.seq, answer)
+                }
+                Err(error) => {
+                    let seq = match &error {
+                        ParseError::Malformed { seq, .. } => seq.unwrap_or(0),
+                        ParseError::NotOurs(_) => 0,
+                    };
+                    let rejection = Rejection::Malformed(error.to_string());
+                    self.core.count_malformed_datagram(&rejection);
+                    (seq, Err(rejection))
+                }
+            };
+            let reply = StopReply::new(seq, &answer, std::process::id());
+            self.stop_endpoint.reply(received.from.as_ref(), &reply);
+        }
+        self.transmit(now);
+        more
     }
 
     /// Answers the waiting stops, bounded (a flood of stops cannot hold up the zero frame), and
@@ -431,8 +505,15 @@ impl Driver {
     /// Waits for input or a wake-up until `deadline` (`now` is this iteration's clock).
     fn wait(&mut self, now: Duration, deadline: Duration) -> Ready {
         let result = match self.device.as_ref() {
-            Some(device) => device.wait(now, deadline, &self.endpoints.wake),
-            None => crate::wait::wait(None, &self.endpoints.wake, deadline.saturating_sub(now)),
+            Some(device) => {
+                device.wait(now, deadline, &self.endpoints.wake, self.stop_endpoint.fd())
+            }
+            None => crate::wait::wait(
+                None,
+                &self.endpoints.wake,
+                self.stop_endpoint.fd(),
+                deadline.saturating_sub(now),
+            ),
         };
         result.unwrap_or_else(|error| {
             debug!("waiting failed: {error}");

@@ -9,8 +9,10 @@
 //! - [`driver`]: the one thread that does I/O around the core: port, iceoryx2, clock, `ppoll`.
 //! - [`wait`]: waiting on the port and the clients' wake-up event at once.
 //! - [`monitor`]: dead-process detection for clients.
+//! - [`stop_endpoint`]: the stop socket beside iceoryx2, which is also the robot name's lock.
+//! - [`identity`]: who a requesting process is, by the operating system; the operator role.
 //! - [`config`]: the configuration file and its lookup.
-//! - [`lock`]: one gateway per robot name and device.
+//! - [`lock`]: one gateway per device.
 //!
 //! The zenoh bridge (`scout-bridge`) is an ordinary local client that the `scout-gateway` binary
 //! starts beside the driver; the contract with every client is `scout-interface`.
@@ -20,9 +22,11 @@ pub mod config;
 pub mod core;
 pub mod device;
 pub mod driver;
+pub mod identity;
 pub mod lock;
 pub mod monitor;
 pub mod state;
+pub mod stop_endpoint;
 pub mod wait;
 
 #[cfg(test)]

@@ -1,5 +1,6 @@
-//! Waiting on the chassis port and the clients' wake-up event at once, so that a request (a
-//! safety stop above all) is handled the moment it arrives, not at the next read timeout.
+//! Waiting on the chassis port, the clients' wake-up event and the stop endpoint at once, so
+//! that a request (a safety stop above all) is handled the moment it arrives, not at the next
+//! read timeout.
 //!
 //! This is the crate's one `unsafe`: iceoryx2 and serialport hand out raw file descriptors, and
 //! `poll` needs them borrowed. Each descriptor is borrowed from an object the caller holds by
@@ -24,11 +25,12 @@ pub struct Ready {
     pub port: bool,
 }
 
-/// Waits at most `timeout` until `port` (if any) or `wake` is readable. A signal ends the wait
-/// early with nothing ready.
+/// Waits at most `timeout` until `port` (if any), `wake` or the stop endpoint `stops` is
+/// readable. A signal ends the wait early with nothing ready.
 pub fn wait(
     port: Option<&dyn AsRawFd>,
     wake: &Listener<Ipc>,
+    stops: BorrowedFd<'_>,
     timeout: Duration,
 ) -> io::Result<Ready> {
     // SAFETY: `native_handle` returns the descriptor the listener owns; `wake` is borrowed for
@@ -39,12 +41,13 @@ pub fn wait(
     let borrow = |fd: RawFd| unsafe { BorrowedFd::borrow_raw(fd) };
     let mut fds = [
         PollFd::new(borrow(wake_fd), PollFlags::POLLIN),
+        PollFd::new(stops, PollFlags::POLLIN),
         PollFd::new(borrow(wake_fd), PollFlags::empty()),
     ];
     if let Some(fd) = port_fd {
-        fds[1] = PollFd::new(borrow(fd), PollFlags::POLLIN);
+        fds[2] = PollFd::new(borrow(fd), PollFlags::POLLIN);
     }
-    let used = if port_fd.is_some() { 2 } else { 1 };
+    let used = if port_fd.is_some() { 3 } else { 2 };
     match ppoll(
         &mut fds[..used],
         Some(TimeSpec::from_duration(timeout)),
@@ -60,6 +63,6 @@ pub fn wait(
         })
     };
     Ok(Ready {
-        port: port_fd.is_some() && readable(&fds[1]),
+        port: port_fd.is_some() && readable(&fds[2]),
     })
 }

@@ -266,11 +266,17 @@ impl Gateway {
     /// Starts `scout-gateway` with `args`; without zenoh unless `args` set it up (parallel tests
     /// would all want the default port).
     pub fn start(args: &[&str]) -> Gateway {
+        Self::start_with_env(args, &[])
+    }
+
+    /// Starts `scout-gateway` with `args` and the environment variables `env` set.
+    pub fn start_with_env(args: &[&str], env: &[(&str, &str)]) -> Gateway {
         let zenoh = args
             .iter()
             .any(|a| a.starts_with("--zenoh") || *a == "--remote-commands");
         let mut child = command("scout-gateway")
             .env("RUST_LOG", "info")
+            .envs(env.iter().copied())
             .args(args)
             .args(if zenoh { None } else { Some("--no-zenoh") })
             .stdin(Stdio::null())

@@ -559,7 +559,9 @@ fn serve(
         Counters::add(&counters.service_calls);
         let result = match kind {
             ServiceKind::Estop => controller.stop("ROS 2 e-stop service"),
-            ServiceKind::Release => controller.release(ReleaseTarget::Own),
+            // This node's own stops only, which only its e-stop service latches: every one of
+            // them, whenever latched (a ROS caller names no stop).
+            ServiceKind::Release => controller.release(ReleaseTarget::Own, u64::MAX),
         };
         let message = match (&result, kind) {
             (Ok(_), ServiceKind::Estop) => {

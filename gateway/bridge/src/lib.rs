@@ -12,7 +12,7 @@ use scout_interface::control::{Accepted, Class, Request, StatusPayload};
 use scout_interface::json::{state_json, status_json};
 use scout_interface::remote::{
     self, DEFAULT_LISTEN, MAX_COMMAND_BYTES, Permission, REMOTE_PREFIX, RemoteAnswer,
-    RemoteCommand, RemoteKind, SessionSettings,
+    RemoteCommand, RemoteKind, SessionSettings, peer_client_name,
 };
 use scout_interface::services::{self, ControlPort, RequestError, Role, Way, monotonic_ns};
 use serde::{Deserialize, Serialize};
@@ -127,6 +127,14 @@ struct Counters {
     info_queries: u64,
     /// Queries dropped unanswered because the query thread was [`MAX_QUEUED_QUERIES`] behind.
     queries_dropped: u64,
+    /// Of the commands, remote e-stops latched.
+    estops_accepted: u64,
+    /// Remote e-stops refused (not allowed, or a key that names no peer).
+    estops_rejected: u64,
+    /// Remote e-stops answered `disabled`.
+    estops_ignored_disabled: u64,
+    /// E-stops dropped unanswered because [`MAX_QUEUED_ESTOPS`] were waiting.
+    estops_dropped: u64,
 }
 
 /// The running bridge thread.
@@ -316,28 +324,39 @@ fn forward_state(
     Ok(())
 }
 
-/// Answers queries as they arrive: remote commands, the latest state, the information.
+/// Answers queries as they arrive: remote e-stops in a lane of their own, on a thread of their
+/// own; remote commands, the latest state and the information on this one.
 fn serve_queries(
     robot_name: &str,
     config: &ZenohConfig,
     mut info: Value,
     session: &zenoh::Session,
     latest_state: &std::sync::Mutex<Option<String>>,
-    halt: &dyn Fn() -> bool,
+    halt: &(dyn Fn() -> bool + Sync),
 ) -> anyhow::Result<()> {
-    let node = services::node(&format!("scout-bridge-commands-{robot_name}"))
-        .map_err(|e| anyhow::anyhow!("creating the bridge's iceoryx2 node: {e:?}"))?;
-    // The state, information and command queries, in arrival order, through one channel to
-    // block on. A query that finds it full (a flood) is dropped unanswered and counted.
+    // Two lanes, each through a channel to block on. The zenoh callback only sorts by key
+    // (no allocation per peer, no I/O): an e-stop never waits behind other queries. A query
+    // that finds its lane full is dropped unanswered and counted.
+    let (estop_sender, estops) = std::sync::mpsc::sync_channel::<Query>(MAX_QUEUED_ESTOPS);
     let (sender, inbox) = std::sync::mpsc::sync_channel::<(Asked, Query)>(MAX_QUEUED_QUERIES);
-    let dropped = Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let dropped = Arc::new(Dropped::default());
     let queryable = |key: String, asked: Asked| {
-        let (sender, dropped) = (sender.clone(), Arc::clone(&dropped));
+        let (sender, estop_sender, dropped) =
+            (sender.clone(), estop_sender.clone(), Arc::clone(&dropped));
         session
             .declare_queryable(key)
             .callback(move |query| {
-                if sender.try_send((asked, query)).is_err() {
-                    dropped.fetch_add(1, Ordering::Relaxed);
+                let estop = matches!(asked, Asked::Command)
+                    && matches!(
+                        remote::parse_command_key(query.key_expr().as_str()),
+                        Ok((RemoteKind::Estop, _))
+                    );
+                if estop {
+                    if estop_sender.try_send(query).is_err() {
+                        dropped.estops.fetch_add(1, Ordering::Relaxed);
+                    }
+                } else if sender.try_send((asked, query)).is_err() {
+                    dropped.queries.fetch_add(1, Ordering::Relaxed);
                 }
             })
             .wait()
@@ -350,41 +369,162 @@ fn serve_queries(
         .declare_subscriber(remote::command_keys(robot_name))
         .wait()
         .map_err(zenoh_error)?;
-    let mut commands = RemoteControl::new(&node, robot_name, config);
-    let mut counters = Counters::default();
-    while !halt() {
-        while let Ok(Some(_)) = command_puts.try_recv() {
-            counters.puts_ignored += 1;
+    let estop_counters = Arc::new(EstopCounters::default());
+    std::thread::scope(|scope| {
+        let estop_lane = std::thread::Builder::new()
+            .name("zenoh-estops".into())
+            .spawn_scoped(scope, {
+                let estop_counters = &estop_counters;
+                move || serve_estops(robot_name, config, &estops, estop_counters, halt)
+            })?;
+        let node = services::node(&format!("scout-bridge-commands-{robot_name}"))
+            .map_err(|e| anyhow::anyhow!("creating the bridge's iceoryx2 node: {e:?}"))?;
+        let mut commands = RemoteControl::new(&node, robot_name, config)?;
+        let mut counters = Counters::default();
+        while !halt() {
+            while let Ok(Some(_)) = command_puts.try_recv() {
+                counters.puts_ignored += 1;
+            }
+            counters.queries_dropped = dropped.queries.load(Ordering::Relaxed);
+            counters.estops_dropped = dropped.estops.load(Ordering::Relaxed);
+            let Ok((asked, query)) = inbox.recv_timeout(Duration::from_millis(100)) else {
+                continue;
+            };
+            match asked {
+                Asked::State => {
+                    counters.state_queries += 1;
+                    let latest = latest_state.lock().ok().and_then(|latest| latest.clone());
+                    if let Some(state) = latest {
+                        reply(&query, state);
+                    }
+                }
+                Asked::Info => {
+                    counters.info_queries += 1;
+                    if let Value::Object(object) = &mut info {
+                        object.insert(
+                            "counters".into(),
+                            serde_json::to_value(estop_counters.merged(counters))
+                                .unwrap_or(Value::Null),
+                        );
+                    }
+                    reply(&query, info.to_string());
+                }
+                Asked::Command => {
+                    let answer = commands.handle(&query, &mut counters);
+                    reply(&query, serde_json::to_string(&answer).unwrap_or_default());
+                }
+            }
         }
-        counters.queries_dropped = dropped.load(Ordering::Relaxed);
-        let Ok((asked, query)) = inbox.recv_timeout(Duration::from_millis(100)) else {
-            continue;
-        };
-        match asked {
-            Asked::State => {
-                counters.state_queries += 1;
-                let latest = latest_state.lock().ok().and_then(|latest| latest.clone());
-                if let Some(state) = latest {
-                    reply(&query, state);
-                }
-            }
-            Asked::Info => {
-                counters.info_queries += 1;
-                if let Value::Object(object) = &mut info {
-                    object.insert(
-                        "counters".into(),
-                        serde_json::to_value(counters).unwrap_or(Value::Null),
-                    );
-                }
-                reply(&query, info.to_string());
-            }
-            Asked::Command => {
-                let answer = commands.handle(&query, &mut counters);
-                reply(&query, serde_json::to_string(&answer).unwrap_or_default());
-            }
+        estop_lane
+            .join()
+            .map_err(|_| anyhow::anyhow!("the e-stop thread panicked"))?
+    })
+}
+
+/// Queries dropped unanswered because their lane was full.
+#[derive(Debug, Default)]
+struct Dropped {
+    queries: std::sync::atomic::AtomicU64,
+    estops: std::sync::atomic::AtomicU64,
+}
+
+/// What the e-stop lane counted.
+#[derive(Debug, Default)]
+struct EstopCounters {
+    accepted: std::sync::atomic::AtomicU64,
+    rejected: std::sync::atomic::AtomicU64,
+    disabled: std::sync::atomic::AtomicU64,
+}
+
+impl EstopCounters {
+    /// `counters` with the e-stops added: to the command counts, and apart.
+    fn merged(&self, counters: Counters) -> Counters {
+        let (accepted, rejected, disabled) = (
+            self.accepted.load(Ordering::Relaxed),
+            self.rejected.load(Ordering::Relaxed),
+            self.disabled.load(Ordering::Relaxed),
+        );
+        Counters {
+            commands_accepted: counters.commands_accepted + accepted,
+            commands_rejected: counters.commands_rejected + rejected,
+            commands_ignored_disabled: counters.commands_ignored_disabled + disabled,
+            estops_accepted: accepted,
+            estops_rejected: rejected,
+            estops_ignored_disabled: disabled,
+            ..counters
         }
     }
+}
+
+/// The e-stop lane: every remote e-stop, answered in arrival order, latched through the
+/// bridge's own stop port as the stop of `remote:PEER`. Per query: the permission check and one
+/// stop request, nothing allocated per peer.
+fn serve_estops(
+    robot_name: &str,
+    config: &ZenohConfig,
+    estops: &std::sync::mpsc::Receiver<Query>,
+    counters: &EstopCounters,
+    halt: &(dyn Fn() -> bool + Sync),
+) -> anyhow::Result<()> {
+    let node = services::node(&format!("scout-bridge-estops-{robot_name}"))
+        .map_err(|e| anyhow::anyhow!("creating the bridge's iceoryx2 node: {e:?}"))?;
+    let mut port = ControlPort::open(&node, robot_name, Way::Stop, REMOTE_PREFIX)
+        .map_err(|e| anyhow::anyhow!("opening the bridge's stop port: {e}"))?;
+    while !halt() {
+        let Ok(query) = estops.recv_timeout(Duration::from_millis(100)) else {
+            continue;
+        };
+        let answer = if !config.remote_commands.enabled {
+            counters.disabled.fetch_add(1, Ordering::Relaxed);
+            RemoteAnswer::rejected(DISABLED)
+        } else {
+            match estop(config, &mut port, &query) {
+                Ok(_) => {
+                    counters.accepted.fetch_add(1, Ordering::Relaxed);
+                    RemoteAnswer::accepted(false)
+                }
+                Err(reason) => {
+                    counters.rejected.fetch_add(1, Ordering::Relaxed);
+                    RemoteAnswer::rejected(reason)
+                }
+            }
+        };
+        reply(&query, serde_json::to_string(&answer).unwrap_or_default());
+    }
     Ok(())
+}
+
+/// One remote e-stop: never refused for its payload (a missing, oversized or malformed one
+/// only loses its reason); it needs the permission and the stop service, nothing else.
+fn estop(config: &ZenohConfig, port: &mut ControlPort, query: &Query) -> Result<Accepted, String> {
+    allowed(config, Permission::Estop)?;
+    let (_, peer) = remote::parse_command_key(query.key_expr().as_str())?;
+    let reason = query
+        .payload()
+        .filter(|payload| payload.len() <= MAX_COMMAND_BYTES)
+        .and_then(|payload| serde_json::from_slice::<Value>(&payload.to_bytes()).ok())
+        .and_then(|json| {
+            json.get("reason")
+                .and_then(Value::as_str)
+                .map(str::to_owned)
+        })
+        .unwrap_or_else(|| "remote estop".into());
+    port.request_for_peer(&Request::Stop { reason }, &peer_client_name(peer))
+        .map_err(|error| error.to_string())
+}
+
+const DISABLED: &str =
+    "remote commands are disabled on this gateway (zenoh.remote_commands.enabled)";
+
+fn allowed(config: &ZenohConfig, permission: Permission) -> Result<(), String> {
+    if config.remote_commands.allowed.contains(&permission) {
+        Ok(())
+    } else {
+        Err(format!(
+            "remote `{permission}` is not allowed on this gateway (zenoh.remote_commands.allowed: {})",
+            config.allowed_names()
+        ))
+    }
 }
 
 /// What a query asks for.
@@ -398,6 +538,10 @@ enum Asked {
 /// Queries waiting for the query thread; more are dropped unanswered (and counted).
 const MAX_QUEUED_QUERIES: usize = 1024;
 
+/// E-stops waiting for the e-stop thread; more are dropped unanswered (and counted): that
+/// many e-stops waiting already stop the robot.
+const MAX_QUEUED_ESTOPS: usize = 4096;
+
 fn reply(query: &Query, payload: String) {
     if let Err(error) = query
         .reply(query.key_expr().clone(), payload)
@@ -408,23 +552,26 @@ fn reply(query: &Query, payload: String) {
     }
 }
 
-/// Remote commands: each remote peer gets ports of its own, named `remote:PEER`, so the
-/// arbiter treats it like a local client (leases, freshness, limits, priority). The peer is
+/// Remote commands other than e-stops. A peer that takes control gets a control port of its
+/// own, named `remote:PEER`, so the arbiter treats it like a local client (leases, freshness,
+/// limits, priority); releases go through the bridge's stop port, naming the peer. The peer is
 /// named by the command's key, which zenoh's access control binds to the peer's certificate.
+/// Nothing is kept or opened for a peer before its command passed the permission check.
 struct RemoteControl<'a> {
     node: &'a iceoryx2::node::Node<services::Ipc>,
     robot: &'a str,
     config: &'a ZenohConfig,
+    /// The bridge's stop-service port, for releases.
+    safety: ControlPort,
     peers: Vec<Peer>,
     used: u64,
 }
 
 /// What the bridge keeps of one remote peer.
 struct Peer {
+    /// Its client name (`remote:...`).
     name: String,
-    /// Opened on its first control request: an e-stop needs only the stop port.
     control: Option<ControlPort>,
-    stop: Option<ControlPort>,
     /// The lease it took and its class.
     lease: Option<(u64, Class)>,
     /// Its last command number.
@@ -442,40 +589,25 @@ impl<'a> RemoteControl<'a> {
         node: &'a iceoryx2::node::Node<services::Ipc>,
         robot: &'a str,
         config: &'a ZenohConfig,
-    ) -> Self {
-        Self {
+    ) -> anyhow::Result<Self> {
+        Ok(Self {
             node,
             robot,
             config,
+            safety: ControlPort::open(node, robot, Way::Stop, REMOTE_PREFIX)
+                .map_err(|e| anyhow::anyhow!("opening the bridge's stop port: {e}"))?,
             peers: Vec::new(),
             used: 0,
-        }
-    }
-
-    fn allowed(&self, permission: Permission) -> Result<(), String> {
-        if self.config.remote_commands.allowed.contains(&permission) {
-            Ok(())
-        } else {
-            Err(format!(
-                "remote `{permission}` is not allowed on this gateway (zenoh.remote_commands.allowed: {})",
-                self.config.allowed_names()
-            ))
-        }
+        })
     }
 
     fn handle(&mut self, query: &Query, counters: &mut Counters) -> RemoteAnswer {
         if !self.config.remote_commands.enabled {
             counters.commands_ignored_disabled += 1;
-            return RemoteAnswer::rejected(
-                "remote commands are disabled on this gateway (zenoh.remote_commands.enabled)",
-            );
+            return RemoteAnswer::rejected(DISABLED);
         }
         let answer = match self.decide(query) {
-            Ok(Accepted { clamped, .. }) => RemoteAnswer {
-                accepted: true,
-                clamped,
-                reason: None,
-            },
+            Ok(Accepted { clamped, .. }) => RemoteAnswer::accepted(clamped),
             Err(reason) => RemoteAnswer::rejected(reason),
         };
         if answer.accepted {
@@ -487,10 +619,8 @@ impl<'a> RemoteControl<'a> {
     }
 
     fn decide(&mut self, query: &Query) -> Result<Accepted, String> {
-        let (kind, peer_name) = remote::parse_command_key(query.key_expr().as_str())?;
-        if kind == RemoteKind::Estop {
-            return self.estop(query, peer_name);
-        }
+        let (kind, peer) = remote::parse_command_key(query.key_expr().as_str())?;
+        let name = peer_client_name(peer);
         let payload = query
             .payload()
             .ok_or("no payload: send the command as JSON")?;
@@ -502,27 +632,31 @@ impl<'a> RemoteControl<'a> {
         }
         let command: RemoteCommand = serde_json::from_slice(&payload.to_bytes())
             .map_err(|error| format!("invalid JSON: {error}"))?;
-        let peer = self.peer(peer_name)?;
-        let (permission, request) = command.request(kind, peer.lease)?;
+        let known = self.peers.iter().position(|p| p.name == name);
+        let lease = known.and_then(|index| self.peers[index].lease);
+        let (permission, request) = command.request(kind, lease)?;
+        // The permission before anything is kept or opened for this peer.
+        allowed(self.config, permission)?;
+        if let Request::Release { .. } = request {
+            return self
+                .safety
+                .request_for_peer(&request, &name)
+                .map_err(|error| error.to_string());
+        }
+        let (node, robot) = (self.node, self.robot);
+        let peer = self.peer(&name);
         let sent = match kind {
-            RemoteKind::Drive => peer.on_time(&command)?,
-            RemoteKind::TakeControl
-            | RemoteKind::Relinquish
+            RemoteKind::TakeControl | RemoteKind::Drive => peer.on_time(kind, &command)?,
+            RemoteKind::Relinquish
             | RemoteKind::Estop
             | RemoteKind::Release
             | RemoteKind::Resume
             | RemoteKind::Lights
             | RemoteKind::ClearFault => services::monotonic(),
         };
-        self.allowed(permission)?;
-        let (node, robot) = (self.node, self.robot);
-        let peer = self.peer(peer_name)?;
-        let answer = match &request {
-            Request::Stop { .. } => peer.stop_port(node, robot)?.request(&request),
-            _ => peer
-                .control_port(node, robot)?
-                .request_sent_at(&request, sent),
-        };
+        let answer = peer
+            .control_port(node, robot)?
+            .request_sent_at(&request, sent);
         let lost_control =
             matches!(&answer, Err(RequestError::Rejected(rejected)) if rejected.lost_control());
         match (&request, &answer) {
@@ -537,30 +671,9 @@ impl<'a> RemoteControl<'a> {
         answer.map_err(|error| error.to_string())
     }
 
-    /// An e-stop is never refused for its payload: a missing, oversized or malformed one only
-    /// loses its reason. It needs the permission and the stop service, nothing else.
-    fn estop(&mut self, query: &Query, peer_name: &str) -> Result<Accepted, String> {
-        self.allowed(Permission::Estop)?;
-        let reason = query
-            .payload()
-            .filter(|payload| payload.len() <= MAX_COMMAND_BYTES)
-            .and_then(|payload| {
-                serde_json::from_slice::<serde_json::Value>(&payload.to_bytes()).ok()
-            })
-            .and_then(|json| {
-                json.get("reason")
-                    .and_then(Value::as_str)
-                    .map(str::to_owned)
-            })
-            .unwrap_or_else(|| "remote estop".into());
-        let (node, robot) = (self.node, self.robot);
-        self.peer(peer_name)?
-            .stop_port(node, robot)?
-            .request(&Request::Stop { reason })
-            .map_err(|error| error.to_string())
-    }
-
-    fn peer(&mut self, name: &str) -> Result<&mut Peer, String> {
+    /// The peer named `name` (a client name), kept from now on; past [`MAX_REMOTE_PEERS`] the
+    /// least recently used is forgotten.
+    fn peer(&mut self, name: &str) -> &mut Peer {
         self.used += 1;
         let used = self.used;
         let index = match self.peers.iter().position(|peer| peer.name == name) {
@@ -574,25 +687,17 @@ impl<'a> RemoteControl<'a> {
                 self.peers.push(Peer {
                     name: name.to_owned(),
                     control: None,
-                    stop: None,
                     lease: None,
                     seq: None,
                     offset: None,
                     used,
                 });
-                // Its stop port now, whatever it asked first: opening one takes milliseconds,
-                // which its first e-stop should not wait for.
-                let (node, robot) = (self.node, self.robot);
-                let index = self.peers.len() - 1;
-                if let Err(error) = self.peers[index].stop_port(node, robot) {
-                    warn!("zenoh: no stop port for remote peer {name} yet: {error}");
-                }
-                index
+                self.peers.len() - 1
             }
         };
         let peer = &mut self.peers[index];
         peer.used = used;
-        Ok(peer)
+        peer
     }
 }
 
@@ -603,8 +708,7 @@ impl Peer {
         robot: &str,
     ) -> Result<&mut ControlPort, String> {
         if self.control.is_none() {
-            let name = format!("{REMOTE_PREFIX}{}", self.name);
-            let port = ControlPort::open(node, robot, Way::Control, &name)
+            let port = ControlPort::open(node, robot, Way::Control, &self.name)
                 .map_err(|error| error.to_string())?;
             self.control = Some(port);
         }
@@ -613,36 +717,35 @@ impl Peer {
             .ok_or_else(|| "no control port".into())
     }
 
-    fn stop_port(
-        &mut self,
-        node: &iceoryx2::node::Node<services::Ipc>,
-        robot: &str,
-    ) -> Result<&mut ControlPort, String> {
-        if self.stop.is_none() {
-            let name = format!("{REMOTE_PREFIX}{}", self.name);
-            let port = ControlPort::open(node, robot, Way::Stop, &name)
-                .map_err(|error| error.to_string())?;
-            self.stop = Some(port);
-        }
-        self.stop.as_mut().ok_or_else(|| "no stop port".into())
-    }
-
-    /// Checks a drive command's order and age; returns when it was sent, on this host's clock.
-    /// A repeated or older `seq` is refused; so is a command the network held up for longer
-    /// than its life (measured against the fastest delivery seen from this peer, so no common
-    /// clock is needed).
-    fn on_time(&mut self, command: &RemoteCommand) -> Result<Duration, String> {
-        let (Some(seq), Some(sent_ms)) = (command.seq, command.sent_ms) else {
-            return Err("drive needs `seq` (rising) and `sent_ms` (the sender's clock, ms)".into());
+    /// Checks a take-control's or drive command's age (and a drive's order); returns when it
+    /// was sent, on this host's clock. A repeated or older drive `seq` is refused; so is a
+    /// command the network held up for longer than its life, measured against the fastest
+    /// delivery seen from this peer (so no common clock is needed). A take-control carries
+    /// `sent_ms` too: it seeds that measure, so the first drive is aged like every later one.
+    fn on_time(&mut self, kind: RemoteKind, command: &RemoteCommand) -> Result<Duration, String> {
+        let (Some(sent_ms), Some(seq)) = (
+            command.sent_ms,
+            command.seq.or((kind != RemoteKind::Drive).then_some(0)),
+        ) else {
+            return Err(match kind {
+                RemoteKind::Drive => {
+                    "drive needs `seq` (rising) and `sent_ms` (the sender's clock, ms)".into()
+                }
+                other => format!(
+                    "{other} needs `sent_ms` (the sender's clock, ms): it seeds the age check of the drives that follow"
+                ),
+            });
         };
-        if let Some(last) = self.seq
-            && seq <= last
-        {
-            return Err(format!(
-                "out of order: seq {seq} after {last} (duplicated or reordered)"
-            ));
+        if kind == RemoteKind::Drive {
+            if let Some(last) = self.seq
+                && seq <= last
+            {
+                return Err(format!(
+                    "out of order: seq {seq} after {last} (duplicated or reordered)"
+                ));
+            }
+            self.seq = Some(seq);
         }
-        self.seq = Some(seq);
         let now = services::monotonic();
         let delay = now.as_millis() as i128 - i128::from(sent_ms);
         let offset = *self

@@ -15,7 +15,8 @@ use scout_gateway::config::GatewayConfig;
 use scout_gateway::core::Start;
 use scout_gateway::device::DeviceSpec;
 use scout_gateway::driver::Driver;
-use scout_gateway::lock::{Lock, LockError};
+use scout_gateway::lock::LockError;
+use scout_gateway::stop_endpoint::StopEndpoint;
 use scout_interface::Transport;
 use scout_interface::remote::Permission;
 use scout_interface::services;
@@ -79,10 +80,11 @@ fn main() -> ExitCode {
             return ExitCode::from(USAGE);
         }
     };
-    let (spec, _lock) = match config
+    // The stop endpoint first: binding it is the robot name's lock on this host.
+    let (spec, endpoint) = match config
         .validate()
         .map_err(anyhow::Error::from)
-        .and_then(|spec| Ok((spec, take_name_lock(&config.name)?)))
+        .and_then(|spec| Ok((spec, StopEndpoint::bind(&config.name)?)))
     {
         Ok(owned) => owned,
         Err(error) => {
@@ -90,7 +92,7 @@ fn main() -> ExitCode {
             return ExitCode::from(USAGE);
         }
     };
-    match serve(config, spec) {
+    match serve(config, spec, endpoint) {
         Ok(()) => ExitCode::SUCCESS,
         Err(error) if error.downcast_ref::<LockError>().is_some() => {
             eprintln!("scout-gateway: {error:#}");
@@ -140,16 +142,7 @@ fn configure(cli: &Cli) -> anyhow::Result<GatewayConfig> {
     Ok(config)
 }
 
-/// One gateway per robot name (the device is locked when it is opened).
-fn take_name_lock(robot: &str) -> anyhow::Result<Lock> {
-    Ok(Lock::acquire(
-        &format!("robot-{robot}"),
-        &format!("robot '{robot}'"),
-        ", or give this one another --name",
-    )?)
-}
-
-fn serve(config: GatewayConfig, spec: DeviceSpec) -> anyhow::Result<()> {
+fn serve(config: GatewayConfig, spec: DeviceSpec, endpoint: StopEndpoint) -> anyhow::Result<()> {
     services::quiet_iceoryx2_logs();
     let stop = Arc::new(AtomicBool::new(false));
     let on_signal = Arc::clone(&stop);
@@ -175,7 +168,7 @@ fn serve(config: GatewayConfig, spec: DeviceSpec) -> anyhow::Result<()> {
             config.name
         );
     }
-    let mut driver = Driver::new(&config, spec, start)?;
+    let mut driver = Driver::new(&config, spec, start, endpoint)?;
     // After the driver's services exist; dropped (stopped and joined) after it ends.
     let _bridge = if bridge_config.enabled {
         Some(

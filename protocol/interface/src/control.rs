@@ -157,10 +157,14 @@ pub enum Request {
         /// Why, for the status and the audit log.
         reason: String,
     },
-    /// Release the stops `target` names, and whatever control this client holds.
+    /// Release the stops `target` names that latched no later than stop `through`: the
+    /// newest stop its sender saw (the status' `newest_stop`). A stop latched after the sender
+    /// looked survives. A release ends whatever control this client holds.
     Release {
         /// Which stops.
         target: ReleaseTarget,
+        /// The newest stop id the sender saw.
+        through: u64,
     },
     /// Give up this client's control; stops are left alone.
     Relinquish,
@@ -220,7 +224,8 @@ impl Request {
                 });
             }
             Self::Stop { reason } => wire.reason = FixedText::new(reason),
-            Self::Release { target } => {
+            Self::Release { target, through } => {
+                wire.through = *through;
                 let scope = match target {
                     ReleaseTarget::Own => ReleaseScope::Own,
                     ReleaseTarget::Owner(owner) => {
@@ -231,7 +236,7 @@ impl Request {
                 };
                 wire.release_scope = scope.raw();
             }
-            Self::Lights(LightsSetting::Auto) => wire.lights.auto = true,
+            Self::Lights(LightsSetting::Auto) => wire.lights.auto = 1,
             Self::Lights(LightsSetting::Manual(command)) => {
                 wire.lights.front = LightPayload::new(command.front);
                 wire.lights.rear = LightPayload::new(command.rear);
@@ -267,6 +272,7 @@ impl Request {
                 },
             },
             RequestKind::Release => Self::Release {
+                through: wire.through,
                 target: match ReleaseScope::from_raw(wire.release_scope) {
                     Some(ReleaseScope::Own) => ReleaseTarget::Own,
                     Some(ReleaseScope::Owner) => {
@@ -346,8 +352,14 @@ pub fn parse_fault_clear(name: &str) -> Result<Option<FaultClear>, String> {
 }
 
 fn decode_lights(wire: &LightsRequest) -> Result<LightsSetting, Rejection> {
-    if wire.auto {
-        return Ok(LightsSetting::Auto);
+    match wire.auto {
+        0 => {}
+        1 => return Ok(LightsSetting::Auto),
+        other => {
+            return Err(Rejection::Malformed(format!(
+                "lights `auto` byte {other} is not 0 or 1"
+            )));
+        }
     }
     let front = wire.front.light();
     let rear = wire.rear.light();
@@ -391,11 +403,13 @@ wire_enum! {
         NotAllowed = 12 => "not_allowed",
         /// The cause of a stop persists: it cannot be released yet.
         CausePersists = 13 => "cause_persists",
+        /// The command is stamped later than its arrival: another clock than this host's.
+        Future = 14 => "future",
     }
 }
 
 /// Rejection counters in a status: one per [`RejectionKind`].
-pub const REJECTION_COUNTERS: usize = 14;
+pub const REJECTION_COUNTERS: usize = 15;
 const _: () = assert!(RejectionKind::ALL.len() == REJECTION_COUNTERS);
 
 /// Why a request was refused.
@@ -454,6 +468,11 @@ pub enum Rejection {
         /// The stops that cannot be released yet, with their causes.
         stops: String,
     },
+    /// The command was stamped later than it arrived, beyond the tolerance.
+    Future {
+        /// By how much.
+        ahead: Duration,
+    },
 }
 
 impl Rejection {
@@ -474,6 +493,7 @@ impl Rejection {
             Self::RateLimited { .. } => RejectionKind::RateLimited,
             Self::NotAllowed { .. } => RejectionKind::NotAllowed,
             Self::CausePersists { .. } => RejectionKind::CausePersists,
+            Self::Future { .. } => RejectionKind::Future,
         }
     }
 }
@@ -506,6 +526,11 @@ impl std::fmt::Display for Rejection {
             }
             Self::NotAllowed { why } => f.write_str(why),
             Self::CausePersists { stops } => write!(f, "cannot release yet: {stops}"),
+            Self::Future { ahead } => write!(
+                f,
+                "command stamped {} ms after its arrival: stamp it with this host's CLOCK_MONOTONIC",
+                ahead.as_millis()
+            ),
         }
     }
 }
@@ -517,6 +542,8 @@ pub struct Accepted {
     pub clamped: bool,
     /// For a take-control: the lease that drive commands name.
     pub lease: Option<u64>,
+    /// For a stop: the id of the stop it latched (or refreshed).
+    pub stop: Option<u64>,
 }
 
 /// Every request gets one.
@@ -553,6 +580,7 @@ impl ControlResponse {
                 clamped: accepted.clamped,
                 code: 0xFF,
                 lease: accepted.lease.unwrap_or(0),
+                stop: accepted.stop.unwrap_or(0),
                 reason: FixedText::empty(),
             },
             Err(rejection) => Self {
@@ -561,6 +589,7 @@ impl ControlResponse {
                 clamped: false,
                 code: rejection.kind().raw(),
                 lease: 0,
+                stop: 0,
                 reason: FixedText::new(&rejection.to_string()),
             },
         }
@@ -572,6 +601,7 @@ impl ControlResponse {
             Ok(Accepted {
                 clamped: self.clamped,
                 lease: (self.lease != 0).then_some(self.lease),
+                stop: (self.stop != 0).then_some(self.stop),
             })
         } else {
             Err(Rejected {
@@ -587,8 +617,9 @@ impl ControlResponse {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
 #[repr(C)]
 pub struct LightsRequest {
-    /// Hand the lights back to the chassis.
-    pub auto: bool,
+    /// Hand the lights back to the chassis: 1; 0 sets `front` and `rear`. A byte, not a `bool`:
+    /// the gateway reads it from the client's shared memory, where any byte may stand.
+    pub auto: u8,
     /// Front light.
     pub front: LightPayload,
     /// Rear light.
@@ -597,7 +628,7 @@ pub struct LightsRequest {
 
 /// A request from a client to the gateway's arbiter.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::ControlRequest.v3")]
+#[type_name("scout::ControlRequest.v4")]
 #[repr(C)]
 pub struct ControlRequest {
     /// [`RequestKind`] as `u8`.
@@ -612,6 +643,12 @@ pub struct ControlRequest {
     pub release_scope: u8,
     /// The owner whose stops a release names.
     pub owner: FixedText<MAX_CLIENT_NAME>,
+    /// The remote peer a stop or release is sent for: read only from the gateway's own zenoh
+    /// bridge (identified by the transport), ignored from anyone else.
+    pub peer: FixedText<MAX_CLIENT_NAME>,
+    /// For release: the newest stop id its sender saw (the status' `newest_stop`); stops
+    /// latched after it are not released.
+    pub through: u64,
     /// The client's own request number.
     pub seq: u64,
     /// The lease a drive command belongs to.
@@ -633,7 +670,7 @@ pub struct ControlRequest {
 
 /// The gateway's answer to one request.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("scout::ControlResponse.v3")]
+#[type_name("scout::ControlResponse.v4")]
 #[repr(C)]
 pub struct ControlResponse {
     /// The request's `seq`.
@@ -646,6 +683,8 @@ pub struct ControlResponse {
     pub code: u8,
     /// For an accepted take-control: the lease (0: none).
     pub lease: u64,
+    /// For an accepted stop: the id of the stop it latched or refreshed (0: none).
+    pub stop: u64,
     /// Why it was rejected.
     pub reason: FixedText<160>,
 }
@@ -682,6 +721,8 @@ pub const STATUS_EVENTS: usize = 16;
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
 pub struct StopPayload {
+    /// Its id: stops are numbered from 1 in the order they latched.
+    pub id: u64,
     /// Who set it: a client's name, or `gateway` for a gap.
     pub owner: FixedText<MAX_CLIENT_NAME>,
     /// [`StopCause`] byte.
@@ -726,7 +767,7 @@ pub struct SourcePayload {
 
 /// The arbiter's status, published on every change and at least once a second.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::StatusPayload.v3")]
+#[type_name("scout::StatusPayload.v4")]
 #[repr(C)]
 pub struct StatusPayload {
     /// Rises by one with every publication.
@@ -737,6 +778,9 @@ pub struct StatusPayload {
     pub robot: FixedText<32>,
     /// How many stops hold the robot (motion only at zero).
     pub stop_total: u32,
+    /// The id of the newest stop latched since the gateway started (0: none yet): a release
+    /// names it as the newest it saw.
+    pub newest_stop: u64,
     /// The first [`MAX_STATUS_STOPS`] of them, oldest first.
     pub stops: [StopPayload; MAX_STATUS_STOPS],
     /// [`Class`] byte of the selected source (0: none).
@@ -905,7 +949,8 @@ mod tests {
                     ttl: ttl.map(Duration::from_millis),
                 }),
             "[a-z ]{1,64}".prop_map(|reason| Request::Stop { reason }),
-            target.prop_map(|target| Request::Release { target }),
+            (target, any::<u64>())
+                .prop_map(|(target, through)| Request::Release { target, through }),
             Just(Request::Relinquish),
             Just(Request::Resume),
             Just(Request::Lights(LightsSetting::Auto)),
@@ -936,7 +981,7 @@ mod tests {
         #[test]
         fn any_bytes_decode_or_are_rejected_with_a_reason(
             kind in any::<u8>(), class in any::<u8>(), fault in any::<u8>(),
-            front in any::<(u8, u8)>(), auto in any::<bool>(), scope in any::<u8>(),
+            front in any::<(u8, u8)>(), auto in any::<u8>(), scope in any::<u8>(),
         ) {
             let mut wire = wire(kind);
             wire.class = class;
@@ -966,6 +1011,7 @@ mod tests {
             Request::Stop { reason: "x".into() },
             Request::Release {
                 target: ReleaseTarget::Own,
+                through: 1,
             },
             Request::Relinquish,
             Request::Resume,
@@ -1003,13 +1049,15 @@ mod tests {
                 6,
                 &Ok(Accepted {
                     clamped: true,
-                    lease: Some(7)
+                    lease: Some(7),
+                    stop: Some(9),
                 })
             )
             .answer(),
             Ok(Accepted {
                 clamped: true,
-                lease: Some(7)
+                lease: Some(7),
+                stop: Some(9),
             })
         );
     }

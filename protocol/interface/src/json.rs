@@ -144,6 +144,7 @@ pub fn status_json(status: &StatusPayload, now_ns: u64) -> Value {
         .iter()
         .map(|stop| {
             json!({
+                "id": stop.id,
                 "owner": stop.owner.as_str(),
                 "cause": StopCause::from_raw(stop.cause).map_or("unknown", StopCause::name),
                 "reason": stop.reason.as_str(),
@@ -190,6 +191,7 @@ pub fn status_json(status: &StatusPayload, now_ns: u64) -> Value {
         "age_ms": age_ms(status.published_ns, now_ns),
         "latched": status.stopped(),
         "stop_total": status.stop_total,
+        "newest_stop": status.newest_stop,
         "stops": stops,
         "selected": selected,
         "output": {
@@ -235,7 +237,7 @@ mod tests {
         assert_eq!(json["autonomy_armed"], false);
         assert_eq!(json["lights"], "chassis");
         assert_eq!(json["rejections"]["not_finite"], 0);
-        assert_eq!(json["rejections"].as_object().map(Map::len), Some(14));
+        assert_eq!(json["rejections"].as_object().map(Map::len), Some(15));
         let driving = StatusPayload {
             selected_class: Class::Teleop.raw(),
             selected_client: FixedText::new("joy"),

@@ -8,6 +8,8 @@
 //! - [`control`]: control requests and answers, typed and on the wire; the arbiter's status.
 //! - [`json`]: the public JSON forms of the state and the status (`scout echo`, zenoh).
 //! - [`remote`]: zenoh key expressions, remote commands and their permissions.
+//! - [`stop_socket`]: the stop endpoint beside iceoryx2 (a Unix datagram socket): stops and
+//!   releases that need no shared memory and no client slot.
 //! - [`text`]: fixed-capacity text for shared-memory payloads.
 //!
 //! Every iceoryx2 payload's type name carries [`LAYOUT_VERSION`]: a client built against another
@@ -23,10 +25,11 @@ pub mod json;
 pub mod remote;
 pub mod services;
 pub mod state;
+pub mod stop_socket;
 pub mod text;
 
-/// The layout version in every payload's iceoryx2 type name (`scout::StatePayload.v3`).
-pub const LAYOUT_VERSION: u32 = 3;
+/// The layout version in every payload's iceoryx2 type name (`scout::StatePayload.v4`).
+pub const LAYOUT_VERSION: u32 = 4;
 
 pub use control::{
     Accepted, Class, ControlRequest, ControlResponse, LightsSetting, Rejection, RejectionKind,

@@ -21,8 +21,37 @@ pub const MAX_COMMAND_BYTES: usize = 4096;
 /// The prefix of a remote client's name in the status and the audit log.
 pub const REMOTE_PREFIX: &str = "remote:";
 
-/// The longest `client` of a remote command: the local name limit less [`REMOTE_PREFIX`].
+/// The longest peer part of a remote client's name: the local name limit less
+/// [`REMOTE_PREFIX`].
 pub const MAX_REMOTE_CLIENT: usize = crate::control::MAX_CLIENT_NAME - REMOTE_PREFIX.len();
+
+/// The local client name of remote peer `peer` (any name zenoh carries in a key chunk), as the
+/// status, the audit log and the owner of its stops show it: `remote:` and the name, each byte
+/// outside `A-Z a-z 0-9 . _ -` written `%XX`; when that is longer than [`MAX_REMOTE_CLIENT`]
+/// bytes, its first 12 bytes, `~` and 12 hex digits of the FNV-1a 64-bit hash of the whole
+/// name. Two names map to one only through a hash collision of 48 bits.
+pub fn peer_client_name(peer: &str) -> String {
+    let mut escaped = String::with_capacity(peer.len());
+    for byte in peer.bytes() {
+        if byte.is_ascii_alphanumeric() || matches!(byte, b'.' | b'_' | b'-') {
+            escaped.push(char::from(byte));
+        } else {
+            escaped.push_str(&format!("%{byte:02X}"));
+        }
+    }
+    if escaped.len() > MAX_REMOTE_CLIENT {
+        let mut cut = 12;
+        // Not inside a %XX.
+        while escaped[..cut].rfind('%').is_some_and(|at| at + 3 > cut) {
+            cut -= 1;
+        }
+        let hash = peer.bytes().fold(0xcbf2_9ce4_8422_2325_u64, |hash, byte| {
+            (hash ^ u64::from(byte)).wrapping_mul(0x0100_0000_01b3)
+        });
+        escaped = format!("{}~{:012x}", &escaped[..cut], hash >> 16);
+    }
+    format!("{REMOTE_PREFIX}{escaped}")
+}
 
 /// The key of the state JSON (publication and queryable).
 pub fn state_key(robot: &str) -> String {
@@ -72,10 +101,8 @@ pub fn parse_command_key(key: &str) -> Result<(RemoteKind, &str), String> {
             e.expected.join(", ")
         )
     })?;
-    if peer.is_empty() || peer.len() > MAX_REMOTE_CLIENT {
-        return Err(format!(
-            "the peer name in the key must be 1 to {MAX_REMOTE_CLIENT} bytes"
-        ));
+    if peer.is_empty() {
+        return Err("the peer name in the key is empty: scout/ROBOT/cmd/KIND/PEER".into());
     }
     Ok((kind, peer))
 }
@@ -142,6 +169,9 @@ pub struct RemoteCommand {
     pub ttl_ms: Option<u32>,
     /// estop: why.
     pub reason: Option<String>,
+    /// release: the newest stop id the peer saw in the status (`newest_stop`): a stop latched
+    /// after it survives. Without it, every stop of the peer's own.
+    pub through: Option<u64>,
     /// lights: hand them back to the chassis.
     pub auto: Option<bool>,
     /// lights: front `{ "mode": "custom", "brightness": 40 }`.
@@ -214,6 +244,7 @@ impl RemoteCommand {
                 Permission::Release,
                 Request::Release {
                     target: ReleaseTarget::Own,
+                    through: self.through.unwrap_or(u64::MAX),
                 },
             ),
             RemoteKind::Resume => (Permission::Resume, Request::Resume),
@@ -258,6 +289,15 @@ pub struct RemoteAnswer {
 }
 
 impl RemoteAnswer {
+    /// An acceptance (`clamped`: a speed beyond the caps was clamped).
+    pub fn accepted(clamped: bool) -> Self {
+        Self {
+            accepted: true,
+            clamped,
+            reason: None,
+        }
+    }
+
     /// A rejection with `reason`.
     pub fn rejected(reason: impl Into<String>) -> Self {
         Self {
@@ -396,7 +436,8 @@ mod tests {
             Ok((
                 Permission::Release,
                 Request::Release {
-                    target: ReleaseTarget::Own
+                    target: ReleaseTarget::Own,
+                    through: u64::MAX,
                 }
             )),
             "a remote peer releases only its own stops"
@@ -448,6 +489,36 @@ mod tests {
                     let _ = command.request(*kind, lease.map(|l| (l, Class::Teleop)));
                 }
             }
+        }
+    }
+
+    #[test]
+    fn peer_names_map_to_client_names() {
+        assert_eq!(peer_client_name("laptop"), "remote:laptop");
+        let exact = "a".repeat(MAX_REMOTE_CLIENT);
+        assert_eq!(peer_client_name(&exact), format!("remote:{exact}"));
+        assert_eq!(peer_client_name("opérateur"), "remote:op%C3%A9rateur");
+        let long = peer_client_name(&"b".repeat(26));
+        assert_eq!(long, format!("remote:{}~{}", "b".repeat(12), &long[20..]));
+        assert_eq!(long.len(), crate::control::MAX_CLIENT_NAME);
+        assert_ne!(
+            long,
+            peer_client_name(&"b".repeat(27)),
+            "the hash tells them apart"
+        );
+        // A cut never splits an escape.
+        let accented = peer_client_name(&"é".repeat(20));
+        assert!(accented.starts_with("remote:%C3%A9%C3%A9~"), "{accented}");
+    }
+
+    proptest::proptest! {
+        /// Any peer name maps to a valid client name: 32 bytes at most, ASCII, prefixed.
+        #[test]
+        fn any_peer_name_maps_to_a_client_name(peer in ".{1,200}") {
+            let name = peer_client_name(&peer);
+            proptest::prop_assert!(name.len() <= crate::control::MAX_CLIENT_NAME);
+            proptest::prop_assert!(name.is_ascii());
+            proptest::prop_assert!(name.starts_with(REMOTE_PREFIX));
         }
     }
 

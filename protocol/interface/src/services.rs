@@ -383,8 +383,10 @@ pub fn request_services(
         .service_builder(&service_name(&name)?)
         .request_response::<ControlRequest, ControlResponse>();
     let requests = match role {
+        // One server: a second gateway for this robot, even one whose stop socket lives in
+        // another network namespace, cannot serve the same services.
         Role::Gateway => builder
-            .max_servers(2)
+            .max_servers(1)
             .max_clients(way.max_clients())
             .max_nodes(MAX_NODES)
             .max_active_requests_per_client(MAX_REQUESTS_IN_FLIGHT)
@@ -518,9 +520,30 @@ impl ControlPort {
         request: &crate::control::Request,
         sent: Duration,
     ) -> Result<Accepted, RequestError> {
+        self.send(request, sent, "")
+    }
+
+    /// Sends a stop or release for remote peer `peer` (its client name, `remote:...`). Only
+    /// the gateway's own zenoh bridge is heard speaking for a peer; from anyone else the field
+    /// is ignored.
+    pub fn request_for_peer(
+        &mut self,
+        request: &crate::control::Request,
+        peer: &str,
+    ) -> Result<Accepted, RequestError> {
+        self.send(request, monotonic(), peer)
+    }
+
+    fn send(
+        &mut self,
+        request: &crate::control::Request,
+        sent: Duration,
+        peer: &str,
+    ) -> Result<Accepted, RequestError> {
         self.seq += 1;
         let mut wire = request.encode(self.seq);
         wire.sent_ns = sent.as_nanos() as u64;
+        wire.peer = crate::text::FixedText::new(peer);
         let pending = self.client.send_copy(wire).map_err(RequestError::Send)?;
         self.wake.notify().map_err(RequestError::Wake)?;
         let deadline = Instant::now() + ANSWER_TIMEOUT;

@@ -54,10 +54,12 @@ pub fn ensure_built() -> anyhow::Result<()> {
     Ok(())
 }
 
-/// A command for workspace binary `name`, quiet.
+/// A command for workspace binary `name`, quiet (`$SCOUT_BENCH_LOG`, e.g. `info`, for more in
+/// the scratch directory's logs).
 pub fn command(name: &str) -> anyhow::Result<Command> {
     let mut command = Command::new(bin_dir()?.join(name));
-    command.env("RUST_LOG", "warn");
+    let level = std::env::var("SCOUT_BENCH_LOG").unwrap_or_else(|_| "warn".into());
+    command.env("RUST_LOG", level);
     Ok(command)
 }
 

@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use scout_clients::client::Robot;
-use scout_clients::{ReleaseTarget, Request, StatePayload, monotonic_ns};
+use scout_clients::{Request, StatePayload, monotonic_ns};
 use scout_protocol::link::{RxEvent, StreamFraming, Transport};
 
 /// Connects to `name`, waiting up to 20 s for its gateway.
@@ -137,8 +137,8 @@ pub fn flood(name: &str, hz: f64, seconds: f64) -> anyhow::Result<()> {
     let mut controller = robot.controller(&format!("flood-{}", std::process::id()), None)?;
     let requests = [
         Request::Resume,
-        Request::Release {
-            target: ReleaseTarget::Own,
+        Request::Heartbeat {
+            period: Duration::ZERO,
         },
         Request::Relinquish,
     ];

@@ -101,6 +101,11 @@ impl Scratch {
 
 impl Drop for Scratch {
     fn drop(&mut self) {
+        // `$SCOUT_BENCH_KEEP` keeps the logs and traces for a look afterwards.
+        if std::env::var_os("SCOUT_BENCH_KEEP").is_some() {
+            eprintln!("scout-bench: kept {}", self.0.display());
+            return;
+        }
         let _ = std::fs::remove_dir_all(&self.0);
     }
 }
@@ -407,6 +412,8 @@ trait Commander {
 struct Local {
     driver: scout_clients::control::Controller,
     safety: scout_clients::control::Controller,
+    /// The id of the bench's last stop: its release names it.
+    last_stop: u64,
 }
 
 impl Commander for Local {
@@ -419,11 +426,11 @@ impl Commander for Local {
         Ok(())
     }
     fn stop(&mut self) -> anyhow::Result<()> {
-        self.safety.stop("bench")?;
+        self.last_stop = self.safety.stop("bench")?.stop.unwrap_or(0);
         Ok(())
     }
     fn release(&mut self) -> anyhow::Result<()> {
-        self.safety.release(ReleaseTarget::Own)?;
+        self.safety.release(ReleaseTarget::Own, self.last_stop)?;
         Ok(())
     }
 }
@@ -461,7 +468,11 @@ impl Remote {
 
 impl Commander for Remote {
     fn take(&mut self) -> anyhow::Result<()> {
-        self.query("take-control", r#"{"class":"teleop"}"#.into())
+        let sent_ms = monotonic_ns() / 1_000_000;
+        self.query(
+            "take-control",
+            format!(r#"{{"class":"teleop","sent_ms":{sent_ms}}}"#),
+        )
     }
     fn drive(&mut self, linear: f64) -> anyhow::Result<()> {
         self.seq += 1;
@@ -627,6 +638,7 @@ fn local(robot: &Robot) -> anyhow::Result<Local> {
     Ok(Local {
         driver: robot.controller("bench-driver", Some(Class::Teleop))?,
         safety: robot.controller("bench-safety", None)?,
+        last_stop: 0,
     })
 }
 

@@ -89,7 +89,6 @@ fn remote_teleop(
     answers: Arc<Mutex<Answers>>,
 ) -> std::thread::JoinHandle<()> {
     std::thread::spawn(move || {
-        let epoch = Instant::now();
         let key = |kind: &str| format!("scout/{name}/cmd/{kind}/laptop");
         let mut pending = Vec::new();
         let mut seq = 0u64;
@@ -98,7 +97,7 @@ fn remote_teleop(
             let now_phase = phase.load(Ordering::Relaxed);
             let payload = format!(
                 r#"{{"seq":{seq},"sent_ms":{},"linear":0.3,"angular":0.0,"ttl_ms":500}}"#,
-                epoch.elapsed().as_millis()
+                scout_clients::monotonic_ns() / 1_000_000
             );
             let replies = session
                 .get(key("drive"))
@@ -121,7 +120,10 @@ fn remote_teleop(
                 answers.lock().expect("answers").retakes += 1;
                 let _ = session
                     .get(key("take-control"))
-                    .payload(r#"{"class":"teleop"}"#)
+                    .payload(format!(
+                        r#"{{"class":"teleop","sent_ms":{}}}"#,
+                        scout_clients::monotonic_ns() / 1_000_000
+                    ))
                     .timeout(Duration::from_secs(15))
                     .wait();
             }
@@ -204,7 +206,10 @@ fn remote_teleop_through_delay_and_loss_then_a_partition() {
     let taken = zenoh_query(
         &session,
         &format!("scout/{name}/cmd/take-control/laptop"),
-        Some(r#"{"class":"teleop"}"#),
+        Some(&format!(
+            r#"{{"class":"teleop","sent_ms":{}}}"#,
+            scout_clients::monotonic_ns() / 1_000_000
+        )),
         LIMIT,
     );
     assert_eq!(

@@ -124,7 +124,7 @@ fn estop_from_a_third_process_release_then_resume() {
     ]);
     assert_eq!(code, Some(4), "{stderr}");
     assert!(
-        stderr.contains("stopped by safety (client): person ahead"),
+        stderr.contains("stopped by #1 safety (client): person ahead"),
         "{stderr}"
     );
     // Release does not restart motion, and autonomy stays disarmed until resume.

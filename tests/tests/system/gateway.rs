@@ -89,15 +89,25 @@ fn second_gateway_is_refused_and_the_first_keeps_running() {
     let mut first = Gateway::start(&["--serial", &port, "--name", &name]);
     let subscriber = connect(&name).subscribe().expect("subscribe");
     wait_for_state(&subscriber, STATE_LIMIT, |s| s["link"]["state"] == "ok");
-    let mut same_name = Gateway::start(&["--sim", "--name", &name]);
-    assert_eq!(same_name.wait_exit(Duration::from_secs(10)), Some(2));
-    assert!(
-        same_name
-            .log()
-            .contains("already owned by another scout-gateway"),
-        "{}",
-        same_name.log()
-    );
+    // Refused whatever its environment: a systemd unit and a login shell have different run
+    // directories, and the name's lock does not depend on them. The refusal names the holder.
+    let other_run_dir = std::env::temp_dir().join(format!("{name}-run"));
+    let other_run_dir = other_run_dir.to_string_lossy();
+    for env in [
+        vec![],
+        vec![
+            ("SCOUT_RUN_DIR", other_run_dir.as_ref()),
+            ("XDG_RUNTIME_DIR", "/nonexistent"),
+        ],
+    ] {
+        let mut same_name = Gateway::start_with_env(&["--sim", "--name", &name], &env);
+        assert_eq!(same_name.wait_exit(Duration::from_secs(10)), Some(2));
+        let holder = format!(
+            "already served by another scout-gateway on this host (pid {})",
+            first.pid()
+        );
+        assert!(same_name.log().contains(&holder), "{}", same_name.log());
+    }
     let other_name = robot_name("second-other");
     let mut same_device = Gateway::start(&["--serial", &port, "--name", &other_name]);
     assert_eq!(same_device.wait_exit(Duration::from_secs(10)), Some(2));

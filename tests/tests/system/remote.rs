@@ -192,7 +192,11 @@ fn enabled_remote_commands_go_through_the_arbiter_and_bad_input_is_rejected() {
         "{no_control}"
     );
     assert_eq!(
-        command("take-control", "laptop", r#"{"class":"teleop"}"#)["accepted"],
+        command(
+            "take-control",
+            "laptop",
+            r#"{"class":"teleop","sent_ms":1000}"#
+        )["accepted"],
         true
     );
     assert_eq!(

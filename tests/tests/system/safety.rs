@@ -159,7 +159,7 @@ fn stacked_stops_are_released_by_their_owners_or_an_operator() {
         ReleaseTarget::Owner("safety-officer".into()),
         ReleaseTarget::Own,
     ] {
-        let Err(ControlError::Rejected(refused)) = random.release(target) else {
+        let Err(ControlError::Rejected(refused)) = random.release(target, u64::MAX) else {
             panic!("a stranger released a stop")
         };
         assert_eq!(refused.kind, Some(RejectionKind::NotAllowed), "{refused}");

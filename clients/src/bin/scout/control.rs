@@ -9,10 +9,10 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use clap::Args;
 use scout_clients::client::Robot;
-use scout_clients::control::{ControlError, Controller, Lights};
+use scout_clients::control::{ControlError, Controller, Lights, Stopper};
 use scout_clients::interface::control::{parse_fault_clear, parse_light};
 use scout_clients::interface::json::status_json;
-use scout_clients::{Accepted, Class, ReleaseTarget, monotonic_ns};
+use scout_clients::{Accepted, Class, ReleaseTarget, StopCause, monotonic_ns};
 use scout_protocol::{Light, LightCommand};
 
 use crate::RobotArgs;
@@ -131,11 +131,15 @@ pub struct EstopArgs {
     reason: String,
 }
 
+/// Latches a stop through the stop endpoint: no iceoryx2, no shared memory, no client slot, so
+/// that nothing on the host (a full `/dev/shm`, every slot taken) can keep it from latching.
 pub fn estop(args: &EstopArgs) -> anyhow::Result<ExitCode> {
-    let robot = Robot::connect(&args.client.robot.name)?;
     let name = args.client.name(OPERATOR);
-    robot.stopper(&name)?.stop(&args.reason)?;
-    println!("stop latched, owned by {name}: `scout release` to release it");
+    let accepted = Stopper::new(&args.client.robot.name, &name)?.stop(&args.reason)?;
+    println!(
+        "stop #{} latched, owned by {name}: `scout release` to release it",
+        accepted.stop.unwrap_or(0)
+    );
     Ok(ExitCode::SUCCESS)
 }
 
@@ -149,15 +153,44 @@ pub struct ReleaseArgs {
     /// Release only the stops of this owner (a client's name, or `gateway` for gaps).
     #[arg(long, value_name = "NAME")]
     owner: Option<String>,
+    /// Release only stops up to this id (as `scout status` lists them); default: the newest in
+    /// the status read now, which this command prints. A stop latched after it survives.
+    #[arg(long, value_name = "ID")]
+    through: Option<u64>,
 }
 
+/// Releases what the status shows now (or up to `--through`): a stop latched after the status
+/// was read survives, and is printed as still holding.
 pub fn release(args: &ReleaseArgs) -> anyhow::Result<ExitCode> {
     let target = match (&args.owner, args.own) {
         (Some(owner), _) => ReleaseTarget::Owner(owner.clone()),
         (None, true) => ReleaseTarget::Own,
         (None, false) => ReleaseTarget::All,
     };
-    one_shot(&args.client, |controller| controller.release(target))
+    let robot = Robot::connect(&args.client.robot.name)?;
+    let statuses = robot.status()?;
+    let status = statuses
+        .latest(Duration::from_secs(2))?
+        .ok_or_else(|| Silent(args.client.robot.name.clone()))?;
+    let through = args.through.unwrap_or(status.newest_stop);
+    if !status.stopped() {
+        println!("nothing to release: no stop holds the robot");
+        return Ok(ExitCode::SUCCESS);
+    }
+    for stop in status.stops().iter().filter(|stop| stop.id <= through) {
+        println!(
+            "releasing #{} {} ({}): {}",
+            stop.id,
+            stop.owner.as_str(),
+            StopCause::from_raw(stop.cause).map_or("unknown", StopCause::name),
+            stop.reason.as_str()
+        );
+    }
+    let name = args.client.name(OPERATOR);
+    let answer = robot.stopper(&name)?.release(target, through);
+    println!("{}", describe(&answer));
+    answer?;
+    Ok(ExitCode::SUCCESS)
 }
 
 /// Sends one request and prints the answer.

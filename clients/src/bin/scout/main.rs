@@ -19,6 +19,7 @@ use scout_clients::client::ClientError;
 use scout_clients::control::ControlError;
 use scout_clients::echo::EchoError;
 use scout_clients::interface::services::ServiceError;
+use scout_clients::interface::stop_socket::StopSocketError;
 use scout_clients::ros2::config::Ros2ConfigError;
 
 /// Command-line tool for an AgileX SCOUT chassis.
@@ -120,6 +121,10 @@ fn exit_code(error: &anyhow::Error) -> u8 {
             )
             || matches!(cause.downcast_ref(), Some(EchoError::Idle(_)))
             || matches!(cause.downcast_ref(), Some(ControlError::NoAnswer { .. }))
+            || matches!(
+                cause.downcast_ref(),
+                Some(ControlError::Stop(StopSocketError::NoGateway { .. }))
+            )
             || matches!(cause.downcast_ref(), Some(control::Silent(_)))
             || matches!(cause.downcast_ref(), Some(echo::RemoteSilent { .. }));
         if no_gateway {

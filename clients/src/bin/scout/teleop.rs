@@ -109,6 +109,7 @@ pub fn run(args: &TeleopArgs) -> anyhow::Result<ExitCode> {
     let mut next = Instant::now();
     let mut last_state = None;
     let mut last_status = None;
+    let mut own_stop = 0;
     let mut out = std::io::stdout();
     loop {
         while event::poll(next.saturating_duration_since(Instant::now()))? {
@@ -131,15 +132,22 @@ pub fn run(args: &TeleopArgs) -> anyhow::Result<ExitCode> {
                 Key::Zero => (linear, angular) = (0.0, 0.0),
                 Key::EStop => {
                     (linear, angular) = (0.0, 0.0);
-                    action = format!(
-                        "e-stop: {}",
-                        describe(&controller.stop("teleop e-stop key"))
-                    );
+                    let answer = controller.stop("teleop e-stop key");
+                    if let Ok(accepted) = &answer {
+                        own_stop = own_stop.max(accepted.stop.unwrap_or(0));
+                    }
+                    action = format!("e-stop: {}", describe(&answer));
                 }
                 Key::Release => {
+                    // What the screen shows, and this keyboard's own e-stops: a stop that
+                    // latched since is not released.
+                    let shown = last_status
+                        .as_ref()
+                        .map_or(0, |s: &scout_clients::StatusPayload| s.newest_stop);
+                    let seen = shown.max(own_stop);
                     action = format!(
                         "release: {}",
-                        describe(&controller.release(ReleaseTarget::All))
+                        describe(&controller.release(ReleaseTarget::All, seen))
                     );
                 }
                 Key::Quit => {

@@ -1,0 +1,197 @@
+//! Who a requesting process is, by the operating system: its executable (device and inode),
+//! its users and its groups, read from `/proc/PID`; and whether that makes it an operator.
+//! Never from a name the process chose: a client may call itself anything, and a copy or link
+//! of a program under another name is another file (or, a hard link, the very same program).
+
+use std::os::unix::fs::MetadataExt;
+use std::path::{Path, PathBuf};
+
+use crate::arbiter::OperatorConfig;
+
+/// A process's identity as the kernel reports it.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct ProcessIdentity {
+    /// The executable's device and inode (`None`: unreadable, or the process is gone).
+    pub executable: Option<(u64, u64)>,
+    /// Real and effective user ids.
+    pub uids: Vec<u32>,
+    /// Primary (real, effective) and supplementary group ids.
+    pub gids: Vec<u32>,
+}
+
+impl ProcessIdentity {
+    /// Reads process `pid`'s identity; what cannot be read is left empty (never an operator).
+    pub fn of(pid: u32) -> Self {
+        let executable = std::fs::metadata(format!("/proc/{pid}/exe"))
+            .ok()
+            .map(|meta| (meta.dev(), meta.ino()));
+        let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();
+        let (uids, gids) = ids_of_status(&status);
+        Self {
+            executable,
+            uids,
+            gids,
+        }
+    }
+}
+
+/// The `Uid:` (real, effective) and the `Gid:` (real, effective) and `Groups:` ids of a
+/// `/proc/PID/status` text.
+fn ids_of_status(status: &str) -> (Vec<u32>, Vec<u32>) {
+    let ids = |line: &str, take: usize| -> Vec<u32> {
+        line.split_whitespace()
+            .skip(1)
+            .take(take)
+            .filter_map(|id| id.parse().ok())
+            .collect()
+    };
+    let mut uids = Vec::new();
+    let mut gids = Vec::new();
+    for line in status.lines() {
+        if line.starts_with("Uid:") {
+            uids = ids(line, 2);
+        } else if line.starts_with("Gid:") {
+            gids.extend(ids(line, 2));
+        } else if line.starts_with("Groups:") {
+            gids.extend(ids(line, usize::MAX));
+        }
+    }
+    (uids, gids)
+}
+
+/// Decides the operator role from a process's identity.
+#[derive(Debug, Clone)]
+pub struct Operators {
+    programs: Vec<PathBuf>,
+    uids: Vec<u32>,
+    gids: Vec<u32>,
+}
+
+impl Operators {
+    /// The rules of `config`; relative program paths are taken in `beside` (the directory of
+    /// the gateway's own executable).
+    pub fn new(config: &OperatorConfig, beside: &Path) -> Self {
+        Self {
+            programs: config
+                .programs
+                .iter()
+                .map(|program| beside.join(program))
+                .collect(),
+            uids: config.uids.clone(),
+            gids: config.gids.clone(),
+        }
+    }
+
+    /// The rules of `config` for this gateway, its programs beside its own executable.
+    pub fn for_this_gateway(config: &OperatorConfig) -> Self {
+        let beside = std::env::current_exe()
+            .ok()
+            .and_then(|exe| exe.parent().map(Path::to_path_buf))
+            .unwrap_or_default();
+        Self::new(config, &beside)
+    }
+
+    /// Whether a process of `identity` is an operator. The programs are looked up now, so a
+    /// rebuilt or reinstalled `scout` is recognised without restarting the gateway.
+    pub fn is_operator(&self, identity: &ProcessIdentity) -> bool {
+        let by_program = identity.executable.is_some_and(|executable| {
+            self.programs.iter().any(|program| {
+                std::fs::metadata(program).is_ok_and(|meta| (meta.dev(), meta.ino()) == executable)
+            })
+        });
+        by_program
+            || identity.uids.iter().any(|uid| self.uids.contains(uid))
+            || identity.gids.iter().any(|gid| self.gids.contains(gid))
+    }
+
+    /// Whether process `pid` is an operator.
+    pub fn is_operator_pid(&self, pid: u32) -> bool {
+        self.is_operator(&ProcessIdentity::of(pid))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn temp_dir(name: &str) -> PathBuf {
+        let dir =
+            std::env::temp_dir().join(format!("scout-identity-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        dir
+    }
+
+    #[test]
+    fn status_ids_are_read() {
+        let status = "Name:\tscout\nUid:\t1000\t1001\t1000\t1000\nGid:\t100\t100\t100\t100\nGroups:\t20 27 1000 \n";
+        assert_eq!(
+            ids_of_status(status),
+            (vec![1000, 1001], vec![100, 100, 20, 27, 1000])
+        );
+        assert_eq!(ids_of_status(""), (vec![], vec![]));
+    }
+
+    #[test]
+    fn this_process_is_read_from_proc() {
+        let me = ProcessIdentity::of(std::process::id());
+        assert!(me.executable.is_some());
+        assert!(!me.uids.is_empty() && !me.gids.is_empty());
+        assert_eq!(ProcessIdentity::of(u32::MAX), ProcessIdentity::default());
+    }
+
+    #[test]
+    fn the_program_is_the_file_not_its_name() {
+        let dir = temp_dir("program");
+        let scout = dir.join("scout");
+        std::fs::write(&scout, b"the real scout").expect("write");
+        let meta = std::fs::metadata(&scout).expect("stat");
+        let operators = Operators::new(&OperatorConfig::default(), &dir);
+        let real = ProcessIdentity {
+            executable: Some((meta.dev(), meta.ino())),
+            ..ProcessIdentity::default()
+        };
+        assert!(operators.is_operator(&real));
+        // A copy named scout elsewhere is another file.
+        let elsewhere = temp_dir("copy");
+        let copy = elsewhere.join("scout");
+        std::fs::copy(&scout, &copy).expect("copy");
+        let meta = std::fs::metadata(&copy).expect("stat");
+        let impostor = ProcessIdentity {
+            executable: Some((meta.dev(), meta.ino())),
+            ..ProcessIdentity::default()
+        };
+        assert!(!operators.is_operator(&impostor));
+        // A hard link is the same file: the same program, so the same role.
+        let link = elsewhere.join("not-scout");
+        std::fs::hard_link(&scout, &link).expect("link");
+        let meta = std::fs::metadata(&link).expect("stat");
+        assert!(operators.is_operator(&ProcessIdentity {
+            executable: Some((meta.dev(), meta.ino())),
+            ..ProcessIdentity::default()
+        }));
+        let _ = std::fs::remove_dir_all(dir);
+        let _ = std::fs::remove_dir_all(elsewhere);
+    }
+
+    #[test]
+    fn users_and_groups_make_operators() {
+        let operators = Operators::new(
+            &OperatorConfig {
+                programs: Vec::new(),
+                uids: vec![1000],
+                gids: vec![27],
+            },
+            Path::new("/nonexistent"),
+        );
+        let user = |uids: Vec<u32>, gids: Vec<u32>| ProcessIdentity {
+            executable: None,
+            uids,
+            gids,
+        };
+        assert!(operators.is_operator(&user(vec![1000], vec![])));
+        assert!(operators.is_operator(&user(vec![5], vec![100, 27])));
+        assert!(!operators.is_operator(&user(vec![5], vec![100])));
+        assert!(!operators.is_operator(&ProcessIdentity::default()));
+    }
+}
