@@ -224,6 +224,7 @@ pub struct Driver {
     origins: std::collections::HashMap<u128, Origin>,
     backlog: bool,
     realtime_priority: u8,
+    service_manager: scout_io::notify::ServiceManager,
 }
 
 impl std::fmt::Debug for Driver {
@@ -261,6 +262,7 @@ impl Driver {
             origins: std::collections::HashMap::new(),
             backlog: false,
             realtime_priority: config.timing.realtime_priority,
+            service_manager: scout_io::notify::ServiceManager::from_env(),
         })
     }
 
@@ -275,6 +277,7 @@ impl Driver {
         let mut ready = Ready::default();
         loop {
             let now = monotonic();
+            self.service_manager.pet(now);
             self.receive(now, ready.port);
             // What the port brought goes out before the requests are served.
             self.publish(now);

@@ -78,10 +78,16 @@ pub fn example(name: &str) -> Command {
     command
 }
 
-/// A command for workspace binary `name`.
+/// A command for workspace binary `name`. Not under this process' service manager, if any: a
+/// test that wants one sets `NOTIFY_SOCKET` itself.
 pub fn command(name: &str) -> Command {
     let mut command = Command::new(bin(name));
-    command.env("RUST_LOG", "warn").env_remove("RUST_BACKTRACE");
+    command
+        .env("RUST_LOG", "warn")
+        .env_remove("RUST_BACKTRACE")
+        .env_remove("NOTIFY_SOCKET")
+        .env_remove("WATCHDOG_USEC")
+        .env_remove("WATCHDOG_PID");
     command
 }
 

@@ -4,9 +4,11 @@
 //! - [`port`]: the chassis port as an OS resource: a tty (serial, slcan adapter, pseudo-terminal)
 //!   or a SocketCAN socket.
 //! - [`logging`]: `tracing` to standard error, never blocking the caller.
+//! - [`notify`]: the service manager's notifications (systemd's readiness and watchdog).
 //! - [`raise_priority`]: real-time scheduling for the thread that keeps the wire's time.
 
 pub mod logging;
+pub mod notify;
 pub mod port;
 
 pub use port::{BusError, Incoming, Port};

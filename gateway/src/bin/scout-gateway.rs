@@ -2,6 +2,9 @@
 //!
 //! Exit codes: 0 stopped by Ctrl-C or SIGTERM (after sending zero speed), 1 runtime error,
 //! 2 usage or configuration error, or another gateway already owns the robot name or device.
+//!
+//! Under systemd (`Type=notify`, config/scout-gateway.service) it reports when it is ready and
+//! when it stops, and its control loop pets the watchdog.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -20,6 +23,7 @@ use scout_gateway::stop_endpoint::StopEndpoint;
 use scout_interface::Transport;
 use scout_interface::remote::Permission;
 use scout_interface::services;
+use scout_io::notify::ServiceManager;
 use tracing::info;
 
 /// The one process that owns a SCOUT chassis port: it decodes the chassis' feedback, publishes
@@ -157,6 +161,21 @@ fn serve(config: GatewayConfig, spec: DeviceSpec, endpoint: StopEndpoint) -> any
         services::state_service(&config.name),
         services::MAX_SUBSCRIBERS,
     );
+    // systemd (Type=notify): told when the services are up and when shutdown begins; the
+    // driver pets the watchdog from its loop.
+    let mut service_manager = ServiceManager::from_env();
+    if service_manager.is_present() {
+        match service_manager.pet_interval() {
+            Some(interval) => info!("under systemd: watchdog petted every {interval:?}"),
+            None => info!("under systemd, no watchdog"),
+        }
+    }
+    let status = format!(
+        "robot '{}', {} on {}",
+        config.name,
+        spec.transport(),
+        spec.name()
+    );
     let bridge_config = config.zenoh.clone();
     let info = config.info(spec.transport(), &spec.name());
     let robot = config.name.clone();
@@ -179,7 +198,10 @@ fn serve(config: GatewayConfig, spec: DeviceSpec, endpoint: StopEndpoint) -> any
         info!("zenoh off: local clients only");
         None
     };
-    driver.run(&stop)?;
+    service_manager.ready(&status);
+    let result = driver.run(&stop);
+    service_manager.stopping();
+    result?;
     marker.clean_exit();
     Ok(())
 }

@@ -11,3 +11,4 @@ mod ros2;
 mod safety;
 mod sim;
 mod teleop;
+mod watchdog;
