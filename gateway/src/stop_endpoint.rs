@@ -9,8 +9,7 @@ use std::time::Duration;
 
 use nix::errno::Errno;
 use nix::sys::socket::{
-    AddressFamily, ControlMessageOwned, MsgFlags, SockFlag, SockType, UnixAddr, UnixCredentials,
-    bind, recvmsg, sendto, setsockopt, socket, sockopt,
+    ControlMessageOwned, MsgFlags, UnixAddr, UnixCredentials, recvmsg, sendto, setsockopt, sockopt,
 };
 use scout_interface::stop_socket::{self, ParseError, StopClient, StopReply, StopRequest};
 
@@ -70,20 +69,14 @@ impl StopEndpoint {
             address: address.clone(),
             errno,
         };
-        let socket = socket(
-            AddressFamily::Unix,
-            SockType::Datagram,
-            SockFlag::SOCK_CLOEXEC | SockFlag::SOCK_NONBLOCK,
-            None,
-        )
-        .map_err(io)?;
-        setsockopt(&socket, sockopt::PassCred, &true).map_err(io)?;
-        let addr = UnixAddr::new_abstract(address.as_bytes()).map_err(io)?;
-        match bind(socket.as_raw_fd(), &addr) {
-            Ok(()) => Ok(Self {
-                socket,
-                replies_lost: 0,
-            }),
+        match stop_socket::claim(&address) {
+            Ok(socket) => {
+                setsockopt(&socket, sockopt::PassCred, &true).map_err(io)?;
+                Ok(Self {
+                    socket,
+                    replies_lost: 0,
+                })
+            }
             Err(Errno::EADDRINUSE) => Err(BindError::Held {
                 robot: robot.to_owned(),
                 holder: holder_pid(robot),

@@ -48,6 +48,22 @@ pub enum BridgeError {
     /// A thread of the bridge could not start.
     #[error("starting a thread: {0}")]
     Thread(#[from] std::io::Error),
+    /// Another bridge serves this robot on this ROS domain: two would share a client name
+    /// and drive the chassis from both graphs.
+    #[error(
+        "another `scout ros2` bridge serves robot '{robot}' on ROS domain {domain} on this host: stop it first, or give this one another --domain"
+    )]
+    AlreadyRunning {
+        /// The robot.
+        robot: String,
+        /// The ROS domain.
+        domain: u32,
+    },
+}
+
+/// The abstract socket address that one bridge per robot and ROS domain holds.
+fn bridge_claim(robot: &str, domain: u32) -> String {
+    format!("{}/ros2/{domain}", scout_interface::services::prefix(robot))
 }
 
 fn zenoh_error(what: &str) -> impl Fn(zenoh::Error) -> BridgeError + '_ {
@@ -177,6 +193,15 @@ pub fn session_settings(config: &Ros2Config) -> SessionSettings {
 
 /// Runs the bridge for robot `robot` until `stop` is set or something fails.
 pub fn run(robot: &str, config: &Ros2Config, stop: &AtomicBool) -> Result<(), BridgeError> {
+    let _claim = scout_interface::stop_socket::claim(&bridge_claim(robot, config.domain)).map_err(
+        |errno| match errno {
+            nix::errno::Errno::EADDRINUSE => BridgeError::AlreadyRunning {
+                robot: robot.to_owned(),
+                domain: config.domain,
+            },
+            other => BridgeError::Thread(other.into()),
+        },
+    )?;
     let gateway = Robot::connect(robot)?;
     let settings = session_settings(config);
     let session = settings.open("client").map_err(|error| {

@@ -28,6 +28,23 @@ pub fn address(robot: &str) -> String {
     format!("{}/stop", crate::services::prefix(robot))
 }
 
+/// Binds a non-blocking datagram socket to the abstract `address`: a claim on a name that one
+/// process holds on this host (in its network namespace) and the kernel frees when that process
+/// dies, even by SIGKILL. `EADDRINUSE`: another process holds it.
+pub fn claim(address: &str) -> Result<OwnedFd, Errno> {
+    let socket = socket(
+        AddressFamily::Unix,
+        SockType::Datagram,
+        SockFlag::SOCK_CLOEXEC | SockFlag::SOCK_NONBLOCK,
+        None,
+    )?;
+    bind(
+        socket.as_raw_fd(),
+        &UnixAddr::new_abstract(address.as_bytes())?,
+    )?;
+    Ok(socket)
+}
+
 /// The request datagram's fields.
 pub mod request {
     use std::ops::Range;

@@ -529,3 +529,125 @@ fn tls_with_mutual_authentication_and_access_control() {
     }
     assert!(gateway.is_running(), "{}", gateway.log());
 }
+
+/// A remote e-stop's answer: accepted, or panics with what came back.
+fn remote_estop(session: &zenoh::Session, robot: &str, peer: &str) {
+    let answers = zenoh_query(
+        session,
+        &format!("scout/{robot}/cmd/estop/{peer}"),
+        Some(r#"{"reason":"remote test"}"#),
+        QUERY,
+    );
+    assert!(
+        answers.len() == 1 && answers[0]["accepted"] == true,
+        "e-stop from {peer}: {answers:?}"
+    );
+}
+
+#[test]
+fn a_remote_estop_is_answered_and_latched_under_a_flood_from_rotating_peer_names() {
+    let name = robot_name("remote-flood");
+    let port = free_port();
+    let _gateway = Gateway::start(&[
+        "--sim",
+        "--name",
+        &name,
+        "--zenoh-listen",
+        &tcp(port),
+        "--remote-commands",
+        "estop",
+    ]);
+    let robot = connect(&name);
+    let status = robot.status().expect("status");
+    let session = zenoh_session("client", &[], &[tcp(port)]);
+    query_until_answered(&session, &format!("scout/{name}/info"));
+    // Two sessions flood releases (not allowed here) over 1000 peer names, never waiting.
+    let flooding = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(true));
+    let floods: Vec<_> = (0..2)
+        .map(|flooder| {
+            let (flooding, name) = (std::sync::Arc::clone(&flooding), name.clone());
+            let session = zenoh_session("client", &[], &[tcp(port)]);
+            std::thread::spawn(move || {
+                let mut sent = 0u64;
+                while flooding.load(std::sync::atomic::Ordering::Relaxed) {
+                    let peer = format!("x{}", (sent * 2 + flooder) % 1000);
+                    let _ = session
+                        .get(format!("scout/{name}/cmd/release/{peer}"))
+                        .payload("{}")
+                        .timeout(Duration::from_secs(1))
+                        .wait();
+                    sent += 1;
+                }
+                sent
+            })
+        })
+        .collect();
+    std::thread::sleep(Duration::from_millis(500));
+    let mut newest = 0;
+    for _ in 0..6 {
+        remote_estop(&session, &name, "guard");
+        let latched = wait_for_status(&status, LIMIT, |s| {
+            s["newest_stop"].as_u64() > Some(newest)
+                && s["stops"]
+                    .as_array()
+                    .is_some_and(|stops| stops.iter().any(|stop| stop["owner"] == "remote:guard"))
+        });
+        newest = latched["newest_stop"].as_u64().unwrap_or(0);
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    flooding.store(false, std::sync::atomic::Ordering::Relaxed);
+    let sent: u64 = floods.into_iter().map(|f| f.join().expect("flooder")).sum();
+    let info = query_until_answered(&session, &format!("scout/{name}/info"));
+    let counters = &info["counters"];
+    assert!(counters["estops_accepted"].as_u64() >= Some(6), "{info}");
+    // The refusals were cheap and counted (or dropped and counted, past the lane's length).
+    let refused = counters["commands_rejected"].as_u64().unwrap_or(0)
+        + counters["queries_dropped"].as_u64().unwrap_or(0);
+    assert!(refused > 0, "{info}");
+    println!("flood: {sent} releases sent, {refused} refused or dropped; {counters}");
+}
+
+#[test]
+fn any_peer_name_zenoh_carries_can_stop_and_release_its_own() {
+    let name = robot_name("remote-names");
+    let port = free_port();
+    let _gateway = Gateway::start(&[
+        "--sim",
+        "--name",
+        &name,
+        "--zenoh-listen",
+        &tcp(port),
+        "--remote-commands",
+        "estop,release",
+    ]);
+    let robot = connect(&name);
+    let status = robot.status().expect("status");
+    let session = zenoh_session("client", &[], &[tcp(port)]);
+    query_until_answered(&session, &format!("scout/{name}/info"));
+    let long = "a".repeat(26);
+    let mapped = scout_clients::interface::remote::peer_client_name(&long);
+    for (peer, owner) in [
+        (long.as_str(), mapped.as_str()),
+        ("opérateur", "remote:op%C3%A9rateur"),
+    ] {
+        remote_estop(&session, &name, peer);
+        let latched = wait_for_status(&status, LIMIT, |s| {
+            s["stops"]
+                .as_array()
+                .is_some_and(|stops| stops.iter().any(|stop| stop["owner"] == owner))
+        });
+        assert_eq!(latched["latched"], true);
+        let released = zenoh_query(
+            &session,
+            &format!("scout/{name}/cmd/release/{peer}"),
+            Some("{}"),
+            QUERY,
+        );
+        assert_eq!(
+            released.first().map(|a| a["accepted"] == true),
+            Some(true),
+            "{released:?}"
+        );
+        wait_for_status(&status, LIMIT, |s| s["latched"] == false);
+    }
+}

@@ -402,3 +402,71 @@ fn scout_ros2_says_what_is_missing() {
     assert_eq!(code, Some(2), "{stderr}");
     assert!(stderr.contains("not a valid ROS name"), "{stderr}");
 }
+
+#[test]
+fn a_second_bridge_for_one_robot_and_domain_is_refused() {
+    let name = robot_name("ros2-twice");
+    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    connect(&name);
+    let router = tcp(free_port());
+    let _router = Background::scout(&["router", "--listen", &router]);
+    let deadline = Instant::now() + LIMIT;
+    while scout_system_tests::try_zenoh_session("client", &[], std::slice::from_ref(&router))
+        .is_err()
+    {
+        assert!(Instant::now() < deadline, "the router never listened");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let domain = (std::process::id() % 200 + 1).to_string();
+    let bridge = [
+        "ros2",
+        "--name",
+        &name,
+        "--connect",
+        &router,
+        "--domain",
+        &domain,
+    ];
+    let mut first = Background::scout(&bridge);
+    // The first bridge holds its claim (an abstract socket) once it runs.
+    let claim = format!("@scout/{name}/ros2/{domain}");
+    let deadline = Instant::now() + LIMIT;
+    while !std::fs::read_to_string("/proc/net/unix").is_ok_and(|table| table.contains(&claim)) {
+        assert!(
+            Instant::now() < deadline,
+            "the first bridge never claimed {claim}"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let (code, _, stderr) = scout(&bridge);
+    assert_eq!(code, Some(2), "{stderr}");
+    assert!(
+        stderr.contains("another `scout ros2` bridge serves robot"),
+        "{stderr}"
+    );
+    // Another domain is another graph: that bridge runs.
+    let other = (std::process::id() % 200 + 201).to_string();
+    let mut second = Background::scout(&[
+        "ros2",
+        "--name",
+        &name,
+        "--connect",
+        &router,
+        "--domain",
+        &other,
+    ]);
+    let other_claim = format!("@scout/{name}/ros2/{other}");
+    let deadline = Instant::now() + LIMIT;
+    while !std::fs::read_to_string("/proc/net/unix").is_ok_and(|table| table.contains(&other_claim))
+    {
+        assert!(
+            Instant::now() < deadline,
+            "the other domain's bridge never ran"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    for bridge in [&mut first, &mut second] {
+        bridge.signal(Signal::SIGINT);
+        assert_eq!(bridge.wait_exit(LIMIT), Some(0));
+    }
+}

@@ -1,8 +1,9 @@
 //! `scout`: the command-line tool for a SCOUT chassis behind scout-gateway.
 //!
 //! Exit codes: 0 success; 1 something failed (a line `scout decode` could not decode, an I/O
-//! error, no ROS 2 router to connect to); 2 usage error (also a bad `scout ros2` setting); 3 no gateway with that name runs, or it stopped answering; 4 the
-//! gateway rejected the request (the reason is printed).
+//! error, no ROS 2 router to connect to); 2 usage error (also a bad `scout ros2` setting, or
+//! another `scout ros2` bridge serves the robot on that ROS domain); 3 no gateway with that name
+//! runs, or it stopped answering; 4 the gateway rejected the request (the reason is printed).
 
 mod control;
 mod decode;
@@ -133,7 +134,12 @@ fn exit_code(error: &anyhow::Error) -> u8 {
         if matches!(cause.downcast_ref(), Some(ControlError::Rejected(_))) {
             return 4;
         }
-        if cause.downcast_ref::<Ros2ConfigError>().is_some() {
+        if cause.downcast_ref::<Ros2ConfigError>().is_some()
+            || matches!(
+                cause.downcast_ref(),
+                Some(scout_clients::ros2::bridge::BridgeError::AlreadyRunning { .. })
+            )
+        {
             return 2;
         }
     }
