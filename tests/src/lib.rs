@@ -261,6 +261,32 @@ pub fn robot_name(test: &str) -> String {
     format!("{test}-{}", std::process::id())
 }
 
+/// A directory of one test's own (a gateway's `SCOUT_RUN_DIR`), removed when dropped.
+#[derive(Debug)]
+pub struct TempDir(PathBuf);
+
+impl TempDir {
+    /// Creates an empty directory named after `name` (a [`robot_name`]) in the system's
+    /// temporary directory.
+    pub fn new(name: &str) -> TempDir {
+        let path = std::env::temp_dir().join(format!("scout-test-{name}"));
+        let _ = std::fs::remove_dir_all(&path);
+        std::fs::create_dir_all(&path).expect("create a temporary directory");
+        TempDir(path)
+    }
+
+    /// Its path.
+    pub fn path(&self) -> &std::path::Path {
+        &self.0
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
 /// A running `scout-gateway`, killed when dropped. Its stderr is collected for failure messages.
 #[derive(Debug)]
 pub struct Gateway {
@@ -273,6 +299,13 @@ impl Gateway {
     /// would all want the default port).
     pub fn start(args: &[&str]) -> Gateway {
         Self::start_with_env(args, &[])
+    }
+
+    /// [`Gateway::start`] with its lock files (and the `robot-NAME.running` marker of an unclean
+    /// exit) in `run_dir` (`SCOUT_RUN_DIR`) instead of the user's run directory.
+    pub fn start_in(run_dir: &std::path::Path, args: &[&str]) -> Gateway {
+        let run_dir = run_dir.to_string_lossy();
+        Self::start_with_env(args, &[("SCOUT_RUN_DIR", run_dir.as_ref())])
     }
 
     /// Starts `scout-gateway` with `args` and the environment variables `env` set.

@@ -10,5 +10,6 @@ mod remote;
 mod ros2;
 mod safety;
 mod sim;
+mod status;
 mod teleop;
 mod watchdog;

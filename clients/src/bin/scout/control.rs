@@ -1,5 +1,4 @@
-//! The control subcommands: drive, estop, release, resume, lights, clear-fault, status,
-//! reset-odometry.
+//! The control subcommands: drive, estop, release, resume, lights, clear-fault, reset-odometry.
 
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -11,8 +10,7 @@ use clap::Args;
 use scout_clients::client::Robot;
 use scout_clients::control::{ControlError, Controller, Lights, Stopper};
 use scout_clients::interface::control::{parse_fault_clear, parse_light};
-use scout_clients::interface::json::status_json;
-use scout_clients::{Accepted, Class, ReleaseTarget, StopCause, monotonic_ns};
+use scout_clients::{Accepted, Class, ReleaseTarget, StopCause};
 use scout_protocol::{Light, LightCommand};
 
 use crate::RobotArgs;
@@ -171,7 +169,7 @@ pub fn release(args: &ReleaseArgs) -> anyhow::Result<ExitCode> {
     let statuses = robot.status()?;
     let status = statuses
         .latest(Duration::from_secs(2))?
-        .ok_or_else(|| Silent(args.client.robot.name.clone()))?;
+        .ok_or_else(|| crate::status::Silent(args.client.robot.name.clone()))?;
     let through = args.through.unwrap_or(status.newest_stop);
     if !status.stopped() {
         println!("nothing to release: no stop holds the robot");
@@ -254,83 +252,4 @@ pub struct ClearFaultArgs {
 pub fn clear_fault(args: &ClearFaultArgs) -> anyhow::Result<ExitCode> {
     let code = parse_fault_clear(&args.kind).map_err(anyhow::Error::msg)?;
     one_shot(&args.client, |controller| controller.clear_fault(code))
-}
-
-/// The gateway publishes no status.
-#[derive(Debug, thiserror::Error)]
-#[error("gateway '{0}' published no status within 2 s: is it running (not stopped)?")]
-pub struct Silent(pub String);
-
-#[derive(Debug, Args)]
-pub struct StatusArgs {
-    #[command(flatten)]
-    robot: RobotArgs,
-    /// The status as one JSON object (the schema in the README).
-    #[arg(long)]
-    json: bool,
-}
-
-pub fn status(args: &StatusArgs) -> anyhow::Result<ExitCode> {
-    let robot = Robot::connect(&args.robot.name)?;
-    let status = robot
-        .status()?
-        .latest(Duration::from_secs(2))?
-        .ok_or_else(|| Silent(args.robot.name.clone()))?;
-    let json = status_json(&status, monotonic_ns());
-    if args.json {
-        println!("{json}");
-        return Ok(ExitCode::SUCCESS);
-    }
-    let latched = match &json["latched_by"] {
-        serde_json::Value::Null => "no".to_owned(),
-        by => format!(
-            "YES, by {} ({})",
-            by["client"].as_str().unwrap_or("?"),
-            by["reason"].as_str().unwrap_or("")
-        ),
-    };
-    let selected = match &json["selected"] {
-        serde_json::Value::Null => "nobody".to_owned(),
-        s => format!(
-            "{} {}",
-            s["class"].as_str().unwrap_or("?"),
-            s["client"].as_str().unwrap_or("?")
-        ),
-    };
-    let output = &json["output"];
-    println!("robot      {}", json["robot"].as_str().unwrap_or("?"));
-    println!("stop       {latched}");
-    println!("driving    {selected}");
-    println!(
-        "output     {:.3} m/s  {:.3} rad/s{}",
-        output["linear"].as_f64().unwrap_or(0.0),
-        output["angular"].as_f64().unwrap_or(0.0),
-        if output["limited"] == true {
-            "  (limited)"
-        } else {
-            ""
-        }
-    );
-    println!(
-        "autonomy   {}",
-        if json["autonomy_armed"] == true {
-            "armed"
-        } else {
-            "disarmed: `scout resume`"
-        }
-    );
-    for source in json["sources"].as_array().into_iter().flatten() {
-        println!(
-            "client     {} {}{}  last request {:.0} ms ago",
-            source["client"].as_str().unwrap_or("?"),
-            source["class"].as_str().unwrap_or("-"),
-            if source["holding"] == true {
-                " (holds)"
-            } else {
-                ""
-            },
-            source["age_ms"].as_f64().unwrap_or(0.0),
-        );
-    }
-    Ok(ExitCode::SUCCESS)
 }

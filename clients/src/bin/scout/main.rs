@@ -10,6 +10,7 @@ mod decode;
 mod echo;
 mod ros2;
 mod router;
+mod status;
 mod teleop;
 
 use std::io::ErrorKind;
@@ -56,8 +57,9 @@ enum Command {
     Lights(control::LightsArgs),
     /// Clear a chassis fault: send its code in the next 3 motion commands (`all`: every code).
     ClearFault(control::ClearFaultArgs),
-    /// Show the arbiter's status: the stop, who drives, the output, autonomy, the clients.
-    Status(control::StatusArgs),
+    /// Show the arbiter's status: the stops and what to do, who drives, the output, autonomy,
+    /// the clients.
+    Status(status::StatusArgs),
     /// Reset the gateway's odometry to the origin.
     ResetOdometry(control::ClientArgs),
     /// Run a zenoh router for a fleet: gateways connect to it, remote readers read through it.
@@ -88,7 +90,7 @@ fn main() -> ExitCode {
         Command::Resume(args) => control::one_shot(&args, |c| c.resume()),
         Command::Lights(args) => control::lights(&args),
         Command::ClearFault(args) => control::clear_fault(&args),
-        Command::Status(args) => control::status(&args),
+        Command::Status(args) => status::run(&args),
         Command::ResetOdometry(args) => control::one_shot(&args, |c| c.reset_odometry()),
         Command::Router(args) => router::run(&args),
         Command::Ros2(args) => ros2::run(&args),
@@ -126,7 +128,7 @@ fn exit_code(error: &anyhow::Error) -> u8 {
                 cause.downcast_ref(),
                 Some(ControlError::Stop(StopSocketError::NoGateway { .. }))
             )
-            || matches!(cause.downcast_ref(), Some(control::Silent(_)))
+            || matches!(cause.downcast_ref(), Some(status::Silent(_)))
             || matches!(cause.downcast_ref(), Some(echo::RemoteSilent { .. }));
         if no_gateway {
             return 3;
