@@ -226,6 +226,10 @@ impl RunningMarker {
         } else {
             Start::Clean
         };
+        if let Some(dir) = self.path.parent() {
+            std::fs::create_dir_all(dir)
+                .with_context(|| format!("creating the run directory {}", dir.display()))?;
+        }
         std::fs::write(&self.path, std::process::id().to_string())
             .with_context(|| format!("writing {}", self.path.display()))?;
         Ok(start)
