@@ -38,9 +38,45 @@ pub enum ClientError {
     /// A control port could not be created.
     #[error(transparent)]
     ControlPort(#[from] services::ControlPortError),
+    /// Shared memory is (nearly) full: iceoryx2 would die of SIGBUS writing into it.
+    #[error(
+        "{path} has {free} bytes free, less than the {needed} a client needs: free some (a full /dev/shm kills iceoryx2 programs with SIGBUS); `scout estop` still works, it needs no shared memory"
+    )]
+    SharedMemoryFull {
+        /// The shared-memory file system.
+        path: &'static str,
+        /// Bytes free there.
+        free: u64,
+        /// Bytes a client needs at least.
+        needed: u64,
+    },
     /// The stop endpoint's socket could not be made.
     #[error(transparent)]
     StopSocket(scout_interface::stop_socket::StopSocketError),
+}
+
+/// Where iceoryx2 keeps its shared memory, and the least free space a client needs there.
+const SHARED_MEMORY: &str = "/dev/shm";
+const SHARED_MEMORY_NEEDED: u64 = 1 << 20;
+
+/// Refuses, with an error, to map shared memory that is already full: writing into a page a
+/// full tmpfs cannot back kills the process with SIGBUS, where an error says what to do.
+fn check_shared_memory() -> Result<(), ClientError> {
+    match nix::sys::statvfs::statvfs(SHARED_MEMORY) {
+        Ok(stat) => {
+            let free = stat.blocks_available() * stat.fragment_size();
+            if free < SHARED_MEMORY_NEEDED {
+                return Err(ClientError::SharedMemoryFull {
+                    path: SHARED_MEMORY,
+                    free,
+                    needed: SHARED_MEMORY_NEEDED,
+                });
+            }
+            Ok(())
+        }
+        // No such file system to look at: iceoryx2 says what is wrong when it tries.
+        Err(_) => Ok(()),
+    }
 }
 
 /// A connection to one robot's gateway.
@@ -56,6 +92,7 @@ impl Robot {
     /// version of the interface.
     pub fn connect(name: &str) -> Result<Self, ClientError> {
         services::check_robot_name(name)?;
+        check_shared_memory()?;
         services::quiet_iceoryx2_logs();
         // Best effort: a failed clean-up of dead processes' leftovers does not stop a client.
         let _ = services::remove_dead_nodes();

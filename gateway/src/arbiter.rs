@@ -101,8 +101,8 @@ pub struct ArbiterConfig {
 
 /// Who has the operator role, by the operating system's identity of the requesting process,
 /// never by a name it chose: its executable is one of `programs` (the same file, by device and
-/// inode: a copy elsewhere is not), or its user is one of `uids`, or one of its groups is in
-/// `gids`.
+/// inode: a copy elsewhere is not) run by the gateway's own user or root, or its user is one of
+/// `uids`, or one of its groups is in `gids`.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct OperatorConfig {

@@ -59,10 +59,13 @@ fn ids_of_status(status: &str) -> (Vec<u32>, Vec<u32>) {
     (uids, gids)
 }
 
-/// Decides the operator role from a process's identity.
+/// Decides the operator role from a process's identity: one of the operator programs run by
+/// the gateway's own user or root, or any process of a configured user or group.
 #[derive(Debug, Clone)]
 pub struct Operators {
     programs: Vec<PathBuf>,
+    /// The users whose runs of an operator program count: the gateway's and root.
+    program_users: Vec<u32>,
     uids: Vec<u32>,
     gids: Vec<u32>,
 }
@@ -72,6 +75,7 @@ impl Operators {
     /// the gateway's own executable).
     pub fn new(config: &OperatorConfig, beside: &Path) -> Self {
         Self {
+            program_users: vec![0, nix::unistd::getuid().as_raw()],
             programs: config
                 .programs
                 .iter()
@@ -98,7 +102,10 @@ impl Operators {
             self.programs.iter().any(|program| {
                 std::fs::metadata(program).is_ok_and(|meta| (meta.dev(), meta.ino()) == executable)
             })
-        });
+        }) && identity
+            .uids
+            .iter()
+            .all(|uid| self.program_users.contains(uid));
         by_program
             || identity.uids.iter().any(|uid| self.uids.contains(uid))
             || identity.gids.iter().any(|gid| self.gids.contains(gid))
@@ -147,11 +154,19 @@ mod tests {
         std::fs::write(&scout, b"the real scout").expect("write");
         let meta = std::fs::metadata(&scout).expect("stat");
         let operators = Operators::new(&OperatorConfig::default(), &dir);
+        let me = nix::unistd::getuid().as_raw();
         let real = ProcessIdentity {
             executable: Some((meta.dev(), meta.ino())),
-            ..ProcessIdentity::default()
+            uids: vec![me],
+            gids: Vec::new(),
         };
         assert!(operators.is_operator(&real));
+        // Run by another user (not root), the program gives no role.
+        let stranger = ProcessIdentity {
+            uids: vec![me.wrapping_add(4321).max(1)],
+            ..real.clone()
+        };
+        assert!(!operators.is_operator(&stranger));
         // A copy named scout elsewhere is another file.
         let elsewhere = temp_dir("copy");
         let copy = elsewhere.join("scout");
@@ -159,7 +174,8 @@ mod tests {
         let meta = std::fs::metadata(&copy).expect("stat");
         let impostor = ProcessIdentity {
             executable: Some((meta.dev(), meta.ino())),
-            ..ProcessIdentity::default()
+            uids: vec![me],
+            gids: Vec::new(),
         };
         assert!(!operators.is_operator(&impostor));
         // A hard link is the same file: the same program, so the same role.
@@ -168,7 +184,8 @@ mod tests {
         let meta = std::fs::metadata(&link).expect("stat");
         assert!(operators.is_operator(&ProcessIdentity {
             executable: Some((meta.dev(), meta.ino())),
-            ..ProcessIdentity::default()
+            uids: vec![me],
+            gids: Vec::new(),
         }));
         let _ = std::fs::remove_dir_all(dir);
         let _ = std::fs::remove_dir_all(elsewhere);

@@ -202,6 +202,111 @@ fn a_stop_goes_through_with_every_control_slot_taken() {
     assert_eq!(code, Some(0), "{stderr}");
     let latched = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
     assert_eq!(latched["stops"][0]["owner"], "guard");
+    // Releasing needs no slot either: every control port is still taken.
+    let (code, stdout, stderr) = scout(&["release", "--name", &name]);
+    assert_eq!(code, Some(0), "{stdout}{stderr}");
+    wait_for_status(&status, LIMIT, |s| s["latched"] == false);
+    assert_eq!(
+        controllers.len(),
+        scout_clients::interface::services::MAX_CONTROLLERS
+    );
+}
+
+#[test]
+fn the_operator_role_comes_from_the_process_not_from_a_name() {
+    let name = robot_name("identity");
+    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    let robot = connect(&name);
+    let status = robot.status().expect("status");
+    let (code, _, stderr) = scout(&["estop", "--name", &name, "--reason", "person ahead"]);
+    assert_eq!(code, Some(0), "{stderr}");
+    let latched = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
+    let newest = latched["newest_stop"].as_u64().expect("newest_stop");
+    assert_eq!(latched["stops"][0]["owner"], "operator");
+    // A library client that names itself `operator` releases nothing of scout estop's.
+    let mut impostor = robot.controller("operator", None).expect("controller");
+    for target in [
+        ReleaseTarget::Own,
+        ReleaseTarget::Owner("operator".into()),
+        ReleaseTarget::All,
+    ] {
+        let refused = impostor
+            .release(target, newest)
+            .expect_err("not an operator");
+        assert_eq!(
+            refused.rejection(),
+            Some(RejectionKind::NotAllowed),
+            "{refused}"
+        );
+    }
+    // A copy of the scout tool is another file: not the installed scout, no operator.
+    let scout_bin = scout_system_tests::bin("scout");
+    let dir = std::env::temp_dir().join(format!("{name}-copy"));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let copy = dir.join("scout");
+    std::fs::copy(&scout_bin, &copy).expect("copy scout");
+    let output = std::process::Command::new(&copy)
+        .args(["release", "--name", &name])
+        .output()
+        .expect("run the copy");
+    let _ = std::fs::remove_dir_all(&dir);
+    assert_eq!(output.status.code(), Some(4), "{output:?}");
+    assert!(
+        String::from_utf8_lossy(&output.stdout).contains("only an operator"),
+        "{output:?}"
+    );
+    assert_eq!(wait_for_status(&status, LIMIT, |_| true)["latched"], true);
+    // The installed scout, run by this user, is the operator.
+    let (code, stdout, stderr) = scout(&["release", "--name", &name]);
+    assert_eq!(code, Some(0), "{stdout}{stderr}");
+    wait_for_status(&status, LIMIT, |s| s["latched"] == false);
+}
+
+/// `scout estop` latches with `/dev/shm` full: run inside a mount namespace whose `/dev/shm` is
+/// a small tmpfs filled to the last byte. Needs root (or user namespaces) and `unshare`.
+#[test]
+fn scout_estop_latches_with_dev_shm_full() {
+    let test = "scout_estop_latches_with_dev_shm_full";
+    let probe = std::process::Command::new("unshare")
+        .args(["-m", "true"])
+        .output();
+    if !probe.as_ref().is_ok_and(|o| o.status.success()) {
+        return scout_system_tests::skip(test, &format!("no mount namespace here ({probe:?})"));
+    }
+    let name = robot_name("fullshm");
+    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    let robot = connect(&name);
+    let status = robot.status().expect("status");
+    let scout_bin = scout_system_tests::bin("scout");
+    let script = format!(
+        "mount -t tmpfs -o size=64k tmpfs /dev/shm && \
+         (dd if=/dev/zero of=/dev/shm/fill bs=4096 2>/dev/null; true) && \
+         test \"$(df --output=avail /dev/shm | tail -1 | tr -d ' ')\" = 0 && \
+         exec {} estop --name {name} --reason 'dev/shm full'",
+        scout_bin.display()
+    );
+    let output = std::process::Command::new("unshare")
+        .args(["-m", "--propagation", "private", "sh", "-c", &script])
+        .output()
+        .expect("unshare");
+    assert_eq!(output.status.code(), Some(0), "{output:?}");
+    let latched = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
+    assert_eq!(latched["stops"][0]["reason"], "dev/shm full");
+    // Whatever fails there is an error with an exit code, never a signal.
+    let script = format!(
+        "mount -t tmpfs -o size=64k tmpfs /dev/shm && \
+         (dd if=/dev/zero of=/dev/shm/fill bs=4096 2>/dev/null; true) && \
+         exec {} status --name {name}",
+        scout_bin.display()
+    );
+    let output = std::process::Command::new("unshare")
+        .args(["-m", "--propagation", "private", "sh", "-c", &script])
+        .output()
+        .expect("unshare");
+    assert!(
+        output.status.code().is_some(),
+        "killed by a signal: {output:?}"
+    );
 }
 
 #[test]
