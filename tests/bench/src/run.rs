@@ -642,6 +642,45 @@ fn local(robot: &Robot) -> anyhow::Result<Local> {
     })
 }
 
+/// Drives through a local controller and stops with `scout estop` started cold: a process that
+/// opened nothing before, as a person at a terminal or a script would; `scout release` after.
+struct ColdEstop<'a> {
+    local: &'a mut Local,
+    name: String,
+}
+
+impl ColdEstop<'_> {
+    fn scout(&self, args: &[&str]) -> anyhow::Result<()> {
+        let output = command("scout")?
+            .args(args)
+            .args(["--name", &self.name])
+            .output()
+            .context("running scout")?;
+        anyhow::ensure!(
+            output.status.success(),
+            "scout {} failed: {}",
+            args.join(" "),
+            String::from_utf8_lossy(&output.stderr)
+        );
+        Ok(())
+    }
+}
+
+impl Commander for ColdEstop<'_> {
+    fn take(&mut self) -> anyhow::Result<()> {
+        self.local.take()
+    }
+    fn drive(&mut self, linear: f64) -> anyhow::Result<()> {
+        self.local.drive(linear)
+    }
+    fn stop(&mut self) -> anyhow::Result<()> {
+        self.scout(&["estop", "--reason", "bench cold"])
+    }
+    fn release(&mut self) -> anyhow::Result<()> {
+        self.scout(&["release"])
+    }
+}
+
 /// A client's drive to the chassis (at the next tick) and a stop to the wire (at once).
 fn command_latency(
     bench: &mut Bench,
@@ -653,6 +692,16 @@ fn command_latency(
     let mut local = local(&robot)?;
     let drives = drive_samples(&mut local, states, bench.plan.commands)?;
     let stops = stop_samples(&mut local, states, bench.plan.stops, bench.client_priority)?;
+    // At normal priority: the process it starts would inherit real-time scheduling.
+    let cold = stop_samples(
+        &mut ColdEstop {
+            local: &mut local,
+            name: bench.name.clone(),
+        },
+        states,
+        bench.plan.stops,
+        0,
+    )?;
     let trace = trace(bench)?;
     report.latency(
         "command_latency_us",
@@ -667,9 +716,16 @@ fn command_latency(
     report_stops(
         report,
         "estop_latency_us",
-        "e-stop to the chassis",
+        "e-stop to the chassis (pre-made stopper)",
         &trace,
         &stops,
+    );
+    report_stops(
+        report,
+        "estop_cold_latency_us",
+        "e-stop from `scout estop` started cold, launch to the chassis",
+        &trace,
+        &cold,
     );
     Ok(())
 }
