@@ -905,60 +905,36 @@ proptest! {
     }
 }
 
-#[test]
-fn a_chassis_turning_faster_than_commanded_is_a_runaway() {
+/// Whether feedback of `linear_mm_s` and `angular_mrad_s`, while nothing is commanded, for
+/// longer than the runaway time, latches a runaway.
+fn feedback_latches_a_runaway(linear_mm_s: i16, angular_mrad_s: i16) -> bool {
     let mut pair = Pair::new(Transport::Sim);
     pair.run(ms(200));
-    // The review's case: still turning at 0.27 rad/s long after the command fell to zero.
-    let turning = |count: u8| {
-        RxEvent::Message(Counted {
-            message: Message::MotionFeedback(MotionFeedback {
-                linear_mm_s: 0,
-                angular_mrad_s: 270,
-            }),
-            count,
-        })
-    };
     pair.feedback = false;
     for i in 0..40u8 {
-        pair.core.handle_rx(pair.now, &turning(100 + i));
+        let feedback = RxEvent::Message(Counted {
+            message: Message::MotionFeedback(MotionFeedback {
+                linear_mm_s,
+                angular_mrad_s,
+            }),
+            count: 100 + i,
+        });
+        pair.core.handle_rx(pair.now, &feedback);
         pair.now += TICK;
         pair.step();
     }
-    assert!(
-        pair.stops()
-            .contains(&("gateway".into(), StopCause::Runaway)),
-        "{:?}",
-        pair.stops()
-    );
+    pair.stops()
+        .contains(&("gateway".into(), StopCause::Runaway))
 }
 
 #[test]
 fn a_chassis_faster_than_commanded_is_a_runaway() {
-    let mut pair = Pair::new(Transport::Sim);
-    pair.run(ms(200));
-    // Feedback of 1 m/s while nothing was commanded, for longer than the runaway time.
-    let runaway = |count: u8| {
-        RxEvent::Message(Counted {
-            message: Message::MotionFeedback(MotionFeedback {
-                linear_mm_s: 1000,
-                angular_mrad_s: 0,
-            }),
-            count,
-        })
-    };
-    pair.feedback = false;
-    for i in 0..40u8 {
-        pair.core.handle_rx(pair.now, &runaway(100 + i));
-        pair.now += TICK;
-        pair.step();
-    }
-    assert!(
-        pair.stops()
-            .contains(&("gateway".into(), StopCause::Runaway)),
-        "{:?}",
-        pair.stops()
-    );
+    assert!(feedback_latches_a_runaway(1000, 0), "1 m/s");
+    // The review's case: still turning at 0.27 rad/s long after the command fell to zero.
+    assert!(feedback_latches_a_runaway(0, 270), "0.27 rad/s");
+    assert!(feedback_latches_a_runaway(0, -270), "-0.27 rad/s");
+    // Within the tolerances: no runaway.
+    assert!(!feedback_latches_a_runaway(200, 100));
 }
 
 #[test]
