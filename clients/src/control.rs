@@ -99,6 +99,38 @@ pub struct Controller {
 #[derive(Debug)]
 pub struct Stopper {
     client: StopClient,
+    /// Made by [`Robot::stopper`]: the iceoryx2 stop service when the stop endpoint cannot be
+    /// reached.
+    fallback: Option<StopService>,
+}
+
+/// The iceoryx2 stop service of a robot, opened on first use: for a process in another
+/// network namespace than the gateway (a container sharing its shared memory and
+/// `/tmp/iceoryx2` but not its network), where the abstract stop socket cannot be reached.
+#[derive(Debug)]
+struct StopService {
+    robot: String,
+    name: String,
+    port: Option<ControlPort>,
+    /// The port's node, dropped after it.
+    node: Option<iceoryx2::node::Node<Ipc>>,
+}
+
+impl StopService {
+    fn request(&mut self, request: &Request) -> Result<Accepted, ControlError> {
+        let port = match self.port.take() {
+            Some(port) => port,
+            None => {
+                let node = services::node(&format!("scout-client-{}", self.robot))
+                    .map_err(|error| ControlError::Client(ClientError::Node(error)))?;
+                let port = ControlPort::open(&node, &self.robot, Way::Stop, &self.name)
+                    .map_err(|error| ControlError::Client(error.into()))?;
+                self.node = Some(node);
+                port
+            }
+        };
+        Ok(self.port.insert(port).request(request)?)
+    }
 }
 
 impl Stopper {
@@ -110,7 +142,10 @@ impl Stopper {
             return Err(ClientError::BadClientName(name.to_owned()));
         }
         let client = StopClient::new(robot, name).map_err(ClientError::StopSocket)?;
-        Ok(Self { client })
+        Ok(Self {
+            client,
+            fallback: None,
+        })
     }
 
     /// Latches a stop owned by this client's name: zero speed at once, until released. The
@@ -134,8 +169,29 @@ impl Stopper {
     }
 
     fn ask(&mut self, ask: Ask) -> Result<Accepted, ControlError> {
-        let reply = self.client.request(ask, ANSWER_TIMEOUT)?;
-        reply.answer.map_err(ControlError::Rejected)
+        let request = match &ask {
+            Ask::Stop { reason } => Some(Request::Stop {
+                reason: reason.clone(),
+            }),
+            Ask::Release { target, through } => Some(Request::Release {
+                target: target.clone(),
+                through: *through,
+            }),
+            Ask::Ping => None,
+        };
+        match (
+            self.client.request(ask, ANSWER_TIMEOUT),
+            &mut self.fallback,
+            request,
+        ) {
+            (Ok(reply), ..) => reply.answer.map_err(ControlError::Rejected),
+            // The gateway's services are there (a Robot connected) but its socket is not:
+            // another network namespace.
+            (Err(StopSocketError::NoGateway { .. }), Some(fallback), Some(request)) => {
+                fallback.request(&request)
+            }
+            (Err(error), ..) => Err(error.into()),
+        }
     }
 }
 
@@ -149,14 +205,23 @@ impl Robot {
         Ok(Controller {
             class,
             port: ControlPort::open(self.node(), self.name(), Way::Control, name)?,
-            safety: Stopper::new(self.name(), name)?,
+            safety: self.stopper(name)?,
             lease: None,
         })
     }
 
-    /// A client named `name` that only stops and releases ([`Stopper::new`]).
+    /// A client named `name` that only stops and releases ([`Stopper::new`]); where the stop
+    /// endpoint cannot be reached (this process in another network namespace than the
+    /// gateway), it uses the iceoryx2 stop service instead.
     pub fn stopper(&self, name: &str) -> Result<Stopper, ClientError> {
-        Stopper::new(self.name(), name)
+        let mut stopper = Stopper::new(self.name(), name)?;
+        stopper.fallback = Some(StopService {
+            robot: self.name().to_owned(),
+            name: name.to_owned(),
+            port: None,
+            node: None,
+        });
+        Ok(stopper)
     }
 
     /// Reads the arbiter's status.

@@ -356,3 +356,38 @@ fn a_request_flood_neither_starves_the_tick_nor_holds_up_a_stop() {
     );
     println!("flood: {intervals}, tick {}", after["tick"]);
 }
+
+/// A client in another network namespace than the gateway (a container sharing its shared
+/// memory, not its network) cannot reach the abstract stop socket: `scout estop` and `scout
+/// release` go through the iceoryx2 stop service instead.
+#[test]
+fn stops_and_releases_reach_the_gateway_from_another_network_namespace() {
+    let test = "stops_and_releases_reach_the_gateway_from_another_network_namespace";
+    let probe = std::process::Command::new("unshare")
+        .args(["-n", "true"])
+        .output();
+    if !probe.as_ref().is_ok_and(|o| o.status.success()) {
+        return scout_system_tests::skip(test, &format!("no network namespace here ({probe:?})"));
+    }
+    let name = robot_name("netns");
+    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    let robot = connect(&name);
+    let status = robot.status().expect("status");
+    let scout_bin = scout_system_tests::bin("scout");
+    let in_netns = |args: &[&str]| {
+        std::process::Command::new("unshare")
+            .arg("-n")
+            .arg(&scout_bin)
+            .args(args)
+            .args(["--name", &name])
+            .output()
+            .expect("unshare")
+    };
+    let output = in_netns(&["estop", "--reason", "from a container"]);
+    assert_eq!(output.status.code(), Some(0), "{output:?}");
+    let latched = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
+    assert_eq!(latched["stops"][0]["reason"], "from a container");
+    let output = in_netns(&["release"]);
+    assert_eq!(output.status.code(), Some(0), "{output:?}");
+    wait_for_status(&status, LIMIT, |s| s["latched"] == false);
+}

@@ -10,6 +10,7 @@ use clap::Args;
 use scout_clients::client::Robot;
 use scout_clients::control::{ControlError, Controller, Lights, Stopper};
 use scout_clients::interface::control::{parse_fault_clear, parse_light};
+use scout_clients::interface::stop_socket::StopSocketError;
 use scout_clients::{Accepted, Class, ReleaseTarget, StopCause};
 use scout_protocol::{Light, LightCommand};
 
@@ -133,7 +134,15 @@ pub struct EstopArgs {
 /// that nothing on the host (a full `/dev/shm`, every slot taken) can keep it from latching.
 pub fn estop(args: &EstopArgs) -> anyhow::Result<ExitCode> {
     let name = args.client.name(OPERATOR);
-    let accepted = Stopper::new(&args.client.robot.name, &name)?.stop(&args.reason)?;
+    let robot = &args.client.robot.name;
+    let accepted = match Stopper::new(robot, &name)?.stop(&args.reason) {
+        // No stop endpoint here: maybe this process lives in another network namespace than
+        // the gateway; its iceoryx2 services tell (no gateway at all: exit 3).
+        Err(ControlError::Stop(StopSocketError::NoGateway { .. })) => {
+            Robot::connect(robot)?.stopper(&name)?.stop(&args.reason)?
+        }
+        other => other?,
+    };
     println!(
         "stop #{} latched, owned by {name}: `scout release` to release it",
         accepted.stop.unwrap_or(0)
