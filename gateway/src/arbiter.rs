@@ -32,6 +32,8 @@ pub const HEARTBEAT_PERIODS: std::ops::RangeInclusive<Duration> =
     Duration::from_millis(20)..=Duration::from_secs(10);
 /// Stops kept one by one; past this, further owners' stops are merged into one entry.
 pub const MAX_STOPS: usize = 256;
+/// Stops a rejection names at most.
+pub const DESCRIBED_STOPS: usize = 4;
 /// Entries of the audit history kept for the status.
 pub const HISTORY: usize = scout_interface::control::STATUS_EVENTS;
 /// The owner of the stops the gateway latches for gaps.
@@ -649,8 +651,21 @@ impl Arbiter {
         }
     }
 
+    /// The stops in words, the first [`DESCRIBED_STOPS`] of them: a rejection's text stays short
+    /// (and cheap to make) however many stops hold.
     fn describe<'a>(&self, stops: impl Iterator<Item = &'a Stop>) -> String {
-        let listed: Vec<String> = stops.map(Stop::to_string).collect();
+        let mut listed = Vec::new();
+        let mut more = 0;
+        for stop in stops {
+            if listed.len() < DESCRIBED_STOPS {
+                listed.push(stop.to_string());
+            } else {
+                more += 1;
+            }
+        }
+        if more > 0 {
+            listed.push(format!("and {more} more (scout status)"));
+        }
         listed.join("; ")
     }
 
@@ -922,6 +937,7 @@ impl Arbiter {
                 stop.reason = reason.to_owned();
                 stop.source = source;
                 stop.by_operator |= by_operator;
+                self.audit(now, format!("STOP #{id} latched again by {why}"));
             }
             None => {
                 self.stops.push(Stop {

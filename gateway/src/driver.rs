@@ -19,7 +19,7 @@ use iceoryx2::service::port_factory::PortFactory;
 use scout_interface::control::{ControlRequest, ControlResponse, Rejection, StatusPayload};
 use scout_interface::services::{self, ControlService, Ipc, Role, Way, monotonic};
 use scout_interface::state::{LinkState, StatePayload};
-use scout_interface::stop_socket::{ParseError, StopReply};
+use scout_interface::stop_socket::{Ask, ParseError, StopReply};
 use tracing::{debug, error, info, warn};
 
 use crate::arbiter::{ClientKey, GATEWAY, OTHERS, Origin};
@@ -294,7 +294,7 @@ impl Driver {
             if self.core.poll_open(now) {
                 self.open(now)?;
             }
-            self.transmit(now);
+            self.transmit();
             self.publish(now);
             if self.core.is_finished() {
                 break;
@@ -397,13 +397,16 @@ impl Driver {
             let (seq, answer) = match received.request {
                 Ok(request) => {
                     let chosen = request.name.as_deref().unwrap_or("");
+                    // A ping needs no identity: it costs no /proc reads.
+                    let asks_identity = !matches!(request.ask, Ask::Ping);
                     let origin = Origin {
                         key: ClientKey {
                             port: DATAGRAM_PORT | u128::from(received.pid),
                             node: 0,
                             name: client_name(chosen, pid, 0, false),
                         },
-                        operator: pid.is_some_and(|pid| self.operators.is_operator_pid(pid)),
+                        operator: asks_identity
+                            && pid.is_some_and(|pid| self.operators.is_operator_pid(pid)),
                         bridge: false,
                     };
                     let answer = self.core.handle_stop_datagram(now, &origin, request.ask);
@@ -422,7 +425,7 @@ impl Driver {
             let reply = StopReply::new(seq, &answer, std::process::id());
             self.stop_endpoint.reply(received.from.as_ref(), &reply);
         }
-        self.transmit(now);
+        self.transmit();
         more
     }
 
@@ -430,7 +433,7 @@ impl Driver {
     /// sends their zero before anything else is read; returns whether more stops wait.
     fn serve_stops(&mut self, now: Duration) -> bool {
         let waiting = self.serve(now, Way::Stop, services::MAX_STOPPERS);
-        self.transmit(now);
+        self.transmit();
         waiting
     }
 
@@ -471,8 +474,11 @@ impl Driver {
         true
     }
 
-    /// Sends every frame the core has for the port now.
-    fn transmit(&mut self, now: Duration) {
+    /// Sends every frame the core has for the port now. The clock is read again here: a stall
+    /// (SIGSTOP, starved of CPU) since the iteration read it must not send a frame made for
+    /// before the stall; the core sees the gap first, and latches.
+    fn transmit(&mut self) {
+        let now = monotonic();
         while let Some(frame) = self.core.poll_transmit(now) {
             let Some(device) = self.device.as_mut() else {
                 return;

@@ -2,6 +2,11 @@
 //! its users and its groups, read from `/proc/PID`; and whether that makes it an operator.
 //! Never from a name the process chose: a client may call itself anything, and a copy or link
 //! of a program under another name is another file (or, a hard link, the very same program).
+//!
+//! Only procfs is read, never the sender's own files: the executable's device and inode come
+//! from its mapping in `/proc/PID/maps` (what the kernel recorded when it mapped it), not from a
+//! `stat` of the file, which a sender could leave hanging on a FUSE or network mount and so
+//! stall the control loop.
 
 use std::os::unix::fs::MetadataExt;
 use std::path::{Path, PathBuf};
@@ -11,8 +16,9 @@ use crate::arbiter::OperatorConfig;
 /// A process's identity as the kernel reports it.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct ProcessIdentity {
-    /// The executable's device and inode (`None`: unreadable, or the process is gone).
-    pub executable: Option<(u64, u64)>,
+    /// The executable's device (major, minor) and inode (`None`: unreadable, or the process is
+    /// gone).
+    pub executable: Option<(u64, u64, u64)>,
     /// Real and effective user ids.
     pub uids: Vec<u32>,
     /// Primary (real, effective) and supplementary group ids.
@@ -22,17 +28,57 @@ pub struct ProcessIdentity {
 impl ProcessIdentity {
     /// Reads process `pid`'s identity; what cannot be read is left empty (never an operator).
     pub fn of(pid: u32) -> Self {
-        let executable = std::fs::metadata(format!("/proc/{pid}/exe"))
+        // readlink names the file without touching it; the mapping gives device and inode.
+        let executable = std::fs::read_link(format!("/proc/{pid}/exe"))
             .ok()
-            .map(|meta| (meta.dev(), meta.ino()));
-        let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();
-        let (uids, gids) = ids_of_status(&status);
+            .and_then(|path| {
+                let maps = std::fs::read(format!("/proc/{pid}/maps")).ok()?;
+                mapped_file(&String::from_utf8_lossy(&maps), &path.to_string_lossy())
+            });
+        // The status holds the process's name, which may be any bytes.
+        let status = std::fs::read(format!("/proc/{pid}/status")).unwrap_or_default();
+        let (uids, gids) = ids_of_status(&String::from_utf8_lossy(&status));
         Self {
             executable,
             uids,
             gids,
         }
     }
+}
+
+/// The device (major, minor) and inode of the mapping of file `path` in a `/proc/PID/maps`
+/// text (`address perms offset MAJOR:MINOR INODE PATH`, numbers of the device in hex).
+fn mapped_file(maps: &str, path: &str) -> Option<(u64, u64, u64)> {
+    maps.lines().find_map(|line| {
+        let mut fields = line.splitn(6, ' ');
+        let (_, _, _, device, inode) = (
+            fields.next()?,
+            fields.next()?,
+            fields.next()?,
+            fields.next()?,
+            fields.next()?,
+        );
+        if fields.next()?.trim_start() != path {
+            return None;
+        }
+        let (major, minor) = device.split_once(':')?;
+        Some((
+            u64::from_str_radix(major, 16).ok()?,
+            u64::from_str_radix(minor, 16).ok()?,
+            inode.parse().ok()?,
+        ))
+    })
+}
+
+/// A file's device (major, minor) and inode, as the maps show them.
+fn file_id(path: &Path) -> Option<(u64, u64, u64)> {
+    let meta = std::fs::metadata(path).ok()?;
+    let dev = meta.dev();
+    Some((
+        nix::sys::stat::major(dev),
+        nix::sys::stat::minor(dev),
+        meta.ino(),
+    ))
 }
 
 /// The `Uid:` (real, effective) and the `Gid:` (real, effective) and `Groups:` ids of a
@@ -98,14 +144,16 @@ impl Operators {
     /// Whether a process of `identity` is an operator. The programs are looked up now, so a
     /// rebuilt or reinstalled `scout` is recognised without restarting the gateway.
     pub fn is_operator(&self, identity: &ProcessIdentity) -> bool {
+        // Unknown users (an unreadable status) make no operator.
         let by_program = identity.executable.is_some_and(|executable| {
-            self.programs.iter().any(|program| {
-                std::fs::metadata(program).is_ok_and(|meta| (meta.dev(), meta.ino()) == executable)
-            })
-        }) && identity
-            .uids
-            .iter()
-            .all(|uid| self.program_users.contains(uid));
+            self.programs
+                .iter()
+                .any(|program| file_id(program) == Some(executable))
+        }) && !identity.uids.is_empty()
+            && identity
+                .uids
+                .iter()
+                .all(|uid| self.program_users.contains(uid));
         by_program
             || identity.uids.iter().any(|uid| self.uids.contains(uid))
             || identity.gids.iter().any(|gid| self.gids.contains(gid))
@@ -140,6 +188,22 @@ mod tests {
     }
 
     #[test]
+    fn the_executable_is_found_in_the_maps() {
+        let maps = "55d0c8a00000-55d0c8a2e000 r--p 00000000 fd:01 1835266                    /usr/bin/scout\n\
+                    7f00-7f01 r--p 00000000 00:00 0 \n";
+        assert_eq!(
+            mapped_file(maps, "/usr/bin/scout"),
+            Some((0xfd, 1, 1835266))
+        );
+        assert_eq!(mapped_file(maps, "/usr/bin/other"), None);
+        let me = std::env::current_exe().expect("exe");
+        assert_eq!(
+            ProcessIdentity::of(std::process::id()).executable,
+            file_id(&me)
+        );
+    }
+
+    #[test]
     fn this_process_is_read_from_proc() {
         let me = ProcessIdentity::of(std::process::id());
         assert!(me.executable.is_some());
@@ -152,11 +216,10 @@ mod tests {
         let dir = temp_dir("program");
         let scout = dir.join("scout");
         std::fs::write(&scout, b"the real scout").expect("write");
-        let meta = std::fs::metadata(&scout).expect("stat");
         let operators = Operators::new(&OperatorConfig::default(), &dir);
         let me = nix::unistd::getuid().as_raw();
         let real = ProcessIdentity {
-            executable: Some((meta.dev(), meta.ino())),
+            executable: file_id(&scout),
             uids: vec![me],
             gids: Vec::new(),
         };
@@ -167,13 +230,18 @@ mod tests {
             ..real.clone()
         };
         assert!(!operators.is_operator(&stranger));
+        // Unknown users (a status that could not be read) make no operator.
+        let unknown = ProcessIdentity {
+            uids: Vec::new(),
+            ..real.clone()
+        };
+        assert!(!operators.is_operator(&unknown));
         // A copy named scout elsewhere is another file.
         let elsewhere = temp_dir("copy");
         let copy = elsewhere.join("scout");
         std::fs::copy(&scout, &copy).expect("copy");
-        let meta = std::fs::metadata(&copy).expect("stat");
         let impostor = ProcessIdentity {
-            executable: Some((meta.dev(), meta.ino())),
+            executable: file_id(&copy),
             uids: vec![me],
             gids: Vec::new(),
         };
@@ -181,9 +249,8 @@ mod tests {
         // A hard link is the same file: the same program, so the same role.
         let link = elsewhere.join("not-scout");
         std::fs::hard_link(&scout, &link).expect("link");
-        let meta = std::fs::metadata(&link).expect("stat");
         assert!(operators.is_operator(&ProcessIdentity {
-            executable: Some((meta.dev(), meta.ino())),
+            executable: file_id(&link),
             uids: vec![me],
             gids: Vec::new(),
         }));

@@ -9,7 +9,8 @@ use std::time::Duration;
 
 use nix::errno::Errno;
 use nix::sys::socket::{
-    ControlMessageOwned, MsgFlags, UnixAddr, UnixCredentials, recvmsg, sendto, setsockopt, sockopt,
+    ControlMessageOwned, MsgFlags, SockaddrLike, UnixAddr, UnixCredentials, recvmsg, sendto,
+    setsockopt, sockopt,
 };
 use scout_interface::stop_socket::{self, ParseError, StopClient, StopReply, StopRequest};
 
@@ -115,10 +116,11 @@ impl StopEndpoint {
                     _ => None,
                 })
             });
-            // An unnamed sender cannot be answered.
+            // An unnamed (unbound) sender cannot be answered. Its address may come back shorter
+            // than the family field: look at the length only (nix's accessors assert on it).
             let from = message
                 .address
-                .filter(|address| address.path().is_some() || address.as_abstract().is_some());
+                .filter(|address| address.len() as usize > std::mem::size_of::<u16>());
             (message.bytes, from, credentials)
         };
         Some(Received {
@@ -130,21 +132,38 @@ impl StopEndpoint {
     }
 
     /// Answers `to` without blocking; a reply that cannot go is counted, never waited for.
+    /// Each reply leaves from a socket of its own: a reply its client never reads stays charged
+    /// to that socket's send buffer, so clients that never read cannot use up the endpoint's
+    /// and starve everyone else's answers.
     pub fn reply(&mut self, to: Option<&UnixAddr>, reply: &StopReply) {
-        let Some(to) = to else {
+        let sent = to.is_some_and(|to| {
+            let (bytes, len) = reply.emit();
+            nix::sys::socket::socket(
+                nix::sys::socket::AddressFamily::Unix,
+                nix::sys::socket::SockType::Datagram,
+                nix::sys::socket::SockFlag::SOCK_CLOEXEC
+                    | nix::sys::socket::SockFlag::SOCK_NONBLOCK,
+                None,
+            )
+            .and_then(|socket| {
+                sendto(
+                    socket.as_raw_fd(),
+                    &bytes[..len],
+                    to,
+                    MsgFlags::MSG_DONTWAIT,
+                )
+            })
+            .is_ok()
+        });
+        if !sent {
             self.replies_lost += 1;
-            return;
-        };
-        let (bytes, len) = reply.emit();
-        if sendto(
-            self.socket.as_raw_fd(),
-            &bytes[..len],
-            to,
-            MsgFlags::MSG_DONTWAIT,
-        )
-        .is_err()
-        {
-            self.replies_lost += 1;
+            if self.replies_lost.is_power_of_two() {
+                tracing::warn!(
+                    "{} stop-endpoint replies could not be sent (the client left, never reads, \
+                     or has no address); their stops and releases were carried out",
+                    self.replies_lost
+                );
+            }
         }
     }
 }
@@ -162,7 +181,7 @@ fn holder_pid(robot: &str) -> Option<u32> {
 mod tests {
     use super::*;
     use scout_interface::control::Accepted;
-    use scout_interface::stop_socket::Ask;
+    use scout_interface::stop_socket::{Ask, StopRequest};
 
     fn robot(tag: &str) -> String {
         format!("ep-{tag}-{}", std::process::id())
@@ -231,6 +250,101 @@ mod tests {
             let reply = asked.join().expect("no panic").expect("answered");
             assert_eq!(reply.answer.expect("accepted").stop, Some(3));
         });
+    }
+
+    #[test]
+    fn an_unbound_sender_is_read_and_not_answered() {
+        use std::os::unix::net::UnixDatagram;
+        let robot = robot("unbound");
+        let mut endpoint = StopEndpoint::bind(&robot).expect("bind");
+        let sender = UnixDatagram::unbound().expect("socket");
+        let address = std::os::unix::net::SocketAddr::from_abstract_name(
+            stop_socket::address(&robot).as_bytes(),
+        )
+        .expect("address");
+        use std::os::linux::net::SocketAddrExt;
+        for datagram in [
+            &b"x"[..],
+            &[],
+            &StopRequest {
+                seq: 1,
+                name: Some("anon".into()),
+                ask: Ask::Stop {
+                    reason: "unbound".into(),
+                },
+            }
+            .emit(),
+        ] {
+            sender.send_to_addr(datagram, &address).expect("send");
+            let deadline = std::time::Instant::now() + Duration::from_secs(2);
+            let received = loop {
+                if let Some(received) = endpoint.try_receive() {
+                    break received;
+                }
+                assert!(std::time::Instant::now() < deadline, "no datagram");
+                std::thread::sleep(Duration::from_millis(1));
+            };
+            assert!(received.from.is_none());
+            endpoint.reply(None, &StopReply::new(1, &Ok(Accepted::default()), 1));
+        }
+        assert_eq!(endpoint.replies_lost, 3);
+    }
+
+    #[test]
+    fn clients_that_never_read_their_replies_do_not_starve_the_others() {
+        use std::os::linux::net::SocketAddrExt;
+        use std::os::unix::net::UnixDatagram;
+        let robot = robot("hogs");
+        let mut endpoint = StopEndpoint::bind(&robot).expect("bind");
+        let address = std::os::unix::net::SocketAddr::from_abstract_name(
+            stop_socket::address(&robot).as_bytes(),
+        )
+        .expect("address");
+        let ping = StopRequest {
+            seq: 1,
+            name: Some("hog".into()),
+            ask: Ask::Ping,
+        }
+        .emit();
+        // 40 bound sockets, 20 pings each, never reading an answer.
+        let hogs: Vec<UnixDatagram> = (0..40)
+            .map(|i| {
+                let name = format!("{robot}-hog-{i}");
+                UnixDatagram::bind_addr(
+                    &std::os::unix::net::SocketAddr::from_abstract_name(name.as_bytes())
+                        .expect("address"),
+                )
+                .expect("socket")
+            })
+            .collect();
+        for hog in &hogs {
+            for _ in 0..20 {
+                let _ = hog.send_to_addr(&ping, &address);
+                while let Some(received) = endpoint.try_receive() {
+                    let reply = StopReply::new(1, &Ok(Accepted::default()), 1);
+                    endpoint.reply(received.from.as_ref(), &reply);
+                }
+            }
+        }
+        // A client that reads gets its answer.
+        let mut client = StopClient::new(&robot, "guard").expect("client");
+        std::thread::scope(|scope| {
+            let asked = scope.spawn(move || client.stop("x", Duration::from_secs(2)));
+            let deadline = std::time::Instant::now() + Duration::from_secs(2);
+            while !asked.is_finished() && std::time::Instant::now() < deadline {
+                while let Some(received) = endpoint.try_receive() {
+                    let seq = received.request.as_ref().map_or(0, |r| r.seq);
+                    let reply = StopReply::new(seq, &Ok(Accepted::default()), 1);
+                    endpoint.reply(received.from.as_ref(), &reply);
+                }
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            asked
+                .join()
+                .expect("no panic")
+                .expect("answered despite the hogs");
+        });
+        drop(hogs);
     }
 
     #[test]

@@ -87,9 +87,9 @@ pub fn command_key(robot: &str, kind: RemoteKind, peer: &str) -> String {
 
 /// A command key's kind and peer, or why it is not one.
 pub fn parse_command_key(key: &str) -> Result<(RemoteKind, &str), String> {
-    let mut chunks = key.rsplit('/');
-    let (Some(peer), Some(kind), Some("cmd")) = (chunks.next(), chunks.next(), chunks.next())
-    else {
+    // Exactly five chunks: a longer key (`scout/R/cmd/a/b/cmd/release/x`) names no peer.
+    let chunks: Vec<&str> = key.split('/').collect();
+    let [_, _, "cmd", kind, peer] = chunks[..] else {
         return Err(format!(
             "`{key}` is not scout/ROBOT/cmd/KIND/PEER: name yourself in the key"
         ));
@@ -529,6 +529,7 @@ mod tests {
             Ok((RemoteKind::Estop, "laptop"))
         );
         assert!(parse_command_key("scout/alpha/cmd/estop").is_err());
+        assert!(parse_command_key("scout/alpha/cmd/a/b/cmd/release/nested").is_err());
         assert!(parse_command_key("scout/alpha/cmd/fly/laptop").is_err());
         assert_eq!(
             command_key("alpha", RemoteKind::Drive, "op"),

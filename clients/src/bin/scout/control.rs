@@ -184,6 +184,10 @@ pub fn release(args: &ReleaseArgs) -> anyhow::Result<ExitCode> {
         println!("nothing to release: no stop holds the robot");
         return Ok(ExitCode::SUCCESS);
     }
+    let unlisted = (status.stop_total as usize).saturating_sub(status.stops().len());
+    if unlisted > 0 {
+        println!("{unlisted} more stops than the status lists: all up to #{through} are named");
+    }
     for stop in status.stops().iter().filter(|stop| stop.id <= through) {
         println!(
             "releasing #{} {} ({}): {}",
