@@ -1,5 +1,6 @@
-//! Exclusive ownership: one gateway per robot name and per device, by advisory file locks that the
-//! kernel releases when the process dies (even by SIGKILL).
+//! Exclusive ownership of a device: one gateway per tty or CAN interface, by advisory file locks
+//! that the kernel releases when the process dies (even by SIGKILL). The robot name's lock is the
+//! stop endpoint's abstract socket ([`crate::stop_endpoint`]), global whatever the run directory.
 
 use std::fs::{File, OpenOptions, TryLockError};
 use std::io::{Read, Seek, Write};
