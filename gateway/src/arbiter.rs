@@ -957,6 +957,14 @@ impl Arbiter {
         id
     }
 
+    /// Stop `id` was latched by an operator, as found out after it latched: only an operator
+    /// releases it now. Nothing if that stop is gone or was latched again since.
+    pub fn handle_stop_by_operator(&mut self, id: u64) {
+        if let Some(stop) = self.stops.iter_mut().find(|stop| stop.id == id) {
+            stop.by_operator = true;
+        }
+    }
+
     /// A gap: the gateway lost control or knowledge of the chassis. Latches a stop owned by the
     /// gateway with `cause`; while `present`, the cause persists and the stop cannot be
     /// released.

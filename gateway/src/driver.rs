@@ -16,7 +16,9 @@ use iceoryx2::port::server::Server;
 use iceoryx2::prelude::BackpressureStrategy;
 use iceoryx2::prelude::CallbackProgression;
 use iceoryx2::service::port_factory::PortFactory;
-use scout_interface::control::{ControlRequest, ControlResponse, Rejection, StatusPayload};
+use scout_interface::control::{
+    Accepted, ControlRequest, ControlResponse, Rejection, StatusPayload,
+};
 use scout_interface::services::{self, ControlService, Ipc, Role, Way, monotonic};
 use scout_interface::state::{LinkState, StatePayload};
 use scout_interface::stop_socket::{Ask, ParseError, StopReply};
@@ -397,19 +399,30 @@ impl Driver {
             let (seq, answer) = match received.request {
                 Ok(request) => {
                     let chosen = request.name.as_deref().unwrap_or("");
-                    // A ping needs no identity: it costs no /proc reads.
-                    let asks_identity = !matches!(request.ask, Ask::Ping);
-                    let origin = Origin {
+                    // A stop goes on the wire before its sender's identity is read (/proc
+                    // reads take hundreds of µs); whether an operator latched it is settled
+                    // right after, before any other request is served. A ping needs none.
+                    let is_stop = matches!(request.ask, Ask::Stop { .. });
+                    let is_release = matches!(request.ask, Ask::Release { .. });
+                    let mut origin = Origin {
                         key: ClientKey {
                             port: DATAGRAM_PORT | u128::from(received.pid),
                             node: 0,
                             name: client_name(chosen, pid, 0, false),
                         },
-                        operator: asks_identity
+                        operator: is_release
                             && pid.is_some_and(|pid| self.operators.is_operator_pid(pid)),
                         bridge: false,
                     };
                     let answer = self.core.handle_stop_datagram(now, &origin, request.ask);
+                    if let (true, Ok(Accepted { stop: Some(id), .. })) = (is_stop, &answer) {
+                        self.transmit();
+                        origin.operator =
+                            pid.is_some_and(|pid| self.operators.is_operator_pid(pid));
+                        if origin.operator {
+                            self.core.handle_stop_by_operator(*id);
+                        }
+                    }
                     (request.seq, answer)
                 }
                 Err(error) => {
