@@ -471,6 +471,11 @@ pub struct Background {
 pub type Driver = Background;
 
 impl Background {
+    /// Whether it has exited.
+    pub fn exited(&mut self) -> bool {
+        self.child.try_wait().is_ok_and(|status| status.is_some())
+    }
+
     /// Starts `scout drive` for robot `name` with `args` (e.g. `--linear 0.5 --class autonomy`).
     pub fn start(name: &str, args: &[&str]) -> Background {
         let mut all = vec!["drive", "--name", name];
@@ -613,6 +618,26 @@ pub fn moving(sim: &mut Sim, limit: Duration) {
         assert!(Instant::now() < deadline, "the chassis never moved");
         std::thread::sleep(Duration::from_millis(50));
     }
+}
+
+/// Starts `scout drive --name NAME` with `args` and waits at most `limit` until the simulator's
+/// ground truth moves. Where the drive is refused or loses control first (the emulated CPU of
+/// the VM stalls the gateway past its 400 ms wire-gap limit now and then, and it latches an
+/// `overrun`, as it must), the stops are released and the drive started again, up to 5 times:
+/// the tests using it are about what comes after.
+pub fn drive_until_moving(sim: &mut Sim, name: &str, args: &[&str], limit: Duration) -> Driver {
+    for _ in 0..5 {
+        let mut driver = Driver::start(name, args);
+        let deadline = Instant::now() + limit;
+        while Instant::now() < deadline && !driver.exited() {
+            if sim.stats()["actual"]["linear"].as_f64() >= Some(0.2) {
+                return driver;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        release_all(name);
+    }
+    panic!("the chassis never moved");
 }
 
 /// `scout release`: every stop, as an operator.

@@ -9,8 +9,8 @@ use scout_protocol::can;
 use scout_protocol::fault::FaultBits;
 use scout_protocol::message::{ChassisState, ControlMode, SystemStatus};
 use scout_system_tests::{
-    Driver, Gateway, command, connect_within, moving, robot_name, run_with_input, wait_for_state,
-    wait_output,
+    Gateway, command, connect_within, drive_until_moving, robot_name, run_with_input,
+    wait_for_state, wait_output,
 };
 
 use crate::bus::{cansend_text, chassis_commanded, start};
@@ -24,8 +24,12 @@ fn candump_of_the_bus_decodes_with_scout_decode() {
         return;
     }
     let (mut sim, _gateway, name) = start(&bus, "can-dump");
-    let _driver = Driver::start(&name, &["--linear", "0.5", "--client", "driver"]);
-    moving(&mut sim, LIMIT);
+    let _driver = drive_until_moving(
+        &mut sim,
+        &name,
+        &["--linear", "0.5", "--client", "driver"],
+        LIMIT,
+    );
     let dump = Command::new("candump")
         .args(["-L", "-n", "300", bus.name()])
         .stdout(Stdio::piped())
@@ -113,8 +117,12 @@ fn a_cangen_flood_of_other_ids_is_refused_counted_and_harmless() {
     }
     let (mut sim, _gateway, name) = start(&bus, "can-flood");
     let state = connect_within(&name, LIMIT).subscribe().expect("state");
-    let _driver = Driver::start(&name, &["--linear", "0.5", "--client", "driver"]);
-    moving(&mut sim, LIMIT);
+    let _driver = drive_until_moving(
+        &mut sim,
+        &name,
+        &["--linear", "0.5", "--client", "driver"],
+        LIMIT,
+    );
     const FLOOD: u64 = 2000;
     // 2000 frames with id 0x700, one a millisecond (a busy foreign node).
     let flood = Command::new("cangen")

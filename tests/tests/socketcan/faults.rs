@@ -5,7 +5,7 @@
 use std::process::Command;
 
 use scout_system_tests::{
-    Driver, Sim, chassis_stays_still, connect_within, moving, release_all, wait_for_status,
+    Sim, chassis_stays_still, connect_within, drive_until_moving, release_all, wait_for_status,
 };
 
 use crate::bus::{chassis_commanded, chassis_stays_still_after_braking, start};
@@ -20,8 +20,12 @@ fn fault_latches_a_link_fault(
     recover: impl FnOnce(),
 ) {
     let status = connect_within(name, LIMIT).status().expect("status");
-    let mut driver = Driver::start(name, &["--linear", "0.5", "--client", "streamer"]);
-    moving(sim, LIMIT);
+    let mut driver = drive_until_moving(
+        sim,
+        name,
+        &["--linear", "0.5", "--client", "streamer"],
+        LIMIT,
+    );
     fault();
     assert_eq!(driver.wait_exit(LIMIT), Some(4), "the driver lost control");
     let latched = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
