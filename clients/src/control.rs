@@ -169,16 +169,7 @@ impl Stopper {
     }
 
     fn ask(&mut self, ask: Ask) -> Result<Accepted, ControlError> {
-        let request = match &ask {
-            Ask::Stop { reason } => Some(Request::Stop {
-                reason: reason.clone(),
-            }),
-            Ask::Release { target, through } => Some(Request::Release {
-                target: target.clone(),
-                through: *through,
-            }),
-            Ask::Ping => None,
-        };
+        let request = ask.request();
         match (
             self.client.request(ask, ANSWER_TIMEOUT),
             &mut self.fallback,

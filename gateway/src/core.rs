@@ -516,12 +516,10 @@ impl Core {
         &mut self,
         now: Duration,
         origin: &Origin,
-        ask: stop_socket::Ask,
+        ask: &stop_socket::Ask,
     ) -> Answer {
-        let request = match ask {
-            stop_socket::Ask::Ping => return Ok(Accepted::default()),
-            stop_socket::Ask::Stop { reason } => Request::Stop { reason },
-            stop_socket::Ask::Release { target, through } => Request::Release { target, through },
+        let Some(request) = ask.request() else {
+            return Ok(Accepted::default());
         };
         self.stats.requests += 1;
         self.status_due = true;

@@ -414,7 +414,7 @@ impl Driver {
                             && pid.is_some_and(|pid| self.operators.is_operator_pid(pid)),
                         bridge: false,
                     };
-                    let answer = self.core.handle_stop_datagram(now, &origin, request.ask);
+                    let answer = self.core.handle_stop_datagram(now, &origin, &request.ask);
                     if let (true, Ok(Accepted { stop: Some(id), .. })) = (is_stop, &answer) {
                         self.transmit();
                         origin.operator =

@@ -183,6 +183,18 @@ mod tests {
     use scout_interface::control::Accepted;
     use scout_interface::stop_socket::{Ask, StopRequest};
 
+    /// The next datagram, waiting at most 2 s for it.
+    fn receive_within(endpoint: &StopEndpoint) -> Received {
+        let deadline = std::time::Instant::now() + Duration::from_secs(2);
+        loop {
+            if let Some(received) = endpoint.try_receive() {
+                return received;
+            }
+            assert!(std::time::Instant::now() < deadline, "no datagram");
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+
     fn robot(tag: &str) -> String {
         format!("ep-{tag}-{}", std::process::id())
     }
@@ -228,14 +240,7 @@ mod tests {
                     Duration::from_secs(2),
                 )
             });
-            let deadline = std::time::Instant::now() + Duration::from_secs(2);
-            let received = loop {
-                if let Some(received) = endpoint.try_receive() {
-                    break received;
-                }
-                assert!(std::time::Instant::now() < deadline, "no datagram");
-                std::thread::sleep(Duration::from_millis(1));
-            };
+            let received = receive_within(&endpoint);
             assert_eq!(received.pid, std::process::id());
             let request = received.request.expect("parsed");
             assert_eq!(request.name.as_deref(), Some("guard"));
@@ -276,14 +281,7 @@ mod tests {
             .emit(),
         ] {
             sender.send_to_addr(datagram, &address).expect("send");
-            let deadline = std::time::Instant::now() + Duration::from_secs(2);
-            let received = loop {
-                if let Some(received) = endpoint.try_receive() {
-                    break received;
-                }
-                assert!(std::time::Instant::now() < deadline, "no datagram");
-                std::thread::sleep(Duration::from_millis(1));
-            };
+            let received = receive_within(&endpoint);
             assert!(received.from.is_none());
             endpoint.reply(None, &StopReply::new(1, &Ok(Accepted::default()), 1));
         }

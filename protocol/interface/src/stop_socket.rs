@@ -20,7 +20,7 @@ use nix::sys::socket::{
 use crate::LAYOUT_VERSION;
 use crate::control::{
     Accepted, MAX_CLIENT_NAME, MAX_REASON, Rejected, Rejection, RejectionKind, ReleaseScope,
-    ReleaseTarget,
+    ReleaseTarget, Request,
 };
 
 /// The abstract socket name of `robot`'s stop endpoint (without the leading NUL).
@@ -127,6 +127,22 @@ pub enum Ask {
         /// The newest stop id the sender saw.
         through: u64,
     },
+}
+
+impl Ask {
+    /// The arbiter request it makes (`None` for a ping, which asks the arbiter nothing).
+    pub fn request(&self) -> Option<Request> {
+        match self {
+            Self::Ping => None,
+            Self::Stop { reason } => Some(Request::Stop {
+                reason: reason.clone(),
+            }),
+            Self::Release { target, through } => Some(Request::Release {
+                target: target.clone(),
+                through: *through,
+            }),
+        }
+    }
 }
 
 /// One request datagram.
