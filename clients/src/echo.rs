@@ -112,7 +112,7 @@ fn draw(state: &StatePayload, out: &mut dyn Write) -> std::io::Result<()> {
     writeln!(out, "robot {}   seq {}", text(&json["robot"]), json["seq"])?;
     writeln!(
         out,
-        "link  {} ({} {})  rx {}  tx {}  checksum errors {}  dropped {}  rejected {}  reconnects {}",
+        "link  {} ({} {})  rx {}  tx {}  checksum errors {}  dropped {}  rejected {}  overflowed {}  reconnects {}",
         text(&link["state"]),
         text(&link["transport"]),
         text(&link["device"]),
@@ -121,6 +121,7 @@ fn draw(state: &StatePayload, out: &mut dyn Write) -> std::io::Result<()> {
         link["checksum_errors"],
         link["dropped_frames"],
         link["rejected_frames"],
+        link["overflowed_frames"],
         link["reconnects"],
     )?;
     writeln!(

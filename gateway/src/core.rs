@@ -30,7 +30,7 @@ use tracing::{debug, info, warn};
 
 use crate::arbiter::{Accepted, Answer, Arbiter, LightsSetting, Origin, Output};
 use crate::config::{GatewayConfig, SafetyConfig};
-use crate::state::{Publish, StateTracker};
+use crate::state::{PortCounters, Publish, StateTracker};
 
 /// The state is published at least this often, frames or not: a subscriber sees that the
 /// gateway lives while the chassis is silent, and a late subscriber gets the latest state fast.
@@ -452,9 +452,10 @@ impl Core {
         }
     }
 
-    /// The stream decoder has thrown away this many bytes so far.
-    pub fn handle_discarded_bytes(&mut self, total: u64) {
-        self.tracker.set_discarded_bytes(total);
+    /// What the current port has counted since it opened: bytes the stream decoder threw
+    /// away, frames the kernel dropped.
+    pub fn handle_port_counters(&mut self, port: PortCounters) {
+        self.tracker.set_port_counters(port);
     }
 
     /// A client's request, from `origin` (as the transport tells) on request service `way`;

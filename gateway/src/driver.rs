@@ -30,6 +30,7 @@ use crate::core::{Core, Publication, Start};
 use crate::device::{Device, DeviceSpec, OpenError};
 use crate::identity::Operators;
 use crate::monitor::NodeMonitor;
+use crate::state::PortCounters;
 use crate::stop_endpoint::StopEndpoint;
 use crate::wait::Ready;
 use scout_interface::remote::REMOTE_PREFIX;
@@ -347,7 +348,10 @@ impl Driver {
         let result = device.receive(now, readable, &mut self.buffer[..], |event| {
             core.handle_rx(now, &event);
         });
-        core.handle_discarded_bytes(device.discarded_bytes());
+        core.handle_port_counters(PortCounters {
+            discarded_bytes: device.discarded_bytes(),
+            overflowed_frames: device.overflowed_frames(),
+        });
         if let Err(error) = result {
             self.device = None;
             let what = format!("reading: {error}");

@@ -40,6 +40,17 @@ pub struct StateTracker {
     link_state: LinkState,
     last_feedback: Option<Duration>,
     foreign_commands_reported: bool,
+    /// The link's port counters when the current port opened: a new port counts from zero.
+    counted_by_closed_ports: PortCounters,
+}
+
+/// What the port itself counts, from when it opened.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct PortCounters {
+    /// Bytes the stream decoder threw away while resynchronising (serial, slcan).
+    pub discarded_bytes: u64,
+    /// Frames the kernel dropped because its receive queue was full (SocketCAN).
+    pub overflowed_frames: u64,
 }
 
 impl StateTracker {
@@ -60,6 +71,7 @@ impl StateTracker {
             link_state: LinkState::Disconnected,
             last_feedback: None,
             foreign_commands_reported: false,
+            counted_by_closed_ports: PortCounters::default(),
         }
     }
 
@@ -100,6 +112,10 @@ impl StateTracker {
         self.sequence.reset();
         self.version.reset();
         self.last_feedback = None;
+        self.counted_by_closed_ports = PortCounters {
+            discarded_bytes: self.state.link.discarded_bytes,
+            overflowed_frames: self.state.link.overflowed_frames,
+        };
         if reconnect {
             self.state.link.reconnects += 1;
         }
@@ -111,9 +127,12 @@ impl StateTracker {
         self.set_link_state(LinkState::Disconnected)
     }
 
-    /// Bytes the stream decoder has thrown away so far.
-    pub fn set_discarded_bytes(&mut self, discarded: u64) {
-        self.state.link.discarded_bytes = discarded;
+    /// What the current port has counted since it opened (the link's counters add what the
+    /// ports before it counted).
+    pub fn set_port_counters(&mut self, port: PortCounters) {
+        let before = self.counted_by_closed_ports;
+        self.state.link.discarded_bytes = before.discarded_bytes + port.discarded_bytes;
+        self.state.link.overflowed_frames = before.overflowed_frames + port.overflowed_frames;
     }
 
     /// A motion command was sent.

@@ -1,5 +1,7 @@
 //! The chassis port as an OS resource: a tty (serial or slcan adapter, or a pseudo-terminal) or
 //! a SocketCAN socket, read with a timeout and written without blocking the caller for long.
+//! SocketCAN reads also carry the kernel's count of frames it dropped because the receive queue
+//! was full (`SO_RXQ_OVFL`), so no frame is lost without being counted.
 
 use std::io::{self, Read, Write};
 use std::path::Path;
@@ -7,7 +9,10 @@ use std::time::Duration;
 
 use scout_protocol::CanFrame;
 use serialport::{SerialPort, TTYPort};
-use socketcan::{EmbeddedFrame, Frame, Socket, SocketOptions};
+use std::os::fd::AsRawFd as _;
+
+use nix::sys::socket::{ControlMessageOwned, MsgFlags, recvmsg, setsockopt, sockopt};
+use socketcan::{Frame as _, Socket, SocketOptions};
 
 /// The serial link's speed (115200 8N1); slcan adapters on USB ignore it.
 pub const BAUD_RATE: u32 = 115_200;
@@ -18,7 +23,15 @@ pub enum Port {
     /// A tty: serial, slcan adapter, or a pseudo-terminal.
     Tty(TTYPort),
     /// A SocketCAN socket.
-    Can(socketcan::CanSocket),
+    Can(CanPort),
+}
+
+/// A SocketCAN socket and the kernel's count of the frames it dropped for it.
+#[derive(Debug)]
+pub struct CanPort {
+    socket: socketcan::CanSocket,
+    /// The last `SO_RXQ_OVFL` count the kernel reported (cumulative for this socket).
+    overflowed: u32,
 }
 
 /// What one read got.
@@ -102,7 +115,21 @@ impl Port {
         socket.set_write_timeout(Duration::from_millis(5))?;
         // Bus-off and error-passive arrive as error frames: a gap for the gateway.
         socket.set_error_filter_accept_all()?;
-        Ok(Self::Can(socket))
+        // Every read reports how many frames the kernel dropped for a full receive queue.
+        setsockopt(&socket, sockopt::RxqOvfl, &1).map_err(io::Error::from)?;
+        Ok(Self::Can(CanPort {
+            socket,
+            overflowed: 0,
+        }))
+    }
+
+    /// Frames the kernel dropped before they could be read, because the receive queue was full
+    /// (SocketCAN; always 0 for a tty, whose driver does not count).
+    pub fn overflowed_frames(&self) -> u64 {
+        match self {
+            Self::Tty(_) => 0,
+            Self::Can(can) => u64::from(can.overflowed),
+        }
     }
 
     /// Waits at most `timeout` for input.
@@ -117,14 +144,7 @@ impl Port {
                     Err(e) => Err(e),
                 }
             }
-            Self::Can(socket) => {
-                socket.set_read_timeout(timeout.max(Duration::from_micros(100)))?;
-                match socket.read_frame() {
-                    Ok(frame) => Ok(from_socketcan(&frame)),
-                    Err(e) if is_timeout(&e) => Ok(Incoming::Timeout),
-                    Err(e) => Err(e),
-                }
-            }
+            Self::Can(can) => can.read(timeout),
         }
     }
 
@@ -152,7 +172,7 @@ impl Port {
 
     /// Sends one CAN frame on a SocketCAN socket.
     pub fn write_frame(&mut self, frame: &CanFrame) -> io::Result<()> {
-        let Self::Can(socket) = self else {
+        let Self::Can(CanPort { socket, .. }) = self else {
             return Err(io::Error::new(
                 io::ErrorKind::InvalidInput,
                 "frames need a CAN socket",
@@ -173,18 +193,97 @@ fn is_timeout(error: &io::Error) -> bool {
     )
 }
 
-fn from_socketcan(frame: &socketcan::CanFrame) -> Incoming {
-    let raw_id = frame.raw_id();
-    match frame {
-        socketcan::CanFrame::Data(data) if !data.is_extended() => {
-            CanFrame::new(raw_id as u16, data.data())
-                .map_or(Incoming::Foreign(raw_id), Incoming::Frame)
+impl CanPort {
+    /// Reads one frame, waiting at most `timeout` (zero: only what is already queued).
+    fn read(&mut self, timeout: Duration) -> io::Result<Incoming> {
+        let flags = if timeout.is_zero() {
+            MsgFlags::MSG_DONTWAIT
+        } else {
+            self.socket.set_read_timeout(timeout)?;
+            MsgFlags::empty()
+        };
+        let mut frame = [0u8; wire::FRAME_LEN];
+        let mut control = nix::cmsg_space!(u32);
+        let mut iov = [io::IoSliceMut::new(&mut frame)];
+        let received =
+            match recvmsg::<()>(self.socket.as_raw_fd(), &mut iov, Some(&mut control), flags) {
+                Ok(received) => received,
+                Err(errno) => {
+                    let error = io::Error::from(errno);
+                    return if is_timeout(&error) {
+                        Ok(Incoming::Timeout)
+                    } else {
+                        Err(error)
+                    };
+                }
+            };
+        for message in received.cmsgs().map_err(io::Error::from)? {
+            if let ControlMessageOwned::RxqOvfl(count) = message {
+                self.overflowed = count;
+            }
         }
-        socketcan::CanFrame::Error(error) => Incoming::BusError(BusError {
-            class: error.error_bits(),
-            controller: error.data().get(1).copied().unwrap_or(0),
-        }),
-        socketcan::CanFrame::Data(_) | socketcan::CanFrame::Remote(_) => Incoming::Foreign(raw_id),
+        if received.bytes != wire::FRAME_LEN {
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidData,
+                format!(
+                    "a SocketCAN read of {} bytes, not one {}-byte CAN frame (a CAN FD \
+                     interface?)",
+                    received.bytes,
+                    wire::FRAME_LEN
+                ),
+            ));
+        }
+        Ok(wire::parse(&frame))
+    }
+}
+
+/// Linux's `struct can_frame` (`linux/can.h`) as named byte ranges.
+mod wire {
+    use super::{BusError, Incoming};
+    use scout_protocol::CanFrame;
+
+    /// The size of one classic CAN frame.
+    pub const FRAME_LEN: usize = 16;
+    /// `can_id`: the identifier and the flags below, in the host's byte order.
+    const ID: std::ops::Range<usize> = 0..4;
+    /// `len`: the payload length (0-8).
+    const LEN: usize = 4;
+    /// `data`: up to 8 payload bytes.
+    const DATA: std::ops::Range<usize> = 8..16;
+
+    const EXTENDED_FLAG: u32 = 0x8000_0000;
+    const REMOTE_FLAG: u32 = 0x4000_0000;
+    const ERROR_FLAG: u32 = 0x2000_0000;
+    const EXTENDED_MASK: u32 = 0x1FFF_FFFF;
+    const STANDARD_MASK: u32 = 0x7FF;
+
+    /// What one `struct can_frame` says.
+    pub fn parse(frame: &[u8; FRAME_LEN]) -> Incoming {
+        let mut id = [0u8; 4];
+        id.copy_from_slice(&frame[ID]);
+        let can_id = u32::from_ne_bytes(id);
+        let data = &frame[DATA][..usize::from(frame[LEN]).min(8)];
+        if can_id & ERROR_FLAG != 0 {
+            return Incoming::BusError(BusError {
+                class: can_id & EXTENDED_MASK,
+                controller: frame[DATA.start + 1],
+            });
+        }
+        if can_id & (EXTENDED_FLAG | REMOTE_FLAG) != 0 {
+            return Incoming::Foreign(can_id & EXTENDED_MASK);
+        }
+        let id = (can_id & STANDARD_MASK) as u16;
+        CanFrame::new(id, data).map_or(Incoming::Foreign(u32::from(id)), Incoming::Frame)
+    }
+
+    /// The bytes of a `struct can_frame` (tests build frames the kernel would deliver).
+    #[cfg(test)]
+    pub fn emit(can_id: u32, data: &[u8]) -> [u8; FRAME_LEN] {
+        let mut frame = [0u8; FRAME_LEN];
+        frame[ID].copy_from_slice(&can_id.to_ne_bytes());
+        frame[LEN] = data.len() as u8;
+        frame[DATA][..data.len()].copy_from_slice(data);
+        frame
     }
 }
 
@@ -192,7 +291,7 @@ impl std::os::fd::AsRawFd for Port {
     fn as_raw_fd(&self) -> std::os::fd::RawFd {
         match self {
             Self::Tty(tty) => tty.as_raw_fd(),
-            Self::Can(socket) => socket.as_raw_fd(),
+            Self::Can(can) => can.socket.as_raw_fd(),
         }
     }
 }
@@ -207,9 +306,40 @@ mod tests {
     use super::*;
 
     fn error_frame(class: u32, controller: u8) -> Incoming {
-        let frame =
-            socketcan::CanErrorFrame::new_error(class, &[0, controller]).expect("an error frame");
-        from_socketcan(&socketcan::CanFrame::Error(frame))
+        wire::parse(&wire::emit(
+            0x2000_0000 | class,
+            &[0, controller, 0, 0, 0, 0, 0, 0],
+        ))
+    }
+
+    #[test]
+    fn can_frames_parse_as_the_kernel_lays_them_out() {
+        // 0x151 with a payload of 8 bytes, as `struct can_frame` in the host's byte order.
+        let data = [0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x03];
+        let Incoming::Frame(frame) = wire::parse(&wire::emit(0x151, &data)) else {
+            panic!("a standard data frame")
+        };
+        assert_eq!((frame.id(), frame.data()), (0x151, &data[..]));
+        let Incoming::Frame(short) = wire::parse(&wire::emit(0x421, &[1])) else {
+            panic!("a standard data frame")
+        };
+        assert_eq!(short.data(), &[1]);
+        assert_eq!(
+            wire::parse(&wire::emit(0x8000_0000 | 0x18FF_0001, &[])),
+            Incoming::Foreign(0x18FF_0001),
+            "an extended id"
+        );
+        assert_eq!(
+            wire::parse(&wire::emit(0x4000_0000 | 0x151, &[])),
+            Incoming::Foreign(0x151),
+            "a remote frame"
+        );
+        let mut too_long = wire::emit(0x151, &data);
+        too_long[4] = 15;
+        assert!(
+            matches!(wire::parse(&too_long), Incoming::Frame(f) if f.data().len() == 8),
+            "a length over 8 reads 8 bytes"
+        );
     }
 
     #[test]

@@ -628,7 +628,7 @@ pub struct LightsRequest {
 
 /// A request from a client to the gateway's arbiter.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::ControlRequest.v4")]
+#[type_name("scout::ControlRequest.v5")]
 #[repr(C)]
 pub struct ControlRequest {
     /// [`RequestKind`] as `u8`.
@@ -670,7 +670,7 @@ pub struct ControlRequest {
 
 /// The gateway's answer to one request.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("scout::ControlResponse.v4")]
+#[type_name("scout::ControlResponse.v5")]
 #[repr(C)]
 pub struct ControlResponse {
     /// The request's `seq`.
@@ -767,7 +767,7 @@ pub struct SourcePayload {
 
 /// The arbiter's status, published on every change and at least once a second.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::StatusPayload.v4")]
+#[type_name("scout::StatusPayload.v5")]
 #[repr(C)]
 pub struct StatusPayload {
     /// Rises by one with every publication.

@@ -97,6 +97,7 @@ pub fn state_json(state: &StatePayload, now_ns: u64) -> Value {
             "checksum_errors": link.checksum_errors,
             "dropped_frames": link.dropped_frames,
             "rejected_frames": link.rejected_frames,
+            "overflowed_frames": link.overflowed_frames,
             "discarded_bytes": link.discarded_bytes,
             "tx_frames": link.tx_frames,
             "reconnects": link.reconnects,

@@ -43,6 +43,9 @@ pub struct LinkPayload {
     pub rejected_frames: u64,
     /// Bytes thrown away while resynchronising (serial).
     pub discarded_bytes: u64,
+    /// Frames the operating system dropped before the gateway read them, because its receive
+    /// queue was full (SocketCAN reports it; a tty's driver does not).
+    pub overflowed_frames: u64,
     /// Frames sent to the chassis.
     pub tx_frames: u64,
     /// Times the port was reopened after a fault.
@@ -191,7 +194,7 @@ pub struct CommandPayload {
 
 /// The chassis state a gateway publishes on every decoded feedback frame and link change.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::StatePayload.v4")]
+#[type_name("scout::StatePayload.v5")]
 #[repr(C)]
 pub struct StatePayload {
     /// Increases by one with every publication.

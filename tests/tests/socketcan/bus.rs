@@ -6,8 +6,8 @@ use std::time::{Duration, Instant};
 
 use scout_protocol::can;
 use scout_system_tests::{
-    Driver, Gateway, Sim, chassis_stays_still, connect, connect_within, moving, release_all,
-    robot_name, scout, wait_for_state, wait_for_status,
+    Driver, Gateway, Sim, chassis_stays_still, connect, connect_within, drive_until_moving,
+    release_all, robot_name, scout, wait_for_state, wait_for_status,
 };
 
 use crate::{Bus, LIMIT};
@@ -64,8 +64,12 @@ fn state_and_motion_end_to_end_with_valid_checksums() {
     assert_eq!(ok["link"]["transport"], "can");
     assert_eq!(ok["link"]["device"], bus.name());
     assert_eq!(ok["system"]["control_mode"], "can", "{ok}");
-    let _driver = Driver::start(&name, &["--linear", "0.5", "--client", "driver"]);
-    moving(&mut sim, LIMIT);
+    let _driver = drive_until_moving(
+        &mut sim,
+        &name,
+        &["--linear", "0.5", "--client", "driver"],
+        LIMIT,
+    );
     wait_for_state(&state, LIMIT, |s| {
         s["motion"]["linear"].as_f64() > Some(0.2)
     });
@@ -147,8 +151,12 @@ fn lose_the_interface(
     let robot = connect(&name);
     let status = robot.status().expect("status");
     let state = robot.subscribe().expect("state");
-    let mut driver = Driver::start(&name, &["--linear", "0.5", "--client", "streamer"]);
-    moving(&mut sim, LIMIT);
+    let mut driver = drive_until_moving(
+        &mut sim,
+        &name,
+        &["--linear", "0.5", "--client", "streamer"],
+        LIMIT,
+    );
     cut(&bus);
     assert_eq!(driver.wait_exit(LIMIT), Some(4), "the driver lost control");
     let lost = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
