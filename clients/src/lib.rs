@@ -14,7 +14,6 @@ pub mod control;
 pub mod decode;
 pub mod echo;
 pub mod remote;
-pub mod ros2;
 
 pub use scout_interface as interface;
 pub use scout_interface::control::{

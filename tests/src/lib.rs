@@ -17,8 +17,9 @@ fn bin_dir() -> PathBuf {
 }
 
 /// The binaries and examples the system tests run.
-const ARTIFACTS: [&str; 6] = [
+const ARTIFACTS: [&str; 7] = [
     "scout",
+    "scout-ros2",
     "scout-gateway",
     "scout-sim",
     "scout-bench",

@@ -24,13 +24,13 @@ use zenoh::pubsub::Publisher;
 use zenoh::qos::CongestionControl;
 use zenoh::query::{Query, Queryable};
 
-use super::config::{ROS2_ROUTER, Ros2Config};
-use super::msgs::{self, MessageType};
-use super::publish::{Clocks, Messages, Topic};
-use super::rmw::{self, EntityKind, Node};
-use super::stream::{Action, CmdVelStream, Ignored, Origin, Outcome};
-use crate::client::{ClientError, Robot};
-use crate::control::ControlError;
+use crate::config::{ROS2_ROUTER, Ros2Config};
+use crate::msgs::{self, MessageType};
+use crate::publish::{Clocks, Messages, Topic};
+use crate::rmw::{self, EntityKind, Node};
+use crate::stream::{Action, CmdVelStream, Ignored, Origin, Outcome};
+use scout_clients::client::{ClientError, Robot};
+use scout_clients::control::ControlError;
 use scout_interface::control::ReleaseTarget;
 
 /// Why the bridge stopped.
@@ -48,6 +48,17 @@ pub enum BridgeError {
     /// A thread of the bridge could not start.
     #[error("starting a thread: {0}")]
     Thread(#[from] std::io::Error),
+    /// The zenoh configuration file puts the session in another mode than client.
+    #[error(
+        "{file} sets zenoh mode \"{mode}\": the bridge must be a client of the ROS 2 router \
+         (rmw_zenohd does not forward between peers); set mode: \"client\" or leave it out"
+    )]
+    NotClient {
+        /// The file.
+        file: String,
+        /// The mode it asks for.
+        mode: String,
+    },
     /// Another bridge serves this robot on this ROS domain: two would share a client name
     /// and drive the chassis from both graphs.
     #[error(
@@ -160,12 +171,13 @@ impl Declared {
         name: &str,
         message: &MessageType,
         config: &Ros2Config,
-    ) -> Result<u32, BridgeError> {
+    ) -> Result<[u8; 16], BridgeError> {
         self.next_entity += 1;
         let entity = self.next_entity;
         let key = self
             .node
             .entity_token(entity, kind, name, message, config.distro);
+        let gid = rmw::gid(&key);
         self.tokens.push(
             session
                 .liveliness()
@@ -173,11 +185,12 @@ impl Declared {
                 .wait()
                 .map_err(zenoh_error("declaring a liveliness token"))?,
         );
-        Ok(entity)
+        Ok(gid)
     }
 }
 
-/// The zenoh session's settings: client mode towards the ROS 2 router.
+/// The zenoh session's settings: client mode towards the ROS 2 router. `$ZENOH_CONFIG` is never
+/// read: a file meant for other zenoh programs would silently change the bridge's mode.
 pub fn session_settings(config: &Ros2Config) -> SessionSettings {
     let connect = if config.connect.is_empty() && config.zenoh_config.is_none() {
         vec![ROS2_ROUTER.to_owned()]
@@ -185,10 +198,36 @@ pub fn session_settings(config: &Ros2Config) -> SessionSettings {
         config.connect.clone()
     };
     SessionSettings {
-        config_file: config.zenoh_config.clone(),
+        config_file: Some(config.zenoh_config.clone().unwrap_or_default()),
         listen: Vec::new(),
         connect,
     }
+}
+
+/// The zenoh configuration of the bridge's session: always a client of the ROS 2 router, since
+/// rmw_zenohd does not forward between peers (its `peers_failover_brokering` is off). A file
+/// without a mode is made a client; a file asking for another mode is refused.
+pub fn session_config(config: &Ros2Config) -> Result<zenoh::Config, BridgeError> {
+    let settings = session_settings(config);
+    let mut zenoh_config = settings
+        .config("client")
+        .map_err(|error| BridgeError::Zenoh(error.to_string()))?;
+    let mode = zenoh_config
+        .get_json("mode")
+        .map_err(|error| BridgeError::Zenoh(format!("reading the zenoh mode: {error}")))?;
+    match mode.trim_matches('"') {
+        "client" => {}
+        "null" | "" => zenoh_config
+            .insert_json5("mode", "\"client\"")
+            .map_err(|error| BridgeError::Zenoh(format!("setting client mode: {error}")))?,
+        other => {
+            return Err(BridgeError::NotClient {
+                file: config.zenoh_config.clone().unwrap_or_default(),
+                mode: other.to_owned(),
+            });
+        }
+    }
+    Ok(zenoh_config)
 }
 
 /// Runs the bridge for robot `robot` until `stop` is set or something fails.
@@ -204,13 +243,15 @@ pub fn run(robot: &str, config: &Ros2Config, stop: &AtomicBool) -> Result<(), Br
     )?;
     let gateway = Robot::connect(robot)?;
     let settings = session_settings(config);
-    let session = settings.open("client").map_err(|error| {
-        BridgeError::Zenoh(format!(
-            "{error}: no ROS 2 router at {:?}? Start one (`ros2 run rmw_zenoh_cpp rmw_zenohd`) \
+    let session = zenoh::open(session_config(config)?)
+        .wait()
+        .map_err(|error| {
+            BridgeError::Zenoh(format!(
+                "{error}: no ROS 2 router at {:?}? Start one (`ros2 run rmw_zenoh_cpp rmw_zenohd`) \
              or give --connect ENDPOINT",
-            settings.connect
-        ))
-    })?;
+                settings.connect
+            ))
+        })?;
     let mut declared = Declared {
         node: Node {
             domain: config.domain,
@@ -238,7 +279,7 @@ pub fn run(robot: &str, config: &Ros2Config, stop: &AtomicBool) -> Result<(), Br
         };
         let name = config.resolve(name);
         let message = topic.message();
-        let entity = declared.declare(&session, EntityKind::Publisher, &name, &message, config)?;
+        let gid = declared.declare(&session, EntityKind::Publisher, &name, &message, config)?;
         let publisher = session
             .declare_publisher(rmw::data_key(config.domain, &name, &message, config.distro))
             .congestion_control(CongestionControl::Drop)
@@ -248,7 +289,7 @@ pub fn run(robot: &str, config: &Ros2Config, stop: &AtomicBool) -> Result<(), Br
             topic,
             RosPublisher {
                 publisher,
-                gid: rmw::gid(&declared.node.zid, declared.node.id, entity),
+                gid,
                 topic: name,
                 seq: 0,
             },
@@ -267,7 +308,7 @@ pub fn run(robot: &str, config: &Ros2Config, stop: &AtomicBool) -> Result<(), Br
         let (sender, counters) = (twists.clone(), Arc::clone(&counters));
         subscribers.push(
             session
-                .declare_subscriber(rmw::data_key(config.domain, &name, &message, config.distro))
+                .declare_subscriber(rmw::subscription_key(config.domain, &name, &message))
                 .callback(move |sample| {
                     if let Err(TrySendError::Full(_)) = sender.try_send((index, sample)) {
                         Counters::add(&counters.cmd_vel_dropped);
@@ -308,10 +349,15 @@ pub fn run(robot: &str, config: &Ros2Config, stop: &AtomicBool) -> Result<(), Br
                         refuse(&query, "not a service call: query the service's exact key");
                         return;
                     }
-                    // Checked here, so that only real calls wait in the queue.
+                    // Checked here, so that only real calls wait in the queue. An rmw_zenoh
+                    // client ignores error replies (its caller would wait for its timeout): a
+                    // call with the attachment is refused with a Trigger response saying why.
                     if let Err(why) = trigger_request(&query) {
                         Counters::add(&counters.service_calls_malformed);
-                        refuse(&query, &why);
+                        match why {
+                            NoCall::NotRmwZenoh(why) => refuse(&query, why),
+                            NoCall::NotTrigger(why) => answer(&query, kind, false, &why),
+                        }
                         return;
                     }
                     if let Err(crossbeam_channel::TrySendError::Full(query)) =
@@ -514,6 +560,9 @@ fn drive(
                 Action::Drive => controller.drive(twist.linear, twist.angular),
             };
             match &answer {
+                // A message is accepted when its speed is: taking control on the way is not a
+                // second acceptance.
+                Ok(_) if action == Action::Take => {}
                 Ok(_) => {
                     Counters::add(&counters.cmd_vel_accepted);
                 }
@@ -606,21 +655,31 @@ fn serve(
     Ok(())
 }
 
+/// Why a query is no call to serve.
+enum NoCall {
+    /// Without the rmw_zenoh attachment: not an rmw_zenoh client (an error reply).
+    NotRmwZenoh(&'static str),
+    /// An rmw_zenoh client's call whose payload is no Trigger request (a Trigger response with
+    /// `success` false, which the client does see).
+    NotTrigger(String),
+}
+
 /// Whether a query is a std_srvs/srv/Trigger request as an rmw_zenoh client sends it: CDR of
 /// the request (its one placeholder byte) and the attachment.
-fn trigger_request(query: &Query) -> Result<(), String> {
+fn trigger_request(query: &Query) -> Result<(), NoCall> {
     query
         .attachment()
         .and_then(|attachment| rmw::parse_attachment(&attachment.to_bytes()))
-        .ok_or("no rmw_zenoh attachment: call the service through rmw_zenoh")?;
+        .ok_or(NoCall::NotRmwZenoh(
+            "no rmw_zenoh attachment: call the service through rmw_zenoh",
+        ))?;
     let payload = query.payload().map(ZBytes::to_bytes).unwrap_or_default();
-    match &payload[..] {
-        [0x00, 0x01, _, _, _, ..] => Ok(()),
-        _ => Err(format!(
-            "{} bytes are no std_srvs/srv/Trigger request (CDR little endian, 5 bytes)",
+    msgs::decode_trigger_request(&payload).map_err(|error| {
+        NoCall::NotTrigger(format!(
+            "refused: {} bytes are no std_srvs/srv/Trigger request: {error}",
             payload.len()
-        )),
-    }
+        ))
+    })
 }
 
 /// The Trigger response to a call.
@@ -649,5 +708,49 @@ fn reply_attachment(request: &ZBytes) -> Vec<u8> {
     match rmw::parse_attachment(&request.to_bytes()) {
         Some((seq, _, gid)) => rmw::attachment(seq, unix_now().as_nanos() as i64, &gid).to_vec(),
         None => request.to_bytes().to_vec(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn with_file(json5: &str) -> Result<zenoh::Config, BridgeError> {
+        let path = std::env::temp_dir().join(format!(
+            "scout-ros2-zenoh-{}-{}.json5",
+            std::process::id(),
+            json5.len()
+        ));
+        std::fs::write(&path, json5).expect("write a zenoh config");
+        let config = Ros2Config {
+            zenoh_config: Some(path.display().to_string()),
+            ..Ros2Config::default()
+        };
+        let result = session_config(&config);
+        std::fs::remove_file(&path).ok();
+        result
+    }
+
+    fn mode(config: &zenoh::Config) -> String {
+        config.get_json("mode").expect("a mode")
+    }
+
+    #[test]
+    fn the_session_is_a_client_of_the_router_whatever_the_file() {
+        let default = session_config(&Ros2Config::default()).expect("the default");
+        assert_eq!(mode(&default), "\"client\"");
+        let without_mode = with_file("{ connect: { endpoints: [\"tcp/127.0.0.1:7447\"] } }")
+            .expect("a file without a mode");
+        assert_eq!(mode(&without_mode), "\"client\"");
+        with_file("{ mode: \"client\" }").expect("a client file");
+        let peer = with_file("{ mode: \"peer\" }").expect_err("a peer file is refused");
+        assert!(
+            matches!(&peer, BridgeError::NotClient { mode, .. } if mode == "peer"),
+            "{peer}"
+        );
+        assert!(
+            peer.to_string().contains("does not forward between peers"),
+            "{peer}"
+        );
     }
 }

@@ -125,6 +125,10 @@ impl<'a> Reader<'a> {
         Ok(chunk.try_into().expect("N bytes"))
     }
 
+    pub fn u8(&mut self) -> Result<u8, CdrError> {
+        self.take::<1>().map(|[byte]| byte)
+    }
+
     pub fn i32(&mut self) -> Result<i32, CdrError> {
         self.take::<4>().map(i32::from_le_bytes)
     }

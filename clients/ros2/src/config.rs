@@ -6,9 +6,9 @@ use std::time::Duration;
 use scout_interface::control::{Class, MAX_CLIENT_NAME};
 use serde::{Deserialize, Serialize};
 
-use super::publish::Topic;
-use super::rmw::Distro;
-use super::stream::Pauses;
+use crate::publish::Topic;
+use crate::rmw::Distro;
+use crate::stream::Pauses;
 
 /// The endpoint of a ROS 2 router (`rmw_zenohd`) on this host.
 pub const ROS2_ROUTER: &str = "tcp/127.0.0.1:7447";
@@ -384,7 +384,7 @@ mod tests {
     #[test]
     fn the_example_file_is_valid_and_states_the_defaults() {
         let path =
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../config/scout-ros2.toml");
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/scout-ros2.toml");
         let example = Ros2Config::load(Some(&path)).expect("the example loads");
         example.validate().expect("the example is valid");
         // What it marks as not the default: the namespace and the second cmd_vel topic.

@@ -1,4 +1,8 @@
-//! `scout ros2`: the chassis as a ROS 2 node over rmw_zenoh (see `scout_clients::ros2`).
+//! `scout-ros2` (run as `scout ros2`): the chassis as a ROS 2 node (see the `scout_ros2` library).
+//!
+//! Exit codes: 0 stopped by Ctrl-C or SIGTERM; 1 something failed (no ROS 2 router to connect
+//! to, zenoh failed); 2 usage error, a bad setting, or another bridge serves the robot on that
+//! ROS domain; 3 no gateway with that name runs, or it stopped answering.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -6,18 +10,23 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::Context;
-use clap::Args;
-use scout_clients::ros2::bridge::{self, BridgeError};
-use scout_clients::ros2::config::Ros2Config;
-use scout_clients::ros2::rmw::Distro;
+use clap::Parser;
+use scout_clients::client::ClientError;
+use scout_clients::control::ControlError;
+use scout_clients::interface::services::ServiceError;
+use scout_ros2::bridge::{self, BridgeError};
+use scout_ros2::config::{Ros2Config, Ros2ConfigError};
+use scout_ros2::rmw::Distro;
 use tracing_subscriber::EnvFilter;
 
-use crate::RobotArgs;
-
-#[derive(Debug, Args)]
+/// Make the chassis a ROS 2 node: /odom, /tf, /battery_state, /joint_states, /diagnostics out;
+/// /cmd_vel through the gateway's arbiter; e-stop and release services.
+#[derive(Debug, Parser)]
+#[command(name = "scout ros2", version, about)]
 pub struct Ros2Args {
-    #[command(flatten)]
-    robot: RobotArgs,
+    /// The robot (gateway) name.
+    #[arg(long, default_value = "scout", value_name = "ROBOT")]
+    name: String,
     /// Settings file (TOML): node, namespace, frames, topics, cmd_vel classes, Humble mode.
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
@@ -76,7 +85,42 @@ impl Ros2Args {
     }
 }
 
-pub fn run(args: &Ros2Args) -> anyhow::Result<ExitCode> {
+fn main() -> ExitCode {
+    let args = Ros2Args::parse();
+    match run(&args) {
+        Ok(code) => code,
+        Err(error) => {
+            eprintln!("scout ros2: {error:#}");
+            ExitCode::from(exit_code(&error))
+        }
+    }
+}
+
+/// The exit code for `error` (see the module documentation).
+fn exit_code(error: &anyhow::Error) -> u8 {
+    for cause in error.chain() {
+        let no_gateway = matches!(cause.downcast_ref(), Some(ServiceError::NoGateway { .. }))
+            || matches!(
+                cause.downcast_ref(),
+                Some(ClientError::Service(ServiceError::NoGateway { .. }))
+            )
+            || matches!(cause.downcast_ref(), Some(ControlError::NoAnswer { .. }));
+        if no_gateway {
+            return 3;
+        }
+        if cause.downcast_ref::<Ros2ConfigError>().is_some()
+            || matches!(
+                cause.downcast_ref(),
+                Some(BridgeError::AlreadyRunning { .. } | BridgeError::NotClient { .. })
+            )
+        {
+            return 2;
+        }
+    }
+    1
+}
+
+fn run(args: &Ros2Args) -> anyhow::Result<ExitCode> {
     let config = args.settings()?;
     if args.print_config {
         print!(
@@ -96,7 +140,7 @@ pub fn run(args: &Ros2Args) -> anyhow::Result<ExitCode> {
     let on_signal = Arc::clone(&stop);
     ctrlc::set_handler(move || on_signal.store(true, Ordering::Relaxed))
         .context("installing the Ctrl-C handler")?;
-    match bridge::run(&args.robot.name, &config, &stop) {
+    match bridge::run(&args.name, &config, &stop) {
         Ok(()) => Ok(ExitCode::SUCCESS),
         Err(BridgeError::Client(error)) => Err(error.into()),
         Err(BridgeError::Control(error)) => Err(error.into()),

@@ -1,7 +1,7 @@
 //! The ROS 2 messages the bridge publishes and receives, with their type names and RIHS01 type
 //! hashes (REP 2016; checked against rosbags' `hash_rihs01` by the tests), written as CDR.
 
-use super::cdr::{CdrError, Reader, Writer};
+use crate::cdr::{CdrError, Reader, Writer};
 
 /// A ROS 2 message type as rmw_zenoh names it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -255,6 +255,14 @@ pub fn encode_trigger_response(success: bool, message: &str) -> Vec<u8> {
     w.finish()
 }
 
+/// Reads a `std_srvs/Trigger` request: no fields, so the one placeholder byte that CDR gives an
+/// empty structure (`structure_needs_at_least_one_member`).
+pub fn decode_trigger_request(bytes: &[u8]) -> Result<(), CdrError> {
+    let mut r = Reader::new(bytes)?;
+    r.u8()?;
+    r.finish()
+}
+
 /// The planar part of a `geometry_msgs/Twist`: linear x (m/s), angular z (rad/s).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PlanarTwist {
@@ -404,13 +412,13 @@ mod tests {
         assert!(decode_twist(&hex(TWIST)[..20], false).is_err());
         assert_eq!(
             decode_twist(&[0, 1, 0], false),
-            Err(crate::ros2::cdr::CdrError::Truncated(3))
+            Err(crate::cdr::CdrError::Truncated(3))
         );
         let mut long = hex(TWIST);
         long.extend([0; 64]);
         assert_eq!(
             decode_twist(&long, false),
-            Err(crate::ros2::cdr::CdrError::Trailing(64))
+            Err(crate::cdr::CdrError::Trailing(64))
         );
     }
 
@@ -434,7 +442,7 @@ mod tests {
         fn any_bytes_decode_or_fail_cleanly(bytes in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..128)) {
             let _ = decode_twist(&bytes, false);
             let _ = decode_twist(&bytes, true);
-            let _ = crate::ros2::rmw::parse_attachment(&bytes);
+            let _ = crate::rmw::parse_attachment(&bytes);
         }
 
         /// What a ROS publisher writes reads back: any speeds, any frame id.

@@ -12,8 +12,8 @@ use scout_interface::state::{LinkState, Received};
 use scout_protocol::{ChassisState, Fault, FaultBits, Severity};
 use serde_json::Value;
 
-use super::config::Ros2Config;
-use super::msgs::{self, Battery, Header, Joints, Odometry, Status, Transform};
+use crate::config::Ros2Config;
+use crate::msgs::{self, Battery, Header, Joints, Odometry, Status, Transform};
 
 /// The topics the bridge publishes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -488,7 +488,7 @@ fn flatten(value: &Value) -> Vec<(String, String)> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ros2::cdr::Reader;
+    use crate::cdr::Reader;
 
     const SECOND: u64 = 1_000_000_000;
 

@@ -7,7 +7,7 @@
 //! `qos.cpp`'s defaults: reliable, volatile, keep last 42), `attachment_helpers.cpp` (zenoh-ext
 //! serialization of `i64, i64, std::array<u8, 16>`, the array with its length).
 
-use super::msgs::MessageType;
+use crate::msgs::MessageType;
 
 /// Reliable, volatile, keep last 10, default deadline, lifespan and liveliness: rmw_zenoh's
 /// `qos_to_keyexpr` of ROS 2's default QoS.
@@ -153,24 +153,24 @@ pub fn parse_attachment(bytes: &[u8]) -> Option<(i64, i64, [u8; 16])> {
     ))
 }
 
-/// A publisher's GID: 16 bytes derived from the session, node and entity, distinct per entity.
-/// (rmw_zenoh derives its GIDs from the XXH3-128 of the entity's token; ROS uses the GID to
-/// tell publishers apart, which any distinct value does.)
-pub fn gid(zid: &str, node: u32, entity: u32) -> [u8; 16] {
-    use std::hash::{Hash, Hasher};
-    let mut gid = [0u8; 16];
-    for (half, salt) in gid.chunks_mut(8).zip([0u8, 1]) {
-        let mut hasher = std::collections::hash_map::DefaultHasher::new();
-        (zid, node, entity, salt).hash(&mut hasher);
-        half.copy_from_slice(&hasher.finish().to_le_bytes());
-    }
-    gid
+/// rmw_zenoh's GID of an entity: the XXH3-128 (seed 0) of its liveliness token, the low 64 bits
+/// then the high 64, each in little-endian byte order (`liveliness_utils.cpp`, `Entity::gid`).
+/// Receivers recompute it from the token, so `message_info.publisher_gid` and
+/// `ros2 topic info -v` agree only when the attachment carries this value.
+pub fn gid(token: &str) -> [u8; 16] {
+    xxhash_rust::xxh3::xxh3_128(token.as_bytes()).to_le_bytes()
+}
+
+/// The data key a subscription listens on: any type hash (`*`), so that publishers of every
+/// distro reach it (Humble's `TypeHashNotSupported` and Jazzy's `RIHS01_...` are different keys).
+pub fn subscription_key(domain: u32, topic: &str, message: &MessageType) -> String {
+    format!("{domain}/{}/{}/*", bare(topic), message.dds_name)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::ros2::msgs::{ODOMETRY, TWIST};
+    use crate::msgs::{ODOMETRY, TWIST};
 
     #[test]
     fn the_issue_s_example_key() {
@@ -205,15 +205,36 @@ mod tests {
     }
 
     #[test]
+    fn gids_are_xxh3_128_of_the_token_low_half_first() {
+        // XXH3-128 of the empty input is 0x99aa06d3014798d8_6001c324468d497f (xxHash's tests).
+        assert_eq!(
+            gid(""),
+            [
+                0x7f, 0x49, 0x8d, 0x46, 0x24, 0xc3, 0x01, 0x60, 0xd8, 0x98, 0x47, 0x01, 0xd3, 0x06,
+                0xaa, 0x99
+            ]
+        );
+        assert_ne!(gid("@ros2_lv/0/1a2b/0/1/MP"), gid("@ros2_lv/0/1a2b/0/2/MP"));
+    }
+
+    #[test]
+    fn subscriptions_accept_every_distro_s_hash() {
+        assert_eq!(
+            subscription_key(3, "/robot1/cmd_vel", &TWIST),
+            "3/robot1/cmd_vel/geometry_msgs::msg::dds_::Twist_/*"
+        );
+    }
+
+    #[test]
     fn the_attachment_is_33_bytes_and_reads_back() {
-        let gid = gid("1a2b", 0, 1);
+        let gid = gid("@ros2_lv/0/1a2b/0/1/MP");
         let bytes = attachment(7, 1_700_000_000_000_000_000, &gid);
         assert_eq!(bytes.len(), 33);
         assert_eq!(
             parse_attachment(&bytes),
             Some((7, 1_700_000_000_000_000_000, gid))
         );
-        assert_ne!(gid, super::gid("1a2b", 0, 2));
+        assert_ne!(gid, super::gid("@ros2_lv/0/1a2b/0/2/MP"));
         assert_eq!(parse_attachment(&bytes[..32]), None);
     }
 }

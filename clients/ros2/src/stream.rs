@@ -21,7 +21,7 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use super::msgs::PlanarTwist;
+use crate::msgs::PlanarTwist;
 
 /// A pause is at least this many times the stream's shortest recent interval.
 pub const PAUSE_PERIODS: u32 = 3;

@@ -4,7 +4,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use scout_clients::ros2::{msgs, rmw};
+use scout_ros2::{msgs, rmw};
 use scout_interface::control::Class;
 use scout_interface::remote::{self, RemoteCommand};
 

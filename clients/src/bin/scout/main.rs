@@ -1,9 +1,10 @@
 //! `scout`: the command-line tool for a SCOUT chassis behind scout-gateway.
 //!
 //! Exit codes: 0 success; 1 something failed (a line `scout decode` could not decode, an I/O
-//! error, no ROS 2 router to connect to); 2 usage error (also a bad `scout ros2` setting, or
-//! another `scout ros2` bridge serves the robot on that ROS domain); 3 no gateway with that name
-//! runs, or it stopped answering; 4 the gateway rejected the request (the reason is printed).
+//! error, no ROS 2 router to connect to, `scout-ros2` not installed); 2 usage error (also a bad
+//! `scout ros2` setting, or another `scout ros2` bridge serves the robot on that ROS domain); 3 no
+//! gateway with that name runs, or it stopped answering; 4 the gateway rejected the request (the
+//! reason is printed). `scout ros2` runs the `scout-ros2` program and exits with its code.
 
 mod control;
 mod decode;
@@ -22,7 +23,6 @@ use scout_clients::control::ControlError;
 use scout_clients::echo::EchoError;
 use scout_clients::interface::services::ServiceError;
 use scout_clients::interface::stop_socket::StopSocketError;
-use scout_clients::ros2::config::Ros2ConfigError;
 
 /// Command-line tool for an AgileX SCOUT chassis.
 #[derive(Debug, Parser)]
@@ -64,9 +64,12 @@ enum Command {
     ResetOdometry(control::ClientArgs),
     /// Run a zenoh router for a fleet: gateways connect to it, remote readers read through it.
     Router(router::RouterArgs),
-    /// Make the chassis a ROS 2 node over rmw_zenoh: /odom, /tf, /battery_state,
-    /// /joint_states, /diagnostics out; /cmd_vel through the arbiter; e-stop and release
-    /// services. Connects to the local ROS 2 router (rmw_zenohd) in client mode.
+    /// Make the chassis a ROS 2 node: /odom, /tf, /battery_state, /joint_states, /diagnostics
+    /// out; /cmd_vel through the arbiter; e-stop and release services (`scout ros2 --help`).
+    ///
+    /// Runs the `scout-ros2` program (found beside `scout`, else on PATH), which carries the ROS
+    /// 2 middleware so that `scout` does not.
+    #[command(disable_help_flag = true)]
     Ros2(ros2::Ros2Args),
 }
 
@@ -135,14 +138,6 @@ fn exit_code(error: &anyhow::Error) -> u8 {
         }
         if matches!(cause.downcast_ref(), Some(ControlError::Rejected(_))) {
             return 4;
-        }
-        if cause.downcast_ref::<Ros2ConfigError>().is_some()
-            || matches!(
-                cause.downcast_ref(),
-                Some(scout_clients::ros2::bridge::BridgeError::AlreadyRunning { .. })
-            )
-        {
-            return 2;
         }
     }
     1
