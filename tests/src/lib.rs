@@ -646,3 +646,86 @@ pub fn release_all(name: &str) {
     let (code, _, stderr) = scout(&["release", "--name", name]);
     assert_eq!(code, Some(0), "{stderr}");
 }
+
+/// A private network namespace with only `lo` (up, multicast on), for processes that speak DDS:
+/// DDS discovers peers by multicast on every interface, and test traffic must stay inside
+/// namespaces a test made itself. A `sleep` holds it; [`NetNs::command`] runs a program in it.
+/// Abstract Unix sockets are per namespace too: a gateway's stop endpoint outside is not seen
+/// inside (clients there use its iceoryx2 services, which are shared memory).
+#[derive(Debug)]
+pub struct NetNs {
+    holder: std::process::Child,
+}
+
+impl NetNs {
+    /// Makes one, or says why it cannot (not root, no `unshare`/`ip`/`nsenter`).
+    pub fn create() -> Result<NetNs, String> {
+        let mut holder = Command::new("unshare")
+            .args([
+                "-n",
+                "sh",
+                "-c",
+                "ip link set lo up && ip link set lo multicast on && echo ready && exec sleep 3600",
+            ])
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .map_err(|error| format!("cannot run unshare: {error}"))?;
+        let lines = line_reader(holder.stdout.take().expect("stdout"));
+        match lines.recv_timeout(Duration::from_secs(10)) {
+            Ok(line) if line == "ready" => {}
+            Ok(_) | Err(_) => {
+                let _ = holder.kill();
+                let output = holder.wait_with_output().ok();
+                let stderr = output
+                    .map(|o| String::from_utf8_lossy(&o.stderr).trim().to_owned())
+                    .unwrap_or_default();
+                return Err(format!(
+                    "cannot make a network namespace (`unshare -n`, needs root): {stderr}"
+                ));
+            }
+        }
+        let namespace = NetNs { holder };
+        if !Command::new("nsenter")
+            .arg(namespace.net())
+            .arg("true")
+            .status()
+            .is_ok_and(|status| status.success())
+        {
+            return Err("cannot enter the network namespace with nsenter".into());
+        }
+        Ok(namespace)
+    }
+
+    fn net(&self) -> String {
+        format!("--net=/proc/{}/ns/net", self.holder.id())
+    }
+
+    /// A command that runs `program` inside the namespace (nsenter enters it and executes the
+    /// program in its own place: signals reach the program).
+    pub fn command(&self, program: impl AsRef<std::ffi::OsStr>) -> Command {
+        let mut command = Command::new("nsenter");
+        command.arg(self.net()).arg("--").arg(program);
+        command
+    }
+
+    /// [`NetNs::command`] for a workspace binary, with its environment.
+    pub fn binary(&self, name: &str) -> Command {
+        let mut command = self.command(bin(name));
+        command
+            .env("RUST_LOG", "warn")
+            .env_remove("RUST_BACKTRACE")
+            .env_remove("NOTIFY_SOCKET")
+            .env_remove("WATCHDOG_USEC")
+            .env_remove("WATCHDOG_PID");
+        command
+    }
+}
+
+impl Drop for NetNs {
+    fn drop(&mut self) {
+        let _ = self.holder.kill();
+        let _ = self.holder.wait();
+    }
+}

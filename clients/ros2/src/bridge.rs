@@ -1,33 +1,28 @@
-//! `scout ros2`: the driver that makes a gateway's chassis a ROS 2 node over rmw_zenoh. An
-//! ordinary local client of the gateway (state and status subscribers, controllers), and a
-//! zenoh client of the ROS 2 router: it declares the node and its endpoints as liveliness
-//! tokens, publishes what [`Messages`] makes, feeds cmd_vel through [`CmdVelStream`] into the
-//! arbiter, and serves the e-stop and release services.
+//! `scout ros2`: the driver that makes a gateway's chassis a ROS 2 node, whatever the middleware.
+//! An ordinary local client of the gateway (state and status subscribers, controllers): it
+//! publishes what [`Messages`] makes, feeds cmd_vel through [`CmdVelStream`] into the arbiter,
+//! and serves the e-stop and release services. The middleware ([`crate::zenoh_node`] or
+//! [`crate::dds_node`]) only carries bytes: it publishes through [`Publishers`] and fills the
+//! [`Inboxes`]' queues, so both obey the same rules by construction.
 //!
 //! Three threads, each blocked on its own input, so that no one waits for another: the state
-//! (woken by the gateway's state event), the cmd_vel messages (a bounded queue the zenoh
-//! callbacks fill) and the services (another queue, with a stop port of its own).
+//! (woken by the gateway's state event), the cmd_vel messages (a bounded queue the middleware
+//! fills) and the services (two more queues, the e-stop's served first, with a stop port of
+//! their own).
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::mpsc::{Receiver, TrySendError, sync_channel};
+use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
-use scout_interface::remote::SessionSettings;
 use scout_interface::services::{monotonic, monotonic_ns};
 use serde::Serialize;
 use tracing::{info, warn};
-use zenoh::Wait;
-use zenoh::bytes::ZBytes;
-use zenoh::liveliness::LivelinessToken;
-use zenoh::pubsub::Publisher;
-use zenoh::qos::CongestionControl;
-use zenoh::query::{Query, Queryable};
 
-use crate::config::{ROS2_ROUTER, Ros2Config};
-use crate::msgs::{self, MessageType};
+use crate::cdr::CdrError;
+use crate::config::{Middleware, Ros2Config};
+use crate::msgs::PlanarTwist;
 use crate::publish::{Clocks, Messages, Topic};
-use crate::rmw::{self, EntityKind, Node};
 use crate::stream::{Action, CmdVelStream, Ignored, Origin, Outcome};
 use scout_clients::client::{ClientError, Robot};
 use scout_clients::control::ControlError;
@@ -45,6 +40,9 @@ pub enum BridgeError {
     /// The ROS 2 router could not be reached, or zenoh failed.
     #[error("{0}")]
     Zenoh(String),
+    /// The DDS participant or one of its endpoints could not be made.
+    #[error("DDS: {0}")]
+    Dds(String),
     /// A thread of the bridge could not start.
     #[error("starting a thread: {0}")]
     Thread(#[from] std::io::Error),
@@ -77,20 +75,19 @@ fn bridge_claim(robot: &str, domain: u32) -> String {
     format!("{}/ros2/{domain}", scout_interface::services::prefix(robot))
 }
 
-fn zenoh_error(what: &str) -> impl Fn(zenoh::Error) -> BridgeError + '_ {
-    move |error| BridgeError::Zenoh(format!("{what}: {error}"))
-}
-
 /// What the bridge counted, shown in its diagnostics and logged when it stops.
 #[derive(Debug, Default, Serialize)]
 pub struct Counters {
     pub published: AtomicU64,
+    /// Messages the middleware failed to send.
+    pub publish_failed: AtomicU64,
     pub cmd_vel_received: AtomicU64,
     pub cmd_vel_accepted: AtomicU64,
     pub cmd_vel_rejected: AtomicU64,
     /// Not CDR of the topic's type.
     pub cmd_vel_malformed: AtomicU64,
-    /// No rmw_zenoh attachment: not from a ROS publisher (ROS subscribers drop these too).
+    /// Without the publisher's identity (over zenoh: no rmw_zenoh attachment, not from a ROS
+    /// publisher; ROS subscribers drop these too).
     pub cmd_vel_without_attachment: AtomicU64,
     /// Ignored: the stream went on across a loss of control.
     pub cmd_vel_mid_stream: AtomicU64,
@@ -99,13 +96,13 @@ pub struct Counters {
     pub service_calls: AtomicU64,
     /// Answered `busy` without being served: the service's queue was [`QUEUE`] calls behind.
     pub service_calls_dropped: AtomicU64,
-    /// Refused with the reason: a wildcard query, or no Trigger request with the rmw_zenoh
-    /// attachment.
+    /// Refused with the reason: a wildcard query, no rmw_zenoh attachment, or no Trigger
+    /// request.
     pub service_calls_malformed: AtomicU64,
 }
 
 impl Counters {
-    fn add(counter: &AtomicU64) -> u64 {
+    pub fn add(counter: &AtomicU64) -> u64 {
         counter.fetch_add(1, Ordering::Relaxed) + 1
     }
 
@@ -121,117 +118,158 @@ impl Counters {
 }
 
 /// Messages waiting for the command or service thread; more are dropped and counted.
-const QUEUE: usize = 64;
+pub const QUEUE: usize = 64;
 
-/// A publisher with its sequence number and GID, for the attachment.
-struct RosPublisher {
-    publisher: Publisher<'static>,
-    topic: String,
-    gid: [u8; 16],
-    seq: i64,
+/// One cmd_vel message as the middleware delivered it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CmdVel {
+    /// Which of [`Ros2Config::cmd_vel`].
+    pub topic: usize,
+    /// Its publisher, sequence number and source time; `None` when the middleware could not
+    /// tell (over zenoh: no rmw_zenoh attachment).
+    pub origin: Option<Origin>,
+    /// The speeds, or why the payload is no message of the topic's type.
+    pub twist: Result<PlanarTwist, CdrError>,
 }
 
-impl RosPublisher {
-    fn put(&mut self, payload: Vec<u8>, counters: &Counters) {
-        self.seq += 1;
-        let attachment = rmw::attachment(self.seq, unix_now().as_nanos() as i64, &self.gid);
-        match self
-            .publisher
-            .put(payload)
-            .attachment(attachment.to_vec())
-            .wait()
-        {
-            Ok(()) => {
-                Counters::add(&counters.published);
-            }
-            Err(error) => warn!("ros2: publishing on {} failed: {error}", self.topic),
+/// The two services.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ServiceKind {
+    Estop,
+    Release,
+}
+
+impl ServiceKind {
+    pub fn name(self, config: &Ros2Config) -> &str {
+        match self {
+            ServiceKind::Estop => &config.topics.estop,
+            ServiceKind::Release => &config.topics.release,
+        }
+    }
+
+    /// The services this configuration serves.
+    pub fn served(config: &Ros2Config) -> &'static [ServiceKind] {
+        match (config.services, config.release_service) {
+            (false, _) => &[],
+            (true, false) => &[ServiceKind::Estop],
+            (true, true) => &[ServiceKind::Estop, ServiceKind::Release],
+        }
+    }
+
+    /// The answer to a call that the queue had no room for.
+    pub fn busy(self) -> &'static str {
+        match self {
+            ServiceKind::Estop => "busy: the e-stop calls already waiting latch the stop",
+            ServiceKind::Release => "busy: too many calls waiting, call again",
         }
     }
 }
 
-fn unix_now() -> Duration {
+/// Sends a call's Trigger response: whether it worked, and what happened.
+pub type Reply = Box<dyn FnOnce(bool, &str) + Send>;
+
+/// A service call waiting to be served: the middleware's way to send its Trigger response.
+pub struct Call {
+    pub reply: Reply,
+}
+
+/// Where the middleware puts what arrives; each queue is bounded, and what does not fit is
+/// counted (`cmd_vel_dropped`) or answered busy (`service_calls_dropped`).
+#[derive(Clone)]
+pub struct Senders {
+    twists: SyncSender<CmdVel>,
+    estops: crossbeam_channel::Sender<Call>,
+    releases: crossbeam_channel::Sender<Call>,
+    pub counters: Arc<Counters>,
+}
+
+impl Senders {
+    /// Queues a cmd_vel message (never blocks: a full queue drops it, counted).
+    pub fn twist(&self, message: CmdVel) {
+        if let Err(TrySendError::Full(_)) = self.twists.try_send(message) {
+            Counters::add(&self.counters.cmd_vel_dropped);
+        }
+    }
+
+    /// Queues a service call (never blocks: a full queue answers it busy, counted).
+    pub fn call(&self, kind: ServiceKind, call: Call) {
+        let queue = match kind {
+            ServiceKind::Estop => &self.estops,
+            ServiceKind::Release => &self.releases,
+        };
+        if let Err(crossbeam_channel::TrySendError::Full(call)) = queue.try_send(call) {
+            Counters::add(&self.counters.service_calls_dropped);
+            (call.reply)(false, kind.busy());
+        }
+    }
+}
+
+impl std::fmt::Debug for Call {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Call").finish_non_exhaustive()
+    }
+}
+
+impl std::fmt::Debug for Senders {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Senders").finish_non_exhaustive()
+    }
+}
+
+impl std::fmt::Debug for Inboxes {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Inboxes").finish_non_exhaustive()
+    }
+}
+
+/// The bridge's side of the queues.
+pub struct Inboxes {
+    twists: Receiver<CmdVel>,
+    estops: crossbeam_channel::Receiver<Call>,
+    releases: crossbeam_channel::Receiver<Call>,
+}
+
+/// The queues between a middleware and the bridge.
+pub fn queues(counters: Arc<Counters>) -> (Senders, Inboxes) {
+    let (twists, twist_inbox) = sync_channel(QUEUE);
+    let (estops, estop_inbox) = crossbeam_channel::bounded(QUEUE);
+    let (releases, release_inbox) = crossbeam_channel::bounded(QUEUE);
+    (
+        Senders {
+            twists,
+            estops,
+            releases,
+            counters,
+        },
+        Inboxes {
+            twists: twist_inbox,
+            estops: estop_inbox,
+            releases: release_inbox,
+        },
+    )
+}
+
+/// The node's publishers, whatever the middleware: the CDR payload of a message (with its
+/// encapsulation header) goes out on its topic.
+pub trait Publishers {
+    /// Publishes `payload` on `topic` (a topic not published is ignored).
+    fn publish(&mut self, topic: Topic, payload: Vec<u8>) -> Result<(), String>;
+}
+
+/// The wall clock, for ROS stamps and source times.
+pub fn unix_now() -> Duration {
     SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .unwrap_or_default()
 }
 
-/// The node and its endpoints' liveliness tokens; entity ids count from 1 (the node's own
-/// token uses the node id).
-struct Declared {
-    node: Node,
-    next_entity: u32,
-    tokens: Vec<LivelinessToken>,
-}
-
-impl Declared {
-    fn declare(
-        &mut self,
-        session: &zenoh::Session,
-        kind: EntityKind,
-        name: &str,
-        message: &MessageType,
-        config: &Ros2Config,
-    ) -> Result<[u8; 16], BridgeError> {
-        self.next_entity += 1;
-        let entity = self.next_entity;
-        let key = self
-            .node
-            .entity_token(entity, kind, name, message, config.distro);
-        let gid = rmw::gid(&key);
-        self.tokens.push(
-            session
-                .liveliness()
-                .declare_token(key)
-                .wait()
-                .map_err(zenoh_error("declaring a liveliness token"))?,
-        );
-        Ok(gid)
-    }
-}
-
-/// The zenoh session's settings: client mode towards the ROS 2 router. `$ZENOH_CONFIG` is never
-/// read: a file meant for other zenoh programs would silently change the bridge's mode.
-pub fn session_settings(config: &Ros2Config) -> SessionSettings {
-    let connect = if config.connect.is_empty() && config.zenoh_config.is_none() {
-        vec![ROS2_ROUTER.to_owned()]
-    } else {
-        config.connect.clone()
-    };
-    SessionSettings {
-        config_file: Some(config.zenoh_config.clone().unwrap_or_default()),
-        listen: Vec::new(),
-        connect,
-    }
-}
-
-/// The zenoh configuration of the bridge's session: always a client of the ROS 2 router, since
-/// rmw_zenohd does not forward between peers (its `peers_failover_brokering` is off). A file
-/// without a mode is made a client; a file asking for another mode is refused.
-pub fn session_config(config: &Ros2Config) -> Result<zenoh::Config, BridgeError> {
-    let settings = session_settings(config);
-    let mut zenoh_config = settings
-        .config("client")
-        .map_err(|error| BridgeError::Zenoh(error.to_string()))?;
-    let mode = zenoh_config
-        .get_json("mode")
-        .map_err(|error| BridgeError::Zenoh(format!("reading the zenoh mode: {error}")))?;
-    match mode.trim_matches('"') {
-        "client" => {}
-        "null" | "" => zenoh_config
-            .insert_json5("mode", "\"client\"")
-            .map_err(|error| BridgeError::Zenoh(format!("setting client mode: {error}")))?,
-        other => {
-            return Err(BridgeError::NotClient {
-                file: config.zenoh_config.clone().unwrap_or_default(),
-                mode: other.to_owned(),
-            });
-        }
-    }
-    Ok(zenoh_config)
-}
-
-/// Runs the bridge for robot `robot` until `stop` is set or something fails.
-pub fn run(robot: &str, config: &Ros2Config, stop: &AtomicBool) -> Result<(), BridgeError> {
+/// Runs the bridge for robot `robot` on `middleware` until `stop` is set or something fails.
+pub fn run(
+    robot: &str,
+    config: &Ros2Config,
+    middleware: Middleware,
+    stop: &AtomicBool,
+) -> Result<(), BridgeError> {
     let _claim = scout_interface::stop_socket::claim(&bridge_claim(robot, config.domain)).map_err(
         |errno| match errno {
             nix::errno::Errno::EADDRINUSE => BridgeError::AlreadyRunning {
@@ -242,153 +280,26 @@ pub fn run(robot: &str, config: &Ros2Config, stop: &AtomicBool) -> Result<(), Br
         },
     )?;
     let gateway = Robot::connect(robot)?;
-    let settings = session_settings(config);
-    let session = zenoh::open(session_config(config)?)
-        .wait()
-        .map_err(|error| {
-            BridgeError::Zenoh(format!(
-                "{error}: no ROS 2 router at {:?}? Start one (`ros2 run rmw_zenoh_cpp rmw_zenohd`) \
-             or give --connect ENDPOINT",
-                settings.connect
-            ))
-        })?;
-    let mut declared = Declared {
-        node: Node {
-            domain: config.domain,
-            zid: session.zid().to_string(),
-            id: 0,
-            namespace: config.namespace.clone(),
-            name: config.node.clone(),
-            enclave: String::new(),
-        },
-        next_entity: 0,
-        tokens: Vec::new(),
-    };
-    declared.tokens.push(
-        session
-            .liveliness()
-            .declare_token(declared.node.token())
-            .wait()
-            .map_err(zenoh_error("declaring the node"))?,
-    );
     let counters = Arc::new(Counters::default());
-    let mut publishers = Vec::new();
-    for topic in Topic::ALL {
-        let Some(name) = topic.name(config) else {
-            continue;
-        };
-        let name = config.resolve(name);
-        let message = topic.message();
-        let gid = declared.declare(&session, EntityKind::Publisher, &name, &message, config)?;
-        let publisher = session
-            .declare_publisher(rmw::data_key(config.domain, &name, &message, config.distro))
-            .congestion_control(CongestionControl::Drop)
-            .wait()
-            .map_err(zenoh_error("declaring a publisher"))?;
-        publishers.push((
-            topic,
-            RosPublisher {
-                publisher,
-                gid,
-                topic: name,
-                seq: 0,
-            },
-        ));
-    }
-    let (twists, twist_inbox) = sync_channel::<(usize, zenoh::sample::Sample)>(QUEUE);
-    let mut subscribers = Vec::new();
-    for (index, cmd_vel) in config.cmd_vel.iter().enumerate() {
-        let name = config.resolve(&cmd_vel.topic);
-        let message = if cmd_vel.stamped {
-            msgs::TWIST_STAMPED
-        } else {
-            msgs::TWIST
-        };
-        declared.declare(&session, EntityKind::Subscription, &name, &message, config)?;
-        let (sender, counters) = (twists.clone(), Arc::clone(&counters));
-        subscribers.push(
-            session
-                .declare_subscriber(rmw::subscription_key(config.domain, &name, &message))
-                .callback(move |sample| {
-                    if let Err(TrySendError::Full(_)) = sender.try_send((index, sample)) {
-                        Counters::add(&counters.cmd_vel_dropped);
-                    }
-                })
-                .wait()
-                .map_err(zenoh_error("subscribing to cmd_vel"))?,
-        );
-    }
-    drop(twists);
-    // A queue per service, the e-stop's served first: a flood of release calls never holds an
-    // e-stop up. The senders live as long as the bridge, so the queues never disconnect.
-    let (estops, estop_inbox) = crossbeam_channel::bounded::<Query>(QUEUE);
-    let (releases, release_inbox) = crossbeam_channel::bounded::<Query>(QUEUE);
-    let mut queryables: Vec<Queryable<()>> = Vec::new();
-    let services = match (config.services, config.release_service) {
-        (false, _) => &[][..],
-        (true, false) => &[ServiceKind::Estop][..],
-        (true, true) => &[ServiceKind::Estop, ServiceKind::Release][..],
+    let (senders, inboxes) = queues(Arc::clone(&counters));
+    // The middleware's node lives as long as the bridge runs: dropping it leaves the graph.
+    let (mut publishers, node): (Box<dyn Publishers>, Box<dyn std::any::Any>) = match middleware {
+        Middleware::Zenoh => {
+            let (publishers, node) = crate::zenoh_node::start(config, senders)?;
+            (Box::new(publishers), Box::new(node))
+        }
+        Middleware::Dds => {
+            let (publishers, node) = crate::dds_node::start(config, senders)?;
+            (Box::new(publishers), Box::new(node))
+        }
     };
-    for &kind in services {
-        let name = config.resolve(kind.name(config));
-        declared.declare(&session, EntityKind::Service, &name, &msgs::TRIGGER, config)?;
-        let key = rmw::data_key(config.domain, &name, &msgs::TRIGGER, config.distro);
-        let sender = match kind {
-            ServiceKind::Estop => estops.clone(),
-            ServiceKind::Release => releases.clone(),
-        };
-        let counters = Arc::clone(&counters);
-        queryables.push(
-            session
-                .declare_queryable(key.clone())
-                .complete(true)
-                .callback(move |query| {
-                    // A wildcard query (`**`, a diagnostic tool's) is no call.
-                    if query.key_expr().as_str() != key {
-                        Counters::add(&counters.service_calls_malformed);
-                        refuse(&query, "not a service call: query the service's exact key");
-                        return;
-                    }
-                    // Checked here, so that only real calls wait in the queue. An rmw_zenoh
-                    // client ignores error replies (its caller would wait for its timeout): a
-                    // call with the attachment is refused with a Trigger response saying why.
-                    if let Err(why) = trigger_request(&query) {
-                        Counters::add(&counters.service_calls_malformed);
-                        match why {
-                            NoCall::NotRmwZenoh(why) => refuse(&query, why),
-                            NoCall::NotTrigger(why) => answer(&query, kind, false, &why),
-                        }
-                        return;
-                    }
-                    if let Err(crossbeam_channel::TrySendError::Full(query)) =
-                        sender.try_send(query)
-                    {
-                        Counters::add(&counters.service_calls_dropped);
-                        let message = match kind {
-                            ServiceKind::Estop => {
-                                "busy: the e-stop calls already waiting latch the stop"
-                            }
-                            ServiceKind::Release => "busy: too many calls waiting, call again",
-                        };
-                        answer(&query, kind, false, message);
-                    }
-                })
-                .wait()
-                .map_err(zenoh_error("declaring a service"))?,
-        );
-    }
     info!(
-        "scout ros2: node {}/{} in domain {} ({:?}), connected to {:?}; publishing {:?}; \
-         driving from {}",
+        "scout ros2: node {}/{} in domain {} over {}; publishing {:?}; driving from {}",
         config.namespace,
         config.node,
         config.domain,
-        config.distro,
-        settings.connect,
-        publishers
-            .iter()
-            .map(|(_, p)| p.topic.as_str())
-            .collect::<Vec<_>>(),
+        middleware.name(),
+        config.published(),
         config
             .cmd_vel
             .iter()
@@ -404,40 +315,42 @@ pub fn run(robot: &str, config: &Ros2Config, stop: &AtomicBool) -> Result<(), Br
         }
         result
     };
+    let Inboxes {
+        twists,
+        estops,
+        releases,
+    } = inboxes;
     let result = std::thread::scope(|scope| {
         let (gateway, counters, halt, give_up) = (&gateway, &*counters, &halt, &give_up);
         let commands = std::thread::Builder::new()
             .name("ros2-cmd-vel".into())
             .spawn_scoped(scope, move || {
-                give_up(drive(gateway, config, &twist_inbox, counters, halt))
+                give_up(drive(gateway, config, &twists, counters, halt))
             })?;
         let services = std::thread::Builder::new()
             .name("ros2-services".into())
             .spawn_scoped(scope, move || {
-                give_up(serve(
-                    gateway,
-                    config,
-                    [&estop_inbox, &release_inbox],
-                    counters,
-                    halt,
-                ))
+                give_up(serve(gateway, config, [&estops, &releases], counters, halt))
             })?;
-        let published = give_up(publish(gateway, config, &mut publishers, counters, halt));
-        let driven = commands
-            .join()
-            .unwrap_or_else(|_| Err(BridgeError::Zenoh("the cmd_vel thread panicked".into())));
-        let served = services
-            .join()
-            .unwrap_or_else(|_| Err(BridgeError::Zenoh("the service thread panicked".into())));
+        let published = give_up(publish(gateway, config, &mut *publishers, counters, halt));
+        let driven = commands.join().unwrap_or_else(|_| {
+            Err(BridgeError::Thread(std::io::Error::other(
+                "the cmd_vel thread panicked",
+            )))
+        });
+        let served = services.join().unwrap_or_else(|_| {
+            Err(BridgeError::Thread(std::io::Error::other(
+                "the service thread panicked",
+            )))
+        });
         published.and(driven).and(served)
     });
     info!(
         "scout ros2: stopping; counters {}",
         serde_json::to_string(&*counters).unwrap_or_default()
     );
-    drop(subscribers);
-    drop(queryables);
-    drop(declared);
+    drop(publishers);
+    drop(node);
     result
 }
 
@@ -445,7 +358,7 @@ pub fn run(robot: &str, config: &Ros2Config, stop: &AtomicBool) -> Result<(), Br
 fn publish(
     gateway: &Robot,
     config: &Ros2Config,
-    publishers: &mut [(Topic, RosPublisher)],
+    publishers: &mut dyn Publishers,
     counters: &Counters,
     halt: &dyn Fn() -> bool,
 ) -> Result<(), BridgeError> {
@@ -476,9 +389,17 @@ fn publish(
             Err(error) => return Err(error.into()),
         };
         for outgoing in outgoing {
-            if let Some((_, publisher)) = publishers.iter_mut().find(|(t, _)| *t == outgoing.topic)
-            {
-                publisher.put(outgoing.payload, counters);
+            let topic = outgoing.topic;
+            match publishers.publish(topic, outgoing.payload) {
+                Ok(()) => {
+                    Counters::add(&counters.published);
+                }
+                Err(error) => {
+                    let count = Counters::add(&counters.publish_failed);
+                    if count.is_power_of_two() {
+                        warn!("ros2: publishing {topic:?} failed ({count} so far): {error}");
+                    }
+                }
             }
         }
     }
@@ -489,7 +410,7 @@ fn publish(
 fn drive(
     gateway: &Robot,
     config: &Ros2Config,
-    inbox: &Receiver<(usize, zenoh::sample::Sample)>,
+    inbox: &Receiver<CmdVel>,
     counters: &Counters,
     halt: &dyn Fn() -> bool,
 ) -> Result<(), BridgeError> {
@@ -505,27 +426,24 @@ fn drive(
         ));
     }
     while !halt() {
-        let Ok((index, sample)) = inbox.recv_timeout(Duration::from_millis(100)) else {
+        let Ok(message) = inbox.recv_timeout(Duration::from_millis(100)) else {
             continue;
         };
-        let Some((controller, stream, name)) = drivers.get_mut(index) else {
+        let Some((controller, stream, name)) = drivers.get_mut(message.topic) else {
             continue;
         };
         Counters::add(&counters.cmd_vel_received);
-        let Some((sequence, sent_ns, gid)) = sample
-            .attachment()
-            .and_then(|a| rmw::parse_attachment(&a.to_bytes()))
-        else {
+        let Some(origin) = message.origin else {
             let count = Counters::add(&counters.cmd_vel_without_attachment);
             if count.is_power_of_two() {
                 warn!(
-                    "ros2: {name}: a message without the rmw_zenoh attachment ({count} so far): \
+                    "ros2: {name}: a message without its publisher's identity ({count} so far): \
                      dropped, as ROS subscribers drop it; publish through rmw_zenoh"
                 );
             }
             continue;
         };
-        let twist = match msgs::decode_twist(&sample.payload().to_bytes(), topics[index].stamped) {
+        let twist = match message.twist {
             Ok(twist) => twist,
             Err(error) => {
                 let count = Counters::add(&counters.cmd_vel_malformed);
@@ -534,11 +452,6 @@ fn drive(
                 }
                 continue;
             }
-        };
-        let origin = Origin {
-            gid,
-            sequence,
-            sent_ns,
         };
         let mut action = stream.handle_twist(monotonic(), origin, twist);
         loop {
@@ -588,43 +501,27 @@ fn drive(
     Ok(())
 }
 
-/// The two services.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum ServiceKind {
-    Estop,
-    Release,
-}
-
-impl ServiceKind {
-    fn name(self, config: &Ros2Config) -> &str {
-        match self {
-            ServiceKind::Estop => &config.topics.estop,
-            ServiceKind::Release => &config.topics.release,
-        }
-    }
-}
-
 /// The service thread: an e-stop latches a stop owned by [`Ros2Config::service_client`]; a
 /// release releases that client's own stops (others' need an operator) and restarts nothing.
 /// E-stop calls are served before release calls.
 fn serve(
     gateway: &Robot,
     config: &Ros2Config,
-    [estops, releases]: [&crossbeam_channel::Receiver<Query>; 2],
+    [estops, releases]: [&crossbeam_channel::Receiver<Call>; 2],
     counters: &Counters,
     halt: &dyn Fn() -> bool,
 ) -> Result<(), BridgeError> {
     let mut controller = gateway.controller(&config.service_client(), None)?;
     while !halt() {
-        let (kind, query) = match estops.try_recv() {
-            Ok(query) => (ServiceKind::Estop, query),
+        let (kind, call) = match estops.try_recv() {
+            Ok(call) => (ServiceKind::Estop, call),
             Err(_) => crossbeam_channel::select! {
-                recv(estops) -> query => match query {
-                    Ok(query) => (ServiceKind::Estop, query),
+                recv(estops) -> call => match call {
+                    Ok(call) => (ServiceKind::Estop, call),
                     Err(_) => continue,
                 },
-                recv(releases) -> query => match query {
-                    Ok(query) => (ServiceKind::Release, query),
+                recv(releases) -> call => match call {
+                    Ok(call) => (ServiceKind::Release, call),
                     Err(_) => continue,
                 },
                 default(Duration::from_millis(100)) => continue,
@@ -647,110 +544,10 @@ fn serve(
             (Err(error), _) => error.to_string(),
         };
         info!("ros2: {kind:?} service: {message}");
-        answer(&query, kind, result.is_ok(), &message);
+        (call.reply)(result.is_ok(), &message);
         if let Err(error @ ControlError::NoAnswer { .. }) = result {
             return Err(error.into());
         }
     }
     Ok(())
-}
-
-/// Why a query is no call to serve.
-enum NoCall {
-    /// Without the rmw_zenoh attachment: not an rmw_zenoh client (an error reply).
-    NotRmwZenoh(&'static str),
-    /// An rmw_zenoh client's call whose payload is no Trigger request (a Trigger response with
-    /// `success` false, which the client does see).
-    NotTrigger(String),
-}
-
-/// Whether a query is a std_srvs/srv/Trigger request as an rmw_zenoh client sends it: CDR of
-/// the request (its one placeholder byte) and the attachment.
-fn trigger_request(query: &Query) -> Result<(), NoCall> {
-    query
-        .attachment()
-        .and_then(|attachment| rmw::parse_attachment(&attachment.to_bytes()))
-        .ok_or(NoCall::NotRmwZenoh(
-            "no rmw_zenoh attachment: call the service through rmw_zenoh",
-        ))?;
-    let payload = query.payload().map(ZBytes::to_bytes).unwrap_or_default();
-    msgs::decode_trigger_request(&payload).map_err(|error| {
-        NoCall::NotTrigger(format!(
-            "refused: {} bytes are no std_srvs/srv/Trigger request: {error}",
-            payload.len()
-        ))
-    })
-}
-
-/// The Trigger response to a call.
-fn answer(query: &Query, kind: ServiceKind, success: bool, message: &str) {
-    let mut reply = query.reply(
-        query.key_expr().clone(),
-        msgs::encode_trigger_response(success, message),
-    );
-    if let Some(attachment) = query.attachment() {
-        reply = reply.attachment(reply_attachment(attachment));
-    }
-    if let Err(error) = reply.wait() {
-        warn!("ros2: replying to a {kind:?} call failed: {error}");
-    }
-}
-
-/// An error reply, with the reason.
-fn refuse(query: &Query, why: &str) {
-    if let Err(error) = query.reply_err(why.to_owned()).wait() {
-        warn!("ros2: refusing a call failed: {error}");
-    }
-}
-
-/// A reply carries the request's sequence number and client GID with the reply's time.
-fn reply_attachment(request: &ZBytes) -> Vec<u8> {
-    match rmw::parse_attachment(&request.to_bytes()) {
-        Some((seq, _, gid)) => rmw::attachment(seq, unix_now().as_nanos() as i64, &gid).to_vec(),
-        None => request.to_bytes().to_vec(),
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn with_file(json5: &str) -> Result<zenoh::Config, BridgeError> {
-        let path = std::env::temp_dir().join(format!(
-            "scout-ros2-zenoh-{}-{}.json5",
-            std::process::id(),
-            json5.len()
-        ));
-        std::fs::write(&path, json5).expect("write a zenoh config");
-        let config = Ros2Config {
-            zenoh_config: Some(path.display().to_string()),
-            ..Ros2Config::default()
-        };
-        let result = session_config(&config);
-        std::fs::remove_file(&path).ok();
-        result
-    }
-
-    fn mode(config: &zenoh::Config) -> String {
-        config.get_json("mode").expect("a mode")
-    }
-
-    #[test]
-    fn the_session_is_a_client_of_the_router_whatever_the_file() {
-        let default = session_config(&Ros2Config::default()).expect("the default");
-        assert_eq!(mode(&default), "\"client\"");
-        let without_mode = with_file("{ connect: { endpoints: [\"tcp/127.0.0.1:7447\"] } }")
-            .expect("a file without a mode");
-        assert_eq!(mode(&without_mode), "\"client\"");
-        with_file("{ mode: \"client\" }").expect("a client file");
-        let peer = with_file("{ mode: \"peer\" }").expect_err("a peer file is refused");
-        assert!(
-            matches!(&peer, BridgeError::NotClient { mode, .. } if mode == "peer"),
-            "{peer}"
-        );
-        assert!(
-            peer.to_string().contains("does not forward between peers"),
-            "{peer}"
-        );
-    }
 }

@@ -92,6 +92,8 @@ pub enum CdrError {
     Truncated(usize),
     #[error("{0} bytes follow the message")]
     Trailing(usize),
+    #[error("not a message of the topic's type: {0}")]
+    Malformed(String),
 }
 
 /// Reads a CDR payload, the encapsulation header first.

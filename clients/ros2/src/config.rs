@@ -10,8 +10,52 @@ use crate::publish::Topic;
 use crate::rmw::Distro;
 use crate::stream::Pauses;
 
+/// The highest ROS domain id (DDS' port mapping: 7400 + 250 * domain must fit in 16 bits).
+pub const MAX_DOMAIN: u32 = 232;
+
 /// The endpoint of a ROS 2 router (`rmw_zenohd`) on this host.
 pub const ROS2_ROUTER: &str = "tcp/127.0.0.1:7447";
+
+/// The ROS 2 middleware the bridge speaks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Middleware {
+    /// DDS, as Fast DDS and Cyclone DDS speak it (ROS 2's default middlewares).
+    Dds,
+    /// rmw_zenoh, through the ROS 2 router (rmw_zenohd).
+    Zenoh,
+}
+
+/// The RMW implementation that selects rmw_zenoh.
+pub const RMW_ZENOH: &str = "rmw_zenoh_cpp";
+
+impl Middleware {
+    /// The middleware every ROS node on this machine would use: `$RMW_IMPLEMENTATION`
+    /// (`rmw_zenoh_cpp` is zenoh; unset or any other, a DDS implementation, is DDS), with why.
+    pub fn from_rmw_implementation(rmw: Option<&str>) -> (Self, String) {
+        match rmw {
+            Some(RMW_ZENOH) => (
+                Middleware::Zenoh,
+                format!("RMW_IMPLEMENTATION is {RMW_ZENOH}"),
+            ),
+            Some(other) if !other.is_empty() => (
+                Middleware::Dds,
+                format!("RMW_IMPLEMENTATION is {other}, a DDS implementation"),
+            ),
+            Some(_) | None => (
+                Middleware::Dds,
+                "RMW_IMPLEMENTATION is not set: ROS 2's default middleware is DDS".into(),
+            ),
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Middleware::Dds => "dds",
+            Middleware::Zenoh => "zenoh",
+        }
+    }
+}
 
 /// `scout ros2`'s settings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -23,6 +67,8 @@ pub struct Ros2Config {
     pub namespace: String,
     /// The ROS domain; `--domain`, then `$ROS_DOMAIN_ID`, override it.
     pub domain: u32,
+    /// `dds` or `zenoh`; unset: as `$RMW_IMPLEMENTATION` says (`--middleware` overrides).
+    pub middleware: Option<Middleware>,
     /// Zenoh endpoints to connect to, in client mode: the ROS 2 router.
     pub connect: Vec<String>,
     /// A zenoh configuration file (JSON5) instead of the client-mode defaults.
@@ -124,6 +170,7 @@ impl Default for Ros2Config {
             node: "scout".into(),
             namespace: String::new(),
             domain: 0,
+            middleware: None,
             connect: Vec::new(),
             zenoh_config: None,
             distro: Distro::Jazzy,
@@ -169,6 +216,8 @@ pub enum Ros2ConfigError {
         name: String,
         why: &'static str,
     },
+    #[error("ROS domain {0} is out of range: ROS 2 domains are 0 to {MAX_DOMAIN}")]
+    BadDomain(u32),
     #[error("topic {0} is used twice: give each publisher and cmd_vel topic a name of its own")]
     Duplicate(String),
     #[error("gear_ratio must be a positive number, found {0}")]
@@ -245,6 +294,10 @@ impl Ros2Config {
     /// Checks names and values, so that a mistake is reported at start and not as a silent
     /// topic.
     pub fn validate(&self) -> Result<(), Ros2ConfigError> {
+        // DDS maps a domain to UDP ports 7400 + 250 * domain: ROS allows 0 to 232.
+        if self.domain > MAX_DOMAIN {
+            return Err(Ros2ConfigError::BadDomain(self.domain));
+        }
         check_name("node name", &self.node, false)?;
         if !self.namespace.is_empty() {
             check_name("namespace", &self.namespace, true)?;

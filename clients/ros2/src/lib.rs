@@ -7,7 +7,9 @@
 pub mod bridge;
 pub mod cdr;
 pub mod config;
+pub mod dds_node;
 pub mod msgs;
 pub mod publish;
 pub mod rmw;
 pub mod stream;
+pub mod zenoh_node;

@@ -15,8 +15,9 @@ use scout_clients::client::ClientError;
 use scout_clients::control::ControlError;
 use scout_clients::interface::services::ServiceError;
 use scout_ros2::bridge::{self, BridgeError};
-use scout_ros2::config::{Ros2Config, Ros2ConfigError};
+use scout_ros2::config::{Middleware, Ros2Config, Ros2ConfigError};
 use scout_ros2::rmw::Distro;
+use tracing::info;
 use tracing_subscriber::EnvFilter;
 
 /// Make the chassis a ROS 2 node: /odom, /tf, /battery_state, /joint_states, /diagnostics out;
@@ -27,6 +28,10 @@ pub struct Ros2Args {
     /// The robot (gateway) name.
     #[arg(long, default_value = "scout", value_name = "ROBOT")]
     name: String,
+    /// The ROS 2 middleware: `dds` (Fast DDS, Cyclone DDS: ROS 2's default) or `zenoh`
+    /// (rmw_zenoh) [default: the file's, else as $RMW_IMPLEMENTATION says].
+    #[arg(long, value_name = "MIDDLEWARE", value_parser = ["dds", "zenoh"])]
+    middleware: Option<String>,
     /// Settings file (TOML): node, namespace, frames, topics, cmd_vel classes, Humble mode.
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
@@ -79,6 +84,11 @@ impl Ros2Args {
         }
         if self.zenoh_config.is_some() {
             config.zenoh_config = self.zenoh_config.clone();
+        }
+        match self.middleware.as_deref() {
+            Some("dds") => config.middleware = Some(Middleware::Dds),
+            Some("zenoh") => config.middleware = Some(Middleware::Zenoh),
+            Some(_) | None => {}
         }
         config.validate()?;
         Ok(config)
@@ -140,7 +150,17 @@ fn run(args: &Ros2Args) -> anyhow::Result<ExitCode> {
     let on_signal = Arc::clone(&stop);
     ctrlc::set_handler(move || on_signal.store(true, Ordering::Relaxed))
         .context("installing the Ctrl-C handler")?;
-    match bridge::run(&args.name, &config, &stop) {
+    let (middleware, why) = match config.middleware {
+        Some(middleware) => (
+            middleware,
+            "chosen in the settings or with --middleware".into(),
+        ),
+        None => {
+            Middleware::from_rmw_implementation(std::env::var("RMW_IMPLEMENTATION").ok().as_deref())
+        }
+    };
+    info!("scout ros2: speaking {} ({why})", middleware.name());
+    match bridge::run(&args.name, &config, middleware, &stop) {
         Ok(()) => Ok(ExitCode::SUCCESS),
         Err(BridgeError::Client(error)) => Err(error.into()),
         Err(BridgeError::Control(error)) => Err(error.into()),

@@ -8,6 +8,7 @@ mod examples;
 mod gateway;
 mod remote;
 mod ros2;
+mod ros2_dds;
 mod safety;
 mod sim;
 mod status;

@@ -146,6 +146,8 @@ impl Bridge {
         let mut command = scout_system_tests::command("scout");
         command
             .args(args)
+            // The middleware as every ROS node on the machine chooses it.
+            .env("RMW_IMPLEMENTATION", "rmw_zenoh_cpp")
             .env("RUST_LOG", "info")
             .stdin(Stdio::null())
             .stdout(Stdio::null())
@@ -389,16 +391,38 @@ fn a_ros_2_node_sees_the_graph_reads_odometry_and_drives_through_the_arbiter() {
 
 #[test]
 fn scout_ros2_says_what_is_missing() {
-    let (code, _, stderr) = scout(&["ros2", "--name", &robot_name("ros2-nobody")]);
+    let (code, _, stderr) = scout(&[
+        "ros2",
+        "--middleware",
+        "zenoh",
+        "--name",
+        &robot_name("ros2-nobody"),
+    ]);
     assert_eq!(code, Some(3), "{stderr}");
     assert!(stderr.contains("scout-gateway"), "{stderr}");
     let name = robot_name("ros2-norouter");
     let _gateway = Gateway::start(&["--sim", "--name", &name]);
     connect(&name);
-    let (code, _, stderr) = scout(&["ros2", "--name", &name, "--connect", &tcp(free_port())]);
+    let (code, _, stderr) = scout(&[
+        "ros2",
+        "--middleware",
+        "zenoh",
+        "--name",
+        &name,
+        "--connect",
+        &tcp(free_port()),
+    ]);
     assert_eq!(code, Some(1), "{stderr}");
     assert!(stderr.contains("rmw_zenohd"), "{stderr}");
-    let (code, _, stderr) = scout(&["ros2", "--name", &name, "--node", "scout-1"]);
+    let (code, _, stderr) = scout(&[
+        "ros2",
+        "--middleware",
+        "zenoh",
+        "--name",
+        &name,
+        "--node",
+        "scout-1",
+    ]);
     assert_eq!(code, Some(2), "{stderr}");
     assert!(stderr.contains("not a valid ROS name"), "{stderr}");
 }
@@ -420,6 +444,8 @@ fn a_second_bridge_for_one_robot_and_domain_is_refused() {
     let domain = (std::process::id() % 200 + 1).to_string();
     let bridge = [
         "ros2",
+        "--middleware",
+        "zenoh",
         "--name",
         &name,
         "--connect",
@@ -445,9 +471,11 @@ fn a_second_bridge_for_one_robot_and_domain_is_refused() {
         "{stderr}"
     );
     // Another domain is another graph: that bridge runs.
-    let other = (std::process::id() % 200 + 201).to_string();
+    let other = (std::process::id() % 20 + 201).to_string();
     let mut second = Background::scout(&[
         "ros2",
+        "--middleware",
+        "zenoh",
         "--name",
         &name,
         "--connect",

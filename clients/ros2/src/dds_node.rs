@@ -1,0 +1,491 @@
+//! The bridge's node on DDS, as ROS 2's default middlewares (Fast DDS, Cyclone DDS) speak it:
+//! a RustDDS participant made a ROS node by `ros2-client` (it publishes `ros_discovery_info`,
+//! so `ros2 node list` shows it), with the same topics, services and QoS ROS users expect. One
+//! thread waits on the cmd_vel readers and the service servers and hands what arrives to the
+//! bridge's queues ([`Senders`]); the writer's GUID, sequence number and source timestamp play
+//! the part of rmw_zenoh's attachment.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use ros2_client::{
+    Context, ContextOptions, MessageTypeName, Name, NodeName, NodeOptions, QosProfile, Server,
+    ServiceMapping, ServiceTypeName, Subscription,
+    qos::{Durability, History, WhenFull},
+};
+use rustdds::mio1::{Events, Interest, Poll, Token};
+use serde::{Deserialize, Serialize};
+use tracing::warn;
+
+use crate::bridge::{BridgeError, Call, CmdVel, Counters, Publishers, Senders, ServiceKind};
+use crate::cdr::{CdrError, ENCAPSULATION};
+use crate::config::Ros2Config;
+use crate::msgs::{MessageType, PlanarTwist};
+use crate::publish::Topic;
+use crate::stream::Origin;
+
+fn dds_error(what: &str) -> impl Fn(ros2_client::CreateError) -> BridgeError + '_ {
+    move |error| BridgeError::Dds(format!("{what}: {error:?}"))
+}
+
+/// A message already in CDR (the bytes after the encapsulation header), written as it is: a
+/// tuple of bytes is serialized without length or padding, so the payload on the wire is
+/// exactly the bytes [`crate::msgs`] made (and the system tests compare against rosbags).
+#[derive(Debug, Clone)]
+pub struct EncodedCdr(Vec<u8>);
+
+impl Serialize for EncodedCdr {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeTuple;
+        let mut tuple = serializer.serialize_tuple(self.0.len())?;
+        for byte in &self.0 {
+            tuple.serialize_element(byte)?;
+        }
+        tuple.end()
+    }
+}
+
+/// `builtin_interfaces/Time`.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+struct Time {
+    sec: i32,
+    nanosec: u32,
+}
+
+/// `std_msgs/Header`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+struct Header {
+    stamp: Time,
+    frame_id: String,
+}
+
+/// `geometry_msgs/Vector3`.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+struct Vector3 {
+    x: f64,
+    y: f64,
+    z: f64,
+}
+
+/// `geometry_msgs/Twist`.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+pub struct Twist {
+    linear: Vector3,
+    angular: Vector3,
+}
+
+/// `geometry_msgs/TwistStamped`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct TwistStamped {
+    header: Header,
+    twist: Twist,
+}
+
+impl From<&Twist> for PlanarTwist {
+    fn from(twist: &Twist) -> Self {
+        PlanarTwist {
+            linear: twist.linear.x,
+            angular: twist.angular.z,
+        }
+    }
+}
+
+/// A `std_srvs/Trigger` request: no fields but CDR's placeholder byte.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct TriggerRequest {
+    structure_needs_at_least_one_member: u8,
+}
+
+/// A `std_srvs/Trigger` response.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct TriggerResponse {
+    success: bool,
+    message: String,
+}
+
+impl ros2_client::Message for TriggerRequest {}
+impl ros2_client::Message for TriggerResponse {}
+
+/// Decodes a cmd_vel payload (with its encapsulation header) exactly as the DDS reader does
+/// (RustDDS' CDR deserializer): the fuzz target's entry to this path.
+pub fn decode_cmd_vel(bytes: &[u8], stamped: bool) -> Result<PlanarTwist, CdrError> {
+    use rustdds::no_key::DeserializerAdapter;
+    let (header, body) = match bytes {
+        [a, b, _, _, body @ ..] => ([*a, *b], body),
+        _ => return Err(CdrError::Truncated(bytes.len())),
+    };
+    let encoding = rustdds::RepresentationIdentifier::from_bytes(&header)
+        .map_err(|_| CdrError::Truncated(bytes.len()))?;
+    // As the reader: a sample in an encoding the adapter does not take is refused.
+    if !<rustdds::CDRDeserializerAdapter<Twist> as DeserializerAdapter<Twist>>::supported_encodings(
+    )
+    .contains(&encoding)
+    {
+        return Err(CdrError::Encapsulation(header));
+    }
+    let malformed = |error: rustdds::serialization::Error| CdrError::Malformed(error.to_string());
+    if stamped {
+        rustdds::CDRDeserializerAdapter::<TwistStamped>::from_bytes(body, encoding)
+            .map(|message| PlanarTwist::from(&message.twist))
+            .map_err(malformed)
+    } else {
+        rustdds::CDRDeserializerAdapter::<Twist>::from_bytes(body, encoding)
+            .map(|message| PlanarTwist::from(&message))
+            .map_err(malformed)
+    }
+}
+
+/// `package/msg/Name` as ros2-client names a type.
+fn type_name(message: &MessageType) -> MessageTypeName {
+    let (package, rest) = message.name.split_once('/').unwrap_or(("", message.name));
+    let name = rest.rsplit('/').next().unwrap_or(rest);
+    MessageTypeName::new(package, name)
+}
+
+/// The QoS a ROS publisher of `topic` offers: reliable and volatile, which reliable and
+/// best-effort (sensor data) subscribers both accept; `/tf` keeps 100 as tf2's broadcaster does.
+fn publisher_qos(topic: Topic) -> QosProfile {
+    let depth = match topic {
+        Topic::Tf => 100,
+        Topic::Odom | Topic::BatteryState | Topic::JointStates | Topic::Diagnostics => 10,
+    };
+    QosProfile::publisher_default()
+        .reliability_reliable(WhenFull::DEFAULT)
+        .durability(Durability::Volatile)
+        .history(History::KeepLast { depth })
+}
+
+/// cmd_vel is read best effort: it matches reliable and best-effort publishers alike, and a
+/// lost command is better than a late one.
+fn cmd_vel_qos() -> QosProfile {
+    QosProfile::subscription_default()
+        .reliability_best_effort()
+        .durability(Durability::Volatile)
+        .history(History::KeepLast { depth: 10 })
+}
+
+/// Services: ROS 2's default service QoS (reliable, volatile, keep last 10).
+fn service_qos() -> QosProfile {
+    QosProfile::publisher_default()
+        .reliability_reliable(WhenFull::DEFAULT)
+        .durability(Durability::Volatile)
+        .history(History::KeepLast { depth: 10 })
+}
+
+fn ros_name(name: &str) -> Result<Name, BridgeError> {
+    Name::parse(name).map_err(|error| BridgeError::Dds(format!("the name {name}: {error:?}")))
+}
+
+/// The node's publishers on DDS.
+pub struct DdsPublishers {
+    publishers: Vec<(Topic, ros2_client::Publisher<EncodedCdr>)>,
+}
+
+impl Publishers for DdsPublishers {
+    fn publish(&mut self, topic: Topic, payload: Vec<u8>) -> Result<(), String> {
+        let Some((_, publisher)) = self.publishers.iter().find(|(t, _)| *t == topic) else {
+            return Ok(());
+        };
+        let body = payload
+            .strip_prefix(&ENCAPSULATION[..])
+            .ok_or("a payload without the CDR little-endian header")?;
+        publisher
+            .publish(EncodedCdr(body.to_vec()))
+            .map_err(|error| format!("{error:?}"))
+    }
+}
+
+/// What keeps the node in the graph: its receive thread (stopped and joined on drop), the node
+/// and the participant.
+pub struct DdsNode {
+    halt: Arc<AtomicBool>,
+    receiver: Option<JoinHandle<()>>,
+}
+
+impl Drop for DdsNode {
+    fn drop(&mut self) {
+        self.halt.store(true, Ordering::Relaxed);
+        if let Some(receiver) = self.receiver.take() {
+            receiver.join().ok();
+        }
+    }
+}
+
+impl std::fmt::Debug for DdsPublishers {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DdsPublishers").finish_non_exhaustive()
+    }
+}
+
+impl std::fmt::Debug for DdsNode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DdsNode").finish_non_exhaustive()
+    }
+}
+
+/// A cmd_vel reader of either type.
+enum CmdVelReader {
+    Twist(Subscription<Twist>),
+    Stamped(Subscription<TwistStamped>),
+}
+
+type TriggerServer = Server<TriggerRequest, TriggerResponse>;
+
+/// Makes the participant and the node with its publishers, cmd_vel readers and services.
+pub fn start(
+    config: &Ros2Config,
+    senders: Senders,
+) -> Result<(DdsPublishers, DdsNode), BridgeError> {
+    let domain = u16::try_from(config.domain)
+        .map_err(|_| BridgeError::Dds(format!("ROS domain {} is out of range", config.domain)))?;
+    let context = Context::with_options(ContextOptions::new().domain_id(domain))
+        .map_err(dds_error("making the DDS participant"))?;
+    let namespace = if config.namespace.is_empty() {
+        "/"
+    } else {
+        config.namespace.as_str()
+    };
+    let node_name = NodeName::new(namespace, &config.node)
+        .map_err(|error| BridgeError::Dds(format!("the node name: {error:?}")))?;
+    let mut node = context
+        .new_node(
+            node_name,
+            NodeOptions::new()
+                .enable_rosout(false)
+                .start_parameter_services(false),
+        )
+        .map_err(|error| BridgeError::Dds(format!("making the node: {error:?}")))?;
+    let mut publishers = Vec::new();
+    for topic in Topic::ALL {
+        let Some(name) = topic.name(config) else {
+            continue;
+        };
+        let qos = publisher_qos(topic);
+        let dds_topic = node
+            .create_topic(
+                &ros_name(&config.resolve(name))?,
+                type_name(&topic.message()),
+                &qos,
+            )
+            .map_err(dds_error("making a topic"))?;
+        let publisher = node
+            .create_publisher::<EncodedCdr>(&dds_topic, None)
+            .map_err(dds_error("making a publisher"))?;
+        publishers.push((topic, publisher));
+    }
+    let mut readers = Vec::new();
+    for cmd_vel in &config.cmd_vel {
+        let name = ros_name(&config.resolve(&cmd_vel.topic))?;
+        let message = if cmd_vel.stamped {
+            crate::msgs::TWIST_STAMPED
+        } else {
+            crate::msgs::TWIST
+        };
+        let dds_topic = node
+            .create_topic(&name, type_name(&message), &cmd_vel_qos())
+            .map_err(dds_error("making the cmd_vel topic"))?;
+        readers.push(if cmd_vel.stamped {
+            CmdVelReader::Stamped(
+                node.create_subscription(&dds_topic, None)
+                    .map_err(dds_error("subscribing to cmd_vel"))?,
+            )
+        } else {
+            CmdVelReader::Twist(
+                node.create_subscription(&dds_topic, None)
+                    .map_err(dds_error("subscribing to cmd_vel"))?,
+            )
+        });
+    }
+    let mut servers = Vec::new();
+    for &kind in ServiceKind::served(config) {
+        let server: TriggerServer = node
+            .create_server(
+                ServiceMapping::Enhanced,
+                &ros_name(&config.resolve(kind.name(config)))?,
+                &ServiceTypeName::new("std_srvs", "Trigger"),
+                service_qos(),
+                service_qos(),
+            )
+            .map_err(dds_error("making a service"))?;
+        servers.push((kind, Arc::new(server)));
+    }
+    let halt = Arc::new(AtomicBool::new(false));
+    let receiver = {
+        let halt = Arc::clone(&halt);
+        std::thread::Builder::new()
+            .name("ros2-dds".into())
+            .spawn(move || {
+                // The node and participant live on this thread, as long as the bridge runs.
+                let _node = node;
+                let _context = context;
+                if let Err(error) = receive(readers, servers, &senders, &halt) {
+                    warn!("ros2: the DDS receive thread stopped: {error}");
+                }
+            })?
+    };
+    Ok((
+        DdsPublishers { publishers },
+        DdsNode {
+            halt,
+            receiver: Some(receiver),
+        },
+    ))
+}
+
+/// How often the receive thread looks whether the bridge stops.
+const HALT_POLL: Duration = Duration::from_millis(100);
+
+/// Waits on the readers and servers, and queues what arrives.
+fn receive(
+    mut readers: Vec<CmdVelReader>,
+    mut servers: Vec<(ServiceKind, Arc<TriggerServer>)>,
+    senders: &Senders,
+    halt: &AtomicBool,
+) -> std::io::Result<()> {
+    let mut poll = Poll::new()?;
+    for (index, reader) in readers.iter_mut().enumerate() {
+        let token = Token(index);
+        match reader {
+            CmdVelReader::Twist(reader) => {
+                poll.registry()
+                    .register(reader, token, Interest::READABLE)?;
+            }
+            CmdVelReader::Stamped(reader) => {
+                poll.registry()
+                    .register(reader, token, Interest::READABLE)?;
+            }
+        }
+    }
+    let first_server = readers.len();
+    for (index, (_, server)) in servers.iter_mut().enumerate() {
+        let server = Arc::get_mut(server).expect("not shared yet");
+        poll.registry()
+            .register(server, Token(first_server + index), Interest::READABLE)?;
+    }
+    let mut events = Events::with_capacity(16);
+    while !halt.load(Ordering::Relaxed) {
+        if let Err(error) = poll.poll(&mut events, Some(HALT_POLL)) {
+            if error.kind() == std::io::ErrorKind::Interrupted {
+                continue;
+            }
+            return Err(error);
+        }
+        // Edge-triggered: everything that arrived is taken, whichever woke the poll (the
+        // e-stop service first).
+        for (kind, server) in &servers {
+            take_calls(*kind, server, senders);
+        }
+        for (index, reader) in readers.iter().enumerate() {
+            take_twists(index, reader, senders);
+        }
+    }
+    Ok(())
+}
+
+fn origin(info: &ros2_client::MessageInfo) -> Option<Origin> {
+    Some(Origin {
+        gid: info.publisher_gid().to_bytes16(),
+        sequence: info.sequence_number(),
+        sent_ns: info.source_timestamp()?.to_nanos(),
+    })
+}
+
+fn take_twists(topic: usize, reader: &CmdVelReader, senders: &Senders) {
+    loop {
+        let taken = match reader {
+            CmdVelReader::Twist(reader) => reader
+                .take()
+                .map(|message| message.map(|(twist, info)| (PlanarTwist::from(&twist), info))),
+            CmdVelReader::Stamped(reader) => reader.take().map(|message| {
+                message.map(|(stamped, info)| (PlanarTwist::from(&stamped.twist), info))
+            }),
+        };
+        match taken {
+            Ok(Some((twist, info))) => senders.twist(CmdVel {
+                topic,
+                origin: origin(&info),
+                twist: Ok(twist),
+            }),
+            Ok(None) => break,
+            // A sample that is no message of the type: counted as malformed by the bridge.
+            Err(error) => senders.twist(CmdVel {
+                topic,
+                origin: None,
+                twist: Err(CdrError::Malformed(format!("{error:?}"))),
+            }),
+        }
+    }
+}
+
+fn take_calls(kind: ServiceKind, server: &Arc<TriggerServer>, senders: &Senders) {
+    loop {
+        match server.receive_request() {
+            Ok(Some((id, _request))) => {
+                let server = Arc::clone(server);
+                senders.call(
+                    kind,
+                    Call {
+                        reply: Box::new(move |success, message| {
+                            let response = TriggerResponse {
+                                success,
+                                message: message.to_owned(),
+                            };
+                            if let Err(error) = server.send_response(id, response) {
+                                warn!("ros2: replying to a {kind:?} call failed: {error:?}");
+                            }
+                        }),
+                    },
+                );
+            }
+            Ok(None) => break,
+            Err(error) => {
+                Counters::add(&senders.counters.service_calls_malformed);
+                warn!("ros2: a {kind:?} call that is no Trigger request: {error:?}");
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn encoded_cdr_is_written_byte_for_byte() {
+        use rustdds::no_key::SerializerAdapter;
+        let response = crate::msgs::encode_trigger_response(true, "stopped");
+        let body = response[ENCAPSULATION.len()..].to_vec();
+        let written =
+            rustdds::CDRSerializerAdapter::<EncodedCdr>::to_bytes(&EncodedCdr(body.clone()))
+                .expect("serializes");
+        assert_eq!(&written[..], &body[..]);
+        assert_eq!(
+            rustdds::CDRSerializerAdapter::<EncodedCdr>::output_encoding().to_bytes(),
+            [ENCAPSULATION[0], ENCAPSULATION[1]]
+        );
+    }
+
+    #[test]
+    fn cmd_vel_decodes_as_the_reader_does() {
+        let mut writer = crate::cdr::Writer::new();
+        writer.f64s(&[0.5, 0.0, 0.0, 0.0, 0.0, -0.25]);
+        let twist = writer.finish();
+        assert_eq!(
+            decode_cmd_vel(&twist, false),
+            Ok(PlanarTwist {
+                linear: 0.5,
+                angular: -0.25
+            })
+        );
+        assert!(decode_cmd_vel(&twist[..20], false).is_err());
+        assert!(decode_cmd_vel(&[], true).is_err());
+    }
+
+    #[test]
+    fn type_names_split_as_ros2_client_wants() {
+        let name = type_name(&crate::msgs::ODOMETRY);
+        assert_eq!(name.dds_msg_type(), "nav_msgs::msg::dds_::Odometry_");
+    }
+}

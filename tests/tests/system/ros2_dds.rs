@@ -1,0 +1,371 @@
+//! `scout ros2 --middleware dds` against real ROS 2: rclpy from PyPI (Kilted and Jazzy, on Fast
+//! DDS), every DDS process (the bridge and rclpy) inside a private network namespace of the
+//! test's own with a ROS domain of its own. The gateway and the simulator speak no DDS and run
+//! outside, as in the other tests.
+//!
+//! The rclpy environments come from `$SCOUT_RCLPY_KILTED` and `$SCOUT_RCLPY_JAZZY` (a venv's
+//! `python`, as `.ci/run` makes them). Without them, or without a network namespace (root), a
+//! test skips saying why, unless `SCOUT_REQUIRE_ROS2` is set (as in CI): then it fails.
+
+use std::io::Write;
+use std::process::{Child, ChildStdin, Stdio};
+use std::sync::mpsc::Receiver;
+use std::time::{Duration, Instant};
+
+use nix::sys::signal::Signal;
+use scout_system_tests::{
+    Background, Gateway, NetNs, Sim, chassis_stays_still, connect, line_reader, moving, robot_name,
+    scout, skip,
+};
+use serde_json::{Value, json};
+
+const LIMIT: Duration = Duration::from_secs(20);
+/// The bridge's default `blocked_pause_ms`, with a margin.
+const BLOCKED_PAUSE: Duration = Duration::from_millis(2100);
+
+/// What a test needs, or why it cannot run here.
+fn prerequisites(test: &str, variable: &str) -> Option<(NetNs, String)> {
+    let missing = |why: String| {
+        assert!(
+            std::env::var_os("SCOUT_REQUIRE_ROS2").is_none(),
+            "{test}: {why}"
+        );
+        skip(test, &why);
+        None
+    };
+    let Some(python) = std::env::var_os(variable) else {
+        return missing(format!(
+            "no rclpy: set {variable} to a venv's python with ros-rclpy[fastrtps] and the \
+             message wheels (.ci/run makes them)"
+        ));
+    };
+    match NetNs::create() {
+        Ok(namespace) => Some((namespace, python.to_string_lossy().into_owned())),
+        Err(why) => missing(why),
+    }
+}
+
+/// A real rclpy node in the namespace, one JSON command and answer per line.
+struct RclpyNode {
+    child: Child,
+    stdin: ChildStdin,
+    lines: Receiver<String>,
+}
+
+impl RclpyNode {
+    fn start(namespace: &NetNs, python: &str, domain: u32, env: &[(&str, &str)]) -> RclpyNode {
+        let script =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/system/ros2_dds_peer.py");
+        let mut child = namespace
+            .command(python)
+            .arg(script)
+            .env("ROS_DOMAIN_ID", domain.to_string())
+            .env_remove("ROS_LOCALHOST_ONLY")
+            .env_remove("ROS_AUTOMATIC_DISCOVERY_RANGE")
+            .envs(env.iter().copied())
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("spawn rclpy");
+        let stdin = child.stdin.take().expect("stdin");
+        let lines = line_reader(child.stdout.take().expect("stdout"));
+        let mut node = RclpyNode {
+            child,
+            stdin,
+            lines,
+        };
+        assert_eq!(node.answer()["ready"], true);
+        node
+    }
+
+    fn answer(&mut self) -> Value {
+        let line = self
+            .lines
+            .recv_timeout(Duration::from_secs(60))
+            .expect("rclpy answers within 60 s");
+        serde_json::from_str(&line).expect("JSON answer")
+    }
+
+    fn ask(&mut self, command: Value) -> Value {
+        writeln!(self.stdin, "{command}").expect("write to rclpy");
+        self.stdin.flush().expect("flush");
+        let answer = self.answer();
+        assert!(answer.get("error").is_none(), "{command}: {answer}");
+        answer
+    }
+
+    fn echo(&mut self, topic: &str, type_name: &str, count: usize, qos: &str) -> Vec<Value> {
+        let answer = self.ask(
+            json!({"cmd": "echo", "topic": topic, "type": type_name, "count": count, "qos": qos}),
+        );
+        let samples = answer["samples"].as_array().cloned().unwrap_or_default();
+        assert_eq!(samples.len(), count, "{topic}: {answer}");
+        samples
+    }
+
+    /// The bridge's own counters, from its diagnostics.
+    fn counters(&mut self) -> Value {
+        let sample = self
+            .echo(
+                "/diagnostics",
+                "diagnostic_msgs/msg/DiagnosticArray",
+                1,
+                "default",
+            )
+            .remove(0);
+        sample["status"]
+            .as_array()
+            .and_then(|statuses| statuses.iter().find(|s| s["name"] == "scout: ros2 bridge"))
+            .map(|status| status["values"].clone())
+            .unwrap_or_else(|| panic!("no bridge counters in {sample}"))
+    }
+
+    fn call(&mut self, service: &str) -> Value {
+        self.ask(json!({"cmd": "call", "service": service}))
+    }
+
+    fn publish(&mut self, linear: f64, stamped: bool) {
+        self.ask(json!({"cmd": "publish", "linear": linear, "angular": 0.0, "stamped": stamped}));
+    }
+}
+
+impl Drop for RclpyNode {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// `scout ros2 --middleware dds` in the namespace, its log shown when the test fails.
+struct DdsBridge {
+    process: Background,
+    log: std::path::PathBuf,
+}
+
+impl DdsBridge {
+    fn start(namespace: &NetNs, name: &str, domain: u32, extra: &[&str]) -> DdsBridge {
+        let log = std::env::temp_dir().join(format!(
+            "scout-ros2-dds-{name}-{}.log",
+            Instant::now().elapsed().as_nanos()
+        ));
+        let file = std::fs::File::create(&log).expect("create the bridge's log");
+        let mut command = namespace.binary("scout-ros2");
+        command
+            .args(["--name", name, "--middleware", "dds", "--domain"])
+            .arg(domain.to_string())
+            .args(extra)
+            .env("RUST_LOG", "info,rustdds=warn,ros2_client=warn")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(file);
+        DdsBridge {
+            process: Background::spawn(command),
+            log,
+        }
+    }
+
+    fn stop(mut self) {
+        self.process.signal(Signal::SIGINT);
+        assert_eq!(
+            self.process.wait_exit(LIMIT),
+            Some(0),
+            "the bridge exits 0 on SIGINT"
+        );
+    }
+}
+
+impl Drop for DdsBridge {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            let log = std::fs::read_to_string(&self.log).unwrap_or_default();
+            eprintln!("scout ros2's log:\n{log}");
+        }
+        let _ = std::fs::remove_file(&self.log);
+    }
+}
+
+fn comes_to_rest(sim: &mut Sim, limit: Duration) {
+    let deadline = Instant::now() + limit;
+    while sim.stats()["actual"]["linear"].as_f64() != Some(0.0) {
+        assert!(Instant::now() < deadline, "the chassis never stopped");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+fn counter(counters: &Value, name: &str) -> u64 {
+    counters[name]
+        .as_str()
+        .and_then(|text| text.parse().ok())
+        .unwrap_or_else(|| panic!("no counter {name} in {counters}"))
+}
+
+fn ok(args: &[&str]) {
+    let (code, _, stderr) = scout(args);
+    assert_eq!(code, Some(0), "scout {args:?}: {stderr}");
+}
+
+/// A ROS domain of this test's own (a namespace isolates the traffic; the domain keeps a
+/// mistake from mixing two tests).
+fn domain(salt: u32) -> u32 {
+    (std::process::id() + salt) % 200 + 10
+}
+
+/// The whole path with one rclpy distro: the graph, every topic deserialized by rclpy, cmd_vel
+/// through the arbiter with the stream rules, the services, a bridge restart.
+fn graph_topics_and_driving(test: &str, variable: &str, stamped: bool, env: &[(&str, &str)]) {
+    let Some((namespace, python)) = prerequisites(test, variable) else {
+        return;
+    };
+    let name = robot_name(test);
+    let domain = domain(u32::from(stamped));
+    let mut sim = Sim::start(&["--serial"]);
+    let device = sim.port().to_owned();
+    let _gateway = Gateway::start(&["--serial", &device, "--name", &name]);
+    connect(&name);
+    let settings = std::env::temp_dir().join(format!("{name}.toml"));
+    std::fs::write(
+        &settings,
+        format!("[[cmd_vel]]\ntopic = \"cmd_vel\"\nclass = \"autonomy\"\nstamped = {stamped}\n"),
+    )
+    .expect("write the settings");
+    let settings_arg = settings.display().to_string();
+    let mut node = RclpyNode::start(&namespace, &python, domain, env);
+    let started = Instant::now();
+    let bridge = DdsBridge::start(&namespace, &name, domain, &["--config", &settings_arg]);
+
+    // The graph: rclpy lists the node, its topics with their types and its services.
+    let deadline = Instant::now() + LIMIT;
+    let graph = loop {
+        let graph = node.ask(json!({"cmd": "graph"}));
+        let complete = graph["nodes"]
+            .as_array()
+            .is_some_and(|nodes| nodes.contains(&json!("/scout")))
+            && graph["services"].get("/scout/release").is_some()
+            && graph["topics"].get("/cmd_vel").is_some();
+        if complete {
+            break graph;
+        }
+        assert!(Instant::now() < deadline, "incomplete graph: {graph}");
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    let cmd_vel_type = if stamped {
+        "geometry_msgs/msg/TwistStamped"
+    } else {
+        "geometry_msgs/msg/Twist"
+    };
+    for (topic, type_name) in [
+        ("/odom", "nav_msgs/msg/Odometry"),
+        ("/tf", "tf2_msgs/msg/TFMessage"),
+        ("/battery_state", "sensor_msgs/msg/BatteryState"),
+        ("/joint_states", "sensor_msgs/msg/JointState"),
+        ("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray"),
+        ("/cmd_vel", cmd_vel_type),
+    ] {
+        assert_eq!(
+            graph["topics"][topic],
+            json!([type_name]),
+            "{topic}: {graph}"
+        );
+    }
+    for service in ["/scout/estop", "/scout/release"] {
+        assert_eq!(
+            graph["services"][service],
+            json!(["std_srvs/srv/Trigger"]),
+            "{graph}"
+        );
+    }
+
+    // Odometry at the state rate, with a sensor-data (best effort) subscriber as Nav2's
+    // costmaps and robot_localization use; the battery's voltage as the gateway reports it.
+    let odometry = node.ask(json!({"cmd": "echo", "topic": "/odom",
+        "type": "nav_msgs/msg/Odometry", "count": 50, "qos": "sensor_data"}));
+    let rate = odometry["rate_hz"].as_f64().expect("a rate");
+    eprintln!("{test}: /odom at {rate:.1} Hz to a best-effort rclpy subscriber");
+    assert!(rate > 25.0, "odometry at {rate} Hz: {odometry}");
+    let sample = &odometry["samples"][0];
+    assert_eq!(sample["frame_id"], "odom", "{sample}");
+    assert_eq!(sample["child_frame_id"], "base_link", "{sample}");
+    let state = connect(&name).subscribe().expect("state");
+    let reported = scout_system_tests::wait_for_state(&state, LIMIT, |s| !s["system"].is_null());
+    let battery = node.echo(
+        "/battery_state",
+        "sensor_msgs/msg/BatteryState",
+        1,
+        "default",
+    );
+    assert_eq!(
+        battery[0]["voltage"].as_f64().map(|v| (v * 10.0).round()),
+        reported["system"]["battery_voltage"]
+            .as_f64()
+            .map(|v| (v * 10.0).round()),
+        "{battery:?} vs {reported}"
+    );
+    let joints = node.echo("/joint_states", "sensor_msgs/msg/JointState", 1, "default");
+    assert_eq!(joints[0]["name"][0], "front_right_wheel", "{joints:?}");
+    let counters = node.counters();
+    assert!(counter(&counters, "published") > 0, "{counters}");
+
+    // cmd_vel drives as autonomy once autonomy is armed; silence stops the robot.
+    std::thread::sleep(BLOCKED_PAUSE.saturating_sub(started.elapsed()));
+    ok(&["resume", "--name", &name]);
+    node.publish(0.5, stamped);
+    moving(&mut sim, LIMIT);
+    node.ask(json!({"cmd": "quiet"}));
+    comes_to_rest(&mut sim, LIMIT);
+
+    // A new stream drives; `scout estop` stops it; the stream goes on through the release and
+    // the resume and never restarts the robot.
+    node.publish(0.5, stamped);
+    moving(&mut sim, LIMIT);
+    ok(&["estop", "--name", &name]);
+    comes_to_rest(&mut sim, LIMIT);
+    ok(&["release", "--name", &name]);
+    ok(&["resume", "--name", &name]);
+    chassis_stays_still(&mut sim, Duration::from_millis(1500));
+    assert!(counter(&node.counters(), "cmd_vel_mid_stream") > 0);
+
+    // Nor does a bridge restart: the stream may have been going before the new bridge started.
+    bridge.stop();
+    let bridge = DdsBridge::start(&namespace, &name, domain, &["--config", &settings_arg]);
+    chassis_stays_still(&mut sim, Duration::from_millis(3000));
+    // A pause, then publishing again: a deliberate act.
+    node.ask(json!({"cmd": "quiet"}));
+    std::thread::sleep(BLOCKED_PAUSE);
+    node.publish(0.5, stamped);
+    moving(&mut sim, LIMIT);
+
+    // The e-stop service stops it, owned by the bridge; its release restarts nothing.
+    let estop = node.call("/scout/estop");
+    assert_eq!(estop["success"], true, "{estop}");
+    comes_to_rest(&mut sim, LIMIT);
+    let owner = format!("ros2:{domain}:/scout");
+    let (_, status, _) = scout(&["status", "--name", &name, "--json"]);
+    assert!(status.contains(&owner), "{status}");
+    let release = node.call("/scout/release");
+    assert_eq!(release["success"], true, "{release}");
+    ok(&["resume", "--name", &name]);
+    chassis_stays_still(&mut sim, Duration::from_millis(1000));
+    node.ask(json!({"cmd": "quiet"}));
+    let counters = node.counters();
+    eprintln!("{test}: the bridge's counters {counters}");
+    assert_eq!(counter(&counters, "cmd_vel_dropped"), 0, "{counters}");
+
+    bridge.stop();
+    let _ = std::fs::remove_file(&settings);
+}
+
+#[test]
+fn kilted_rclpy_on_fast_dds_sees_the_node_reads_every_topic_and_drives() {
+    graph_topics_and_driving("ros2_dds_kilted", "SCOUT_RCLPY_KILTED", false, &[]);
+}
+
+#[test]
+fn jazzy_rclpy_on_fast_dds_over_udp_drives_with_twist_stamped() {
+    graph_topics_and_driving(
+        "ros2_dds_jazzy",
+        "SCOUT_RCLPY_JAZZY",
+        true,
+        &[("FASTDDS_BUILTIN_TRANSPORTS", "UDPv4")],
+    );
+}
