@@ -43,6 +43,9 @@ pub enum BridgeError {
     /// The DDS participant or one of its endpoints could not be made.
     #[error("DDS: {0}")]
     Dds(String),
+    /// The middleware stopped delivering (its receive thread failed).
+    #[error("the middleware stopped delivering messages and calls: {0}")]
+    Middleware(String),
     /// A thread of the bridge could not start.
     #[error("starting a thread: {0}")]
     Thread(#[from] std::io::Error),
@@ -181,6 +184,8 @@ pub struct Senders {
     estops: crossbeam_channel::Sender<Call>,
     releases: crossbeam_channel::Sender<Call>,
     pub counters: Arc<Counters>,
+    /// Why the middleware can no longer deliver, once it cannot: the bridge stops on it.
+    failure: Arc<std::sync::Mutex<Option<String>>>,
 }
 
 impl Senders {
@@ -188,6 +193,14 @@ impl Senders {
     pub fn twist(&self, message: CmdVel) {
         if let Err(TrySendError::Full(_)) = self.twists.try_send(message) {
             Counters::add(&self.counters.cmd_vel_dropped);
+        }
+    }
+
+    /// The middleware can no longer deliver what arrives (its receive thread failed): the
+    /// bridge stops with this reason rather than run on deaf to cmd_vel and the e-stop service.
+    pub fn fail(&self, why: String) {
+        if let Ok(mut failure) = self.failure.lock() {
+            failure.get_or_insert(why);
         }
     }
 
@@ -240,6 +253,7 @@ pub fn queues(counters: Arc<Counters>) -> (Senders, Inboxes) {
             estops,
             releases,
             counters,
+            failure: Arc::default(),
         },
         Inboxes {
             twists: twist_inbox,
@@ -282,6 +296,8 @@ pub fn run(
     let gateway = Robot::connect(robot)?;
     let counters = Arc::new(Counters::default());
     let (senders, inboxes) = queues(Arc::clone(&counters));
+    let failure = Arc::clone(&senders.failure);
+    let middleware_failed = || failure.lock().map_or(true, |failure| failure.is_some());
     // The middleware's node lives as long as the bridge runs: dropping it leaves the graph.
     let (mut publishers, node): (Box<dyn Publishers>, Box<dyn std::any::Any>) = match middleware {
         Middleware::Zenoh => {
@@ -308,7 +324,8 @@ pub fn run(
             .join(", "),
     );
     let failed = AtomicBool::new(false);
-    let halt = || stop.load(Ordering::Relaxed) || failed.load(Ordering::Relaxed);
+    let halt =
+        || stop.load(Ordering::Relaxed) || failed.load(Ordering::Relaxed) || middleware_failed();
     let give_up = |result: Result<(), BridgeError>| {
         if result.is_err() {
             failed.store(true, Ordering::Relaxed);
@@ -345,6 +362,10 @@ pub fn run(
         });
         published.and(driven).and(served)
     });
+    let result = match failure.lock().ok().and_then(|failure| failure.clone()) {
+        Some(why) => result.and(Err(BridgeError::Middleware(why))),
+        None => result,
+    };
     info!(
         "scout ros2: stopping; counters {}",
         serde_json::to_string(&*counters).unwrap_or_default()

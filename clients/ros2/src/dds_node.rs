@@ -108,9 +108,9 @@ pub struct TriggerResponse {
 impl ros2_client::Message for TriggerRequest {}
 impl ros2_client::Message for TriggerResponse {}
 
-/// Decodes a cmd_vel payload (with its encapsulation header) exactly as the DDS reader does
-/// (RustDDS' CDR deserializer): the fuzz target's entry to this path.
-pub fn decode_cmd_vel(bytes: &[u8], stamped: bool) -> Result<PlanarTwist, CdrError> {
+/// Decodes a payload (with its encapsulation header) as a DDS reader of `T` does, with RustDDS'
+/// CDR deserializer, refusing the encodings the reader refuses.
+fn decode<T: serde::de::DeserializeOwned>(bytes: &[u8]) -> Result<T, CdrError> {
     use rustdds::no_key::DeserializerAdapter;
     let (header, body) = match bytes {
         [a, b, _, _, body @ ..] => ([*a, *b], body),
@@ -118,23 +118,27 @@ pub fn decode_cmd_vel(bytes: &[u8], stamped: bool) -> Result<PlanarTwist, CdrErr
     };
     let encoding = rustdds::RepresentationIdentifier::from_bytes(&header)
         .map_err(|_| CdrError::Truncated(bytes.len()))?;
-    // As the reader: a sample in an encoding the adapter does not take is refused.
-    if !<rustdds::CDRDeserializerAdapter<Twist> as DeserializerAdapter<Twist>>::supported_encodings(
-    )
-    .contains(&encoding)
+    if !<rustdds::CDRDeserializerAdapter<T> as DeserializerAdapter<T>>::supported_encodings()
+        .contains(&encoding)
     {
         return Err(CdrError::Encapsulation(header));
     }
-    let malformed = |error: rustdds::serialization::Error| CdrError::Malformed(error.to_string());
+    rustdds::CDRDeserializerAdapter::<T>::from_bytes(body, encoding)
+        .map_err(|error| CdrError::Malformed(error.to_string()))
+}
+
+/// Decodes a cmd_vel payload as the bridge's DDS reader does: the fuzz target's entry to it.
+pub fn decode_cmd_vel(bytes: &[u8], stamped: bool) -> Result<PlanarTwist, CdrError> {
     if stamped {
-        rustdds::CDRDeserializerAdapter::<TwistStamped>::from_bytes(body, encoding)
-            .map(|message| PlanarTwist::from(&message.twist))
-            .map_err(malformed)
+        decode::<TwistStamped>(bytes).map(|message| PlanarTwist::from(&message.twist))
     } else {
-        rustdds::CDRDeserializerAdapter::<Twist>::from_bytes(body, encoding)
-            .map(|message| PlanarTwist::from(&message))
-            .map_err(malformed)
+        decode::<Twist>(bytes).map(|message| PlanarTwist::from(&message))
     }
+}
+
+/// Decodes a Trigger request as the bridge's DDS service does: the fuzz target's entry to it.
+pub fn decode_trigger_request(bytes: &[u8]) -> Result<(), CdrError> {
+    decode::<TriggerRequest>(bytes).map(|_| ())
 }
 
 /// `package/msg/Name` as ros2-client names a type.
@@ -309,8 +313,13 @@ pub fn start(
                 service_qos(),
             )
             .map_err(dds_error("making a service"))?;
-        servers.push((kind, Arc::new(server)));
+        servers.push((kind, server));
     }
+    let poll = register(&mut readers, &mut servers).map_err(BridgeError::Thread)?;
+    let servers: Vec<_> = servers
+        .into_iter()
+        .map(|(kind, server)| (kind, Arc::new(server)))
+        .collect();
     let halt = Arc::new(AtomicBool::new(false));
     let receiver = {
         let halt = Arc::clone(&halt);
@@ -320,8 +329,8 @@ pub fn start(
                 // The node and participant live on this thread, as long as the bridge runs.
                 let _node = node;
                 let _context = context;
-                if let Err(error) = receive(readers, servers, &senders, &halt) {
-                    warn!("ros2: the DDS receive thread stopped: {error}");
+                if let Err(error) = receive(poll, &readers, &servers, &senders, &halt) {
+                    senders.fail(format!("waiting for DDS input: {error}"));
                 }
             })?
     };
@@ -334,17 +343,13 @@ pub fn start(
     ))
 }
 
-/// How often the receive thread looks whether the bridge stops.
-const HALT_POLL: Duration = Duration::from_millis(100);
-
-/// Waits on the readers and servers, and queues what arrives.
-fn receive(
-    mut readers: Vec<CmdVelReader>,
-    mut servers: Vec<(ServiceKind, Arc<TriggerServer>)>,
-    senders: &Senders,
-    halt: &AtomicBool,
-) -> std::io::Result<()> {
-    let mut poll = Poll::new()?;
+/// A poll that wakes when a cmd_vel reader or a server has input: reader `i` is token `i`, the
+/// servers follow.
+fn register(
+    readers: &mut [CmdVelReader],
+    servers: &mut [(ServiceKind, TriggerServer)],
+) -> std::io::Result<Poll> {
+    let poll = Poll::new()?;
     for (index, reader) in readers.iter_mut().enumerate() {
         let token = Token(index);
         match reader {
@@ -358,12 +363,24 @@ fn receive(
             }
         }
     }
-    let first_server = readers.len();
     for (index, (_, server)) in servers.iter_mut().enumerate() {
-        let server = Arc::get_mut(server).expect("not shared yet");
         poll.registry()
-            .register(server, Token(first_server + index), Interest::READABLE)?;
+            .register(server, Token(readers.len() + index), Interest::READABLE)?;
     }
+    Ok(poll)
+}
+
+/// How often the receive thread looks whether the bridge stops.
+const HALT_POLL: Duration = Duration::from_millis(100);
+
+/// Waits on the readers and servers, and queues what arrives.
+fn receive(
+    mut poll: Poll,
+    readers: &[CmdVelReader],
+    servers: &[(ServiceKind, Arc<TriggerServer>)],
+    senders: &Senders,
+    halt: &AtomicBool,
+) -> std::io::Result<()> {
     let mut events = Events::with_capacity(16);
     while !halt.load(Ordering::Relaxed) {
         if let Err(error) = poll.poll(&mut events, Some(HALT_POLL)) {
@@ -374,7 +391,7 @@ fn receive(
         }
         // Edge-triggered: everything that arrived is taken, whichever woke the poll (the
         // e-stop service first).
-        for (kind, server) in &servers {
+        for (kind, server) in servers {
             take_calls(*kind, server, senders);
         }
         for (index, reader) in readers.iter().enumerate() {
@@ -481,6 +498,14 @@ mod tests {
         );
         assert!(decode_cmd_vel(&twist[..20], false).is_err());
         assert!(decode_cmd_vel(&[], true).is_err());
+        let mut xcdr2 = twist.clone();
+        xcdr2[1] = 0x07;
+        assert_eq!(
+            decode_cmd_vel(&xcdr2, false),
+            Err(CdrError::Encapsulation([0x00, 0x07]))
+        );
+        assert_eq!(decode_trigger_request(&[0, 1, 0, 0, 0]), Ok(()));
+        assert!(decode_trigger_request(&[0, 1, 0, 0]).is_err());
     }
 
     #[test]

@@ -143,7 +143,8 @@ fn run(args: &Ros2Args) -> anyhow::Result<ExitCode> {
         .with_writer(std::io::stderr)
         .with_target(false)
         .with_env_filter(
-            EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info")),
+            EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| EnvFilter::new("info,rustdds=warn,ros2_client=warn")),
         )
         .init();
     let stop = Arc::new(AtomicBool::new(false));

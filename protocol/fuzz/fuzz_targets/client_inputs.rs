@@ -1,16 +1,21 @@
 //! Fuzzes what peers on the network send the gateway's bridges: a ROS 2 cmd_vel (CDR, plain and
-//! stamped) with its rmw_zenoh attachment, and a zenoh remote command (its key and JSON payload
-//! down to the arbiter request it makes).
+//! stamped, as the rmw_zenoh path and the DDS reader each decode it) with its rmw_zenoh
+//! attachment, a std_srvs/Trigger request (both paths), and a zenoh remote command (its key and
+//! JSON payload down to the arbiter request it makes).
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use scout_ros2::{msgs, rmw};
+use scout_ros2::{dds_node, msgs, rmw};
 use scout_interface::control::Class;
 use scout_interface::remote::{self, RemoteCommand};
 
 fuzz_target!(|input: &[u8]| {
     let _ = msgs::decode_twist(input, false);
     let _ = msgs::decode_twist(input, true);
+    let _ = dds_node::decode_cmd_vel(input, false);
+    let _ = dds_node::decode_cmd_vel(input, true);
+    let _ = msgs::decode_trigger_request(input);
+    let _ = dds_node::decode_trigger_request(input);
     let _ = rmw::parse_attachment(input);
     // The first line is the key, the rest the payload.
     let (key, payload) = match input.iter().position(|&b| b == b'\n') {

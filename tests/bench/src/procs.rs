@@ -10,7 +10,7 @@ use std::time::Duration;
 use anyhow::Context;
 
 /// The directory of the bench's executable, where cargo puts the other binaries too.
-fn bin_dir() -> anyhow::Result<PathBuf> {
+pub fn bin_dir() -> anyhow::Result<PathBuf> {
     let exe = std::env::current_exe().context("finding the bench's executable")?;
     Ok(exe
         .parent()
@@ -23,7 +23,7 @@ fn bin_dir() -> anyhow::Result<PathBuf> {
 pub fn ensure_built() -> anyhow::Result<()> {
     let dir = bin_dir()?;
     if let Ok(cargo) = std::env::var("CARGO") {
-        eprintln!("building scout-gateway, scout-sim and scout...");
+        eprintln!("building scout-gateway, scout-sim, scout and scout-ros2...");
         let mut build = Command::new(cargo);
         build.args([
             "build",
@@ -34,6 +34,8 @@ pub fn ensure_built() -> anyhow::Result<()> {
             "scout-sim",
             "-p",
             "scout-clients",
+            "-p",
+            "scout-ros2",
             "--bins",
         ]);
         if dir.ends_with("release") {

@@ -12,7 +12,7 @@ use scout_clients::{Class, ReleaseTarget, monotonic_ns};
 use serde_json::{Value, json};
 
 use crate::figures::{Summary, Ticks, Trace, read_rows, round};
-use crate::procs::{Gateway, Roles, Sim, command, ensure_built, usage};
+use crate::procs::{Gateway, Roles, Sim, bin_dir, command, ensure_built, usage};
 use crate::roles::connect;
 
 #[derive(Debug)]
@@ -226,6 +226,7 @@ pub fn run(options: &Options) -> anyhow::Result<()> {
     let states = bench.start_gateway(true)?;
 
     state_latency(&mut bench, &mut report)?;
+    ros2_dds(&mut bench, &mut report)?;
     command_latency(&mut bench, &mut report, &states)?;
     remote_latency(&mut bench, &mut report, &states)?;
     ticks(&mut bench, &mut report, &states)?;
@@ -393,6 +394,88 @@ fn state_latency(bench: &mut Bench, report: &mut Report) -> anyhow::Result<()> {
                 .push(("iceoryx2, 32 subscribers".into(), split.end_to_end));
         }
     }
+    Ok(())
+}
+
+/// State to a real rclpy subscriber over DDS: `scout ros2 --middleware dds` and rclpy (from
+/// `$SCOUT_RCLPY_KILTED`) in a network namespace of the bench's own, /odom from the simulator's
+/// write to rclpy's callback, and the bridge's CPU and memory at the state's 50 Hz. Skipped,
+/// saying why, without rclpy or a network namespace (root).
+fn ros2_dds(bench: &mut Bench, report: &mut Report) -> anyhow::Result<()> {
+    let Some(python) = std::env::var_os("SCOUT_RCLPY_KILTED") else {
+        progress("ROS 2 over DDS: skipped (set SCOUT_RCLPY_KILTED to a venv's python with rclpy)");
+        return Ok(());
+    };
+    let namespace = match scout_system_tests::NetNs::create() {
+        Ok(namespace) => namespace,
+        Err(why) => {
+            progress(&format!("ROS 2 over DDS: skipped ({why})"));
+            return Ok(());
+        }
+    };
+    progress("state latency: ROS 2 over DDS (scout ros2 and rclpy in a network namespace)");
+    let domain = (std::process::id() % 200 + 10).to_string();
+    let log = std::fs::File::create(bench.scratch.path("ros2.log"))?;
+    let mut bridge = namespace
+        .command(bin_dir()?.join("scout-ros2"))
+        .args([
+            "--name",
+            &bench.name,
+            "--middleware",
+            "dds",
+            "--domain",
+            &domain,
+        ])
+        .env("RUST_LOG", "warn")
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::null())
+        .stderr(log)
+        .spawn()
+        .context("starting scout-ros2 in the network namespace")?;
+    let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("ros2_odom_subscriber.py");
+    let mut subscriber = namespace
+        .command(&python)
+        .arg(script)
+        .arg(bench.scratch.path("ros2-dds"))
+        .arg(bench.plan.window.to_string())
+        .env("ROS_DOMAIN_ID", &domain)
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .context("starting the rclpy subscriber")?;
+    // The bridge's cost over the subscriber's window (after discovery).
+    std::thread::sleep(Duration::from_secs(3));
+    let pid = i32::try_from(bridge.id())?;
+    let (cpu_before, _) = usage(pid)?;
+    let start = Instant::now();
+    let status = subscriber.wait()?;
+    let (cpu_after, rss) = usage(pid)?;
+    let percent = (cpu_after - cpu_before) / start.elapsed().as_secs_f64() * 100.0;
+    let _ = bridge.kill();
+    let _ = bridge.wait();
+    anyhow::ensure!(
+        status.success(),
+        "the rclpy subscriber failed ({status}); the bridge's log: {}",
+        bench.scratch.text("ros2.log")
+    );
+    let trace = trace(bench)?;
+    let dds = seen_latencies(&read_rows(&bench.scratch.path("ros2-dds"))?, &trace);
+    report.latency(
+        "state_latency_us.ros2_dds",
+        "state, ROS 2 over DDS (rclpy /odom)",
+        &dds,
+    );
+    report.value(
+        "ros2_bridge_cpu_percent",
+        "scout ros2 over DDS, CPU, % of a core, 50 Hz",
+        percent,
+    );
+    report.value(
+        "ros2_bridge_rss_mb",
+        "scout ros2 over DDS, resident memory, MB",
+        rss,
+    );
+    report.paths.push(("ROS 2 DDS (rclpy)".into(), dds));
     Ok(())
 }
 

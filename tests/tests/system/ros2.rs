@@ -29,11 +29,13 @@ fn python() -> String {
 
 /// Why the stand-in cannot run here, if it cannot.
 fn standin_missing() -> Option<String> {
-    let check = "import importlib.metadata as m, rosbags, zenoh; print(m.version('eclipse-zenoh'))";
+    let check =
+        "import importlib.metadata as m, rosbags, xxhash, zenoh; print(m.version('eclipse-zenoh'))";
     match Command::new(python()).args(["-c", check]).output() {
         Ok(output) if output.status.success() => None,
         Ok(output) => Some(format!(
-            "{} lacks eclipse-zenoh or rosbags ({}): pip install eclipse-zenoh==1.6.2 rosbags",
+            "{} lacks eclipse-zenoh, rosbags or xxhash ({}): pip install eclipse-zenoh==1.6.2 \
+             rosbags xxhash",
             python(),
             String::from_utf8_lossy(&output.stderr).trim()
         )),
@@ -207,7 +209,22 @@ fn a_ros_2_node_sees_the_graph_reads_odometry_and_drives_through_the_arbiter() {
     let _gateway = Gateway::start(&["--serial", &device, "--name", &name]);
     connect(&name);
     let router = tcp(free_port());
-    let router_process = Background::scout(&["router", "--listen", &router]);
+    // rmw_zenohd's own settings: gossip on, and no forwarding between peers (the stand-in node
+    // is a peer, as rmw_zenoh's nodes are; the bridge must be a client to be reached).
+    let router_settings = std::env::temp_dir().join(format!("{name}-rmw_zenohd.json5"));
+    std::fs::write(
+        &router_settings,
+        "{ mode: \"router\", scouting: { multicast: { enabled: false }, gossip: { enabled: true } },\n  \
+         routing: { router: { peers_failover_brokering: false } } }\n",
+    )
+    .expect("write the router's settings");
+    let router_process = Background::scout(&[
+        "router",
+        "--listen",
+        &router,
+        "--zenoh-config",
+        &router_settings.display().to_string(),
+    ]);
     let mut node = RosNode::start(&router, domain);
     let started = Instant::now();
     let mut bridge = Bridge::start(&[
@@ -259,8 +276,19 @@ fn a_ros_2_node_sees_the_graph_reads_odometry_and_drives_through_the_arbiter() {
         assert!(entities.contains(&wanted), "{wanted:?} not in {entities:?}");
     }
 
-    // Odometry on the exact key: rising sequence numbers, wall-clock stamps, the frames.
+    // Odometry on the exact key: rising sequence numbers, wall-clock stamps, the frames; the
+    // attachment's GID is the one rmw_zenoh computes from the publisher's token.
     let odometry = node.echo("/odom", "nav_msgs/msg/Odometry", 10);
+    let odom_gid = graph["entities"]
+        .as_array()
+        .and_then(|entities| {
+            entities
+                .iter()
+                .find(|e| e["kind"] == "MP" && e["topic"] == "/odom")
+        })
+        .map(|entity| entity["gid"].clone())
+        .expect("the /odom publisher's token");
+    assert_eq!(odometry[0]["attachment"]["gid"], odom_gid, "{graph}");
     let sequences: Vec<i64> = odometry
         .iter()
         .map(|s| s["attachment"]["sequence"].as_i64().expect("sequence"))
@@ -320,10 +348,11 @@ fn a_ros_2_node_sees_the_graph_reads_odometry_and_drives_through_the_arbiter() {
     router_process.signal(Signal::SIGCONT);
     chassis_stays_still(&mut sim, Duration::from_millis(1500));
     assert!(counter(&node.counters(), "cmd_vel_mid_stream") > 0);
-    // A pause, then publishing again: a deliberate act.
+    // A pause, then publishing again: a deliberate act; from a Humble publisher (its key has
+    // no type hash: the bridge subscribes to any).
     node.ask(json!({"cmd": "quiet"}));
     std::thread::sleep(BLOCKED_PAUSE);
-    node.ask(json!({"cmd": "publish", "linear": 0.5, "angular": 0.0}));
+    node.ask(json!({"cmd": "publish", "linear": 0.5, "angular": 0.0, "humble": true}));
     moving(&mut sim, LIMIT);
 
     // The e-stop service stops it, owned by the bridge; its release restarts nothing.
@@ -387,6 +416,7 @@ fn a_ros_2_node_sees_the_graph_reads_odometry_and_drives_through_the_arbiter() {
 
     bridge.process.signal(Signal::SIGINT);
     assert_eq!(bridge.process.wait_exit(LIMIT), Some(0));
+    let _ = std::fs::remove_file(&router_settings);
 }
 
 #[test]

@@ -1,5 +1,5 @@
 //! `scout ros2 --middleware dds` against real ROS 2: rclpy from PyPI (Kilted and Jazzy, on Fast
-//! DDS), every DDS process (the bridge and rclpy) inside a private network namespace of the
+//! DDS) and a plain Cyclone DDS reader, every DDS process (the bridge and rclpy) inside a private network namespace of the
 //! test's own with a ROS domain of its own. The gateway and the simulator speak no DDS and run
 //! outside, as in the other tests.
 //!
@@ -185,6 +185,34 @@ impl Drop for DdsBridge {
     }
 }
 
+/// Five /tf samples as a plain Cyclone DDS reader gets them (multicast for discovery only, as
+/// a Cyclone peer beside Fast DDS ones must be set).
+fn cyclone_tf(namespace: &NetNs, python: &str, domain: u32) -> Value {
+    let script =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/system/cyclone_tf_reader.py");
+    let output = namespace
+        .command(python)
+        .arg(script)
+        .arg("5")
+        .env("ROS_DOMAIN_ID", domain.to_string())
+        .env(
+            "CYCLONEDDS_URI",
+            "<CycloneDDS><Domain><General><AllowMulticast>spdp</AllowMulticast></General>\
+             </Domain></CycloneDDS>",
+        )
+        .stdin(Stdio::null())
+        .stderr(Stdio::inherit())
+        .output()
+        .expect("run the Cyclone DDS reader");
+    let answer: Value = serde_json::from_slice(&output.stdout)
+        .unwrap_or_else(|_| panic!("Cyclone DDS reader: {output:?}"));
+    assert!(
+        answer.get("error").is_none(),
+        "Cyclone DDS reader: {answer}"
+    );
+    answer
+}
+
 fn comes_to_rest(sim: &mut Sim, limit: Duration) {
     let deadline = Instant::now() + limit;
     while sim.stats()["actual"]["linear"].as_f64() != Some(0.0) {
@@ -213,7 +241,13 @@ fn domain(salt: u32) -> u32 {
 
 /// The whole path with one rclpy distro: the graph, every topic deserialized by rclpy, cmd_vel
 /// through the arbiter with the stream rules, the services, a bridge restart.
-fn graph_topics_and_driving(test: &str, variable: &str, stamped: bool, env: &[(&str, &str)]) {
+fn graph_topics_and_driving(
+    test: &str,
+    variable: &str,
+    stamped: bool,
+    env: &[(&str, &str)],
+    cyclone: bool,
+) {
     let Some((namespace, python)) = prerequisites(test, variable) else {
         return;
     };
@@ -305,10 +339,19 @@ fn graph_topics_and_driving(test: &str, variable: &str, stamped: bool, env: &[(&
     assert_eq!(joints[0]["name"][0], "front_right_wheel", "{joints:?}");
     let counters = node.counters();
     assert!(counter(&counters, "published") > 0, "{counters}");
+    if cyclone {
+        // Another vendor: a plain Cyclone DDS reader of /tf (tf2_msgs is not on PyPI).
+        let tf = cyclone_tf(&namespace, &python, domain);
+        assert_eq!(tf["transforms"][0]["parent"], "odom", "{tf}");
+        assert_eq!(tf["transforms"][0]["child"], "base_link", "{tf}");
+    }
 
     // cmd_vel drives as autonomy once autonomy is armed; silence stops the robot.
     std::thread::sleep(BLOCKED_PAUSE.saturating_sub(started.elapsed()));
     ok(&["resume", "--name", &name]);
+    // A release with nothing latched changes nothing: autonomy stays armed.
+    let release = node.call("/scout/release");
+    assert_eq!(release["success"], true, "{release}");
     node.publish(0.5, stamped);
     moving(&mut sim, LIMIT);
     node.ask(json!({"cmd": "quiet"}));
@@ -357,7 +400,7 @@ fn graph_topics_and_driving(test: &str, variable: &str, stamped: bool, env: &[(&
 
 #[test]
 fn kilted_rclpy_on_fast_dds_sees_the_node_reads_every_topic_and_drives() {
-    graph_topics_and_driving("ros2_dds_kilted", "SCOUT_RCLPY_KILTED", false, &[]);
+    graph_topics_and_driving("ros2_dds_kilted", "SCOUT_RCLPY_KILTED", false, &[], true);
 }
 
 #[test]
@@ -367,5 +410,6 @@ fn jazzy_rclpy_on_fast_dds_over_udp_drives_with_twist_stamped() {
         "SCOUT_RCLPY_JAZZY",
         true,
         &[("FASTDDS_BUILTIN_TRANSPORTS", "UDPv4")],
+        false,
     );
 }

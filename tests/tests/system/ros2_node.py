@@ -9,8 +9,10 @@ on standard input, answering each with one JSON line on standard output:
       the liveliness tokens, each parsed by rmw_zenoh's rules, with every problem found
   {"cmd": "echo", "topic": "/odom", "type": "nav_msgs/msg/Odometry", "count": 5}
       that many samples on the exact data key, decoded, with their attachments
-  {"cmd": "publish", "topic": "/cmd_vel", "linear": 0.5, "angular": 0.0, "rate": 20}
-      starts publishing a Twist at that rate (with the attachment), until "quiet"
+  {"cmd": "publish", "topic": "/cmd_vel", "linear": 0.5, "angular": 0.0, "rate": 20,
+   "humble": false}
+      starts publishing a Twist at that rate (with the attachment), until "quiet"; on Humble's
+      key (no type hash) with "humble"
   {"cmd": "quiet"}
       stops publishing
   {"cmd": "call", "service": "/scout/estop"}
@@ -29,6 +31,7 @@ import sys
 import threading
 import time
 
+import xxhash
 import zenoh
 from rosbags.typesys import Stores, get_typestore, get_types_from_msg
 
@@ -91,8 +94,10 @@ def type_of_dds(name):
     return f"{package}/{kind}/{rest[:-1]}"
 
 
-def data_key(topic, type_name):
-    return f"{DOMAIN}/{topic.lstrip('/')}/{dds_name(type_name)}/{STORE.hash_rihs01(type_name)}"
+def data_key(topic, type_name, humble=False):
+    """The key rmw_zenoh publishes on; Humble's has no type hash."""
+    type_hash = "TypeHashNotSupported" if humble else STORE.hash_rihs01(type_name)
+    return f"{DOMAIN}/{topic.lstrip('/')}/{dds_name(type_name)}/{type_hash}"
 
 
 class Attachments:
@@ -166,6 +171,8 @@ def parse_token(token, problems):
         "enclave": enclave.replace("%", "/"),
         "namespace": namespace.replace("%", "/"),
         "node": node,
+        # rmw_zenoh's GID of the entity: XXH3-128 of its token, low 64 bits first.
+        "gid": xxhash.xxh3_128_intdigest(token.encode()).to_bytes(16, "little").hex(),
     }
     try:
         int(zid, 16)
@@ -283,7 +290,8 @@ class Node:
                   angular=Vector3(x=0.0, y=0.0, z=command["angular"])),
             type_name,
         )
-        publisher = self.session.declare_publisher(data_key(command.get("topic", "/cmd_vel"), type_name))
+        publisher = self.session.declare_publisher(
+            data_key(command.get("topic", "/cmd_vel"), type_name, command.get("humble", False)))
         attachments = Attachments()
         stop = threading.Event()
         period = 1.0 / command.get("rate", 20)
