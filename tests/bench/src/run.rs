@@ -440,11 +440,15 @@ fn ros2_dds(bench: &mut Bench, report: &mut Report) -> anyhow::Result<()> {
         .arg(bench.plan.window.to_string())
         .env("ROS_DOMAIN_ID", &domain)
         .stdin(std::process::Stdio::null())
-        .stdout(std::process::Stdio::null())
+        .stdout(std::process::Stdio::piped())
         .spawn()
         .context("starting the rclpy subscriber")?;
-    // The bridge's cost over the subscriber's window (after discovery).
-    std::thread::sleep(Duration::from_secs(3));
+    // The bridge's cost over the subscriber's window, from its first message (after discovery).
+    let mut first = String::new();
+    std::io::BufRead::read_line(
+        &mut std::io::BufReader::new(subscriber.stdout.take().context("its output")?),
+        &mut first,
+    )?;
     let pid = i32::try_from(bridge.id())?;
     let (cpu_before, _) = usage(pid)?;
     let start = Instant::now();
