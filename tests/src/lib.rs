@@ -45,8 +45,7 @@ fn ensure_built() {
             std::env::var_os("SCOUT_IN_VM").is_none(),
             "a binary the system tests run is missing inside the VM: build them on the host first"
         );
-        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-        let mut command = Command::new(cargo);
+        let mut command = cargo();
         command.args(["build", "--quiet", "--workspace", "--bins", "--examples"]);
         if bin_dir().ends_with("release") {
             command.arg("--release");
@@ -59,6 +58,31 @@ fn ensure_built() {
             "cargo build --workspace --bins --examples failed"
         );
     });
+}
+
+/// A `cargo` command as the one running the tests, without what cargo set for this test
+/// process: a build script that reads such a variable (ring's reads `CARGO_MANIFEST_DIR`) would
+/// run again, and everything above it would build again, here and in the next workspace build.
+pub fn cargo() -> Command {
+    let mut command = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
+    for (name, _) in std::env::vars_os() {
+        let name = name.to_string_lossy().into_owned();
+        let set_for_this_test = name.starts_with("CARGO_PKG_")
+            || name.starts_with("CARGO_BIN_")
+            || [
+                "CARGO_MANIFEST_DIR",
+                "CARGO_MANIFEST_PATH",
+                "CARGO_CRATE_NAME",
+                "CARGO_PRIMARY_PACKAGE",
+                "CARGO_TARGET_TMPDIR",
+                "CARGO_RUSTC_CURRENT_DIR",
+            ]
+            .contains(&name.as_str());
+        if set_for_this_test {
+            command.env_remove(name);
+        }
+    }
+    command
 }
 
 /// The path of workspace binary `name`, built if needed.

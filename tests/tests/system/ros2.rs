@@ -143,7 +143,9 @@ struct Bridge {
 
 impl Bridge {
     fn start(args: &[&str]) -> Bridge {
-        let log = std::env::temp_dir().join(format!("scout-ros2-{}.log", std::process::id()));
+        static STARTED: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+        let n = STARTED.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let log = std::env::temp_dir().join(format!("scout-ros2-{}-{n}.log", std::process::id()));
         let file = std::fs::File::create(&log).expect("create the bridge's log");
         let mut command = scout_system_tests::command("scout");
         command
@@ -192,6 +194,28 @@ fn ok(args: &[&str]) {
     assert_eq!(code, Some(0), "scout {args:?}: {stderr}");
 }
 
+/// A router as rmw_zenohd runs: gossip on, and no forwarding between peers (rmw_zenoh's nodes
+/// are peers; the bridge must be a client to be reached). Its endpoint, the process, and its
+/// settings file (removed by the caller).
+fn rmw_zenohd(name: &str) -> (String, Background, std::path::PathBuf) {
+    let router = tcp(free_port());
+    let settings = std::env::temp_dir().join(format!("{name}-rmw_zenohd.json5"));
+    std::fs::write(
+        &settings,
+        "{ mode: \"router\", scouting: { multicast: { enabled: false }, gossip: { enabled: true } },\n  \
+         routing: { router: { peers_failover_brokering: false } } }\n",
+    )
+    .expect("write the router's settings");
+    let process = Background::scout(&[
+        "router",
+        "--listen",
+        &router,
+        "--zenoh-config",
+        &settings.display().to_string(),
+    ]);
+    (router, process, settings)
+}
+
 #[test]
 fn a_ros_2_node_sees_the_graph_reads_odometry_and_drives_through_the_arbiter() {
     let test = "ros2_node_drives_through_the_arbiter";
@@ -208,23 +232,7 @@ fn a_ros_2_node_sees_the_graph_reads_odometry_and_drives_through_the_arbiter() {
     let device = sim.port().to_owned();
     let _gateway = Gateway::start(&["--serial", &device, "--name", &name]);
     connect(&name);
-    let router = tcp(free_port());
-    // rmw_zenohd's own settings: gossip on, and no forwarding between peers (the stand-in node
-    // is a peer, as rmw_zenoh's nodes are; the bridge must be a client to be reached).
-    let router_settings = std::env::temp_dir().join(format!("{name}-rmw_zenohd.json5"));
-    std::fs::write(
-        &router_settings,
-        "{ mode: \"router\", scouting: { multicast: { enabled: false }, gossip: { enabled: true } },\n  \
-         routing: { router: { peers_failover_brokering: false } } }\n",
-    )
-    .expect("write the router's settings");
-    let router_process = Background::scout(&[
-        "router",
-        "--listen",
-        &router,
-        "--zenoh-config",
-        &router_settings.display().to_string(),
-    ]);
+    let (router, router_process, router_settings) = rmw_zenohd(&name);
     let mut node = RosNode::start(&router, domain);
     let started = Instant::now();
     let mut bridge = Bridge::start(&[
@@ -527,4 +535,161 @@ fn a_second_bridge_for_one_robot_and_domain_is_refused() {
         bridge.signal(Signal::SIGINT);
         assert_eq!(bridge.wait_exit(LIMIT), Some(0));
     }
+}
+
+/// The second rmw_zenoh peer (`tests/rmw-zenoh-peer`: ros2-client's zenoh backend, written by
+/// others than the bridge's authors), built beside the workspace's binaries (a no-op when it is
+/// up to date), or why it cannot be. It is a workspace of its own so that its zenoh features
+/// and ros2-client's zenoh backend stay out of the gateway and the bridge under test.
+fn rmw_zenoh_peer() -> Result<std::path::PathBuf, String> {
+    static BUILT: std::sync::OnceLock<Result<std::path::PathBuf, String>> =
+        std::sync::OnceLock::new();
+    BUILT
+        .get_or_init(|| {
+            let bin_dir = scout_system_tests::bin("scout")
+                .parent()
+                .expect("the binaries' directory")
+                .to_owned();
+            let target_dir = bin_dir.parent().expect("the target directory");
+            let manifest =
+                std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("rmw-zenoh-peer/Cargo.toml");
+            let mut build = scout_system_tests::cargo();
+            build
+                .args(["build", "--quiet", "--locked", "--manifest-path"])
+                .arg(&manifest)
+                .arg("--target-dir")
+                .arg(target_dir);
+            if bin_dir.ends_with("release") {
+                build.arg("--release");
+            }
+            match build.output() {
+                Ok(output) if output.status.success() => Ok(bin_dir.join("rmw-zenoh-peer")),
+                Ok(output) => Err(format!(
+                    "building {} failed (it needs crates.io once): {}",
+                    manifest.display(),
+                    String::from_utf8_lossy(&output.stderr).trim()
+                )),
+                Err(error) => Err(format!("no cargo to build {}: {error}", manifest.display())),
+            }
+        })
+        .clone()
+}
+
+/// Runs the peer's `args` to the end and returns its JSON lines.
+fn peer_lines(peer: &std::path::Path, router: &str, domain: u32, args: &[&str]) -> Vec<Value> {
+    let child = Command::new(peer)
+        .args(["--router", router, "--domain", &domain.to_string()])
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start rmw-zenoh-peer");
+    let output = scout_system_tests::wait_output(child, Duration::from_secs(30));
+    assert!(
+        output.status.success(),
+        "rmw-zenoh-peer {args:?}: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    String::from_utf8_lossy(&output.stdout)
+        .lines()
+        .map(|line| serde_json::from_str(line).expect("a JSON line"))
+        .collect()
+}
+
+#[test]
+fn an_independent_rmw_zenoh_node_reads_odometry_and_drives_through_the_arbiter() {
+    let test = "independent_rmw_zenoh_node";
+    let peer = match rmw_zenoh_peer() {
+        Ok(peer) => peer,
+        Err(why) => {
+            assert!(
+                std::env::var_os("SCOUT_REQUIRE_ROS2_STANDIN").is_none(),
+                "{test}: {why}"
+            );
+            return skip(test, &why);
+        }
+    };
+    let name = robot_name("ros2-peer");
+    let domain = std::process::id() % 200 + 1;
+    let mut sim = Sim::start(&["--serial"]);
+    let device = sim.port().to_owned();
+    let _gateway = Gateway::start(&["--serial", &device, "--name", &name]);
+    connect(&name);
+    let (router, _router_process, router_settings) = rmw_zenohd(&name);
+    let started = Instant::now();
+    let _bridge = Bridge::start(&[
+        "ros2",
+        "--name",
+        &name,
+        "--connect",
+        &router,
+        "--domain",
+        &domain.to_string(),
+    ]);
+
+    // The peer's graph cache (built from the liveliness tokens) shows the node and its ends.
+    let graph = peer_lines(&peer, &router, domain, &["graph", "--node", "/scout"]);
+    assert!(
+        graph[0]["nodes"].to_string().contains("/scout"),
+        "{graph:?}"
+    );
+
+    // Odometry as the peer's own CDR decodes it: the frames, a unit quaternion, rising
+    // sequence numbers from one publisher.
+    let odometry = peer_lines(&peer, &router, domain, &["echo-odom", "--count", "10"]);
+    assert_eq!(odometry.len(), 10);
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .expect("clock")
+        .as_secs_f64();
+    for sample in &odometry {
+        assert_eq!(sample["frame_id"], "odom", "{sample}");
+        assert_eq!(sample["child_frame_id"], "base_link", "{sample}");
+        assert_eq!(sample["gid"], odometry[0]["gid"], "{sample}");
+        let norm = sample["orientation_norm"].as_f64().expect("norm");
+        assert!((norm - 1.0).abs() < 1e-9, "{sample}");
+        let stamp = sample["stamp"].as_f64().expect("stamp");
+        assert!((now - stamp).abs() < 10.0, "stamp {stamp} vs now {now}");
+    }
+    assert_ne!(odometry[0]["gid"], "00000000000000000000000000000000");
+    let sequences: Vec<i64> = odometry
+        .iter()
+        .map(|s| s["sequence"].as_i64().expect("sequence"))
+        .collect();
+    assert!(sequences.windows(2).all(|w| w[1] > w[0]), "{sequences:?}");
+
+    // Its cmd_vel drives as autonomy once armed; its silence stops the robot.
+    std::thread::sleep(BLOCKED_PAUSE.saturating_sub(started.elapsed()));
+    ok(&["resume", "--name", &name]);
+    let drive = |seconds: &str| {
+        let mut command = Command::new(&peer);
+        command
+            .args(["--router", &router, "--domain", &domain.to_string()])
+            .args(["drive", "--linear", "0.5", "--seconds", seconds])
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null());
+        Background::spawn(command)
+    };
+    let mut first = drive("3");
+    moving(&mut sim, LIMIT);
+    let moving_odometry = peer_lines(&peer, &router, domain, &["echo-odom", "--count", "3"]);
+    assert!(
+        moving_odometry[2]["linear"].as_f64() > Some(0.2),
+        "{moving_odometry:?}"
+    );
+    assert_eq!(first.wait_exit(LIMIT), Some(0));
+    comes_to_rest(&mut sim, LIMIT);
+
+    // A stream that goes on across a stop, its release and the resume never moves the robot.
+    std::thread::sleep(BLOCKED_PAUSE);
+    let _streaming = drive("60");
+    moving(&mut sim, LIMIT);
+    ok(&["estop", "--name", &name]);
+    comes_to_rest(&mut sim, LIMIT);
+    ok(&["release", "--name", &name]);
+    ok(&["resume", "--name", &name]);
+    chassis_stays_still(&mut sim, Duration::from_millis(1500));
+    let _ = std::fs::remove_file(&router_settings);
 }

@@ -357,6 +357,25 @@ fn graph_topics_and_driving(
     node.ask(json!({"cmd": "quiet"}));
     comes_to_rest(&mut sim, LIMIT);
 
+    // A node publishing another type on cmd_vel (a TwistWithCovariance, whose first 48 bytes
+    // are a Twist) moves nothing. Fast DDS matches endpoints by type name as well as topic, so
+    // none of its samples reaches the bridge (RustDDS, matching by topic alone, would hand them
+    // over: the bridge then refuses a sample longer than its type, see `dds_node::Whole`).
+    std::thread::sleep(BLOCKED_PAUSE);
+    let before = node.counters();
+    let answer = node.ask(json!({"cmd": "publish", "linear": 0.5, "angular": 0.0,
+                                 "stamped": stamped, "wrong_type": true}));
+    assert_eq!(answer["publishing"], true, "{answer}");
+    chassis_stays_still(&mut sim, Duration::from_millis(1500));
+    let after = node.counters();
+    assert_eq!(
+        counter(&after, "cmd_vel_accepted"),
+        counter(&before, "cmd_vel_accepted"),
+        "{before} -> {after}"
+    );
+    node.ask(json!({"cmd": "quiet"}));
+    std::thread::sleep(BLOCKED_PAUSE);
+
     // A new stream drives; `scout estop` stops it; the stream goes on through the release and
     // the resume and never restarts the robot.
     node.publish(0.5, stamped);

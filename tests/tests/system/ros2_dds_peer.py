@@ -12,7 +12,8 @@ each with one JSON line on standard output:
       that many messages, deserialized by rclpy, summarised
   {"cmd": "publish", "topic": "/cmd_vel", "stamped": false, "linear": 0.5, "angular": 0.0,
    "rate": 20}
-      starts publishing a Twist (or TwistStamped) at that rate, until "quiet"
+      starts publishing a Twist (or TwistStamped) at that rate, until "quiet"; with
+      "wrong_type": true a TwistWithCovariance on the same topic (a misconfigured node)
   {"cmd": "quiet"}
       stops publishing
   {"cmd": "call", "service": "/scout/estop"}
@@ -30,7 +31,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import Twist, TwistStamped
+from geometry_msgs.msg import Twist, TwistStamped, TwistWithCovariance
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import BatteryState, JointState
 from std_srvs.srv import Trigger
@@ -130,16 +131,17 @@ class Peer:
     def publish(self, command):
         self.quiet(None)
         stamped = command.get("stamped", False)
-        message_type = TwistStamped if stamped else Twist
+        wrong_type = command.get("wrong_type", False)
+        message_type = TwistWithCovariance if wrong_type else TwistStamped if stamped else Twist
         self.publisher = self.node.create_publisher(message_type, command.get("topic", "/cmd_vel"), 10)
         linear, angular = command["linear"], command["angular"]
 
         def tick():
             message = message_type()
-            twist = message.twist if stamped else message
+            twist = message.twist if stamped or wrong_type else message
             twist.linear.x = float(linear)
             twist.angular.z = float(angular)
-            if stamped:
+            if stamped and not wrong_type:
                 message.header.stamp = self.node.get_clock().now().to_msg()
                 message.header.frame_id = "base_link"
             self.publisher.publish(message)
