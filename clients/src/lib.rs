@@ -2,7 +2,7 @@
 //!
 //! - [`client`]: connect to a robot by name; subscribe to its state.
 //! - [`control`]: drive, stop, release, resume, lights, fault clear; the arbiter's status.
-//! - [`remote`]: reading gateways through zenoh.
+//! - [`remote`]: reading gateways through zenoh (feature `remote`, on by default).
 //! - [`echo`]: `scout echo`, the state on a terminal or as JSON lines.
 //! - [`decode`]: candump text and serial hex to decoded frames (`scout decode`).
 //!
@@ -13,6 +13,7 @@ pub mod client;
 pub mod control;
 pub mod decode;
 pub mod echo;
+#[cfg(feature = "remote")]
 pub mod remote;
 
 pub use scout_interface as interface;

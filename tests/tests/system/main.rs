@@ -6,6 +6,7 @@ mod bench;
 mod decode;
 mod examples;
 mod gateway;
+mod python;
 mod remote;
 mod ros2;
 mod ros2_dds;

@@ -1,0 +1,714 @@
+//! The native half of the Python package `scout` (`scout._scout`): the Rust client library
+//! behind a small, GIL-free surface. iceoryx2 ports belong to the thread that made them, so each
+//! `Robot` runs two threads of its own: a reader that takes every state from shared memory into a
+//! bounded queue, and an actor that owns the connection, the controllers and the stoppers and
+//! runs each request Python makes. Python only ever waits on a queue or a reply channel, with the
+//! GIL released and Ctrl-C checked every [`SLICE`]. The Python half (`python/scout`) gives it its
+//! public shape: `State`, context managers, exceptions, asyncio.
+
+use std::collections::{HashMap, VecDeque};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender, SyncSender};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+use serde_json::Value;
+
+use scout_clients::client::{ClientError, Robot};
+use scout_clients::control::{ControlError, Controller, Lights, StatusReader, Stopper};
+use scout_clients::interface::LAYOUT_VERSION;
+use scout_clients::interface::json::{state_json, status_json};
+use scout_clients::interface::services::ServiceError;
+use scout_clients::{Accepted, Class, ReleaseTarget, StatePayload, StatusPayload, monotonic_ns};
+use scout_protocol::FaultClear;
+use scout_protocol::message::{Light, LightCommand, LightMode};
+
+/// How long a wait holds off Ctrl-C at most.
+const SLICE: Duration = Duration::from_millis(50);
+/// How long `connect` waits for the gateway's newest state.
+const FIRST_STATE: Duration = Duration::from_millis(500);
+/// States kept for a reader that falls behind (5 s at 50 Hz); older ones are dropped and counted.
+const QUEUE: usize = 256;
+
+/// Why a call failed, carried from the worker threads to Python's exceptions (`scout._errors`).
+#[derive(Debug, Clone)]
+enum Failure {
+    NoGateway(String),
+    Version(String),
+    NoAnswer(String),
+    Rejected {
+        message: String,
+        reason: String,
+        cause: String,
+    },
+    Other(String),
+}
+
+impl From<ClientError> for Failure {
+    fn from(error: ClientError) -> Self {
+        match &error {
+            ClientError::Service(ServiceError::NoGateway { .. }) => {
+                Failure::NoGateway(error.to_string())
+            }
+            ClientError::Service(ServiceError::Incompatible { .. }) => {
+                Failure::Version(error.to_string())
+            }
+            _ => Failure::Other(error.to_string()),
+        }
+    }
+}
+
+impl From<ControlError> for Failure {
+    fn from(error: ControlError) -> Self {
+        match error {
+            ControlError::Rejected(rejected) => Failure::Rejected {
+                message: format!("rejected: {rejected}"),
+                cause: rejected
+                    .kind
+                    .map_or("unknown", |kind| kind.name())
+                    .to_owned(),
+                reason: rejected.reason,
+            },
+            ControlError::NoAnswer { .. } => Failure::NoAnswer(error.to_string()),
+            ControlError::Client(client) => client.into(),
+            ControlError::Request(_) | ControlError::Stop(_) => Failure::Other(error.to_string()),
+        }
+    }
+}
+
+impl Failure {
+    /// The Python exception (from `scout._errors`) saying this.
+    fn into_py(self, py: Python<'_>) -> PyErr {
+        let made = (|| -> PyResult<Bound<'_, PyAny>> {
+            let errors = py.import("scout._errors")?;
+            match self {
+                Failure::NoGateway(message) => errors.getattr("NoGatewayError")?.call1((message,)),
+                Failure::Version(message) => errors.getattr("VersionError")?.call1((message,)),
+                Failure::NoAnswer(message) => errors.getattr("NoAnswerError")?.call1((message,)),
+                Failure::Rejected {
+                    message,
+                    reason,
+                    cause,
+                } => errors.getattr("Rejected")?.call1((message, reason, cause)),
+                Failure::Other(message) => errors.getattr("ScoutError")?.call1((message,)),
+            }
+        })();
+        match made {
+            Ok(exception) => PyErr::from_value(exception),
+            Err(error) => error,
+        }
+    }
+}
+
+/// A JSON value of the documented schemas as Python objects (dicts, lists, numbers, strings).
+fn to_python<'py>(py: Python<'py>, value: &Value) -> PyResult<Bound<'py, PyAny>> {
+    Ok(match value {
+        Value::Null => py.None().into_bound(py),
+        Value::Bool(flag) => flag.into_pyobject(py)?.to_owned().into_any(),
+        Value::Number(number) => match (number.as_u64(), number.as_i64()) {
+            (Some(unsigned), _) => unsigned.into_pyobject(py)?.into_any(),
+            (None, Some(signed)) => signed.into_pyobject(py)?.into_any(),
+            (None, None) => number
+                .as_f64()
+                .unwrap_or(f64::NAN)
+                .into_pyobject(py)?
+                .into_any(),
+        },
+        Value::String(text) => text.into_pyobject(py)?.into_any(),
+        Value::Array(items) => {
+            let list = PyList::empty(py);
+            for item in items {
+                list.append(to_python(py, item)?)?;
+            }
+            list.into_any()
+        }
+        Value::Object(fields) => {
+            let dict = PyDict::new(py);
+            for (key, item) in fields {
+                dict.set_item(key, to_python(py, item)?)?;
+            }
+            dict.into_any()
+        }
+    })
+}
+
+fn answer_dict<'py>(py: Python<'py>, accepted: &Accepted) -> PyResult<Bound<'py, PyDict>> {
+    let dict = PyDict::new(py);
+    dict.set_item("clamped", accepted.clamped)?;
+    dict.set_item("lease", accepted.lease)?;
+    dict.set_item("stop", accepted.stop)?;
+    Ok(dict)
+}
+
+/// Waits for `receiver`'s one reply with the GIL released, checking for Ctrl-C between slices.
+fn wait_reply<T: Send>(py: Python<'_>, mut receiver: Receiver<T>) -> PyResult<T> {
+    loop {
+        let (returned, reply) = py.detach(move || {
+            let reply = receiver.recv_timeout(SLICE);
+            (receiver, reply)
+        });
+        receiver = returned;
+        match reply {
+            Ok(reply) => return Ok(reply),
+            Err(RecvTimeoutError::Timeout) => py.check_signals()?,
+            Err(RecvTimeoutError::Disconnected) => {
+                return Err(Failure::Other("the robot's worker thread is gone".into()).into_py(py));
+            }
+        }
+    }
+}
+
+/// The states the reader thread took, oldest first, and how the reader ended.
+#[derive(Debug, Default)]
+struct Queue {
+    states: VecDeque<StatePayload>,
+    dropped: u64,
+    ended: Option<Failure>,
+}
+
+#[derive(Debug, Default)]
+struct StateQueue {
+    queue: Mutex<Queue>,
+    ready: Condvar,
+}
+
+impl StateQueue {
+    fn lock(&self) -> MutexGuard<'_, Queue> {
+        self.queue
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner())
+    }
+
+    fn push(&self, state: StatePayload) {
+        let mut queue = self.lock();
+        if queue.states.len() == QUEUE {
+            queue.states.pop_front();
+            queue.dropped += 1;
+        }
+        queue.states.push_back(state);
+        self.ready.notify_all();
+    }
+
+    fn end(&self, failure: Failure) {
+        self.lock().ended = Some(failure);
+        self.ready.notify_all();
+    }
+}
+
+/// The reader thread: every state, in order, into the queue until `halt`.
+fn read_states(
+    name: String,
+    queue: Arc<StateQueue>,
+    halt: Arc<AtomicBool>,
+    connected: SyncSender<Result<(), Failure>>,
+) {
+    let subscriber = match Robot::connect(&name).and_then(|robot| Ok((robot.subscribe()?, robot))) {
+        Ok(subscriber) => {
+            let _ = connected.send(Ok(()));
+            subscriber
+        }
+        Err(error) => {
+            let _ = connected.send(Err(error.into()));
+            return;
+        }
+    };
+    let (subscriber, _robot) = subscriber;
+    while !halt.load(Ordering::Relaxed) {
+        match subscriber.next_timeout(Duration::from_millis(100)) {
+            Ok(Some(state)) => queue.push(state),
+            Ok(None) => {}
+            Err(error) => {
+                queue.end(error.into());
+                return;
+            }
+        }
+    }
+}
+
+/// What the actor thread owns: the connection, and the controllers and stoppers by id.
+struct Actor {
+    robot: Robot,
+    /// Opened with the connection, so the newest status is there when asked for.
+    status: StatusReader,
+    last_status: Option<StatusPayload>,
+    controllers: HashMap<u64, Controller>,
+    stoppers: HashMap<u64, Stopper>,
+    next_id: u64,
+}
+
+type Job = Box<dyn FnOnce(&mut Actor) + Send>;
+
+fn act(name: String, jobs: Receiver<Job>, connected: SyncSender<Result<(), Failure>>) {
+    let (robot, status) = match Robot::connect(&name).and_then(|robot| Ok((robot.status()?, robot)))
+    {
+        Ok((status, robot)) => {
+            let _ = connected.send(Ok(()));
+            (robot, status)
+        }
+        Err(error) => {
+            let _ = connected.send(Err(error.into()));
+            return;
+        }
+    };
+    let mut actor = Actor {
+        robot,
+        status,
+        last_status: None,
+        controllers: HashMap::new(),
+        stoppers: HashMap::new(),
+        next_id: 0,
+    };
+    for job in jobs {
+        job(&mut actor);
+    }
+}
+
+/// Runs `work` on the actor thread and waits for its result.
+fn on_actor<T: Send + 'static>(
+    py: Python<'_>,
+    jobs: &Sender<Job>,
+    work: impl FnOnce(&mut Actor) -> Result<T, Failure> + Send + 'static,
+) -> PyResult<T> {
+    let (reply, replied) = mpsc::sync_channel(1);
+    jobs.send(Box::new(move |actor| {
+        let _ = reply.send(work(actor));
+    }))
+    .map_err(|_| Failure::Other("the robot's worker thread is gone".into()).into_py(py))?;
+    wait_reply(py, replied)?.map_err(|failure| failure.into_py(py))
+}
+
+fn parse_class(class: &str) -> PyResult<Class> {
+    Class::ALL
+        .iter()
+        .copied()
+        .find(|known| known.name() == class)
+        .ok_or_else(|| PyValueError::new_err(format!("no class {class:?}: teleop or autonomy")))
+}
+
+fn parse_light(light: &str) -> PyResult<Light> {
+    let (mode, brightness) = light.split_once(':').unwrap_or((light, "100"));
+    let mode = LightMode::from_name(mode).ok_or_else(|| {
+        PyValueError::new_err(format!("no light mode {mode:?}: off, on, breath or custom"))
+    })?;
+    let brightness = brightness
+        .parse::<u8>()
+        .ok()
+        .filter(|value| *value <= 100)
+        .ok_or_else(|| PyValueError::new_err(format!("brightness {brightness:?}: 0 to 100")))?;
+    Ok(Light { mode, brightness })
+}
+
+/// One robot: its state queue, its reader thread and its actor thread.
+#[pyclass(module = "scout._scout")]
+#[derive(Debug)]
+struct NativeRobot {
+    name: String,
+    queue: Arc<StateQueue>,
+    halt: Arc<AtomicBool>,
+    reader: Option<JoinHandle<()>>,
+    jobs: Option<Sender<Job>>,
+    last: Option<StatePayload>,
+}
+
+impl NativeRobot {
+    fn jobs(&self) -> &Sender<Job> {
+        self.jobs.as_ref().expect("jobs until dropped")
+    }
+
+    /// `(published_ns, fields)`: when the gateway published it (CLOCK_MONOTONIC, as Python's
+    /// `time.monotonic_ns()`), and the `scout echo --json` fields.
+    fn state_dict<'py>(py: Python<'py>, state: &StatePayload) -> PyResult<Bound<'py, PyAny>> {
+        let fields = to_python(py, &state_json(state, monotonic_ns()))?;
+        Ok((state.published_ns, fields).into_pyobject(py)?.into_any())
+    }
+}
+
+impl Drop for NativeRobot {
+    /// Stops the reader (within its 100 ms wait). The actor ends by itself when the robot and
+    /// every controller and stopper made from it are gone (they hold its inbox).
+    fn drop(&mut self) {
+        self.halt.store(true, Ordering::Relaxed);
+        self.jobs = None;
+        if let Some(reader) = self.reader.take() {
+            let _ = reader.join();
+        }
+    }
+}
+
+#[pymethods]
+impl NativeRobot {
+    /// Connects to the gateway serving robot `name` (raises `NoGatewayError`, `VersionError`).
+    #[new]
+    fn new(py: Python<'_>, name: String) -> PyResult<Self> {
+        let queue = Arc::new(StateQueue::default());
+        let halt = Arc::new(AtomicBool::new(false));
+        let (connected, reader_connected) = mpsc::sync_channel(1);
+        let reader = std::thread::Builder::new()
+            .name(format!("scout-{name}-states"))
+            .spawn({
+                let (name, queue, halt) = (name.clone(), Arc::clone(&queue), Arc::clone(&halt));
+                move || read_states(name, queue, halt, connected)
+            })
+            .map_err(|error| Failure::Other(format!("starting a thread: {error}")).into_py(py))?;
+        let (jobs, inbox) = mpsc::channel::<Job>();
+        let (connected, actor_connected) = mpsc::sync_channel(1);
+        std::thread::Builder::new()
+            .name(format!("scout-{name}-control"))
+            .spawn({
+                let name = name.clone();
+                move || act(name, inbox, connected)
+            })
+            .map_err(|error| Failure::Other(format!("starting a thread: {error}")).into_py(py))?;
+        let mut robot = NativeRobot {
+            name,
+            queue,
+            halt,
+            reader: Some(reader),
+            jobs: Some(jobs),
+            last: None,
+        };
+        for connected in [reader_connected, actor_connected] {
+            if let Err(failure) = wait_reply(py, connected)? {
+                robot.halt.store(true, Ordering::Relaxed);
+                return Err(failure.into_py(py));
+            }
+        }
+        // The gateway's newest state reaches a new subscriber at once: wait for it briefly, so
+        // `latest()` has it (it stays queued for `next()` too).
+        let queue = Arc::clone(&robot.queue);
+        robot.last = py.detach(move || {
+            let guard = queue.lock();
+            let (guard, _) = queue
+                .ready
+                .wait_timeout_while(guard, FIRST_STATE, |queue| {
+                    queue.states.is_empty() && queue.ended.is_none()
+                })
+                .unwrap_or_else(|poisoned| poisoned.into_inner());
+            guard.states.back().copied()
+        });
+        Ok(robot)
+    }
+
+    /// The robot's name.
+    #[getter]
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// States dropped because they were not read in time (more than 256 behind).
+    #[getter]
+    fn dropped(&self) -> u64 {
+        self.queue.lock().dropped
+    }
+
+    /// The newest state (a dict of the `scout echo --json` schema), or None before the first.
+    /// Skips the ones not read.
+    fn latest<'py>(&mut self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {
+        {
+            let mut queue = self.queue.lock();
+            if let Some(newest) = queue.states.back().copied() {
+                queue.states.clear();
+                self.last = Some(newest);
+            }
+        }
+        self.last
+            .as_ref()
+            .map(|state| Self::state_dict(py, state))
+            .transpose()
+    }
+
+    /// The next state in order, waiting at most `timeout` seconds; None when none came.
+    fn next<'py>(&mut self, py: Python<'py>, timeout: f64) -> PyResult<Option<Bound<'py, PyAny>>> {
+        let timeout = Duration::try_from_secs_f64(timeout)
+            .map_err(|_| PyValueError::new_err("timeout: a number of seconds, 0 or more"))?;
+        let deadline = Instant::now() + timeout;
+        loop {
+            let queue = Arc::clone(&self.queue);
+            let left = deadline.saturating_duration_since(Instant::now());
+            let taken = py.detach(move || {
+                let mut guard = queue.lock();
+                if guard.states.is_empty() && guard.ended.is_none() && !left.is_zero() {
+                    guard = queue
+                        .ready
+                        .wait_timeout(guard, left.min(SLICE))
+                        .unwrap_or_else(|poisoned| poisoned.into_inner())
+                        .0;
+                }
+                (guard.states.pop_front(), guard.ended.clone())
+            });
+            match taken {
+                (Some(state), _) => {
+                    self.last = Some(state);
+                    return Self::state_dict(py, &state).map(Some);
+                }
+                (None, Some(failure)) => return Err(failure.into_py(py)),
+                (None, None) if Instant::now() >= deadline => return Ok(None),
+                (None, None) => py.check_signals()?,
+            }
+        }
+    }
+
+    /// The arbiter's status (a dict of the `scout status --json` schema), waiting at most
+    /// `timeout` seconds for one.
+    fn status<'py>(&self, py: Python<'py>, timeout: f64) -> PyResult<Bound<'py, PyAny>> {
+        let timeout = Duration::try_from_secs_f64(timeout)
+            .map_err(|_| PyValueError::new_err("timeout: a number of seconds, 0 or more"))?;
+        let name = self.name.clone();
+        let status = on_actor(py, self.jobs(), move |actor| {
+            let wait = if actor.last_status.is_some() {
+                Duration::ZERO
+            } else {
+                timeout
+            };
+            if let Some(newest) = actor.status.latest(wait).map_err(Failure::from)? {
+                actor.last_status = Some(newest);
+            }
+            actor.last_status.ok_or_else(|| {
+                Failure::NoAnswer(format!(
+                    "gateway '{name}' published no status within {timeout:?}: is it running \
+                         (not stopped)?"
+                ))
+            })
+        })?;
+        to_python(py, &status_json(&status, monotonic_ns()))
+    }
+
+    /// A controller named `name`, driving as `class` ("teleop", "autonomy") or not at all.
+    #[pyo3(signature = (name, class_=None))]
+    fn controller(
+        &self,
+        py: Python<'_>,
+        name: String,
+        class_: Option<&str>,
+    ) -> PyResult<NativeController> {
+        let class = class_.map(parse_class).transpose()?;
+        let id = on_actor(py, self.jobs(), move |actor| {
+            let controller = actor
+                .robot
+                .controller(&name, class)
+                .map_err(Failure::from)?;
+            actor.next_id += 1;
+            actor.controllers.insert(actor.next_id, controller);
+            Ok(actor.next_id)
+        })?;
+        Ok(NativeController {
+            jobs: self.jobs().clone(),
+            id,
+        })
+    }
+
+    /// A client named `name` that only stops and releases.
+    fn stopper(&self, py: Python<'_>, name: String) -> PyResult<NativeStopper> {
+        let id = on_actor(py, self.jobs(), move |actor| {
+            let stopper = actor.robot.stopper(&name).map_err(Failure::from)?;
+            actor.next_id += 1;
+            actor.stoppers.insert(actor.next_id, stopper);
+            Ok(actor.next_id)
+        })?;
+        Ok(NativeStopper {
+            jobs: self.jobs().clone(),
+            id,
+        })
+    }
+
+    /// Stops the threads (also done when the object goes).
+    fn close(&mut self) {
+        self.halt.store(true, Ordering::Relaxed);
+    }
+}
+
+/// A named client of the arbiter, living on its robot's actor thread.
+#[pyclass(module = "scout._scout")]
+#[derive(Debug)]
+struct NativeController {
+    jobs: Sender<Job>,
+    id: u64,
+}
+
+impl NativeController {
+    fn call<'py>(
+        &self,
+        py: Python<'py>,
+        request: impl FnOnce(&mut Controller) -> Result<Accepted, ControlError> + Send + 'static,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let id = self.id;
+        let accepted = on_actor(py, &self.jobs, move |actor| {
+            let controller = actor
+                .controllers
+                .get_mut(&id)
+                .ok_or_else(|| Failure::Other("this controller was closed".into()))?;
+            request(controller).map_err(Failure::from)
+        })?;
+        answer_dict(py, &accepted)
+    }
+}
+
+fn release_target(own: bool, owner: Option<String>) -> ReleaseTarget {
+    match (owner, own) {
+        (Some(owner), _) => ReleaseTarget::Owner(owner),
+        (None, true) => ReleaseTarget::Own,
+        (None, false) => ReleaseTarget::All,
+    }
+}
+
+#[pymethods]
+impl NativeController {
+    fn take_control<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        self.call(py, Controller::take_control)
+    }
+
+    fn drive<'py>(
+        &self,
+        py: Python<'py>,
+        linear: f64,
+        angular: f64,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        self.call(py, move |controller| controller.drive(linear, angular))
+    }
+
+    fn heartbeat<'py>(&self, py: Python<'py>, period: f64) -> PyResult<Bound<'py, PyDict>> {
+        let period = Duration::try_from_secs_f64(period)
+            .map_err(|_| PyValueError::new_err("period: a number of seconds, 0 or more"))?;
+        self.call(py, move |controller| controller.heartbeat(period))
+    }
+
+    fn resume<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        self.call(py, Controller::resume)
+    }
+
+    fn relinquish<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        self.call(py, Controller::relinquish)
+    }
+
+    fn stop<'py>(&self, py: Python<'py>, reason: String) -> PyResult<Bound<'py, PyDict>> {
+        self.call(py, move |controller| controller.stop(&reason))
+    }
+
+    #[pyo3(signature = (through, own=true, owner=None))]
+    fn release<'py>(
+        &self,
+        py: Python<'py>,
+        through: u64,
+        own: bool,
+        owner: Option<String>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let target = release_target(own, owner);
+        self.call(py, move |controller| controller.release(target, through))
+    }
+
+    /// `auto`, or the front and rear lights as `MODE[:BRIGHTNESS]` (as `scout lights`).
+    #[pyo3(signature = (auto, front="off", rear="off"))]
+    fn lights<'py>(
+        &self,
+        py: Python<'py>,
+        auto: bool,
+        front: &str,
+        rear: &str,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let lights = if auto {
+            Lights::Auto
+        } else {
+            Lights::Manual(LightCommand {
+                enabled: true,
+                front: parse_light(front)?,
+                rear: parse_light(rear)?,
+            })
+        };
+        self.call(py, move |controller| controller.lights(lights))
+    }
+
+    #[pyo3(signature = (code=None))]
+    fn clear_fault<'py>(
+        &self,
+        py: Python<'py>,
+        code: Option<&str>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let code = code
+            .map(|name| {
+                FaultClear::from_name(name)
+                    .ok_or_else(|| PyValueError::new_err(format!("no fault-clear code {name:?}")))
+            })
+            .transpose()?;
+        self.call(py, move |controller| controller.clear_fault(code))
+    }
+
+    fn reset_odometry<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        self.call(py, Controller::reset_odometry)
+    }
+
+    /// The lease it holds, if it took control and has not lost it.
+    #[getter]
+    fn lease(&self, py: Python<'_>) -> PyResult<Option<u64>> {
+        let id = self.id;
+        on_actor(py, &self.jobs, move |actor| {
+            Ok(actor.controllers.get(&id).and_then(Controller::lease))
+        })
+    }
+
+    /// Forgets the controller (its client slot frees when the gateway sees it gone).
+    fn close(&self, py: Python<'_>) -> PyResult<()> {
+        let id = self.id;
+        on_actor(py, &self.jobs, move |actor| {
+            actor.controllers.remove(&id);
+            Ok(())
+        })
+    }
+}
+
+/// A client that only stops and releases, living on its robot's actor thread.
+#[pyclass(module = "scout._scout")]
+#[derive(Debug)]
+struct NativeStopper {
+    jobs: Sender<Job>,
+    id: u64,
+}
+
+impl NativeStopper {
+    fn call<'py>(
+        &self,
+        py: Python<'py>,
+        request: impl FnOnce(&mut Stopper) -> Result<Accepted, ControlError> + Send + 'static,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let id = self.id;
+        let accepted = on_actor(py, &self.jobs, move |actor| {
+            let stopper = actor
+                .stoppers
+                .get_mut(&id)
+                .ok_or_else(|| Failure::Other("this stopper was closed".into()))?;
+            request(stopper).map_err(Failure::from)
+        })?;
+        answer_dict(py, &accepted)
+    }
+}
+
+#[pymethods]
+impl NativeStopper {
+    fn stop<'py>(&self, py: Python<'py>, reason: String) -> PyResult<Bound<'py, PyDict>> {
+        self.call(py, move |stopper| stopper.stop(&reason))
+    }
+
+    #[pyo3(signature = (through, own=true, owner=None))]
+    fn release<'py>(
+        &self,
+        py: Python<'py>,
+        through: u64,
+        own: bool,
+        owner: Option<String>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let target = release_target(own, owner);
+        self.call(py, move |stopper| stopper.release(target, through))
+    }
+}
+
+#[pymodule]
+fn _scout(module: &Bound<'_, PyModule>) -> PyResult<()> {
+    module.add_class::<NativeRobot>()?;
+    module.add_class::<NativeController>()?;
+    module.add_class::<NativeStopper>()?;
+    module.add("LAYOUT_VERSION", LAYOUT_VERSION)?;
+    Ok(())
+}

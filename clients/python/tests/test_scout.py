@@ -1,0 +1,273 @@
+"""The package against real `scout-gateway --sim` processes: every API point, and the safety
+rules as a Python user meets them."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from typing import Any, Dict, List
+
+import pytest
+
+import scout
+from conftest import Gateway, robot_name, scout_cli, until
+
+
+def keys(value: Any) -> Any:
+    """The shape of a JSON value: its keys, recursively (lists by their first element)."""
+    if isinstance(value, dict):
+        return {key: keys(item) for key, item in value.items()}
+    if isinstance(value, list):
+        return [keys(value[0])] if value else []
+    return type(value).__name__ if value is not None else None
+
+
+def test_no_gateway_error_says_what_the_cli_says() -> None:
+    name = robot_name("nogateway")
+    with pytest.raises(scout.NoGatewayError) as raised:
+        scout.Robot.connect(name)
+    cli = scout_cli("status", "--name", name)
+    assert cli.returncode == 3
+    assert cli.stderr.strip() == f"scout: {raised.value}"
+    assert isinstance(raised.value, scout.ScoutError)
+
+
+def test_latest_and_next(robot: scout.Robot) -> None:
+    latest = robot.latest()
+    assert latest is not None, "the newest state is there at once"
+    first = robot.next(timeout=1.0)
+    second = robot.next(timeout=1.0)
+    assert second.seq == first.seq + 1
+    assert robot.latest() is not None
+    assert first.robot == robot.name
+    assert first.link.state == "ok"
+    assert first.system is not None and first.system.battery_voltage > 20.0
+    assert first.system.faults == []
+    assert len(first.motors) == 4
+    assert first.odometry.x == 0.0
+    assert first.command.linear == 0.0
+    assert "link=ok" in repr(first)
+
+
+def test_to_dict_is_the_scout_echo_json_schema(robot: scout.Robot) -> None:
+    cli = scout_cli("echo", "--name", robot.name, "--json", "--count", "1")
+    assert cli.returncode == 0, cli.stderr
+    echoed = json.loads(cli.stdout.splitlines()[0])
+    state = robot.next(timeout=1.0)
+    as_dict = state.to_dict()
+    assert keys(as_dict) == keys(echoed)
+    assert as_dict["seq"] == state.seq
+    assert as_dict["system"]["battery_voltage"] == state.system.battery_voltage  # type: ignore[union-attr]
+    assert as_dict["link"]["rx_frames"] == state.link.rx_frames
+    as_dict["seq"] = -1
+    assert state.to_dict()["seq"] == state.seq, "to_dict gives a copy"
+
+
+def test_a_thousand_states_in_order_with_no_gap(robot: scout.Robot) -> None:
+    seqs = [state.seq for state, _ in zip(robot.states(timeout=3.0), range(1000))]
+    gaps = [(a, b) for a, b in zip(seqs, seqs[1:]) if b != a + 1]
+    assert gaps == [], f"{len(gaps)} gaps, first {gaps[:3]}"
+    assert robot.dropped == 0
+
+
+def test_next_times_out(gateway: Gateway) -> None:
+    robot = gateway.connect()
+    gateway.process.send_signal(signal.SIGSTOP)
+    try:
+        robot.latest()
+        started = time.monotonic()
+        with pytest.raises(TimeoutError):
+            robot.next(timeout=0.3)
+        assert time.monotonic() - started < 2.0
+    finally:
+        gateway.process.send_signal(signal.SIGCONT)
+
+
+def test_states_async(robot: scout.Robot) -> None:
+    async def collect() -> List[int]:
+        seqs: List[int] = []
+        async for state in robot.states_async():
+            seqs.append(state.seq)
+            if len(seqs) == 20:
+                break
+        return seqs
+
+    seqs = asyncio.run(collect())
+    assert seqs == list(range(seqs[0], seqs[0] + 20))
+
+
+def test_teleop_drives_and_leaving_the_block_stops(robot: scout.Robot) -> None:
+    with robot.controller("pytest-teleop", scout.Class.TELEOP) as controller:
+        answer = controller.take_control()
+        assert answer.lease is not None and controller.lease == answer.lease
+        deadline = time.monotonic() + 5.0
+        while True:
+            answer = controller.drive(0.5, 0.0)
+            assert not answer.clamped
+            state = robot.next(timeout=1.0)
+            if state.motion is not None and state.motion.linear > 0.3:
+                break
+            assert time.monotonic() < deadline, "the chassis never moved"
+        assert controller.drive(50.0, 0.0).clamped
+    until(lambda: robot.next().command.linear == 0.0, 3.0, "zero on the wire")
+    until(lambda: abs(robot.next().motion.linear) < 0.01, 3.0, "the chassis at rest")  # type: ignore[union-attr]
+    status = robot.status()
+    assert status["selected"] is None, status
+
+
+def test_autonomy_before_resume_is_refused_with_the_reason(robot: scout.Robot) -> None:
+    with robot.controller("pytest-planner", "autonomy") as controller:
+        with pytest.raises(scout.Rejected) as raised:
+            controller.take_control()
+        assert raised.value.cause == "autonomy_disarmed"
+        assert "resume first" in raised.value.reason
+        assert str(raised.value) == f"rejected: {raised.value.reason}"
+        controller.resume()
+        assert controller.take_control().lease is not None
+
+
+def test_a_stop_latches_is_shown_and_released_by_its_owner(robot: scout.Robot) -> None:
+    stopper = robot.stopper("lidar-guard")
+    answer = stopper.stop("obstacle")
+    assert answer.stop is not None
+    status = robot.status()
+    assert status["latched"] is True
+    assert [(s["owner"], s["reason"]) for s in status["stops"]] == [("lidar-guard", "obstacle")]
+    with robot.controller("pytest-teleop", "teleop") as controller:
+        with pytest.raises(scout.Rejected) as raised:
+            controller.take_control()
+        assert raised.value.cause == "latched"
+        # It has no stop of its own to release, and is told whose stop holds the robot.
+        with pytest.raises(scout.Rejected) as refused:
+            controller.release(own=True)
+        assert "lidar-guard" in refused.value.reason
+        assert robot.status()["latched"] is True
+    stopper.release()
+    until(lambda: robot.status()["stops"] == [], 2.0, "the stop released")
+
+
+def test_heartbeat_missed_latches_a_stop(robot: scout.Robot) -> None:
+    with robot.controller("pytest-beat") as controller:
+        controller.heartbeat(0.3)
+        time.sleep(0.8)
+        status = robot.status()
+        assert [s["cause"] for s in status["stops"]] == ["heartbeat"], status
+        controller.heartbeat(0)
+        controller.release()
+
+
+def test_lights_fault_clear_and_odometry(robot: scout.Robot) -> None:
+    with robot.controller("pytest-lights") as controller:
+        assert not controller.lights(front="on", rear="breath:50").clamped
+
+        def front_on() -> bool:
+            lights = robot.next().lights
+            return lights is not None and lights.front.mode == "on"
+
+        until(front_on, 3.0, "the front light on (the chassis' feedback)")
+        controller.lights(auto=True)
+        controller.clear_fault()
+        controller.reset_odometry()
+        with pytest.raises(ValueError):
+            controller.lights(front="dazzle")
+
+
+DRIVER = textwrap.dedent(
+    """
+    import sys, scout
+    robot = scout.Robot.connect(sys.argv[1])
+    controller = robot.controller("doomed", "teleop")
+    controller.take_control()
+    while True:
+        controller.drive(0.5, 0.0)
+        state = robot.next()
+        if state.motion is not None and state.motion.linear > 0.3:
+            print("moving", flush=True)
+    """
+)
+
+
+def test_a_killed_python_driver_is_a_dead_client(robot: scout.Robot) -> None:
+    driver = subprocess.Popen(
+        [sys.executable, "-c", DRIVER, robot.name], stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert driver.stdout is not None
+        assert driver.stdout.readline().strip() == "moving"
+        driver.kill()
+        driver.wait(timeout=10)
+        until(lambda: robot.next().command.linear == 0.0, 2.0, "zero on the wire")
+        until(lambda: abs(robot.next().motion.linear) < 0.01, 3.0, "the chassis at rest")  # type: ignore[union-attr]
+    finally:
+        driver.kill()
+
+
+WAITER = textwrap.dedent(
+    """
+    import sys, scout
+    robot = scout.Robot.connect(sys.argv[1])
+    robot.latest()
+    print("waiting", flush=True)
+    try:
+        robot.next(timeout=60)
+    except KeyboardInterrupt:
+        print("interrupted", flush=True)
+    """
+)
+
+
+def test_ctrl_c_interrupts_a_blocking_call(gateway: Gateway) -> None:
+    gateway.connect().close()
+    waiter = subprocess.Popen(
+        [sys.executable, "-c", WAITER, gateway.name], stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert waiter.stdout is not None
+        assert waiter.stdout.readline().strip() == "waiting"
+        gateway.process.send_signal(signal.SIGSTOP)  # no state comes: next() blocks
+        time.sleep(0.3)
+        started = time.monotonic()
+        waiter.send_signal(signal.SIGINT)
+        assert waiter.stdout.readline().strip() == "interrupted"
+        assert waiter.wait(timeout=10) == 0
+        assert time.monotonic() - started < 2.0
+    finally:
+        gateway.process.send_signal(signal.SIGCONT)
+        waiter.kill()
+
+
+def test_blocking_calls_release_the_gil(robot: scout.Robot) -> None:
+    import threading
+
+    ticks: List[float] = []
+    done = threading.Event()
+
+    def count() -> None:
+        while not done.is_set():
+            ticks.append(time.monotonic())
+            time.sleep(0.001)
+
+    counter = threading.Thread(target=count)
+    counter.start()
+    try:
+        for _ in range(25):
+            robot.next(timeout=1.0)
+    finally:
+        done.set()
+        counter.join()
+    assert len(ticks) > 100, f"the other thread ran {len(ticks)} times in 0.5 s"
+
+
+def test_help_is_useful() -> None:
+    import pydoc
+
+    text = pydoc.plain(pydoc.render_doc(scout.Controller))
+    assert "take_control" in text and "a deliberate act" in text
+    assert "NoGatewayError" in pydoc.plain(pydoc.render_doc(scout.Robot))
+    assert scout.LAYOUT_VERSION >= 5
