@@ -1,27 +1,25 @@
 //! The native half of the Python package `scout` (`scout._scout`): the Rust client library
-//! behind a small, GIL-free surface. iceoryx2 ports belong to the thread that made them, so each
-//! `Robot` runs two threads of its own: a reader that takes every state from shared memory into a
-//! bounded queue, and an actor that owns the connection, the controllers and the stoppers and
-//! runs each request Python makes. Python only ever waits on a queue or a reply channel, with the
-//! GIL released and Ctrl-C checked every [`SLICE`]. The Python half (`python/scout`) gives it its
-//! public shape: `State`, context managers, exceptions, asyncio.
+//! behind a small, GIL-free surface. States are read from shared memory by the calling Python
+//! thread, which waits on the gateway's state event with the GIL released (the ports are
+//! thread-safe). Control runs on an actor thread per robot that owns the connection, the
+//! controllers and the stoppers; Python waits for its replies with the GIL released too. Every
+//! wait is sliced so Ctrl-C interrupts it within [`SLICE`]. The Python half (`python/scout`)
+//! gives it its public shape: `State`, context managers, exceptions, asyncio.
 
-use std::collections::{HashMap, VecDeque};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::collections::HashMap;
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender, SyncSender};
-use std::sync::{Arc, Condvar, Mutex, MutexGuard};
-use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use iceoryx2::port::listener::ListenerWaitError;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyList};
+use pyo3::types::{PyDict, PyList, PyString};
 use serde_json::Value;
 
-use scout_clients::client::{ClientError, Robot};
+use scout_clients::client::{ClientError, Robot, StateSubscriber};
 use scout_clients::control::{ControlError, Controller, Lights, StatusReader, Stopper};
 use scout_clients::interface::LAYOUT_VERSION;
-use scout_clients::interface::json::{state_json, status_json};
+use scout_clients::interface::json::{STATE_KEYS, state_field, state_json, status_json};
 use scout_clients::interface::services::ServiceError;
 use scout_clients::{Accepted, Class, ReleaseTarget, StatePayload, StatusPayload, monotonic_ns};
 use scout_protocol::FaultClear;
@@ -29,10 +27,6 @@ use scout_protocol::message::{Light, LightCommand, LightMode};
 
 /// How long a wait holds off Ctrl-C at most.
 const SLICE: Duration = Duration::from_millis(50);
-/// How long `connect` waits for the gateway's newest state.
-const FIRST_STATE: Duration = Duration::from_millis(500);
-/// States kept for a reader that falls behind (5 s at 50 Hz); older ones are dropped and counted.
-const QUEUE: usize = 256;
 
 /// Why a call failed, carried from the worker threads to Python's exceptions (`scout._errors`).
 #[derive(Debug, Clone)]
@@ -129,7 +123,8 @@ fn to_python<'py>(py: Python<'py>, value: &Value) -> PyResult<Bound<'py, PyAny>>
         Value::Object(fields) => {
             let dict = PyDict::new(py);
             for (key, item) in fields {
-                dict.set_item(key, to_python(py, item)?)?;
+                // Interned: the schema's few keys are made once per process, not per state.
+                dict.set_item(PyString::intern(py, key), to_python(py, item)?)?;
             }
             dict.into_any()
         }
@@ -157,73 +152,6 @@ fn wait_reply<T: Send>(py: Python<'_>, mut receiver: Receiver<T>) -> PyResult<T>
             Err(RecvTimeoutError::Timeout) => py.check_signals()?,
             Err(RecvTimeoutError::Disconnected) => {
                 return Err(Failure::Other("the robot's worker thread is gone".into()).into_py(py));
-            }
-        }
-    }
-}
-
-/// The states the reader thread took, oldest first, and how the reader ended.
-#[derive(Debug, Default)]
-struct Queue {
-    states: VecDeque<StatePayload>,
-    dropped: u64,
-    ended: Option<Failure>,
-}
-
-#[derive(Debug, Default)]
-struct StateQueue {
-    queue: Mutex<Queue>,
-    ready: Condvar,
-}
-
-impl StateQueue {
-    fn lock(&self) -> MutexGuard<'_, Queue> {
-        self.queue
-            .lock()
-            .unwrap_or_else(|poisoned| poisoned.into_inner())
-    }
-
-    fn push(&self, state: StatePayload) {
-        let mut queue = self.lock();
-        if queue.states.len() == QUEUE {
-            queue.states.pop_front();
-            queue.dropped += 1;
-        }
-        queue.states.push_back(state);
-        self.ready.notify_all();
-    }
-
-    fn end(&self, failure: Failure) {
-        self.lock().ended = Some(failure);
-        self.ready.notify_all();
-    }
-}
-
-/// The reader thread: every state, in order, into the queue until `halt`.
-fn read_states(
-    name: String,
-    queue: Arc<StateQueue>,
-    halt: Arc<AtomicBool>,
-    connected: SyncSender<Result<(), Failure>>,
-) {
-    let subscriber = match Robot::connect(&name).and_then(|robot| Ok((robot.subscribe()?, robot))) {
-        Ok(subscriber) => {
-            let _ = connected.send(Ok(()));
-            subscriber
-        }
-        Err(error) => {
-            let _ = connected.send(Err(error.into()));
-            return;
-        }
-    };
-    let (subscriber, _robot) = subscriber;
-    while !halt.load(Ordering::Relaxed) {
-        match subscriber.next_timeout(Duration::from_millis(100)) {
-            Ok(Some(state)) => queue.push(state),
-            Ok(None) => {}
-            Err(error) => {
-                queue.end(error.into());
-                return;
             }
         }
     }
@@ -302,40 +230,62 @@ fn parse_light(light: &str) -> PyResult<Light> {
     Ok(Light { mode, brightness })
 }
 
-/// One robot: its state queue, its reader thread and its actor thread.
+/// One robot: its state subscriber (read on the caller's thread) and its actor thread.
 #[pyclass(module = "scout._scout")]
 #[derive(Debug)]
 struct NativeRobot {
     name: String,
-    queue: Arc<StateQueue>,
-    halt: Arc<AtomicBool>,
-    reader: Option<JoinHandle<()>>,
-    jobs: Option<Sender<Job>>,
+    states: StateSubscriber,
+    /// The connection the subscriber belongs to, dropped after it.
+    _robot: Robot,
+    jobs: Sender<Job>,
     last: Option<StatePayload>,
 }
 
-impl NativeRobot {
-    fn jobs(&self) -> &Sender<Job> {
-        self.jobs.as_ref().expect("jobs until dropped")
-    }
+/// One state as read from shared memory: a copy of the gateway's payload, turned into the
+/// `scout echo --json` schema's fields only when asked for (each top-level field on its own).
+#[pyclass(module = "scout._scout", frozen)]
+#[derive(Debug)]
+struct StateView {
+    state: StatePayload,
+    /// When this process read it (CLOCK_MONOTONIC): the ages are as of then.
+    read_ns: u64,
+}
 
-    /// `(published_ns, fields)`: when the gateway published it (CLOCK_MONOTONIC, as Python's
-    /// `time.monotonic_ns()`), and the `scout echo --json` fields.
-    fn state_dict<'py>(py: Python<'py>, state: &StatePayload) -> PyResult<Bound<'py, PyAny>> {
-        let fields = to_python(py, &state_json(state, monotonic_ns()))?;
-        Ok((state.published_ns, fields).into_pyobject(py)?.into_any())
+impl StateView {
+    fn new(state: StatePayload) -> Self {
+        StateView {
+            state,
+            read_ns: monotonic_ns(),
+        }
     }
 }
 
-impl Drop for NativeRobot {
-    /// Stops the reader (within its 100 ms wait). The actor ends by itself when the robot and
-    /// every controller and stopper made from it are gone (they hold its inbox).
-    fn drop(&mut self) {
-        self.halt.store(true, Ordering::Relaxed);
-        self.jobs = None;
-        if let Some(reader) = self.reader.take() {
-            let _ = reader.join();
-        }
+#[pymethods]
+impl StateView {
+    /// When the gateway published it: CLOCK_MONOTONIC ns, as `time.monotonic_ns()`.
+    #[getter]
+    fn published_ns(&self) -> u64 {
+        self.state.published_ns
+    }
+
+    /// Its sequence number.
+    #[getter]
+    fn seq(&self) -> u64 {
+        self.state.seq
+    }
+
+    /// One top-level field of the `scout echo --json` schema (`link`, `system`, `motors`...).
+    fn field<'py>(&self, py: Python<'py>, key: &str) -> PyResult<Bound<'py, PyAny>> {
+        let value = state_field(&self.state, key, self.read_ns).ok_or_else(|| {
+            PyValueError::new_err(format!("the state has no field {key:?}: {STATE_KEYS:?}"))
+        })?;
+        to_python(py, &value)
+    }
+
+    /// The whole state as `scout echo --json` prints it.
+    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        to_python(py, &state_json(&self.state, self.read_ns))
     }
 }
 
@@ -344,16 +294,10 @@ impl NativeRobot {
     /// Connects to the gateway serving robot `name` (raises `NoGatewayError`, `VersionError`).
     #[new]
     fn new(py: Python<'_>, name: String) -> PyResult<Self> {
-        let queue = Arc::new(StateQueue::default());
-        let halt = Arc::new(AtomicBool::new(false));
-        let (connected, reader_connected) = mpsc::sync_channel(1);
-        let reader = std::thread::Builder::new()
-            .name(format!("scout-{name}-states"))
-            .spawn({
-                let (name, queue, halt) = (name.clone(), Arc::clone(&queue), Arc::clone(&halt));
-                move || read_states(name, queue, halt, connected)
-            })
-            .map_err(|error| Failure::Other(format!("starting a thread: {error}")).into_py(py))?;
+        let (robot, states) = py
+            .detach(|| Robot::connect(&name).and_then(|robot| Ok((robot.subscribe()?, robot))))
+            .map(|(states, robot)| (robot, states))
+            .map_err(|error| Failure::from(error).into_py(py))?;
         let (jobs, inbox) = mpsc::channel::<Job>();
         let (connected, actor_connected) = mpsc::sync_channel(1);
         std::thread::Builder::new()
@@ -363,34 +307,14 @@ impl NativeRobot {
                 move || act(name, inbox, connected)
             })
             .map_err(|error| Failure::Other(format!("starting a thread: {error}")).into_py(py))?;
-        let mut robot = NativeRobot {
+        wait_reply(py, actor_connected)?.map_err(|failure| failure.into_py(py))?;
+        Ok(NativeRobot {
             name,
-            queue,
-            halt,
-            reader: Some(reader),
-            jobs: Some(jobs),
+            states,
+            _robot: robot,
+            jobs,
             last: None,
-        };
-        for connected in [reader_connected, actor_connected] {
-            if let Err(failure) = wait_reply(py, connected)? {
-                robot.halt.store(true, Ordering::Relaxed);
-                return Err(failure.into_py(py));
-            }
-        }
-        // The gateway's newest state reaches a new subscriber at once: wait for it briefly, so
-        // `latest()` has it (it stays queued for `next()` too).
-        let queue = Arc::clone(&robot.queue);
-        robot.last = py.detach(move || {
-            let guard = queue.lock();
-            let (guard, _) = queue
-                .ready
-                .wait_timeout_while(guard, FIRST_STATE, |queue| {
-                    queue.states.is_empty() && queue.ended.is_none()
-                })
-                .unwrap_or_else(|poisoned| poisoned.into_inner());
-            guard.states.back().copied()
-        });
-        Ok(robot)
+        })
     }
 
     /// The robot's name.
@@ -399,55 +323,46 @@ impl NativeRobot {
         &self.name
     }
 
-    /// States dropped because they were not read in time (more than 256 behind).
-    #[getter]
-    fn dropped(&self) -> u64 {
-        self.queue.lock().dropped
-    }
-
     /// The newest state (a dict of the `scout echo --json` schema), or None before the first.
     /// Skips the ones not read.
-    fn latest<'py>(&mut self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {
+    fn latest<'py>(&mut self, py: Python<'py>) -> PyResult<Option<Bound<'py, StateView>>> {
+        if let Some(newest) = self
+            .states
+            .try_latest()
+            .map_err(|error| Failure::from(error).into_py(py))?
         {
-            let mut queue = self.queue.lock();
-            if let Some(newest) = queue.states.back().copied() {
-                queue.states.clear();
-                self.last = Some(newest);
-            }
+            self.last = Some(newest);
         }
         self.last
-            .as_ref()
-            .map(|state| Self::state_dict(py, state))
+            .map(|state| Bound::new(py, StateView::new(state)))
             .transpose()
     }
 
     /// The next state in order, waiting at most `timeout` seconds; None when none came.
-    fn next<'py>(&mut self, py: Python<'py>, timeout: f64) -> PyResult<Option<Bound<'py, PyAny>>> {
+    fn next<'py>(
+        &mut self,
+        py: Python<'py>,
+        timeout: f64,
+    ) -> PyResult<Option<Bound<'py, StateView>>> {
         let timeout = Duration::try_from_secs_f64(timeout)
             .map_err(|_| PyValueError::new_err("timeout: a number of seconds, 0 or more"))?;
         let deadline = Instant::now() + timeout;
         loop {
-            let queue = Arc::clone(&self.queue);
             let left = deadline.saturating_duration_since(Instant::now());
-            let taken = py.detach(move || {
-                let mut guard = queue.lock();
-                if guard.states.is_empty() && guard.ended.is_none() && !left.is_zero() {
-                    guard = queue
-                        .ready
-                        .wait_timeout(guard, left.min(SLICE))
-                        .unwrap_or_else(|poisoned| poisoned.into_inner())
-                        .0;
-                }
-                (guard.states.pop_front(), guard.ended.clone())
-            });
-            match taken {
-                (Some(state), _) => {
+            let states = &self.states;
+            let next = match py.detach(|| states.next_timeout(left.min(SLICE))) {
+                Ok(next) => next,
+                // A signal (Ctrl-C) woke the wait: Python's handler runs below.
+                Err(ClientError::Wait(ListenerWaitError::InterruptSignal)) => None,
+                Err(error) => return Err(Failure::from(error).into_py(py)),
+            };
+            match next {
+                Some(state) => {
                     self.last = Some(state);
-                    return Self::state_dict(py, &state).map(Some);
+                    return Bound::new(py, StateView::new(state)).map(Some);
                 }
-                (None, Some(failure)) => return Err(failure.into_py(py)),
-                (None, None) if Instant::now() >= deadline => return Ok(None),
-                (None, None) => py.check_signals()?,
+                None if Instant::now() >= deadline => return Ok(None),
+                None => py.check_signals()?,
             }
         }
     }
@@ -458,7 +373,7 @@ impl NativeRobot {
         let timeout = Duration::try_from_secs_f64(timeout)
             .map_err(|_| PyValueError::new_err("timeout: a number of seconds, 0 or more"))?;
         let name = self.name.clone();
-        let status = on_actor(py, self.jobs(), move |actor| {
+        let status = on_actor(py, &self.jobs, move |actor| {
             let wait = if actor.last_status.is_some() {
                 Duration::ZERO
             } else {
@@ -486,7 +401,7 @@ impl NativeRobot {
         class_: Option<&str>,
     ) -> PyResult<NativeController> {
         let class = class_.map(parse_class).transpose()?;
-        let id = on_actor(py, self.jobs(), move |actor| {
+        let id = on_actor(py, &self.jobs, move |actor| {
             let controller = actor
                 .robot
                 .controller(&name, class)
@@ -496,28 +411,23 @@ impl NativeRobot {
             Ok(actor.next_id)
         })?;
         Ok(NativeController {
-            jobs: self.jobs().clone(),
+            jobs: self.jobs.clone(),
             id,
         })
     }
 
     /// A client named `name` that only stops and releases.
     fn stopper(&self, py: Python<'_>, name: String) -> PyResult<NativeStopper> {
-        let id = on_actor(py, self.jobs(), move |actor| {
+        let id = on_actor(py, &self.jobs, move |actor| {
             let stopper = actor.robot.stopper(&name).map_err(Failure::from)?;
             actor.next_id += 1;
             actor.stoppers.insert(actor.next_id, stopper);
             Ok(actor.next_id)
         })?;
         Ok(NativeStopper {
-            jobs: self.jobs().clone(),
+            jobs: self.jobs.clone(),
             id,
         })
-    }
-
-    /// Stops the threads (also done when the object goes).
-    fn close(&mut self) {
-        self.halt.store(true, Ordering::Relaxed);
     }
 }
 
@@ -707,6 +617,7 @@ impl NativeStopper {
 #[pymodule]
 fn _scout(module: &Bound<'_, PyModule>) -> PyResult<()> {
     module.add_class::<NativeRobot>()?;
+    module.add_class::<StateView>()?;
     module.add_class::<NativeController>()?;
     module.add_class::<NativeStopper>()?;
     module.add("LAYOUT_VERSION", LAYOUT_VERSION)?;

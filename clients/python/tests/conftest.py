@@ -75,11 +75,7 @@ def gateway(request: pytest.FixtureRequest) -> Iterator[Gateway]:
 
 @pytest.fixture
 def robot(gateway: Gateway) -> Iterator[scout.Robot]:
-    connected = gateway.connect()
-    try:
-        yield connected
-    finally:
-        connected.close()
+    yield gateway.connect()
 
 
 def scout_cli(*args: str) -> subprocess.CompletedProcess[str]:

@@ -22,7 +22,7 @@ def example(name: str, *args: str) -> subprocess.CompletedProcess[str]:
 
 
 def test_logger_writes_every_state(gateway: Gateway) -> None:
-    gateway.connect().close()
+    gateway.connect()
     result = example("logger_csv.py", "--name", gateway.name, "--count", "25")
     assert result.returncode == 0, result.stderr
     rows = list(csv.DictReader(io.StringIO(result.stdout)))

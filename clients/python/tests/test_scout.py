@@ -73,7 +73,6 @@ def test_a_thousand_states_in_order_with_no_gap(robot: scout.Robot) -> None:
     seqs = [state.seq for state, _ in zip(robot.states(timeout=3.0), range(1000))]
     gaps = [(a, b) for a, b in zip(seqs, seqs[1:]) if b != a + 1]
     assert gaps == [], f"{len(gaps)} gaps, first {gaps[:3]}"
-    assert robot.dropped == 0
 
 
 def test_next_times_out(gateway: Gateway) -> None:
@@ -223,7 +222,7 @@ WAITER = textwrap.dedent(
 
 
 def test_ctrl_c_interrupts_a_blocking_call(gateway: Gateway) -> None:
-    gateway.connect().close()
+    gateway.connect()
     waiter = subprocess.Popen(
         [sys.executable, "-c", WAITER, gateway.name], stdout=subprocess.PIPE, text=True
     )

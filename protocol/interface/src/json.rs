@@ -53,20 +53,16 @@ pub fn message_fields(message: &Message, max_angular: f64) -> Value {
     }
 }
 
-/// Where a feedback message stands in the state JSON: a key, or an entry of the `motors` list.
-/// `None` for host-to-chassis commands.
-enum StateKey {
-    Key(&'static str),
-    Motor(Motor),
-}
-
-fn state_key(kind: MessageKind) -> Option<StateKey> {
+/// The state JSON key a feedback message has of its own; `None` for the motors' (entries of
+/// the `motors` list) and for host-to-chassis commands.
+fn feedback_key(kind: MessageKind) -> Option<&'static str> {
     match kind {
-        MessageKind::SystemStatus => Some(StateKey::Key("system")),
-        MessageKind::MotionFeedback => Some(StateKey::Key("motion")),
-        MessageKind::LightFeedback => Some(StateKey::Key("lights")),
-        MessageKind::MotorFeedback(motor) => Some(StateKey::Motor(motor)),
-        MessageKind::MotionCommand | MessageKind::LightCommand => None,
+        MessageKind::SystemStatus => Some("system"),
+        MessageKind::MotionFeedback => Some("motion"),
+        MessageKind::LightFeedback => Some("lights"),
+        MessageKind::MotorFeedback(_) | MessageKind::MotionCommand | MessageKind::LightCommand => {
+            None
+        }
     }
 }
 
@@ -82,56 +78,72 @@ fn received_json(received: Option<(Received, Message)>, max_angular: f64, now_ns
     fields
 }
 
+/// The state JSON's top-level keys, in the order the README documents them.
+pub const STATE_KEYS: [&str; 10] = [
+    "robot", "seq", "age_ms", "link", "system", "motion", "lights", "motors", "odometry", "command",
+];
+
+/// One top-level field of the state JSON ([`STATE_KEYS`]), or `None` for a key the schema does
+/// not have. `now_ns` (CLOCK_MONOTONIC) sets the ages. A client that reads a few fields makes
+/// only those; [`state_json`] is all of them.
+pub fn state_field(state: &StatePayload, key: &str, now_ns: u64) -> Option<Value> {
+    let feedback = |wanted: &str| {
+        MessageKind::ALL
+            .into_iter()
+            .find(|kind| feedback_key(*kind) == Some(wanted))
+            .map(|kind| received_json(state.received(kind), state.max_angular, now_ns))
+    };
+    Some(match key {
+        "robot" => state.robot.as_str().into(),
+        "seq" => state.seq.into(),
+        "age_ms" => age_ms(state.published_ns, now_ns).into(),
+        "link" => {
+            let link = &state.link;
+            json!({
+                "state": link.state().name(),
+                "transport": link.transport().map_or("unknown", |t| t.name()),
+                "device": link.device.as_str(),
+                "rx_frames": link.rx_frames,
+                "checksum_errors": link.checksum_errors,
+                "dropped_frames": link.dropped_frames,
+                "rejected_frames": link.rejected_frames,
+                "overflowed_frames": link.overflowed_frames,
+                "discarded_bytes": link.discarded_bytes,
+                "tx_frames": link.tx_frames,
+                "reconnects": link.reconnects,
+            })
+        }
+        "system" | "motion" | "lights" => feedback(key)?,
+        "motors" => Motor::ALL
+            .into_iter()
+            .map(|motor| {
+                received_json(
+                    state.received(MessageKind::MotorFeedback(motor)),
+                    state.max_angular,
+                    now_ns,
+                )
+            })
+            .collect::<Vec<_>>()
+            .into(),
+        "odometry" => json!({
+            "x": state.odometry.x,
+            "y": state.odometry.y,
+            "yaw": state.odometry.yaw,
+            "distance": state.odometry.distance,
+            "resets": state.odometry.resets,
+        }),
+        "command" => json!({ "linear": state.command.linear, "angular": state.command.angular }),
+        _ => return None,
+    })
+}
+
 /// The state as the README documents it. `now_ns` (CLOCK_MONOTONIC) sets the ages.
 pub fn state_json(state: &StatePayload, now_ns: u64) -> Value {
-    let link = &state.link;
-    let mut object = json!({
-        "robot": state.robot.as_str(),
-        "seq": state.seq,
-        "age_ms": age_ms(state.published_ns, now_ns),
-        "link": {
-            "state": link.state().name(),
-            "transport": link.transport().map_or("unknown", |t| t.name()),
-            "device": link.device.as_str(),
-            "rx_frames": link.rx_frames,
-            "checksum_errors": link.checksum_errors,
-            "dropped_frames": link.dropped_frames,
-            "rejected_frames": link.rejected_frames,
-            "overflowed_frames": link.overflowed_frames,
-            "discarded_bytes": link.discarded_bytes,
-            "tx_frames": link.tx_frames,
-            "reconnects": link.reconnects,
-        },
-    });
-    let mut motors = vec![Value::Null; Motor::ALL.len()];
-    if let Value::Object(fields) = &mut object {
-        for kind in MessageKind::ALL {
-            let value = received_json(state.received(kind), state.max_angular, now_ns);
-            match state_key(kind) {
-                Some(StateKey::Key(key)) => {
-                    fields.insert(key.into(), value);
-                }
-                Some(StateKey::Motor(motor)) => motors[motor.index()] = value,
-                None => {}
-            }
-        }
-        fields.insert("motors".into(), motors.into());
-        fields.insert(
-            "odometry".into(),
-            json!({
-                "x": state.odometry.x,
-                "y": state.odometry.y,
-                "yaw": state.odometry.yaw,
-                "distance": state.odometry.distance,
-                "resets": state.odometry.resets,
-            }),
-        );
-        fields.insert(
-            "command".into(),
-            json!({ "linear": state.command.linear, "angular": state.command.angular }),
-        );
-    }
-    object
+    let fields: Map<String, Value> = STATE_KEYS
+        .iter()
+        .filter_map(|key| Some(((*key).to_owned(), state_field(state, key, now_ns)?)))
+        .collect();
+    Value::Object(fields)
 }
 
 fn class_name(raw: u8) -> Value {

@@ -35,8 +35,10 @@ use crate::control::{
 };
 use crate::state::StatePayload;
 
-/// The iceoryx2 service flavour every process uses: inter-process, shared memory.
-pub type Ipc = iceoryx2::service::ipc::Service;
+/// The iceoryx2 service flavour every process uses: inter-process, shared memory, with ports
+/// that may move between threads and be shared (a mutex each, uncontended): the Python package
+/// waits on a subscriber with the GIL released. The same shared-memory objects as `ipc`'s.
+pub type Ipc = iceoryx2::service::ipc_threadsafe::Service;
 
 /// The state's publish-subscribe service.
 pub type StateService = publish_subscribe::PortFactory<Ipc, StatePayload, ()>;

@@ -227,6 +227,7 @@ pub fn run(options: &Options) -> anyhow::Result<()> {
 
     state_latency(&mut bench, &mut report)?;
     ros2_dds(&mut bench, &mut report)?;
+    python_client(&mut bench, &mut report)?;
     command_latency(&mut bench, &mut report, &states)?;
     remote_latency(&mut bench, &mut report, &states)?;
     ticks(&mut bench, &mut report, &states)?;
@@ -480,6 +481,108 @@ fn ros2_dds(bench: &mut Bench, report: &mut Report) -> anyhow::Result<()> {
         rss,
     );
     report.paths.push(("ROS 2 DDS (rclpy)".into(), dds));
+    Ok(())
+}
+
+/// State to a Python subscriber (the `scout` package, from `$SCOUT_PYTHON_CLIENT`) and, in a
+/// window of its own just before under the same load, to a Rust iceoryx2 subscriber (each alone:
+/// two subscribers woken by one state wait for each other on two cores): end to end from the
+/// simulator's write, and the delivery part (published to seen); and the Python process' CPU
+/// (every thread) and memory at 50 Hz. Skipped, saying why, without that Python.
+fn python_client(bench: &mut Bench, report: &mut Report) -> anyhow::Result<()> {
+    let Some(python) = std::env::var_os("SCOUT_PYTHON_CLIENT") else {
+        progress(
+            "Python client: skipped (set SCOUT_PYTHON_CLIENT to a venv's python with the scout \
+             package: pip install ./clients/python)",
+        );
+        return Ok(());
+    };
+    progress("state latency: a Rust iceoryx2 subscriber, then the Python package, each alone");
+    let window = bench.plan.window.to_string();
+    let mut roles = Roles::default();
+    roles.spawn(&[
+        "subscribe",
+        &bench.name,
+        &bench.scratch.text("iox-beside-python"),
+        &window,
+    ])?;
+    roles.wait()?;
+    let script =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("python_state_subscriber.py");
+    let mut subscriber = std::process::Command::new(&python)
+        .arg(script)
+        .arg(&bench.name)
+        .arg(bench.scratch.path("python"))
+        .arg(&window)
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .context("starting the Python subscriber")?;
+    let mut output = std::io::BufReader::new(subscriber.stdout.take().context("its output")?);
+    let mut first = String::new();
+    std::io::BufRead::read_line(&mut output, &mut first)?;
+    anyhow::ensure!(
+        first.trim() == "receiving",
+        "the Python subscriber did not start"
+    );
+    // Its own CPU (every thread) over its window, and its memory, measured by itself.
+    let mut cost = String::new();
+    std::io::BufRead::read_line(&mut output, &mut cost)?;
+    let status = subscriber.wait()?;
+    anyhow::ensure!(status.success(), "the Python subscriber failed ({status})");
+    let cost: Value = serde_json::from_str(&cost).context("the Python subscriber's cost line")?;
+    let trace = trace(bench)?;
+    let python_rows = read_rows(&bench.scratch.path("python"))?;
+    let python = seen_latencies(&python_rows, &trace);
+    let python_delivery: Vec<f64> = python_rows
+        .iter()
+        .skip(1)
+        .filter_map(|row| match row.as_slice() {
+            &[seen, published] if seen >= published => Some(us(seen - published)),
+            _ => None,
+        })
+        .collect();
+    let rust_rows = read_rows(&bench.scratch.path("iox-beside-python"))?;
+    let rust = seen_latencies(&rust_rows, &trace);
+    let rust_delivery: Vec<f64> = rust_rows
+        .iter()
+        .skip(1)
+        .filter_map(|row| match row.as_slice() {
+            &[seen, _, published] if seen >= published => Some(us(seen - published)),
+            _ => None,
+        })
+        .collect();
+    report.latency(
+        "state_latency_us.python",
+        "state, Python (scout package, next())",
+        &python,
+    );
+    report.latency(
+        "state_latency_us.iceoryx2_beside_python",
+        "state, iceoryx2 (Rust), window before",
+        &rust,
+    );
+    report.latency(
+        "python_delivery_us",
+        "  Python: published to seen",
+        &python_delivery,
+    );
+    report.latency(
+        "iceoryx2_delivery_beside_python_us",
+        "  Rust: published to seen",
+        &rust_delivery,
+    );
+    report.value(
+        "python_client_cpu_percent",
+        "Python subscriber, CPU, % of a core, 50 Hz",
+        cost["cpu_percent"].as_f64().unwrap_or(f64::NAN),
+    );
+    report.value(
+        "python_client_rss_mb",
+        "Python subscriber, resident memory, MB",
+        cost["rss_mb"].as_f64().unwrap_or(f64::NAN),
+    );
+    report.paths.push(("Python (scout package)".into(), python));
     Ok(())
 }
 

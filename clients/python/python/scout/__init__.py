@@ -100,15 +100,10 @@ class Robot:
         """The robot's name."""
         return self._native.name
 
-    @property
-    def dropped(self) -> int:
-        """States dropped because this process did not read them in time (256 behind)."""
-        return self._native.dropped
-
     def latest(self) -> Optional[State]:
         """The newest state, or None before the gateway published one. Does not wait."""
         latest = self._native.latest()
-        return None if latest is None else State(*latest)
+        return None if latest is None else State(latest)
 
     def next(self, timeout: float = 1.0) -> State:
         """The next state in order (every one the gateway publishes, none skipped).
@@ -121,7 +116,7 @@ class Robot:
             raise TimeoutError(
                 f"no state from gateway '{self.name}' within {timeout} s: is it running?"
             )
-        return State(*state)
+        return State(state)
 
     def states(self, timeout: float = 3.0) -> Iterator[State]:
         """Every state in order, forever; raises `TimeoutError` after `timeout` s of silence."""
@@ -131,8 +126,9 @@ class Robot:
     async def states_async(self, timeout: float = 3.0) -> AsyncIterator[State]:
         """`states()` for asyncio: `async for s in robot.states_async(): ...`.
 
-        A connection of its own reads the states on a thread and hands them to the event loop,
-        so the loop never blocks; raises `TimeoutError` after `timeout` s of silence.
+        A connection of its own reads the states on a thread and hands them to the event loop
+        (the newest 256 kept if the loop falls behind), so the loop never blocks; raises
+        `TimeoutError` after `timeout` s of silence.
         """
         loop = asyncio.get_running_loop()
         queue: asyncio.Queue[Union[State, BaseException]] = asyncio.Queue(maxsize=256)
@@ -151,21 +147,18 @@ class Robot:
 
         def read() -> None:
             try:
-                robot = Robot.connect(self.name)
-                try:
-                    heard = time.monotonic()
-                    while not halt.is_set():
-                        state = robot._native.next(0.1)
-                        if state is not None:
-                            heard = time.monotonic()
-                            hand_over(State(*state))
-                        elif time.monotonic() - heard > timeout:
-                            raise TimeoutError(
-                                f"no state from gateway '{self.name}' within {timeout} s: "
-                                "is it running?"
-                            )
-                finally:
-                    robot.close()
+                native = _scout.NativeRobot(self.name)
+                heard = time.monotonic()
+                while not halt.is_set():
+                    state = native.next(0.1)
+                    if state is not None:
+                        heard = time.monotonic()
+                        hand_over(State(state))
+                    elif time.monotonic() - heard > timeout:
+                        raise TimeoutError(
+                            f"no state from gateway '{self.name}' within {timeout} s: "
+                            "is it running?"
+                        )
             except BaseException as error:  # handed to the consumer
                 if not halt.is_set():
                     hand_over(error)
@@ -203,16 +196,6 @@ class Robot:
         time and a stop costs one datagram each way.
         """
         return Stopper(self, self._native.stopper(name))
-
-    def close(self) -> None:
-        """Stops reading states (also done when the object goes)."""
-        self._native.close()
-
-    def __enter__(self) -> "Robot":
-        return self
-
-    def __exit__(self, *_: object) -> None:
-        self.close()
 
     def __repr__(self) -> str:
         return f"<scout.Robot {self.name!r}>"

@@ -1,9 +1,9 @@
 """The native half of `scout` (Rust, PyO3): use the `scout` module's classes instead."""
 
-from typing import Any, Dict, Optional, Tuple, final
+from typing import Any, Dict, Optional, final
 
 
-__all__ = ["LAYOUT_VERSION", "NativeController", "NativeRobot", "NativeStopper"]
+__all__ = ["LAYOUT_VERSION", "NativeController", "NativeRobot", "NativeStopper", "StateView"]
 
 LAYOUT_VERSION: int
 
@@ -16,22 +16,16 @@ class NativeRobot:
     @property
     def name(self) -> str:
         """The robot's name."""
-    @property
-    def dropped(self) -> int:
-        """States dropped for a reader more than 256 behind."""
-    def latest(self) -> Optional[Tuple[int, Dict[str, Any]]]:
-        """The newest state as (published_ns, fields), or None before the first."""
-    def next(self, timeout: float) -> Optional[Tuple[int, Dict[str, Any]]]:
-        """The next state in order as (published_ns, fields), or None after `timeout` seconds
-        (GIL released)."""
+    def latest(self) -> Optional[StateView]:
+        """The newest state, or None before the first."""
+    def next(self, timeout: float) -> Optional[StateView]:
+        """The next state in order, or None after `timeout` seconds (GIL released)."""
     def status(self, timeout: float) -> Dict[str, Any]:
         """The arbiter's status as a dict."""
     def controller(self, name: str, class_: Optional[str] = None) -> NativeController:
         """A controller named `name` of class `class_` (teleop, autonomy) or none."""
     def stopper(self, name: str) -> NativeStopper:
         """A client that only stops and releases."""
-    def close(self) -> None:
-        """Stops the state reader."""
 
 @final
 class NativeController:
@@ -75,3 +69,18 @@ class NativeStopper:
         self, through: int, own: bool = True, owner: Optional[str] = None
     ) -> Dict[str, Any]:
         """Releases its stops up to `through`."""
+
+@final
+class StateView:
+    """One state as read from shared memory; its fields made when asked for."""
+
+    @property
+    def published_ns(self) -> int:
+        """When the gateway published it (CLOCK_MONOTONIC ns)."""
+    @property
+    def seq(self) -> int:
+        """Its sequence number."""
+    def field(self, key: str) -> Any:
+        """One top-level field of the `scout echo --json` schema."""
+    def to_dict(self) -> Dict[str, Any]:
+        """The whole state as `scout echo --json` prints it."""

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
-import copy
 from dataclasses import dataclass
-from typing import Any, Dict, List, Optional
+from typing import TYPE_CHECKING, Any, Callable, Dict, List, Optional
+
+if TYPE_CHECKING:
+    from . import _scout
 
 
 @dataclass(frozen=True)
@@ -94,59 +96,116 @@ class Command:
     angular: float
 
 
-def _optional(kind: Any, fields: Optional[Dict[str, Any]]) -> Any:
-    return None if fields is None else kind(**fields)
-
-
 class State:
     """One chassis state, as the gateway published it (every 20 ms).
 
     The attributes mirror the `scout echo --json` schema; a section the chassis has not reported
-    yet is None. `to_dict()` gives exactly that schema.
+    yet is None. Each section is made from the shared-memory copy when first read, so reading
+    a state costs little until its fields are used. `to_dict()` gives exactly that schema.
     """
 
-    __slots__ = ("_fields", "published_ns", "robot", "seq", "age_ms", "link", "system", "motion", "lights",
-                 "motors", "odometry", "command")
+    __slots__ = ("_view", "_made")
 
-    published_ns: int
-    """When the gateway published it: CLOCK_MONOTONIC ns, comparable with time.monotonic_ns()."""
-    robot: str
-    seq: int
-    age_ms: float
-    """Its age when this process read it from shared memory."""
-    link: Link
-    system: Optional[System]
-    motion: Optional[Motion]
-    lights: Optional[Lights]
-    motors: List[Optional[Motor]]
-    odometry: Odometry
-    command: Command
+    def __init__(self, view: "_scout.StateView") -> None:
+        self._view = view
+        self._made: Dict[str, Any] = {}
 
-    def __init__(self, published_ns: int, fields: Dict[str, Any]) -> None:
-        self._fields = fields
-        self.published_ns = published_ns
-        self.robot = fields["robot"]
-        self.seq = fields["seq"]
-        self.age_ms = fields["age_ms"]
-        self.link = Link(**fields["link"])
-        self.system = _optional(System, fields["system"])
-        self.motion = _optional(Motion, fields["motion"])
-        lights = fields["lights"]
-        self.lights = None if lights is None else Lights(
-            enabled=lights["enabled"],
-            front=Light(**lights["front"]),
-            rear=Light(**lights["rear"]),
-            age_ms=lights["age_ms"],
+    def _field(self, key: str, make: Callable[[Any], Any]) -> Any:
+        try:
+            return self._made[key]
+        except KeyError:
+            made = make(self._view.field(key))
+            self._made[key] = made
+            return made
+
+    @property
+    def published_ns(self) -> int:
+        """When the gateway published it: CLOCK_MONOTONIC ns, as `time.monotonic_ns()`."""
+        return self._view.published_ns
+
+    @property
+    def seq(self) -> int:
+        """Its sequence number (one per state the gateway publishes)."""
+        return self._view.seq
+
+    @property
+    def robot(self) -> str:
+        """The robot's name."""
+        robot: str = self._field("robot", str)
+        return robot
+
+    @property
+    def age_ms(self) -> float:
+        """Its age when this process read it from shared memory, ms."""
+        age: float = self._field("age_ms", float)
+        return age
+
+    @property
+    def link(self) -> Link:
+        """The gateway's link to the chassis and its counters."""
+        link: Link = self._field("link", lambda fields: Link(**fields))
+        return link
+
+    @property
+    def system(self) -> Optional[System]:
+        """The chassis' system status, or None before the first."""
+        system: Optional[System] = self._field("system", lambda f: _optional(System, f))
+        return system
+
+    @property
+    def motion(self) -> Optional[Motion]:
+        """The speeds the chassis reports, or None before the first."""
+        motion: Optional[Motion] = self._field("motion", lambda f: _optional(Motion, f))
+        return motion
+
+    @property
+    def lights(self) -> Optional[Lights]:
+        """The lights the chassis reports, or None before the first."""
+        lights: Optional[Lights] = self._field("lights", _lights)
+        return lights
+
+    @property
+    def motors(self) -> List[Optional[Motor]]:
+        """The four motors' feedback (None before each one's first)."""
+        motors: List[Optional[Motor]] = self._field(
+            "motors", lambda items: [_optional(Motor, item) for item in items]
         )
-        self.motors = [_optional(Motor, motor) for motor in fields["motors"]]
-        self.odometry = Odometry(**fields["odometry"])
-        self.command = Command(**fields["command"])
+        return motors
+
+    @property
+    def odometry(self) -> Odometry:
+        """The gateway's dead reckoning."""
+        odometry: Odometry = self._field("odometry", lambda fields: Odometry(**fields))
+        return odometry
+
+    @property
+    def command(self) -> Command:
+        """The motion command on the wire now."""
+        command: Command = self._field("command", lambda fields: Command(**fields))
+        return command
 
     def to_dict(self) -> Dict[str, Any]:
-        """The state as `scout echo --json` prints it (a copy)."""
-        return copy.deepcopy(self._fields)
+        """The state as `scout echo --json` prints it (a new dict each call)."""
+        fields: Dict[str, Any] = self._view.to_dict()
+        return fields
 
     def __repr__(self) -> str:
-        speed = "-" if self.motion is None else f"{self.motion.linear:+.2f} m/s"
-        battery = "-" if self.system is None else f"{self.system.battery_voltage:.1f} V"
+        motion, system = self.motion, self.system
+        speed = "-" if motion is None else f"{motion.linear:+.2f} m/s"
+        battery = "-" if system is None else f"{system.battery_voltage:.1f} V"
         return f"<State {self.robot} #{self.seq} link={self.link.state} {speed} {battery}>"
+
+
+def _optional(kind: Any, fields: Optional[Dict[str, Any]]) -> Any:
+    return None if fields is None else kind(**fields)
+
+
+def _lights(fields: Optional[Dict[str, Any]]) -> Optional[Lights]:
+    if fields is None:
+        return None
+    return Lights(
+        enabled=fields["enabled"],
+        front=Light(**fields["front"]),
+        rear=Light(**fields["rear"]),
+        age_ms=fields["age_ms"],
+    )
