@@ -365,4 +365,14 @@ impl StatusReader {
             std::thread::sleep(Duration::from_millis(2));
         }
     }
+
+    /// The next status in the order the gateway published them, without waiting (a recorder
+    /// sees every one; [`StatusReader::latest`] skips to the newest).
+    pub fn try_next(&self) -> Result<Option<StatusPayload>, ClientError> {
+        Ok(self
+            .subscriber
+            .receive()
+            .map_err(ClientError::Receive)?
+            .map(|sample| *sample))
+    }
 }

@@ -17,9 +17,10 @@ fn bin_dir() -> PathBuf {
 }
 
 /// The binaries and examples the system tests run.
-const ARTIFACTS: [&str; 7] = [
+const ARTIFACTS: [&str; 8] = [
     "scout",
     "scout-ros2",
+    "scout-foxglove",
     "scout-gateway",
     "scout-sim",
     "scout-bench",
@@ -525,6 +526,11 @@ impl Background {
         Background { child }
     }
 
+    /// Takes over a child already started (to read its output first).
+    pub fn from_child(child: std::process::Child) -> Background {
+        Background { child }
+    }
+
     /// Sends `signal` to it.
     pub fn signal(&self, signal: nix::sys::signal::Signal) {
         let pid = nix::unistd::Pid::from_raw(self.child.id() as i32);
@@ -632,6 +638,15 @@ pub fn chassis_stays_still(sim: &mut Sim, time: Duration) {
     while Instant::now() < end {
         let stats = sim.stats();
         assert_eq!(stats["actual"]["linear"], 0.0, "the chassis moves: {stats}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// The simulator's ground truth comes to rest within `limit` (polled).
+pub fn comes_to_rest(sim: &mut Sim, limit: Duration) {
+    let deadline = Instant::now() + limit;
+    while sim.stats()["actual"]["linear"].as_f64() != Some(0.0) {
+        assert!(Instant::now() < deadline, "the chassis never stopped");
         std::thread::sleep(Duration::from_millis(50));
     }
 }

@@ -5,6 +5,7 @@ mod arbiter;
 mod bench;
 mod decode;
 mod examples;
+mod foxglove;
 mod gateway;
 mod python;
 mod remote;

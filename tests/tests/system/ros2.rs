@@ -13,8 +13,8 @@ use std::time::{Duration, Instant};
 
 use nix::sys::signal::Signal;
 use scout_system_tests::{
-    Background, Gateway, Sim, chassis_stays_still, connect, free_port, line_reader, moving,
-    robot_name, scout, skip, tcp,
+    Background, Gateway, Sim, chassis_stays_still, comes_to_rest, connect, free_port, line_reader,
+    moving, robot_name, scout, skip, tcp,
 };
 use serde_json::{Value, json};
 
@@ -170,15 +170,6 @@ impl Drop for Bridge {
             eprintln!("scout ros2's log:\n{log}");
         }
         let _ = std::fs::remove_file(&self.log);
-    }
-}
-
-/// The simulator's ground truth comes to rest within `limit` (polled).
-fn comes_to_rest(sim: &mut Sim, limit: Duration) {
-    let deadline = Instant::now() + limit;
-    while sim.stats()["actual"]["linear"].as_f64() != Some(0.0) {
-        assert!(Instant::now() < deadline, "the chassis never stopped");
-        std::thread::sleep(Duration::from_millis(50));
     }
 }
 

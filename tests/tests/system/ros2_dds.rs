@@ -14,8 +14,8 @@ use std::time::{Duration, Instant};
 
 use nix::sys::signal::Signal;
 use scout_system_tests::{
-    Background, Gateway, NetNs, Sim, chassis_stays_still, connect, line_reader, moving, robot_name,
-    scout, skip,
+    Background, Gateway, NetNs, Sim, chassis_stays_still, comes_to_rest, connect, line_reader,
+    moving, robot_name, scout, skip,
 };
 use serde_json::{Value, json};
 
@@ -211,14 +211,6 @@ fn cyclone_tf(namespace: &NetNs, python: &str, domain: u32) -> Value {
         "Cyclone DDS reader: {answer}"
     );
     answer
-}
-
-fn comes_to_rest(sim: &mut Sim, limit: Duration) {
-    let deadline = Instant::now() + limit;
-    while sim.stats()["actual"]["linear"].as_f64() != Some(0.0) {
-        assert!(Instant::now() < deadline, "the chassis never stopped");
-        std::thread::sleep(Duration::from_millis(50));
-    }
 }
 
 fn counter(counters: &Value, name: &str) -> u64 {

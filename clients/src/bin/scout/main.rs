@@ -4,12 +4,13 @@
 //! error, no ROS 2 router to connect to, `scout-ros2` not installed); 2 usage error (also a bad
 //! `scout ros2` setting, or another `scout ros2` bridge serves the robot on that ROS domain); 3 no
 //! gateway with that name runs, or it stopped answering; 4 the gateway rejected the request (the
-//! reason is printed). `scout ros2` runs the `scout-ros2` program and exits with its code.
+//! reason is printed). `scout ros2` runs the `scout-ros2` program, `scout record` and `scout
+//! foxglove` the `scout-foxglove` program, and exit with its code.
 
+mod companion;
 mod control;
 mod decode;
 mod echo;
-mod ros2;
 mod router;
 mod status;
 mod teleop;
@@ -70,7 +71,19 @@ enum Command {
     /// Runs the `scout-ros2` program (found beside `scout`, else on PATH), which carries the ROS
     /// 2 middleware so that `scout` does not.
     #[command(disable_help_flag = true)]
-    Ros2(ros2::Ros2Args),
+    Ros2(companion::CompanionArgs),
+    /// Record the state, the arbiter's status and events and every motion command to an MCAP
+    /// file that Foxglove opens (`scout record --help`).
+    ///
+    /// Runs the `scout-foxglove` program (found beside `scout`, else on PATH).
+    #[command(disable_help_flag = true)]
+    Record(companion::CompanionArgs),
+    /// Serve the robot live to Foxglove or Lichtblick over the Foxglove WebSocket protocol,
+    /// the same channels as a recording (`scout foxglove --help`).
+    ///
+    /// Runs the `scout-foxglove` program (found beside `scout`, else on PATH).
+    #[command(disable_help_flag = true)]
+    Foxglove(companion::CompanionArgs),
 }
 
 /// The robot to talk to.
@@ -96,7 +109,9 @@ fn main() -> ExitCode {
         Command::Status(args) => status::run(&args),
         Command::ResetOdometry(args) => control::one_shot(&args, |c| c.reset_odometry()),
         Command::Router(args) => router::run(&args),
-        Command::Ros2(args) => ros2::run(&args),
+        Command::Ros2(args) => companion::run(companion::ROS2, &[], &args),
+        Command::Record(args) => companion::run(companion::FOXGLOVE, &["record"], &args),
+        Command::Foxglove(args) => companion::run(companion::FOXGLOVE, &["serve"], &args),
     };
     match result {
         Ok(code) => code,

@@ -1,0 +1,163 @@
+//! Reading a gateway for the recorder and the live view: an ordinary iceoryx2 subscriber of the
+//! state and the status (no work in the gateway's loop), on a thread of its own that turns them
+//! into transcript entries, so a slow disk or a flush never makes it miss a state.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{self, Receiver, Sender};
+use std::thread::JoinHandle;
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+use scout_clients::client::{ClientError, Robot};
+use scout_clients::monotonic_ns;
+use tracing::warn;
+
+use crate::transcript::{Timed, Transcript};
+
+/// How long the reader waits for a state before it looks at the status again.
+const WAIT: Duration = Duration::from_millis(50);
+/// No state for this long: the gateway is said to be silent.
+const SILENT_AFTER: Duration = Duration::from_secs(2);
+
+/// What the reader thread sends.
+#[derive(Debug)]
+pub enum Update {
+    /// Entries to write, in order.
+    Entries(Vec<Timed>),
+    /// No state came for this long (sent once per silence).
+    Silent(Duration),
+    /// States flow again after a silence.
+    Flowing,
+    /// States the subscriber's buffer lost (a gap in `seq`): the reader fell behind.
+    Missed(u64),
+    /// Reading failed; the reader stopped.
+    Failed(ClientError),
+}
+
+/// CLOCK_REALTIME minus CLOCK_MONOTONIC now, ns.
+pub fn realtime_offset_ns() -> i128 {
+    let monotonic = i128::from(monotonic_ns());
+    let realtime = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |since| since.as_nanos() as i128);
+    realtime - monotonic
+}
+
+/// Why reading could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum SourceError {
+    /// The gateway could not be reached.
+    #[error(transparent)]
+    Client(#[from] ClientError),
+    /// The reader thread could not be started.
+    #[error("starting the reader thread: {0}")]
+    Thread(#[source] std::io::Error),
+}
+
+/// A reader thread for one robot.
+#[derive(Debug)]
+pub struct Source {
+    updates: Receiver<Update>,
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl Source {
+    /// Connects to robot `name` (fails at once when no gateway of that name runs) and starts
+    /// reading.
+    pub fn start(name: &str) -> Result<Self, SourceError> {
+        let robot = Robot::connect(name)?;
+        let states = robot.subscribe()?;
+        let status = robot.status()?;
+        let (sender, updates) = mpsc::channel();
+        let stop = Arc::new(AtomicBool::new(false));
+        let thread_stop = Arc::clone(&stop);
+        let transcript = Transcript::new(monotonic_ns(), realtime_offset_ns());
+        let thread = std::thread::Builder::new()
+            .name("scout-reader".into())
+            .spawn(move || {
+                // The robot's node outlives its ports.
+                let _robot = robot;
+                read(&states, &status, transcript, &sender, &thread_stop);
+            })
+            .map_err(SourceError::Thread)?;
+        Ok(Self {
+            updates,
+            stop,
+            thread: Some(thread),
+        })
+    }
+
+    /// The next update, waiting at most `timeout`.
+    pub fn next(&self, timeout: Duration) -> Option<Update> {
+        self.updates.recv_timeout(timeout).ok()
+    }
+}
+
+impl Drop for Source {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
+
+fn read(
+    states: &scout_clients::client::StateSubscriber,
+    status: &scout_clients::control::StatusReader,
+    mut transcript: Transcript,
+    sender: &Sender<Update>,
+    stop: &AtomicBool,
+) {
+    let mut last_seq: Option<u64> = None;
+    let mut last_state = std::time::Instant::now();
+    let mut silent = false;
+    while !stop.load(Ordering::Relaxed) {
+        let mut entries = Vec::new();
+        let mut missed = 0;
+        let result = (|| -> Result<(), ClientError> {
+            if let Some(state) = states.next_timeout(WAIT)? {
+                let mut next = Some(state);
+                while let Some(state) = next {
+                    if let Some(last) = last_seq {
+                        missed += state.seq.saturating_sub(last + 1);
+                    }
+                    last_seq = Some(state.seq);
+                    transcript.handle_state(&state, &mut entries);
+                    next = states.try_next()?;
+                }
+                last_state = std::time::Instant::now();
+            }
+            while let Some(status) = status.try_next()? {
+                transcript.handle_status(&status, &mut entries);
+            }
+            Ok(())
+        })();
+        if let Err(error) = result {
+            let _ = sender.send(Update::Failed(error));
+            return;
+        }
+        let since = last_state.elapsed();
+        let mut updates = Vec::new();
+        if missed > 0 {
+            warn!("{missed} states lost: the recorder fell behind the gateway");
+            updates.push(Update::Missed(missed));
+        }
+        if !entries.is_empty() {
+            updates.push(Update::Entries(entries));
+        }
+        if since >= SILENT_AFTER && !silent {
+            silent = true;
+            updates.push(Update::Silent(since));
+        } else if since < SILENT_AFTER && silent {
+            silent = false;
+            updates.push(Update::Flowing);
+        }
+        for update in updates {
+            if sender.send(update).is_err() {
+                return;
+            }
+        }
+    }
+}

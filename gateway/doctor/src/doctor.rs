@@ -1,0 +1,162 @@
+//! Every check in order: the device, the CAN interface, opening the port and listening to it
+//! (or, when a gateway holds it, the same questions asked of that gateway), the chassis' state,
+//! the robot's gateway, and leftovers of dead processes in shared memory.
+
+use std::path::Path;
+use std::time::Duration;
+
+use scout_gateway::device::DeviceSpec;
+use scout_interface::services;
+
+use crate::can;
+use crate::check::{Check, Verdict};
+use crate::gateway::{self, is_no_gateway};
+use crate::port::{self, Opened};
+
+/// What to check.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// The robot (gateway) name.
+    pub robot: String,
+    /// The port to check, if any.
+    pub port: Option<DeviceSpec>,
+    /// How long to listen.
+    pub window: Duration,
+}
+
+/// Whether the gateway's device names the same device as `spec`.
+fn same_device(spec: &DeviceSpec, device: &str) -> bool {
+    match spec {
+        DeviceSpec::Serial(path) | DeviceSpec::Slcan(path) => {
+            let canonical = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_owned());
+            canonical(path) == canonical(Path::new(device))
+        }
+        DeviceSpec::Can(interface) => interface == device,
+        DeviceSpec::Sim(_) => false,
+    }
+}
+
+/// Runs the checks, handing each to `report` as soon as it is made.
+pub fn run(options: &Options, report: &mut dyn FnMut(&Check)) -> Vec<Check> {
+    let mut checks: Vec<Check> = Vec::new();
+    let mut emit = |new: Vec<Check>, checks: &mut Vec<Check>| {
+        for check in new {
+            report(&check);
+            checks.push(check);
+        }
+    };
+    let robot = &options.robot;
+    let mut gateway_checked = false;
+    if let Some(spec) = &options.port {
+        let device = match spec {
+            DeviceSpec::Serial(path) | DeviceSpec::Slcan(path) => port::tty_checks(path),
+            DeviceSpec::Can(interface) => can::inspect(interface),
+            DeviceSpec::Sim(_) => Vec::new(),
+        };
+        let usable = !device.iter().any(|check| {
+            check.verdict == Verdict::Fail && matches!(check.name, "device" | "can.interface")
+        });
+        emit(device, &mut checks);
+        if usable {
+            let mut opened = Vec::new();
+            match port::listen(spec, options.window, &mut opened) {
+                Opened::Listened(tally) => {
+                    emit(opened, &mut checks);
+                    emit(
+                        tally.checks(spec.transport(), options.window, options.window),
+                        &mut checks,
+                    );
+                }
+                Opened::Failed => emit(opened, &mut checks),
+                Opened::Held(holder) => {
+                    let pid =
+                        holder.map_or_else(|| "pid unknown".to_owned(), |pid| format!("pid {pid}"));
+                    match gateway::inspect(robot, options.window) {
+                        Ok(found) if same_device(spec, &found.device) => {
+                            emit(
+                                vec![Check::pass(
+                                    "port",
+                                    format!(
+                                        "held by the gateway of robot {robot} ({pid}): checked \
+                                         through it"
+                                    ),
+                                )],
+                                &mut checks,
+                            );
+                            emit(found.checks, &mut checks);
+                            gateway_checked = true;
+                        }
+                        Ok(_) | Err(_) => emit(
+                            vec![Check::fail(
+                                "port",
+                                format!(
+                                    "{} is held by another scout-gateway ({pid}), not robot \
+                                     {robot}'s",
+                                    spec.name()
+                                ),
+                                "stop that gateway (`systemctl stop scout-gateway` or kill the \
+                                 pid), or run `scout doctor --name` with its robot name",
+                            )],
+                            &mut checks,
+                        ),
+                    }
+                }
+            }
+        }
+    }
+    if !gateway_checked {
+        match gateway::inspect(robot, options.window) {
+            Ok(found) => emit(found.checks, &mut checks),
+            Err(error) if is_no_gateway(&error) => {
+                let check = match &options.port {
+                    Some(spec) => Check::warn(
+                        "gateway",
+                        format!("no gateway serves robot {robot}: the port was checked directly"),
+                        format!(
+                            "when the checks pass: scout-gateway --{} {} --name {robot}",
+                            match spec {
+                                DeviceSpec::Serial(_) => "serial",
+                                DeviceSpec::Slcan(_) => "slcan",
+                                DeviceSpec::Can(_) => "can",
+                                DeviceSpec::Sim(_) => "sim",
+                            },
+                            spec.name()
+                        ),
+                    ),
+                    None => Check::fail(
+                        "gateway",
+                        format!("no gateway serves robot {robot}"),
+                        format!(
+                            "start one (scout-gateway --serial DEV --name {robot}, or --sim), or \
+                             give the port (--serial, --slcan, --can) to check it directly"
+                        ),
+                    ),
+                };
+                emit(vec![check], &mut checks);
+            }
+            Err(error) => emit(
+                vec![Check::fail(
+                    "gateway",
+                    format!("reading the gateway of robot {robot}: {error}"),
+                    "see the error; `scout status` says more",
+                )],
+                &mut checks,
+            ),
+        }
+    }
+    let leftovers = match services::remove_dead_nodes() {
+        Ok(0) => Check::pass("iceoryx2", "no resources left by dead processes"),
+        Ok(removed) => Check::warn(
+            "iceoryx2",
+            format!("removed the shared-memory resources of {removed} dead processes"),
+            "nothing more to do; a gateway or client killed (SIGKILL, power loss) leaves them",
+        ),
+        Err(error) => Check::warn(
+            "iceoryx2",
+            format!("cannot list iceoryx2 nodes: {error:?}"),
+            "check that /dev/shm and /tmp/iceoryx2 are writable",
+        ),
+    };
+    emit(vec![leftovers], &mut checks);
+    checks
+}

@@ -1,0 +1,187 @@
+//! Checks through a running gateway: its link state and counters, the chassis' state as it
+//! publishes it, and the stops that hold the robot, without touching the port it owns.
+
+use std::time::{Duration, Instant};
+
+use scout_clients::client::{ClientError, Robot};
+use scout_interface::json::status_json;
+use scout_interface::services::{self, ServiceError};
+use scout_interface::{LinkState, StatePayload};
+
+use crate::check::Check;
+use crate::traffic::chassis_checks;
+
+/// What the gateway of a robot said.
+#[derive(Debug)]
+pub struct GatewayReport {
+    /// The checks.
+    pub checks: Vec<Check>,
+    /// The device it serves, as it names it.
+    pub device: String,
+}
+
+/// Whether the error means no gateway of that name runs.
+pub fn is_no_gateway(error: &ClientError) -> bool {
+    matches!(error, ClientError::Service(ServiceError::NoGateway { .. }))
+}
+
+fn latest(
+    subscriber: &scout_clients::client::StateSubscriber,
+    limit: Duration,
+) -> Result<Option<StatePayload>, ClientError> {
+    let deadline = Instant::now() + limit;
+    let mut newest = None;
+    while Instant::now() < deadline {
+        if let Some(state) = subscriber.next_timeout(Duration::from_millis(50))? {
+            newest = Some(state);
+            while let Some(state) = subscriber.try_next()? {
+                newest = Some(state);
+            }
+            return Ok(newest);
+        }
+    }
+    Ok(newest)
+}
+
+/// The checks of robot `robot`'s gateway over `window`; `Err` when it cannot be reached.
+pub fn inspect(robot: &str, window: Duration) -> Result<GatewayReport, ClientError> {
+    let connection = Robot::connect(robot)?;
+    let subscriber = connection.subscribe()?;
+    let status = connection.status()?;
+    let mut checks = Vec::new();
+    let Some(first) = latest(&subscriber, Duration::from_secs(1))? else {
+        checks.push(Check::fail(
+            "gateway",
+            format!("the gateway of robot {robot} publishes no state"),
+            "it is stopped (SIGSTOP) or stuck: see its log (`journalctl -u scout-gateway`), \
+             restart it",
+        ));
+        return Ok(GatewayReport {
+            checks,
+            device: String::new(),
+        });
+    };
+    let started = Instant::now();
+    let mut last = first;
+    while started.elapsed() < window {
+        if let Some(state) = latest(&subscriber, window.saturating_sub(started.elapsed()))? {
+            last = state;
+        }
+    }
+    let elapsed = started.elapsed().as_secs_f64().max(1e-3);
+    let link = &last.link;
+    let transport = link.transport().map_or("unknown", |t| t.name());
+    let device = link.device.as_str().to_owned();
+    checks.push(Check::pass(
+        "gateway",
+        format!("scout-gateway serves robot {robot} on {transport} {device}"),
+    ));
+    checks.push(match link.state() {
+        LinkState::Ok => Check::pass("link", "ok: feedback arrives"),
+        LinkState::Silent => Check::fail(
+            "link",
+            "silent: the gateway receives no feedback",
+            "is the chassis on and wired? `scout doctor` with the port (after stopping the \
+             gateway) listens to it directly",
+        ),
+        LinkState::Disconnected => Check::fail(
+            "link",
+            format!("disconnected: the gateway cannot use {device} and keeps reopening it"),
+            "see the gateway's log for the reason (`journalctl -u scout-gateway`): a device \
+             unplugged, a CAN interface down",
+        ),
+        LinkState::ProtocolV2 => Check::fail(
+            "link",
+            "the chassis speaks protocol v2",
+            "a SCOUT 2.0 or MINI (protocol v2): this gateway speaks v1 only so far",
+        ),
+    });
+    let frames = link.rx_frames.saturating_sub(first.link.rx_frames);
+    checks.push(if frames > 0 {
+        Check::pass(
+            "traffic",
+            format!(
+                "{frames} frames in {elapsed:.1} s ({:.0}/s)",
+                frames as f64 / elapsed
+            ),
+        )
+    } else {
+        Check::fail(
+            "traffic",
+            format!("no frame in {elapsed:.1} s"),
+            "the chassis sends nothing: power, wiring, bitrate (see link)",
+        )
+    });
+    let grew = |now: u64, then: u64| now.saturating_sub(then);
+    let errors = [
+        (
+            "checksum errors",
+            grew(link.checksum_errors, first.link.checksum_errors),
+        ),
+        (
+            "dropped",
+            grew(link.dropped_frames, first.link.dropped_frames),
+        ),
+        (
+            "rejected",
+            grew(link.rejected_frames, first.link.rejected_frames),
+        ),
+        (
+            "overflowed",
+            grew(link.overflowed_frames, first.link.overflowed_frames),
+        ),
+    ];
+    let bad: u64 = errors.iter().map(|(_, n)| n).sum();
+    let described = errors
+        .iter()
+        .map(|(what, n)| format!("{n} {what}"))
+        .collect::<Vec<_>>()
+        .join(", ");
+    checks.push(if bad == 0 {
+        Check::pass("errors", format!("none in {elapsed:.1} s"))
+    } else {
+        Check::warn(
+            "errors",
+            format!("in {elapsed:.1} s: {described}"),
+            "noise, another device, or a slow reader: check wiring and termination; \
+             `scout status` and the gateway's log tell more",
+        )
+    });
+    let system = last.system;
+    checks.extend(chassis_checks(
+        system.received.valid.then(|| system.status()).as_ref(),
+    ));
+    if let Some(payload) = status.latest(Duration::from_secs(1))? {
+        let json = status_json(&payload, services::monotonic_ns());
+        let stops = json["stops"].as_array().cloned().unwrap_or_default();
+        checks.push(if stops.is_empty() {
+            Check::pass("stops", "no stop holds the robot")
+        } else {
+            let described = stops
+                .iter()
+                .map(|stop| {
+                    format!(
+                        "#{} by {} ({}): {}{}",
+                        stop["id"],
+                        stop["owner"].as_str().unwrap_or("?"),
+                        stop["cause"].as_str().unwrap_or("?"),
+                        stop["reason"].as_str().unwrap_or(""),
+                        if stop["persists"] == true {
+                            " [its cause persists]"
+                        } else {
+                            ""
+                        }
+                    )
+                })
+                .collect::<Vec<_>>()
+                .join("; ");
+            Check::warn(
+                "stops",
+                format!("{} stop(s) hold the robot: {described}", stops.len()),
+                "remove each cause, then `scout release` (nothing moves until a client takes \
+                 control again)",
+            )
+        });
+    }
+    Ok(GatewayReport { checks, device })
+}

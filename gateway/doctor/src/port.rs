@@ -1,0 +1,143 @@
+//! The port itself, when no gateway holds it: the device file (exists, readable and writable by
+//! this user), opening it with the gateway's own code and lock, and listening to it. Nothing is
+//! ever sent to the chassis (an slcan adapter gets its set-up lines, as from the gateway).
+
+use std::io::ErrorKind;
+use std::os::unix::fs::{FileTypeExt, MetadataExt};
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use nix::unistd::{AccessFlags, Group, access};
+use scout_gateway::device::{DeviceSpec, OpenError};
+use scout_gateway::lock::LockError;
+
+use crate::check::Check;
+use crate::traffic::Traffic;
+
+/// What opening the port found.
+#[derive(Debug)]
+pub enum Opened {
+    /// Listened to: the tally.
+    Listened(Box<Traffic>),
+    /// A gateway holds it (its pid, if it wrote one).
+    Held(Option<u32>),
+    /// It could not be opened (the check says why).
+    Failed,
+}
+
+/// The device file of a tty: it exists, is a character device, and this user may read and write
+/// it.
+pub fn tty_checks(path: &Path) -> Vec<Check> {
+    let metadata = match std::fs::metadata(path) {
+        Ok(metadata) => metadata,
+        Err(error) if error.kind() == ErrorKind::NotFound => {
+            return vec![Check::fail(
+                "device",
+                format!("no {}", path.display()),
+                "plug the adapter in; `ls -l /dev/serial/by-id/` names USB serial adapters \
+                 (use that path: it survives re-plugging); `dmesg | tail` shows what the kernel \
+                 saw",
+            )];
+        }
+        Err(error) => {
+            return vec![Check::fail(
+                "device",
+                format!("{}: {error}", path.display()),
+                "check the path",
+            )];
+        }
+    };
+    if !metadata.file_type().is_char_device() {
+        return vec![Check::fail(
+            "device",
+            format!("{} is not a character device (a tty)", path.display()),
+            "name the serial device, e.g. /dev/ttyUSB0",
+        )];
+    }
+    if access(path, AccessFlags::R_OK | AccessFlags::W_OK).is_err() {
+        let group = Group::from_gid(nix::unistd::Gid::from_raw(metadata.gid()))
+            .ok()
+            .flatten()
+            .map_or_else(|| format!("gid {}", metadata.gid()), |group| group.name);
+        return vec![Check::fail(
+            "device",
+            format!(
+                "{} is not readable and writable by this user (mode {:o}, group {group})",
+                path.display(),
+                metadata.mode() & 0o777
+            ),
+            format!(
+                "sudo usermod -aG {group} $USER, then log out and in again (or run the gateway \
+                 as its service user)"
+            ),
+        )];
+    }
+    vec![Check::pass(
+        "device",
+        format!(
+            "{} exists and this user may read and write it",
+            path.display()
+        ),
+    )]
+}
+
+/// Opens `spec` as the gateway does (taking its lock) and listens for `window`.
+pub fn listen(spec: &DeviceSpec, window: Duration, checks: &mut Vec<Check>) -> Opened {
+    let started = Instant::now();
+    let clock = |at: Instant| at.duration_since(started);
+    let mut device = match spec.open(Duration::ZERO) {
+        Ok(device) => device,
+        Err(OpenError::Owned(LockError::Held { holder, .. })) => return Opened::Held(holder),
+        Err(OpenError::Owned(error @ LockError::Io { .. })) => {
+            checks.push(Check::fail(
+                "port",
+                error.to_string(),
+                "the gateway's lock directory must be writable: set SCOUT_RUN_DIR or fix its \
+                 permissions",
+            ));
+            return Opened::Failed;
+        }
+        Err(OpenError::Io(error)) => {
+            let fix = match error.kind() {
+                ErrorKind::PermissionDenied => {
+                    "this user may not open it: add it to the device's group (dialout), or run as \
+                     the gateway's user"
+                }
+                ErrorKind::NotFound => "the device or interface is gone: plug it in",
+                _ => {
+                    "another program may hold it (`fuser -v DEVICE` tells which: a ModemManager or \
+                     a terminal program)"
+                }
+            };
+            checks.push(Check::fail(
+                "port",
+                format!("opening {}: {error}", spec.name()),
+                fix,
+            ));
+            return Opened::Failed;
+        }
+    };
+    checks.push(Check::pass(
+        "port",
+        format!("opened {} (no gateway holds it)", spec.name()),
+    ));
+    let mut traffic = Traffic::new();
+    let mut buffer = [0_u8; 4096];
+    let deadline = started + window;
+    while Instant::now() < deadline {
+        let now = clock(Instant::now());
+        let result = device.receive(now, true, &mut buffer, |event| traffic.handle(&event, now));
+        if let Err(error) = result {
+            checks.push(Check::fail(
+                "port.read",
+                format!("reading {}: {error}", spec.name()),
+                "a CAN bus-off or error-passive controller (see can.state), or the adapter was \
+                 unplugged",
+            ));
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    traffic.discarded_bytes = device.discarded_bytes();
+    Opened::Listened(Box::new(traffic))
+}

@@ -1,0 +1,442 @@
+//! What a port said while the doctor listened, and the verdicts on it: whether frames arrive,
+//! which protocol their ids speak, checksums and rejects, another host commanding the chassis,
+//! and the chassis' own state from its last 0x151. Sans-IO: events and their times come in.
+
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+use scout_protocol::Severity;
+use scout_protocol::link::RxEvent;
+use scout_protocol::version::{ProtocolVersion, VersionDetector, is_v2_only_id};
+use scout_protocol::{ChassisState, ControlMode, Direction, Message, SystemStatus, Transport};
+
+use crate::check::Check;
+
+/// Below this the battery is worth a warning (the chassis faults at 22 V), V.
+pub const LOW_BATTERY: f64 = 23.0;
+
+/// The tally of one listening window.
+#[derive(Debug, Clone, Default)]
+pub struct Traffic {
+    /// Valid frames by CAN id.
+    pub frames: BTreeMap<u16, u64>,
+    /// Rejected input by CAN id, where it had one.
+    pub rejected_ids: BTreeMap<u16, u64>,
+    /// Frames rejected for their checksum.
+    pub checksum_errors: u64,
+    /// Other rejected input.
+    pub rejected: u64,
+    /// Extended, remote or error CAN frames.
+    pub foreign: u64,
+    /// Motion or light commands another host sent (the chassis' ids for host commands).
+    pub other_host_commands: u64,
+    /// Bytes the stream decoder discarded (a tty), set by the caller at the end.
+    pub discarded_bytes: u64,
+    /// The last system status.
+    pub last_status: Option<SystemStatus>,
+    version: VersionDetector,
+}
+
+impl Traffic {
+    /// An empty tally.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// One event, received at `now` (any monotonic origin).
+    pub fn handle(&mut self, event: &RxEvent, now: Duration) {
+        match event {
+            RxEvent::Message(counted) => {
+                let id = counted.message.kind().can_id();
+                self.version.observe(id, now);
+                *self.frames.entry(id).or_default() += 1;
+                if counted.message.kind().direction() == Direction::Command {
+                    self.other_host_commands += 1;
+                }
+                if let Message::SystemStatus(status) = counted.message {
+                    self.last_status = Some(status);
+                }
+            }
+            RxEvent::Rejected(error) => {
+                if let Some(id) = error.can_id() {
+                    self.version.observe(id, now);
+                    *self.rejected_ids.entry(id).or_default() += 1;
+                }
+                if error.is_checksum() {
+                    self.checksum_errors += 1;
+                } else if matches!(error, scout_protocol::link::RxError::ForeignFrame(_)) {
+                    self.foreign += 1;
+                } else {
+                    self.rejected += 1;
+                }
+            }
+            RxEvent::Slcan(_) => {}
+        }
+    }
+
+    fn valid_frames(&self) -> u64 {
+        self.frames.values().sum()
+    }
+
+    fn ids(ids: &BTreeMap<u16, u64>) -> String {
+        ids.iter()
+            .map(|(id, count)| format!("0x{id:03X} x{count}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+
+    /// The verdicts after listening for `window` on `transport`, at `now`.
+    pub fn checks(&self, transport: Transport, window: Duration, now: Duration) -> Vec<Check> {
+        let mut checks = Vec::new();
+        let v2_ids: BTreeMap<u16, u64> = self
+            .rejected_ids
+            .iter()
+            .filter(|(id, _)| is_v2_only_id(**id))
+            .map(|(id, count)| (*id, *count))
+            .collect();
+        let valid = self.valid_frames();
+        let anything =
+            valid + self.checksum_errors + self.rejected + self.foreign + self.discarded_bytes;
+        let how = match transport {
+            Transport::Serial => {
+                "is the chassis on, the cable on its RS232 port (TX/RX crossed, GND), and the port \
+                 at 115200 8N1?"
+            }
+            Transport::Slcan | Transport::Can => {
+                "is the chassis on, CAN_H/CAN_L wired (and terminated: 120 ohm at each end), the \
+                 bus at 500 kbit/s?"
+            }
+            Transport::Sim => "is the simulator running?",
+        };
+        if anything == 0 {
+            checks.push(Check::fail(
+                "traffic",
+                format!("nothing received in {window:.1?}"),
+                format!("nothing arrives: {how}"),
+            ));
+            return checks;
+        }
+        if valid == 0 && v2_ids.is_empty() {
+            let what = format!(
+                "no valid frame in {window:.1?}: {} rejected, {} checksum errors, {} bytes \
+                 discarded, {} foreign frames{}",
+                self.rejected,
+                self.checksum_errors,
+                self.discarded_bytes,
+                self.foreign,
+                if self.rejected_ids.is_empty() {
+                    String::new()
+                } else {
+                    format!("; ids {}", Self::ids(&self.rejected_ids))
+                }
+            );
+            let fix = match transport {
+                Transport::Serial => {
+                    "bytes arrive but no SCOUT frame: the wrong baud rate (the chassis speaks \
+                     115200 8N1), another device on this port, or a CAN adapter (use --slcan)"
+                }
+                Transport::Slcan => {
+                    "lines arrive but no SCOUT frame: the adapter's bitrate (500k), or not an \
+                     slcan adapter (a plain RS232 link is --serial)"
+                }
+                Transport::Can | Transport::Sim => {
+                    "frames arrive but none of SCOUT v1: another device on the bus, or the \
+                     wrong bitrate"
+                }
+            };
+            checks.push(Check::fail("traffic", what, fix));
+        } else {
+            let rate = valid as f64 / window.as_secs_f64().max(1e-3);
+            checks.push(Check::pass(
+                "traffic",
+                format!(
+                    "{valid} frames in {window:.1?} ({rate:.0}/s): {}",
+                    Self::ids(&self.frames)
+                ),
+            ));
+        }
+        checks.push(match self.version.version(now) {
+            ProtocolVersion::V1 => Check::pass("protocol", "v1 (0x151 seen): supported"),
+            ProtocolVersion::V2 => Check::fail(
+                "protocol",
+                format!("protocol v2 ids and no 0x151: {}", Self::ids(&v2_ids)),
+                "a SCOUT 2.0 or MINI (protocol v2): this gateway speaks v1 only so far",
+            ),
+            ProtocolVersion::Unknown if !v2_ids.is_empty() => Check::fail(
+                "protocol",
+                format!("protocol v2 ids ({}) and no 0x151", Self::ids(&v2_ids)),
+                "a SCOUT 2.0 or MINI (protocol v2): this gateway speaks v1 only so far",
+            ),
+            ProtocolVersion::Unknown => Check::fail(
+                "protocol",
+                "no 0x151 system status: the protocol is unknown",
+                "a v1 chassis sends 0x151 every 20 ms: listen longer, or check the ids above",
+            ),
+        });
+        let bad = self.checksum_errors + self.rejected + self.foreign;
+        let total = valid + bad;
+        if bad == 0 {
+            checks.push(Check::pass(
+                "errors",
+                "no checksum errors or rejected frames",
+            ));
+        } else {
+            let detail = format!(
+                "{} checksum errors, {} rejected, {} foreign of {total} frames{}",
+                self.checksum_errors,
+                self.rejected,
+                self.foreign,
+                if self.rejected_ids.is_empty() {
+                    String::new()
+                } else {
+                    format!("; rejected ids {}", Self::ids(&self.rejected_ids))
+                }
+            );
+            let fix = "noise or another device: check the wiring and its shield, the \
+                       termination (CAN), and what else is on the bus";
+            checks.push(if bad * 20 > total {
+                Check::fail("errors", detail, fix)
+            } else {
+                Check::warn("errors", detail, fix)
+            });
+        }
+        if self.other_host_commands > 0 {
+            checks.push(Check::fail(
+                "other-host",
+                format!(
+                    "{} motion or light commands from another host (0x130/0x140)",
+                    self.other_host_commands
+                ),
+                "another program commands this chassis: stop it (two commanders fight, and \
+                 the gateway cannot arbitrate what it does not send)",
+            ));
+        } else {
+            checks.push(Check::pass("other-host", "no other host sends commands"));
+        }
+        checks.extend(chassis_checks(self.last_status.as_ref()));
+        checks
+    }
+}
+
+/// The chassis' own state from its 0x151: e-stop, who controls it, faults, battery.
+pub fn chassis_checks(status: Option<&SystemStatus>) -> Vec<Check> {
+    let Some(status) = status else {
+        return [
+            "chassis.estop",
+            "chassis.control",
+            "chassis.faults",
+            "chassis.battery",
+        ]
+        .into_iter()
+        .map(|name| Check::skip(name, "no 0x151 system status received"))
+        .collect();
+    };
+    let mut checks = Vec::new();
+    checks.push(match status.state {
+        ChassisState::Normal => Check::pass("chassis.estop", "state normal"),
+        ChassisState::EStop => Check::fail(
+            "chassis.estop",
+            "the chassis reports its e-stop",
+            "release the e-stop button on the chassis (turn it), or the RC's stop switch; then \
+             `scout release` for the gateway's stop",
+        ),
+        ChassisState::Exception | ChassisState::Unknown(_) => Check::fail(
+            "chassis.estop",
+            format!("the chassis reports state {}", status.state.name()),
+            "a system exception: see chassis.faults; power-cycle the chassis if it persists",
+        ),
+    });
+    checks.push(match status.control_mode {
+        ControlMode::Can | ControlMode::Serial => Check::pass(
+            "chassis.control",
+            format!(
+                "command mode {}: the host may drive",
+                status.control_mode.name()
+            ),
+        ),
+        ControlMode::Rc | ControlMode::Unknown(_) => Check::warn(
+            "chassis.control",
+            format!(
+                "control mode {}: the RC transmitter holds the chassis",
+                status.control_mode.name()
+            ),
+            "give control to the host: the RC's mode switch to command mode (or switch the RC \
+             off); the gateway never fights the RC",
+        ),
+    });
+    let faults: Vec<_> = status.faults.iter().collect();
+    checks.push(if faults.is_empty() {
+        Check::pass("chassis.faults", "no fault bits")
+    } else {
+        let names = faults
+            .iter()
+            .map(|f| f.name())
+            .collect::<Vec<_>>()
+            .join(", ");
+        let latched = faults.iter().any(|f| f.severity() == Severity::Protection);
+        Check::fail(
+            "chassis.faults",
+            format!("fault bits 0x{:04X}: {names}", status.faults.0),
+            if latched {
+                "a latched protection: remove the cause (let drivers cool, lighten the load), \
+                 then `scout clear-fault all`"
+            } else {
+                "the chassis reports it while the cause lasts: check the motors' cables and the \
+                 battery; `scout clear-fault` for latched ones"
+            },
+        )
+    });
+    let volts = status.battery_voltage();
+    checks.push(if volts < LOW_BATTERY {
+        Check::warn(
+            "chassis.battery",
+            format!("{volts:.1} V"),
+            "charge the battery (the chassis faults at 22 V)",
+        )
+    } else {
+        Check::pass("chassis.battery", format!("{volts:.1} V"))
+    });
+    checks
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::check::Verdict;
+    use scout_protocol::link::RxError;
+    use scout_protocol::{Counted, FaultBits};
+
+    fn verdicts(checks: &[Check]) -> Vec<(&'static str, Verdict)> {
+        checks.iter().map(|c| (c.name, c.verdict)).collect()
+    }
+
+    fn status(state: ChassisState, mode: ControlMode, faults: u16, decivolts: u16) -> RxEvent {
+        RxEvent::Message(Counted {
+            message: Message::SystemStatus(SystemStatus {
+                state,
+                control_mode: mode,
+                battery_decivolts: decivolts,
+                faults: FaultBits(faults),
+            }),
+            count: 0,
+        })
+    }
+
+    const MS: Duration = Duration::from_millis(1);
+    const WINDOW: Duration = Duration::from_secs(1);
+
+    #[test]
+    fn a_healthy_chassis_passes_everything() {
+        let mut traffic = Traffic::new();
+        for i in 0..50 {
+            traffic.handle(
+                &status(ChassisState::Normal, ControlMode::Can, 0, 250),
+                i * 20 * MS,
+            );
+        }
+        let checks = traffic.checks(Transport::Can, WINDOW, WINDOW);
+        assert!(
+            checks.iter().all(|c| c.verdict == Verdict::Pass),
+            "{checks:#?}"
+        );
+        assert!(
+            checks[0].detail.contains("0x151 x50"),
+            "{}",
+            checks[0].detail
+        );
+    }
+
+    #[test]
+    fn silence_fails_with_what_to_check_and_stops_there() {
+        let checks = Traffic::new().checks(Transport::Serial, WINDOW, WINDOW);
+        assert_eq!(verdicts(&checks), [("traffic", Verdict::Fail)]);
+        assert!(
+            checks[0]
+                .fix
+                .as_deref()
+                .is_some_and(|f| f.contains("115200"))
+        );
+    }
+
+    #[test]
+    fn garbage_fails_as_the_wrong_baud_rate() {
+        let mut traffic = Traffic::new();
+        traffic.discarded_bytes = 300;
+        let checks = traffic.checks(Transport::Serial, WINDOW, WINDOW);
+        assert_eq!(checks[0].verdict, Verdict::Fail);
+        assert!(
+            checks[0].fix.as_deref().is_some_and(|f| f.contains("baud")),
+            "{checks:#?}"
+        );
+    }
+
+    #[test]
+    fn v2_ids_without_0x151_fail_as_protocol_v2() {
+        let mut traffic = Traffic::new();
+        for i in 0..60 {
+            let error = RxError::Can(scout_protocol::can::CanError::UnknownId { id: 0x211 });
+            traffic.handle(&RxEvent::Rejected(error), i * 20 * MS);
+        }
+        let checks = traffic.checks(Transport::Slcan, WINDOW, 1200 * MS);
+        let protocol = checks
+            .iter()
+            .find(|c| c.name == "protocol")
+            .expect("protocol");
+        assert_eq!(protocol.verdict, Verdict::Fail);
+        assert!(protocol.detail.contains("0x211"), "{protocol:?}");
+        assert!(protocol.fix.as_deref().is_some_and(|f| f.contains("v2")));
+    }
+
+    #[test]
+    fn the_chassis_estop_rc_faults_and_a_low_battery_are_named_with_their_fixes() {
+        let mut traffic = Traffic::new();
+        traffic.handle(
+            &status(ChassisState::EStop, ControlMode::Rc, 0x0040, 225),
+            Duration::ZERO,
+        );
+        let checks = traffic.checks(Transport::Serial, WINDOW, WINDOW);
+        let find = |name| checks.iter().find(|c| c.name == name).expect(name);
+        assert_eq!(find("chassis.estop").verdict, Verdict::Fail);
+        assert_eq!(find("chassis.control").verdict, Verdict::Warn);
+        assert!(
+            find("chassis.control")
+                .fix
+                .as_deref()
+                .is_some_and(|f| f.contains("RC"))
+        );
+        let faults = find("chassis.faults");
+        assert_eq!(faults.verdict, Verdict::Fail);
+        assert!(
+            faults
+                .fix
+                .as_deref()
+                .is_some_and(|f| f.contains("clear-fault")),
+            "{faults:?}"
+        );
+        assert_eq!(find("chassis.battery").verdict, Verdict::Warn);
+    }
+
+    #[test]
+    fn another_host_sending_0x130_fails() {
+        let mut traffic = Traffic::new();
+        traffic.handle(
+            &status(ChassisState::Normal, ControlMode::Can, 0, 250),
+            Duration::ZERO,
+        );
+        traffic.handle(
+            &RxEvent::Message(Counted {
+                message: Message::MotionCommand(scout_protocol::MotionCommand::stop(
+                    ControlMode::Can,
+                )),
+                count: 0,
+            }),
+            MS,
+        );
+        let checks = traffic.checks(Transport::Can, WINDOW, WINDOW);
+        let other = checks
+            .iter()
+            .find(|c| c.name == "other-host")
+            .expect("other-host");
+        assert_eq!(other.verdict, Verdict::Fail);
+    }
+}

@@ -1,0 +1,497 @@
+//! `scout record` and `scout foxglove` against a real gateway on the simulator: MCAP files read
+//! back with the Python `mcap` package (whole, cut by SIGINT, by `--duration`, by SIGKILL), and
+//! the live view read by a Foxglove WebSocket client written with `websockets`
+//! (`foxglove_ws_client.py`): channels, rates, the stop service through the gateway's stop path.
+//!
+//! They need `python3` (or `$SCOUT_PYTHON`) with `mcap` and `websockets` (`.ci/run` installs
+//! them). Without them the tests skip, saying why, unless `SCOUT_REQUIRE_FOXGLOVE_CHECKS` is set
+//! (as in CI): then they fail.
+
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use nix::sys::signal::Signal;
+use scout_system_tests::{
+    Background, Gateway, Sim, TempDir, chassis_stays_still, comes_to_rest, command, connect,
+    drive_until_moving, release_all, robot_name, run_with_input, scout, skip, wait_for_status,
+};
+use serde_json::Value;
+
+fn python() -> String {
+    std::env::var("SCOUT_PYTHON").unwrap_or_else(|_| "python3".into())
+}
+
+/// Why the checks cannot run here, if they cannot; panics instead where they are required.
+fn checks_missing(test: &str) -> Option<String> {
+    let why = match Command::new(python())
+        .args(["-c", "import mcap, websockets, zstandard"])
+        .output()
+    {
+        Ok(output) if output.status.success() => return None,
+        Ok(output) => format!(
+            "{} lacks mcap or websockets ({}): pip install mcap==1.6.0 websockets==17.4",
+            python(),
+            String::from_utf8_lossy(&output.stderr).trim()
+        ),
+        Err(error) => format!("no {}: {error}", python()),
+    };
+    assert!(
+        std::env::var_os("SCOUT_REQUIRE_FOXGLOVE_CHECKS").is_none(),
+        "{test}: {why}"
+    );
+    skip(test, &why);
+    Some(why)
+}
+
+fn script(name: &str) -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/system")
+        .join(name)
+}
+
+/// The report of `mcap_check.py` on `file`.
+fn mcap_report(file: &Path, truncated: bool) -> Value {
+    let mut check = Command::new(python());
+    check.arg(script("mcap_check.py")).arg(file);
+    if truncated {
+        check.arg("--truncated");
+    }
+    let output = run_with_input(check, b"", Duration::from_secs(60));
+    assert!(
+        output.status.success(),
+        "mcap_check.py failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    serde_json::from_slice(&output.stdout).expect("a JSON report")
+}
+
+/// `scout record --name NAME --output FILE ARGS` in the background, its output collected.
+fn recorder(name: &str, file: &Path, args: &[&str]) -> Background {
+    let mut record = command("scout");
+    record
+        .args(["record", "--name", name, "--output"])
+        .arg(file)
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null());
+    Background::spawn(record)
+}
+
+fn file_size(file: &Path) -> u64 {
+    std::fs::metadata(file).map_or(0, |metadata| metadata.len())
+}
+
+/// Waits at most `limit` until `file` has grown `times` times (a chunk is synced every second).
+fn wait_growth(file: &Path, times: u32, limit: Duration) {
+    let deadline = Instant::now() + limit;
+    let mut size = file_size(file);
+    let mut grown = 0;
+    while grown < times {
+        assert!(
+            Instant::now() < deadline,
+            "{} did not grow {times} times",
+            file.display()
+        );
+        std::thread::sleep(Duration::from_millis(50));
+        let now = file_size(file);
+        if now > size {
+            grown += 1;
+            size = now;
+        }
+    }
+}
+
+fn topic<'a>(report: &'a Value, name: &str) -> &'a Value {
+    let topic = &report["topics"][name];
+    assert!(topic.is_object(), "no {name} in {report}");
+    topic
+}
+
+/// Messages a second on `topic`, from its count and first and last log times.
+fn rate(topic: &Value) -> f64 {
+    let count = topic["count"].as_f64().expect("count");
+    let span = (topic["last_ns"].as_f64().expect("last")
+        - topic["first_ns"].as_f64().expect("first"))
+        / 1e9;
+    (count - 1.0) / span
+}
+
+#[test]
+fn a_recording_holds_every_channel_with_schemas_and_closes_with_its_index_on_sigint() {
+    let test = "record_sigint";
+    if checks_missing(test).is_some() {
+        return;
+    }
+    let name = robot_name("record");
+    let dir = TempDir::new(&name);
+    let file = dir.path().join("drive.mcap");
+    let mut sim = Sim::start(&["--serial"]);
+    let device = sim.port().to_owned();
+    let _gateway = Gateway::start(&["--serial", &device, "--name", &name]);
+    let robot = connect(&name);
+    let status = robot.status().expect("status reader");
+    let mut recorder = recorder(&name, &file, &[]);
+    wait_growth(&file, 1, Duration::from_secs(10));
+
+    // Drive, latch a stop, release it: commands, stops and events to record.
+    let driver = drive_until_moving(
+        &mut sim,
+        &name,
+        &["--linear", "0.4", "--duration", "60"],
+        Duration::from_secs(10),
+    );
+    let (code, _, stderr) = scout(&["estop", "--name", &name, "--reason", "recorded stop"]);
+    assert_eq!(code, Some(0), "{stderr}");
+    comes_to_rest(&mut sim, Duration::from_secs(5));
+    chassis_stays_still(&mut sim, Duration::from_millis(300));
+    drop(driver);
+    release_all(&name);
+    wait_for_status(&status, Duration::from_secs(5), |s| s["latched"] == false);
+    wait_growth(&file, 2, Duration::from_secs(10));
+
+    recorder.signal(Signal::SIGINT);
+    assert_eq!(
+        recorder.wait_exit(Duration::from_secs(10)),
+        Some(0),
+        "SIGINT is a clean end"
+    );
+    let report = mcap_report(&file, false);
+    assert_eq!(report["summary"], true, "a summary section: {report}");
+    assert_eq!(report["compression"], serde_json::json!(["zstd"]));
+    assert!(
+        report["chunks"].as_u64() >= Some(2),
+        "a chunk a second: {report}"
+    );
+    assert_eq!(report["metadata"]["scout"]["robot"], name.as_str());
+
+    let expected = [
+        ("/scout/state", "scout.State", "jsonschema", "json"),
+        ("/scout/command", "scout.Command", "jsonschema", "json"),
+        ("/scout/status", "scout.Status", "jsonschema", "json"),
+        ("/scout/events", "foxglove.Log", "protobuf", "protobuf"),
+        (
+            "/scout/pose",
+            "foxglove.PoseInFrame",
+            "protobuf",
+            "protobuf",
+        ),
+        ("/tf", "foxglove.FrameTransform", "protobuf", "protobuf"),
+    ];
+    let mut total = 0;
+    for (name, schema, schema_encoding, encoding) in expected {
+        let topic = topic(&report, name);
+        assert_eq!(topic["schema"], schema, "{name}: {topic}");
+        assert_eq!(topic["schema_encoding"], schema_encoding, "{name}");
+        assert_eq!(topic["encoding"], encoding, "{name}");
+        assert_eq!(topic["in_order"], true, "{name}: log times never go back");
+        assert_eq!(
+            report["channel_message_counts"][name], topic["count"],
+            "{name}: the statistics agree"
+        );
+        total += topic["count"].as_u64().expect("count");
+    }
+    assert_eq!(report["message_count"].as_u64(), Some(total));
+
+    let state = topic(&report, "/scout/state");
+    let state_rate = rate(state);
+    assert!(
+        (40.0..=60.0).contains(&state_rate),
+        "the state at the chassis' 50 Hz: {state_rate:.1}"
+    );
+    assert_eq!(state["last"]["robot"], name.as_str());
+    assert!(
+        state["last"]["system"]["battery_voltage"].as_f64() > Some(20.0),
+        "{state}"
+    );
+    let pose = topic(&report, "/scout/pose");
+    assert_eq!(pose["count"], state["count"], "a pose with each state");
+    let command = topic(&report, "/scout/command");
+    let command_rate = rate(command);
+    assert!(
+        (40.0..=60.0).contains(&command_rate),
+        "every command at 50 Hz: {command_rate:.1}"
+    );
+    assert!(
+        topic(&report, "/scout/events")["count"].as_u64() >= Some(3),
+        "takeover, stop, release"
+    );
+    let last_status = &topic(&report, "/scout/status")["last"];
+    assert_eq!(last_status["latched"], false, "{last_status}");
+    let log_times_are_unix_now = state["first_ns"].as_f64().map(|ns| ns / 1e9);
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .expect("after 1970")
+        .as_secs_f64();
+    assert!(
+        log_times_are_unix_now.is_some_and(|first| (now - 120.0..now).contains(&first)),
+        "log times are Unix times: {log_times_are_unix_now:?}, now {now}"
+    );
+}
+
+#[test]
+fn a_recording_with_a_duration_ends_by_itself_and_one_cut_by_sigkill_reads_up_to_its_last_chunk() {
+    let test = "record_cut";
+    if checks_missing(test).is_some() {
+        return;
+    }
+    let name = robot_name("record-cut");
+    let dir = TempDir::new(&name);
+    let mut sim = Sim::start(&["--serial"]);
+    let device = sim.port().to_owned();
+    let _gateway = Gateway::start(&["--serial", &device, "--name", &name]);
+    connect(&name);
+
+    // --duration: exits 0 on its own, prints what it wrote.
+    let timed = dir.path().join("timed.mcap");
+    let mut record = command("scout");
+    record
+        .args(["record", "--name", &name, "--duration", "2", "--output"])
+        .arg(&timed);
+    let output = run_with_input(record, b"", Duration::from_secs(20));
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert_eq!(
+        output.status.code(),
+        Some(0),
+        "{stdout}{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(
+        stdout.starts_with(&format!("wrote {}", timed.display())),
+        "{stdout}"
+    );
+    let report = mcap_report(&timed, false);
+    assert_eq!(report["summary"], true);
+    let states = topic(&report, "/scout/state")["count"]
+        .as_u64()
+        .expect("count");
+    assert!((80..=120).contains(&states), "2 s at 50 Hz: {states}");
+
+    // The same file again: refused (exit 2), untouched.
+    let size = file_size(&timed);
+    let (code, _, stderr) = scout(&[
+        "record",
+        "--name",
+        &name,
+        "--duration",
+        "1",
+        "--output",
+        timed.to_str().expect("utf-8"),
+    ]);
+    assert_eq!(code, Some(2), "{stderr}");
+    assert!(
+        stderr.contains("exists") && stderr.contains("--force"),
+        "{stderr}"
+    );
+    assert_eq!(file_size(&timed), size);
+
+    // SIGKILL: no summary, but every synced chunk reads.
+    let cut = dir.path().join("cut.mcap");
+    let mut recorder = recorder(&name, &cut, &[]);
+    wait_growth(&cut, 3, Duration::from_secs(15));
+    recorder.signal(Signal::SIGKILL);
+    recorder.wait_exit(Duration::from_secs(5));
+    let whole = mcap_report(&cut, false);
+    assert_eq!(
+        whole["summary"], false,
+        "a killed recorder wrote no summary: {whole}"
+    );
+    let report = mcap_report(&cut, true);
+    let states = topic(&report, "/scout/state");
+    assert!(
+        states["count"].as_u64() >= Some(50),
+        "at least a second of states: {report}"
+    );
+    assert_eq!(states["in_order"], true);
+    assert_eq!(
+        states["last"]["robot"],
+        name.as_str(),
+        "the last message read is whole"
+    );
+    let _ = sim.stats();
+}
+
+#[test]
+fn no_gateway_is_exit_3_and_leaves_no_file() {
+    let name = robot_name("record-none");
+    let dir = TempDir::new(&name);
+    let file = dir.path().join("none.mcap");
+    let (code, _, stderr) = scout(&[
+        "record",
+        "--name",
+        &name,
+        "--output",
+        file.to_str().expect("utf-8"),
+    ]);
+    assert_eq!(code, Some(3), "{stderr}");
+    assert!(!file.exists());
+    let (code, _, stderr) = scout(&["foxglove", "--name", &name, "--listen", "127.0.0.1:0"]);
+    assert_eq!(code, Some(3), "{stderr}");
+}
+
+/// `scout foxglove --name NAME --listen 127.0.0.1:0 ARGS` and the URL it prints.
+fn live_view(name: &str, args: &[&str]) -> (Background, String) {
+    let mut serve = command("scout");
+    serve
+        .args(["foxglove", "--name", name, "--listen", "127.0.0.1:0"])
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null());
+    let mut child = serve.spawn().expect("start scout foxglove");
+    let stdout = child.stdout.take().expect("stdout");
+    let mut line = String::new();
+    BufReader::new(stdout)
+        .read_line(&mut line)
+        .expect("the first line");
+    let url = line
+        .split_whitespace()
+        .find(|word| word.starts_with("ws://"))
+        .map(|url| url.trim_end_matches(':').to_owned())
+        .unwrap_or_else(|| panic!("no URL in {line:?}"));
+    (Background::from_child(child), url)
+}
+
+fn ws_client(url: &str, seconds: &str, calls: &[(&str, &str)]) -> Value {
+    let mut client = Command::new(python());
+    client
+        .arg(script("foxglove_ws_client.py"))
+        .args([url, seconds]);
+    for (service, request) in calls {
+        client.args(["--call", service, request]);
+    }
+    let output = run_with_input(client, b"", Duration::from_secs(60));
+    assert!(
+        output.status.success(),
+        "foxglove_ws_client.py failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    serde_json::from_slice(&output.stdout).expect("a JSON report")
+}
+
+#[test]
+fn the_live_view_serves_the_same_channels_at_the_state_rate_and_is_read_only_by_default() {
+    let test = "foxglove_live";
+    if checks_missing(test).is_some() {
+        return;
+    }
+    let name = robot_name("foxglove");
+    let sim = Sim::start(&["--serial"]);
+    let device = sim.port().to_owned();
+    let _gateway = Gateway::start(&["--serial", &device, "--name", &name]);
+    connect(&name);
+    let (_server, url) = live_view(&name, &[]);
+    let report = ws_client(&url, "3", &[]);
+    assert_eq!(report["subprotocol"], "foxglove.websocket.v1");
+    assert_eq!(report["server_info"]["name"], format!("scout {name}"));
+    let capabilities = report["server_info"]["capabilities"]
+        .as_array()
+        .expect("capabilities");
+    assert!(
+        !capabilities
+            .iter()
+            .any(|c| c == "services" || c == "clientPublish"),
+        "read-only: {capabilities:?}"
+    );
+    for (topic, schema) in [
+        ("/scout/state", "scout.State"),
+        ("/scout/command", "scout.Command"),
+        ("/scout/status", "scout.Status"),
+        ("/scout/events", "foxglove.Log"),
+        ("/scout/pose", "foxglove.PoseInFrame"),
+        ("/tf", "foxglove.FrameTransform"),
+    ] {
+        assert_eq!(
+            report["channels"][topic]["schemaName"], schema,
+            "{topic}: {report}"
+        );
+    }
+    let states = report["messages"]["/scout/state"].as_u64().expect("states");
+    // 3 s at 50 Hz, less what the subscription's start took.
+    assert!(
+        (100..=160).contains(&states),
+        "/scout/state at about 50 Hz: {states}"
+    );
+    assert_eq!(
+        report["last"]["/scout/state"]["body"]["robot"],
+        name.as_str()
+    );
+    assert!(report["messages"]["/tf"].as_u64() >= Some(100));
+    assert!(report["services"].as_object().is_some_and(|s| s.is_empty()));
+}
+
+#[test]
+fn the_live_views_estop_is_a_stop_of_its_owner_shown_with_its_cause_and_released_only_as_configured()
+ {
+    let test = "foxglove_estop";
+    if checks_missing(test).is_some() {
+        return;
+    }
+    let name = robot_name("foxglove-estop");
+    let mut sim = Sim::start(&["--serial"]);
+    let device = sim.port().to_owned();
+    let _gateway = Gateway::start(&["--serial", &device, "--name", &name]);
+    let robot = connect(&name);
+    let status = robot.status().expect("status reader");
+    let (_server, url) = live_view(&name, &["--estop", "--owner", "console"]);
+
+    let driver = drive_until_moving(
+        &mut sim,
+        &name,
+        &["--linear", "0.4", "--duration", "60"],
+        Duration::from_secs(10),
+    );
+    let report = ws_client(
+        &url,
+        "0.5",
+        &[
+            ("/scout/estop", r#"{"reason": "operator saw a person"}"#),
+            ("/scout/release", "{}"),
+        ],
+    );
+    assert!(
+        report["server_info"]["capabilities"]
+            .as_array()
+            .is_some_and(|c| c.iter().any(|c| c == "services"))
+    );
+    let answer = &report["responses"]["1"]["body"];
+    assert_eq!(answer["success"], true, "{report}");
+    assert!(answer["stop"].as_u64() >= Some(1), "{answer}");
+    assert!(
+        report["failures"]["2"]
+            .as_str()
+            .is_some_and(|why| why.contains("no service /scout/release")),
+        "release is not offered without --allow-release: {report}"
+    );
+    let latched = wait_for_status(&status, Duration::from_secs(5), |s| s["latched"] == true);
+    let stop = &latched["stops"][0];
+    assert_eq!(stop["owner"], "console", "{latched}");
+    assert!(
+        stop["reason"]
+            .as_str()
+            .is_some_and(|r| r.contains("operator saw a person")),
+        "{stop}"
+    );
+    comes_to_rest(&mut sim, Duration::from_secs(5));
+    chassis_stays_still(&mut sim, Duration::from_millis(500));
+    let shown = report["statuses"].as_array().expect("statuses");
+    assert!(
+        shown.iter().any(|s| s["message"]
+            .as_str()
+            .is_some_and(|m| m.starts_with("STOP #") && m.contains("by console (client)"))),
+        "the stop is shown with its owner and cause: {shown:?}"
+    );
+    drop(driver);
+
+    // With --allow-release, a second view releases its owner's stop; motion does not restart.
+    let (_releaser, url) = live_view(&name, &["--allow-release", "--owner", "console"]);
+    let report = ws_client(&url, "1", &[("/scout/release", "{}")]);
+    assert_eq!(
+        report["responses"]["1"]["body"]["success"], true,
+        "{report}"
+    );
+    wait_for_status(&status, Duration::from_secs(5), |s| s["latched"] == false);
+    chassis_stays_still(&mut sim, Duration::from_millis(500));
+}
