@@ -17,10 +17,11 @@ fn bin_dir() -> PathBuf {
 }
 
 /// The binaries and examples the system tests run.
-const ARTIFACTS: [&str; 8] = [
+const ARTIFACTS: [&str; 9] = [
     "scout",
     "scout-ros2",
     "scout-foxglove",
+    "scout-doctor",
     "scout-gateway",
     "scout-sim",
     "scout-bench",

@@ -1,6 +1,7 @@
 //! Every check in order: the device, the CAN interface, opening the port and listening to it
 //! (or, when a gateway holds it, the same questions asked of that gateway), the chassis' state,
-//! the robot's gateway, and leftovers of dead processes in shared memory.
+//! the robot's gateway, the robot through zenoh when asked, and leftovers of dead processes in
+//! shared memory.
 
 use std::path::Path;
 use std::time::Duration;
@@ -8,10 +9,10 @@ use std::time::Duration;
 use scout_gateway::device::DeviceSpec;
 use scout_interface::services;
 
-use crate::can;
 use crate::check::{Check, Verdict};
 use crate::gateway::{self, is_no_gateway};
 use crate::port::{self, Opened};
+use crate::{can, remote};
 
 /// What to check.
 #[derive(Debug, Clone)]
@@ -22,6 +23,8 @@ pub struct Options {
     pub port: Option<DeviceSpec>,
     /// How long to listen.
     pub window: Duration,
+    /// A zenoh endpoint to read the robot's state through, if asked.
+    pub zenoh: Option<String>,
 }
 
 /// Whether the gateway's device names the same device as `spec`.
@@ -54,7 +57,8 @@ pub fn run(options: &Options, report: &mut dyn FnMut(&Check)) -> Vec<Check> {
             DeviceSpec::Sim(_) => Vec::new(),
         };
         let usable = !device.iter().any(|check| {
-            check.verdict == Verdict::Fail && matches!(check.name, "device" | "can.interface")
+            check.verdict == Verdict::Fail
+                && matches!(check.name, "device" | "can.interface" | "can.up")
         });
         emit(device, &mut checks);
         if usable {
@@ -143,6 +147,12 @@ pub fn run(options: &Options, report: &mut dyn FnMut(&Check)) -> Vec<Check> {
                 &mut checks,
             ),
         }
+    }
+    if let Some(endpoint) = &options.zenoh {
+        emit(
+            vec![remote::inspect(robot, endpoint, options.window)],
+            &mut checks,
+        );
     }
     let leftovers = match services::remove_dead_nodes() {
         Ok(0) => Check::pass("iceoryx2", "no resources left by dead processes"),

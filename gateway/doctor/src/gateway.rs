@@ -6,6 +6,7 @@ use std::time::{Duration, Instant};
 use scout_clients::client::{ClientError, Robot};
 use scout_interface::json::status_json;
 use scout_interface::services::{self, ServiceError};
+use scout_interface::stop_socket::{Ask, StopClient};
 use scout_interface::{LinkState, StatePayload};
 
 use crate::check::Check;
@@ -43,6 +44,14 @@ fn latest(
     Ok(newest)
 }
 
+/// The pid of robot `robot`'s gateway, from a ping of its stop endpoint (which asks the arbiter
+/// nothing).
+fn gateway_pid(robot: &str) -> Option<u32> {
+    let mut client = StopClient::new(robot, "scout-doctor").ok()?;
+    let reply = client.request(Ask::Ping, Duration::from_millis(500)).ok()?;
+    Some(reply.gateway_pid)
+}
+
 /// The checks of robot `robot`'s gateway over `window`; `Err` when it cannot be reached.
 pub fn inspect(robot: &str, window: Duration) -> Result<GatewayReport, ClientError> {
     let connection = Robot::connect(robot)?;
@@ -74,7 +83,10 @@ pub fn inspect(robot: &str, window: Duration) -> Result<GatewayReport, ClientErr
     let device = link.device.as_str().to_owned();
     checks.push(Check::pass(
         "gateway",
-        format!("scout-gateway serves robot {robot} on {transport} {device}"),
+        format!(
+            "scout-gateway{} serves robot {robot} on {transport} {device}",
+            gateway_pid(robot).map_or_else(String::new, |pid| format!(" (pid {pid})"))
+        ),
     ));
     checks.push(match link.state() {
         LinkState::Ok => Check::pass("link", "ok: feedback arrives"),

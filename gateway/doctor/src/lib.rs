@@ -7,6 +7,7 @@
 //! - [`can`]: a SocketCAN interface as `ip` describes it, and the verdicts.
 //! - [`port`]: the device file, opening and listening.
 //! - [`gateway`]: the checks through a running gateway.
+//! - [`remote`]: the robot's state through zenoh, when asked.
 //! - [`doctor`]: all of them, in order.
 
 pub mod can;
@@ -14,4 +15,5 @@ pub mod check;
 pub mod doctor;
 pub mod gateway;
 pub mod port;
+pub mod remote;
 pub mod traffic;

@@ -14,7 +14,10 @@ use scout_doctor::doctor::{self, Options};
 use scout_gateway::device::DeviceSpec;
 
 /// Check a SCOUT set-up: the device, the CAN interface, the traffic and protocol, the chassis'
-/// state (e-stop, RC, faults, battery), the gateway and its stops.
+/// state (e-stop, RC, faults, battery), the gateway and its stops, zenoh when asked.
+///
+/// A port a gateway holds is checked through that gateway, never opened twice. Exit codes: 0
+/// every check passed (warnings included), 1 a check failed, 2 usage error.
 #[derive(Debug, Parser)]
 #[command(name = "scout doctor", version, about)]
 #[command(group(ArgGroup::new("port").args(["serial", "slcan", "can"])))]
@@ -34,6 +37,10 @@ struct Args {
     /// One JSON object per check, one per line.
     #[arg(long)]
     json: bool,
+    /// Also read the robot's state through zenoh from this endpoint (a gateway's or a router's,
+    /// e.g. tcp/127.0.0.1:7448), as a remote peer would.
+    #[arg(long, value_name = "ENDPOINT")]
+    zenoh: Option<String>,
     /// How long to listen to the port or the gateway, seconds.
     #[arg(long, default_value_t = 1.5, value_name = "SECONDS")]
     listen: f64,
@@ -58,6 +65,7 @@ fn main() -> ExitCode {
         robot: args.name.clone(),
         port,
         window: Duration::from_secs_f64(args.listen),
+        zenoh: args.zenoh.clone(),
     };
     let mut stdout = std::io::stdout();
     let mut print = |check: &Check| {

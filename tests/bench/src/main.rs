@@ -8,6 +8,7 @@ mod plot;
 mod procs;
 mod roles;
 mod run;
+mod watchers;
 
 use std::path::PathBuf;
 use std::process::ExitCode;

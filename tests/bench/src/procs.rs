@@ -23,7 +23,7 @@ pub fn bin_dir() -> anyhow::Result<PathBuf> {
 pub fn ensure_built() -> anyhow::Result<()> {
     let dir = bin_dir()?;
     if let Ok(cargo) = std::env::var("CARGO") {
-        eprintln!("building scout-gateway, scout-sim, scout and scout-ros2...");
+        eprintln!("building scout-gateway, scout-sim, scout, scout-ros2 and scout-foxglove...");
         let mut build = Command::new(cargo);
         build.args([
             "build",
@@ -36,6 +36,8 @@ pub fn ensure_built() -> anyhow::Result<()> {
             "scout-clients",
             "-p",
             "scout-ros2",
+            "-p",
+            "scout-foxglove",
             "--bins",
         ]);
         if dir.ends_with("release") {
@@ -46,7 +48,7 @@ pub fn ensure_built() -> anyhow::Result<()> {
             "building the gateway and the simulator failed"
         );
     }
-    for name in ["scout-gateway", "scout-sim", "scout"] {
+    for name in ["scout-gateway", "scout-sim", "scout", "scout-foxglove"] {
         anyhow::ensure!(
             dir.join(name).exists(),
             "{} is missing: run `cargo build --release --workspace --bins` first",

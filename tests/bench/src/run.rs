@@ -231,6 +231,7 @@ pub fn run(options: &Options) -> anyhow::Result<()> {
     command_latency(&mut bench, &mut report, &states)?;
     remote_latency(&mut bench, &mut report, &states)?;
     ticks(&mut bench, &mut report, &states)?;
+    watchers(&mut bench, &mut report)?;
     recovery(&mut bench, &mut report, states)?;
     cost(&mut bench, &mut report)?;
     decode_throughput(&mut report);
@@ -1030,6 +1031,78 @@ fn ticks(bench: &mut Bench, report: &mut Report, states: &StateSubscriber) -> an
         insert(&mut report.json, &format!("tick_interval_ms.{key}"), json);
         report.ticks.push((label.to_owned(), ticks));
     }
+    Ok(())
+}
+
+/// Two `scout record` and a Foxglove client on `scout foxglove` attached at once: what each
+/// costs, how fast a recording grows, and the 0x130 intervals meanwhile (as idle, if they cost
+/// the gateway nothing).
+fn watchers(bench: &mut Bench, report: &mut Report) -> anyhow::Result<()> {
+    use crate::watchers::{Client, cpu, live_view, percent, recorder};
+    progress("watchers: two scout record and a Foxglove client on scout foxglove");
+    let files = [
+        bench.scratch.path("one.mcap"),
+        bench.scratch.path("two.mcap"),
+    ];
+    let recorders = [
+        recorder(&bench.name, &files[0])?,
+        recorder(&bench.name, &files[1])?,
+    ];
+    let (server, url) = live_view(&bench.name)?;
+    let client = Client::connect(&url)?;
+    // The first chunks are written and the client has subscribed.
+    std::thread::sleep(Duration::from_secs(2));
+    let size = |path: &std::path::Path| std::fs::metadata(path).map_or(0, |m| m.len());
+    let (bytes_before, messages_before) = (size(&files[0]), client.messages());
+    let recorder_before = cpu(recorders[0].pid())?;
+    let server_before = cpu(server.pid())?;
+    let from = monotonic_ns();
+    let start = Instant::now();
+    std::thread::sleep(Duration::from_secs_f64(bench.plan.window));
+    let to = monotonic_ns();
+    let elapsed = start.elapsed().as_secs_f64();
+    let recorder_percent = percent(recorders[0].pid(), recorder_before, start)?;
+    let server_percent = percent(server.pid(), server_before, start)?;
+    let grown = size(&files[0]).saturating_sub(bytes_before) as f64;
+    let received = client.messages() - messages_before;
+    client.finish()?;
+    drop(recorders);
+    drop(server);
+
+    report.value(
+        "record_cpu_percent",
+        "scout record CPU, % of a core (50 Hz)",
+        recorder_percent,
+    );
+    report.value(
+        "record_mb_per_minute",
+        "scout record file growth, MB a minute (50 Hz, zstd)",
+        grown / elapsed * 60.0 / 1e6,
+    );
+    report.value(
+        "foxglove_cpu_percent",
+        "scout foxglove CPU, % of a core, one client on every channel",
+        server_percent,
+    );
+    report.value(
+        "foxglove_messages_per_second",
+        "  messages a second to that client",
+        received as f64 / elapsed,
+    );
+    let trace = trace(bench)?;
+    let ticks = trace.ticks(from, to);
+    let json = ticks.json();
+    report.rows.push((
+        "0x130 interval, two recorders and a Foxglove client (ms)".to_owned(),
+        format!(
+            "mean {} / p99 dev {} / max {} / >25 ms {} / >40 ms {} ({})",
+            json["mean"], json["p99_dev"], json["max"], json["over_25"], json["over_40"], json["n"]
+        ),
+    ));
+    insert(&mut report.json, "tick_interval_ms.watchers", json);
+    report
+        .ticks
+        .push(("two recorders and a Foxglove client".to_owned(), ticks));
     Ok(())
 }
 

@@ -8,6 +8,7 @@
 
 mod bus;
 mod can_utils;
+mod doctor;
 mod faults;
 mod netem;
 

@@ -4,6 +4,7 @@
 mod arbiter;
 mod bench;
 mod decode;
+mod doctor;
 mod examples;
 mod foxglove;
 mod gateway;

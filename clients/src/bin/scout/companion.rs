@@ -1,6 +1,7 @@
-//! `scout ros2`, `scout record` and `scout foxglove`: run a companion program (`scout-ros2`,
-//! `scout-foxglove`) with the same arguments. The ROS 2 bridge and the Foxglove SDK live in
-//! crates of their own (`clients/ros2`, `clients/foxglove`), so `scout` carries none of them.
+//! `scout ros2`, `scout record`, `scout foxglove` and `scout doctor`: run a companion program
+//! (`scout-ros2`, `scout-foxglove`, `scout-doctor`) with the same arguments. The ROS 2 bridge, the
+//! Foxglove SDK and the gateway's device code live in crates of their own (`clients/ros2`,
+//! `clients/foxglove`, `gateway/doctor`), so `scout` carries none of them.
 
 use std::ffi::OsString;
 use std::os::unix::process::CommandExt;
@@ -40,6 +41,12 @@ pub const ROS2: Companion = Companion {
 pub const FOXGLOVE: Companion = Companion {
     program: "scout-foxglove",
     crate_path: "clients/foxglove",
+};
+
+/// `scout doctor`.
+pub const DOCTOR: Companion = Companion {
+    program: "scout-doctor",
+    crate_path: "gateway/doctor",
 };
 
 /// The program beside this executable (an install or a cargo build puts them together), else

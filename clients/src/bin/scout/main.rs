@@ -5,7 +5,8 @@
 //! `scout ros2` setting, or another `scout ros2` bridge serves the robot on that ROS domain); 3 no
 //! gateway with that name runs, or it stopped answering; 4 the gateway rejected the request (the
 //! reason is printed). `scout ros2` runs the `scout-ros2` program, `scout record` and `scout
-//! foxglove` the `scout-foxglove` program, and exit with its code.
+//! foxglove` the `scout-foxglove` program, `scout doctor` the `scout-doctor` program; each exits
+//! with that program's code.
 
 mod companion;
 mod control;
@@ -84,6 +85,13 @@ enum Command {
     /// Runs the `scout-foxglove` program (found beside `scout`, else on PATH).
     #[command(disable_help_flag = true)]
     Foxglove(companion::CompanionArgs),
+    /// Check the set-up in order (device, CAN interface, traffic, protocol, the chassis' e-stop,
+    /// RC, faults and battery, the gateway and its stops) and say how to fix what fails (`scout
+    /// doctor --help`).
+    ///
+    /// Runs the `scout-doctor` program (found beside `scout`, else on PATH).
+    #[command(disable_help_flag = true)]
+    Doctor(companion::CompanionArgs),
 }
 
 /// The robot to talk to.
@@ -112,6 +120,7 @@ fn main() -> ExitCode {
         Command::Ros2(args) => companion::run(companion::ROS2, &[], &args),
         Command::Record(args) => companion::run(companion::FOXGLOVE, &["record"], &args),
         Command::Foxglove(args) => companion::run(companion::FOXGLOVE, &["serve"], &args),
+        Command::Doctor(args) => companion::run(companion::DOCTOR, &[], &args),
     };
     match result {
         Ok(code) => code,

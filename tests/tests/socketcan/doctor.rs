@@ -1,0 +1,133 @@
+//! `scout doctor --can` on a virtual bus: the simulator on it (passes), the interface down, no
+//! other node on the bus, and a bus-off error frame while it listens.
+
+use std::process::Command;
+use std::time::Duration;
+
+use scout_system_tests::{Sim, command, robot_name, run_with_input};
+use serde_json::Value;
+
+use crate::{Bus, can_utils};
+
+/// `scout doctor --can IFACE --json`: the exit code and the checks.
+fn doctor(interface: &str) -> (Option<i32>, Vec<Value>) {
+    let mut doctor = command("scout");
+    doctor.args([
+        "doctor",
+        "--name",
+        &robot_name("doctor-can"),
+        "--can",
+        interface,
+        "--json",
+        "--listen",
+        "2",
+    ]);
+    let output = run_with_input(doctor, b"", Duration::from_secs(120));
+    let checks = String::from_utf8_lossy(&output.stdout)
+        .lines()
+        .map(|line| serde_json::from_str(line).unwrap_or_else(|_| panic!("not JSON: {line}")))
+        .collect();
+    (output.status.code(), checks)
+}
+
+fn check<'a>(checks: &'a [Value], name: &str) -> &'a Value {
+    checks
+        .iter()
+        .find(|c| c["check"] == name)
+        .unwrap_or_else(|| panic!("no check {name} in {checks:#?}"))
+}
+
+#[test]
+fn doctor_on_a_bus_with_the_chassis_passes() {
+    const TEST: &str = "doctor_on_a_bus_with_the_chassis_passes";
+    let Some(bus) = Bus::create(TEST) else { return };
+    let _sim = Sim::start(&["--can", bus.name()]);
+    let (code, checks) = doctor(bus.name());
+    assert_eq!(code, Some(0), "{checks:#?}");
+    for name in [
+        "can.interface",
+        "can.up",
+        "port",
+        "traffic",
+        "protocol",
+        "chassis.estop",
+    ] {
+        assert_eq!(
+            check(&checks, name)["verdict"],
+            "pass",
+            "{name}: {checks:#?}"
+        );
+    }
+}
+
+#[test]
+fn doctor_on_a_bus_that_is_down_or_has_no_other_node_fails_with_the_fix() {
+    const TEST: &str = "doctor_on_a_bus_that_is_down_or_has_no_other_node_fails_with_the_fix";
+    let Some(bus) = Bus::create(TEST) else { return };
+    if bus.is_real() {
+        scout_system_tests::skip(TEST, "a real interface is not set down by a test");
+        return;
+    }
+
+    // Up, and nobody on it.
+    let (code, checks) = doctor(bus.name());
+    assert_eq!(code, Some(1), "{checks:#?}");
+    let traffic = check(&checks, "traffic");
+    assert_eq!(traffic["verdict"], "fail", "{checks:#?}");
+    assert!(
+        traffic["fix"]
+            .as_str()
+            .is_some_and(|f| f.contains("500 kbit/s")),
+        "{traffic}"
+    );
+
+    // Down: said so with the commands that bring it up, and the port is not listened to.
+    bus.set_up(false).expect("ip link set down");
+    let (code, checks) = doctor(bus.name());
+    assert_eq!(code, Some(1), "{checks:#?}");
+    let up = check(&checks, "can.up");
+    assert_eq!(up["verdict"], "fail", "{checks:#?}");
+    assert!(
+        up["fix"]
+            .as_str()
+            .is_some_and(|f| f.contains(&format!("ip link set {} up", bus.name()))),
+        "{up}"
+    );
+}
+
+#[test]
+fn doctor_names_a_bus_off_it_hears() {
+    const TEST: &str = "doctor_names_a_bus_off_it_hears";
+    let Some(bus) = Bus::create(TEST) else { return };
+    if !can_utils(TEST) {
+        return;
+    }
+    if bus.is_real() {
+        scout_system_tests::skip(
+            TEST,
+            "error frames come from a real controller, not cansend",
+        );
+        return;
+    }
+    let _sim = Sim::start(&["--can", bus.name()]);
+    let interface = bus.name().to_owned();
+    // CAN_ERR_FLAG with CAN_ERR_BUSOFF (linux/can/error.h), while the doctor listens.
+    let injector = std::thread::spawn(move || {
+        std::thread::sleep(Duration::from_millis(700));
+        Command::new("cansend")
+            .args([&interface, "20000040#0000000000000000"])
+            .status()
+            .expect("cansend")
+    });
+    let (code, checks) = doctor(bus.name());
+    assert!(injector.join().expect("injector").success(), "cansend");
+    assert_eq!(code, Some(1), "{checks:#?}");
+    let read = check(&checks, "port.read");
+    assert_eq!(read["verdict"], "fail", "{checks:#?}");
+    assert!(
+        read["detail"]
+            .as_str()
+            .is_some_and(|d| d.contains("bus-off")),
+        "{read}"
+    );
+}
