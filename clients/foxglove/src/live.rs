@@ -111,7 +111,7 @@ fn answer(result: Result<scout_clients::Accepted, ControlError>, done: &str) -> 
 }
 
 /// The reason a stop request gives, if it is a JSON object with a string `reason`.
-fn reason_of(payload: &[u8]) -> Option<String> {
+pub fn reason_of(payload: &[u8]) -> Option<String> {
     let value: Value = serde_json::from_slice(payload).ok()?;
     Some(value.get("reason")?.as_str()?.to_owned())
 }
