@@ -1,8 +1,34 @@
-//! `scout decode`: one input line (candump text or serial hex) to decoded frames, as text or JSON.
+//! `scout decode`: one input line (candump text or serial hex) to decoded frames, as text or JSON,
+//! in protocol v1 or v2 (a CAN frame tells which by its id, or a flag forces one).
 
 use scout_protocol::serial::{Pull, StreamDecoder};
-use scout_protocol::{Counted, can, candump};
+use scout_protocol::v2::{self, MessageV2};
+use scout_protocol::{CanFrame, Counted, MessageKind, can, candump};
 use serde_json::{Value, json};
+
+pub use scout_interface::json::{message_fields, message_fields_v2};
+
+/// Which protocol CAN frames are read in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Protocol {
+    /// By the frame's id: v1's ids (0x130, 0x131, 0x140, 0x141, 0x151, 0x200-0x203) as v1, v2's
+    /// as v2 (the two sets do not overlap for a SCOUT).
+    #[default]
+    Auto,
+    /// Protocol v1 only (the 2019 SCOUT; also every serial frame).
+    V1,
+    /// Protocol v2 only (SCOUT 2.0, SCOUT MINI).
+    V2,
+}
+
+/// The message of one frame, in its protocol.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FrameMessage {
+    /// Protocol v1, with its rolling count.
+    V1(Counted),
+    /// Protocol v2.
+    V2(MessageV2),
+}
 
 /// Which link a line came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -31,8 +57,8 @@ pub struct DecodedFrame {
     pub interface: Option<String>,
     /// The candump timestamp in seconds, when the line had one.
     pub timestamp: Option<f64>,
-    /// The message and its rolling count.
-    pub counted: Counted,
+    /// The message.
+    pub message: FrameMessage,
 }
 
 /// Why a line could not be decoded.
@@ -44,6 +70,12 @@ pub enum LineError {
     /// A CAN frame that is not a valid SCOUT v1 frame.
     #[error("{0}")]
     Can(#[from] can::CanError),
+    /// A CAN frame that is not a valid SCOUT v2 frame.
+    #[error("{0}")]
+    V2(#[from] v2::V2Error),
+    /// An id of neither protocol.
+    #[error("unknown CAN id 0x{0:03X} (neither SCOUT v1 nor v2)")]
+    UnknownId(u16),
     /// Serial hex with a rejected frame.
     #[error("{0}")]
     Serial(#[from] scout_protocol::serial::SerialError),
@@ -67,8 +99,23 @@ fn serial_hex(line: &str) -> Option<Vec<u8>> {
     })
 }
 
-/// Decodes one line: serial hex if it starts with `5A A5`, else candump text in any format.
-pub fn decode_line(line: &str) -> Result<Vec<DecodedFrame>, LineError> {
+/// A CAN frame in `protocol`.
+fn decode_can(frame: &CanFrame, protocol: Protocol) -> Result<FrameMessage, LineError> {
+    let id = frame.id();
+    match protocol {
+        Protocol::V1 => Ok(FrameMessage::V1(can::decode(frame)?)),
+        Protocol::V2 => Ok(FrameMessage::V2(v2::decode(frame)?)),
+        Protocol::Auto if MessageKind::from_can_id(id).is_some() => {
+            Ok(FrameMessage::V1(can::decode(frame)?))
+        }
+        Protocol::Auto if v2::is_v2_id(id) => Ok(FrameMessage::V2(v2::decode(frame)?)),
+        Protocol::Auto => Err(LineError::UnknownId(id)),
+    }
+}
+
+/// Decodes one line: serial hex if it starts with `5A A5` (always protocol v1), else candump
+/// text in any format, its frame in `protocol`.
+pub fn decode_line(line: &str, protocol: Protocol) -> Result<Vec<DecodedFrame>, LineError> {
     if let Some(bytes) = serial_hex(line) {
         let mut decoder = StreamDecoder::new();
         let mut frames = Vec::new();
@@ -79,7 +126,7 @@ pub fn decode_line(line: &str) -> Result<Vec<DecodedFrame>, LineError> {
                     link: Link::Serial,
                     interface: None,
                     timestamp: None,
-                    counted,
+                    message: FrameMessage::V1(counted),
                 }),
                 Pull::Rejected(error) => return Err(error.into()),
             }
@@ -91,14 +138,14 @@ pub fn decode_line(line: &str) -> Result<Vec<DecodedFrame>, LineError> {
         return Ok(frames);
     }
     let record = candump::parse(line)?;
-    let counted = can::decode(&record.frame)?;
+    let message = decode_can(&record.frame, protocol)?;
     Ok(vec![DecodedFrame {
         link: Link::Can,
         interface: record.interface.map(str::to_owned),
         timestamp: record
             .timestamp
             .map(|t| t.seconds as f64 + f64::from(t.micros) / 1_000_000.0),
-        counted,
+        message,
     }])
 }
 
@@ -107,20 +154,67 @@ fn bytes_unused(line: &str, frames: &[DecodedFrame]) -> usize {
     (digits / 2).saturating_sub(frames.len() * scout_protocol::serial::FRAME_LEN)
 }
 
-pub use scout_interface::json::message_fields;
+impl FrameMessage {
+    /// The CAN id.
+    pub fn can_id(&self) -> u16 {
+        match self {
+            Self::V1(counted) => counted.message.kind().can_id(),
+            Self::V2(message) => message.can_id(),
+        }
+    }
 
-/// The JSON object of one frame: `id`, `name`, `count`, `link`, optional `interface` and
-/// `timestamp`, then the message's fields.
+    /// The message's name.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::V1(counted) => counted.message.kind().name(),
+            Self::V2(message) => message.name(),
+        }
+    }
+
+    /// The protocol's number.
+    pub fn protocol(&self) -> u8 {
+        match self {
+            Self::V1(_) => 1,
+            Self::V2(_) => 2,
+        }
+    }
+
+    /// The rolling count, where the frame carries one (every v1 frame; v2's 0x121, 0x211,
+    /// 0x231 and 0x241).
+    pub fn count(&self) -> Option<u8> {
+        match self {
+            Self::V1(counted) => Some(counted.count),
+            Self::V2(MessageV2::LightCommand(lights) | MessageV2::LightState(lights)) => {
+                Some(lights.count)
+            }
+            Self::V2(MessageV2::SystemState(state)) => Some(state.count),
+            Self::V2(MessageV2::RcState(rc)) => Some(rc.count),
+            Self::V2(_) => None,
+        }
+    }
+
+    /// The fields, in physical units.
+    pub fn fields(&self, max_angular: f64) -> Value {
+        match self {
+            Self::V1(counted) => message_fields(&counted.message, max_angular),
+            Self::V2(message) => message_fields_v2(message),
+        }
+    }
+}
+
+/// The JSON object of one frame: `id`, `name`, `protocol`, `count` (`null` for a v2 frame
+/// without one), `link`, optional `interface` and `timestamp`, then the message's fields.
 pub fn frame_json(frame: &DecodedFrame, max_angular: f64) -> Value {
-    let message = &frame.counted.message;
+    let message = &frame.message;
     let mut object = json!({
-        "id": format!("0x{:03X}", message.kind().can_id()),
-        "name": message.kind().name(),
-        "count": frame.counted.count,
+        "id": format!("0x{:03X}", message.can_id()),
+        "name": message.name(),
+        "protocol": message.protocol(),
+        "count": message.count(),
         "link": frame.link.name(),
     });
     if let (Value::Object(object), Value::Object(fields)) =
-        (&mut object, message_fields(message, max_angular))
+        (&mut object, message.fields(max_angular))
     {
         if let Some(interface) = &frame.interface {
             object.insert("interface".into(), interface.clone().into());
@@ -133,16 +227,18 @@ pub fn frame_json(frame: &DecodedFrame, max_angular: f64) -> Value {
     object
 }
 
-/// One human-readable line: `0x151 system_status count=228 state=estop ...`.
+/// One human-readable line: `0x151 system_status count=228 state=estop ...` (a v2 frame's name
+/// is marked `v2`, its count given where it has one).
 pub fn frame_text(frame: &DecodedFrame, max_angular: f64) -> String {
-    let message = &frame.counted.message;
-    let mut text = format!(
-        "0x{:03X} {} count={}",
-        message.kind().can_id(),
-        message.kind().name(),
-        frame.counted.count
-    );
-    if let Value::Object(fields) = message_fields(message, max_angular) {
+    let message = &frame.message;
+    let mut text = format!("0x{:03X} {}", message.can_id(), message.name());
+    if message.protocol() == 2 {
+        text.push_str(" v2");
+    }
+    if let Some(count) = message.count() {
+        text.push_str(&format!(" count={count}"));
+    }
+    if let Value::Object(fields) = message.fields(max_angular) {
         for (key, value) in fields {
             text.push(' ');
             text.push_str(&key);
@@ -178,7 +274,8 @@ mod tests {
 
     #[test]
     fn status_json_has_the_documented_fields() {
-        let frames = decode_line("  can1  151   [8]  01 00 00 EF 00 3C E4 6A").expect("valid");
+        let frames = decode_line("  can1  151   [8]  01 00 00 EF 00 3C E4 6A", Protocol::Auto)
+            .expect("valid");
         let json = frame_json(&frames[0], DEFAULT_MAX_ANGULAR_SPEED);
         assert_eq!(json["id"], "0x151");
         assert_eq!(json["name"], "system_status");
@@ -201,7 +298,7 @@ mod tests {
 
     #[test]
     fn command_json_is_in_physical_units() {
-        let frames = decode_line("130#01000A0000000044").expect("valid");
+        let frames = decode_line("130#01000A0000000044", Protocol::Auto).expect("valid");
         let json = frame_json(&frames[0], DEFAULT_MAX_ANGULAR_SPEED);
         assert_eq!(json["control_mode"], "can");
         assert_eq!(json["fault_clear"], "none");
@@ -215,7 +312,7 @@ mod tests {
             "5A A5 0A 55 01 02 00 0A 00 00 00 00 6B",
             "5aa50a55010200 0a000000006b",
         ] {
-            let frames = decode_line(line).expect("valid");
+            let frames = decode_line(line, Protocol::Auto).expect("valid");
             assert_eq!(frames.len(), 1);
             assert_eq!(frames[0].link, Link::Serial);
             assert_eq!(
@@ -228,23 +325,73 @@ mod tests {
     #[test]
     fn bad_lines_say_why() {
         assert_eq!(
-            decode_line("130#01000A0000000045")
+            decode_line("130#01000A0000000045", Protocol::Auto)
                 .expect_err("bad checksum")
                 .to_string(),
             "CAN id 0x130: checksum 0x45, expected 0x44"
         );
         assert_eq!(
-            decode_line("5A A5 0A 55 01 02 00 0A 00 00 00 00")
+            decode_line("5A A5 0A 55 01 02 00 0A 00 00 00 00", Protocol::Auto)
                 .expect_err("short")
                 .to_string(),
             "12 trailing byte(s) are not a whole serial frame"
         );
-        assert!(decode_line("hello world").is_err());
+        assert!(decode_line("hello world", Protocol::Auto).is_err());
+        assert_eq!(
+            decode_line("2F0#00", Protocol::Auto)
+                .expect_err("neither")
+                .to_string(),
+            "unknown CAN id 0x2F0 (neither SCOUT v1 nor v2)"
+        );
+        assert_eq!(
+            decode_line("211#00", Protocol::Auto)
+                .expect_err("short")
+                .to_string(),
+            "CAN id 0x211: data length 1, expected 8"
+        );
+    }
+
+    #[test]
+    fn v2_frames_are_told_by_their_ids_or_forced() {
+        // A Bunker Mini's 0x211 in e-stop before 0x421 (protocol-v2-notes 8, C1).
+        let frames =
+            decode_line("can0  211   [8]  01 00 01 00 00 80 00 00", Protocol::Auto).expect("valid");
+        let json = frame_json(&frames[0], DEFAULT_MAX_ANGULAR_SPEED);
+        assert_eq!(json["protocol"], 2);
+        assert_eq!(json["name"], "system_state");
+        assert_eq!(json["state"], "estop");
+        assert_eq!(json["control_mode"], "standby");
+        assert_eq!(json["battery_voltage"], 25.6);
+        assert_eq!(json["errors"], json!([]));
+        assert_eq!(json["unknown_error_bits"], 0x80);
+        assert_eq!(json["count"], 0);
+        assert_eq!(
+            frame_text(&frames[0], DEFAULT_MAX_ANGULAR_SPEED),
+            "0x211 system_state v2 count=0 state=estop control_mode=standby control_mode_raw=0 \
+             battery_voltage=25.600 error_bits=128 errors=none unknown_error_bits=128"
+        );
+        let motion = decode_line("111#0096000000000000", Protocol::Auto).expect("valid");
+        let json = frame_json(&motion[0], DEFAULT_MAX_ANGULAR_SPEED);
+        assert_eq!(
+            (json["linear"].as_f64(), json["count"].is_null()),
+            (Some(0.15), true)
+        );
+        // Forced: a v2 id read as v1 is an unknown id, and the other way round.
+        assert!(decode_line("111#0096000000000000", Protocol::V1).is_err());
+        assert!(decode_line("130#01000A0000000044", Protocol::V2).is_err());
+        assert_eq!(
+            frame_json(
+                &decode_line("130#01000A0000000044", Protocol::V1).expect("v1")[0],
+                DEFAULT_MAX_ANGULAR_SPEED
+            )["protocol"],
+            1
+        );
     }
 
     #[test]
     fn text_line_reads_well() {
-        let frames = decode_line("can1 141 [8] 00 00 00 02 0F 00 E2 3D").expect("valid");
+        let frames =
+            decode_line("can1 141 [8] 00 00 00 02 0F 00 E2 3D", Protocol::Auto).expect("valid");
         assert_eq!(
             frame_text(&frames[0], DEFAULT_MAX_ANGULAR_SPEED),
             "0x141 light_feedback count=226 enabled=false front=off:0 rear=breath:15"

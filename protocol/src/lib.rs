@@ -1,4 +1,4 @@
-//! scout-protocol: the AgileX SCOUT chassis protocol v1, CAN and serial, without I/O.
+//! scout-protocol: the AgileX SCOUT chassis protocol v1 (CAN and serial) and v2 (CAN), without I/O.
 //!
 //! Sans-IO and `no_std`: bytes and frames go in, typed messages come out, and back. No clock
 //! (time comes in as an argument) and no allocation.
@@ -11,6 +11,7 @@
 //! - [`candump`]: candump's text formats.
 //! - [`units`]: m/s and rad/s to whole percent and back.
 //! - [`sequence`]: rolling counters and gap tracking.
+//! - [`v2`]: protocol v2 (SCOUT 2.0, SCOUT MINI) CAN frames.
 //! - [`version`]: protocol v1 / v2 detection.
 //! - [`link`]: the transports and their framing, shared by the gateway and the simulator.
 //! - [`kinematics`]: the skid-steer pose step (with `std`).
@@ -29,6 +30,7 @@ pub mod sequence;
 pub mod serial;
 pub mod slcan;
 pub mod units;
+pub mod v2;
 pub mod version;
 
 pub use can::CanFrame;

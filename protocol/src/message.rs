@@ -117,6 +117,8 @@ macro_rules! raw_enum {
     };
 }
 
+pub(crate) use raw_enum;
+
 raw_enum! {
     /// Who controls the chassis (0x130 byte 0, 0x151 byte 1).
     ControlMode {

@@ -1,8 +1,9 @@
-//! Fuzzes the CAN decoder: any id and up to 8 bytes; a decoded frame must re-encode to itself.
+//! Fuzzes the CAN decoders, v1 and v2: any id and up to 8 bytes; a decoded frame must re-encode
+//! to a frame that decodes to the same message.
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use scout_protocol::{CanFrame, can};
+use scout_protocol::{CanFrame, can, v2};
 
 fuzz_target!(|input: &[u8]| {
     let Some((id_bytes, data)) = input.split_first_chunk::<2>() else { return };
@@ -11,5 +12,8 @@ fuzz_target!(|input: &[u8]| {
     if let Ok(counted) = can::decode(&frame) {
         let again = can::decode(&can::encode(&counted.message, counted.count));
         assert_eq!(again, Ok(counted));
+    }
+    if let Ok(message) = v2::decode(&frame) {
+        assert_eq!(v2::decode(&message.encode()), Ok(message));
     }
 });

@@ -2,6 +2,7 @@
 //! and of the arbiter's status (`scout status --json`, zenoh `scout/ROBOT/status`), and of one
 //! decoded message (`scout decode --json`): the schema the README documents, in one place.
 
+use scout_protocol::v2::{LightsV2, MessageV2, MotionV2, VersionRequestForm};
 use scout_protocol::{FaultClear, Light, Message, MessageKind, Motor};
 use serde_json::{Map, Value, json};
 
@@ -50,6 +51,105 @@ pub fn message_fields(message: &Message, max_angular: f64) -> Value {
             "driver_temperature": motor.driver_temperature,
             "motor_temperature": motor.motor_temperature,
         }),
+    }
+}
+
+/// A protocol v2 message's fields, in physical units (m/s, rad/s, V, A, m), every bit kept:
+/// named bits as names, the rest as `unknown_*` numbers.
+pub fn message_fields_v2(message: &MessageV2) -> Value {
+    let lights = |l: &LightsV2| {
+        json!({
+            "host_control": l.host_control,
+            "front": { "mode": l.front_mode.name(), "brightness": l.front_brightness },
+            "rear": { "mode": l.rear_mode.name(), "brightness": l.rear_brightness },
+        })
+    };
+    let motion = |m: &MotionV2| {
+        json!({
+            "linear": m.linear(),
+            "angular": m.angular(),
+            "lateral": m.lateral(),
+            "steering": f64::from(m.steering_mrad) / 1000.0,
+        })
+    };
+    let text = |bytes: &[u8; 8]| -> String {
+        bytes
+            .iter()
+            .map(|&b| {
+                if (32..=126).contains(&b) {
+                    b as char
+                } else {
+                    ' '
+                }
+            })
+            .collect()
+    };
+    let version = |v: u16| format!("{}.{}", v >> 8, v & 0xFF);
+    match message {
+        MessageV2::MotionCommand(m) | MessageV2::MotionState(m) => motion(m),
+        MessageV2::LightCommand(l) | MessageV2::LightState(l) => lights(l),
+        MessageV2::ControlMode(mode) => json!({ "control_mode": mode.name(), "raw": mode.raw() }),
+        MessageV2::ErrorClear(code) => json!({ "clear": code.name(), "raw": code.raw() }),
+        MessageV2::VersionRequest(form) => json!({
+            "form": match form {
+                VersionRequestForm::Binary => "binary",
+                VersionRequestForm::Text => "text",
+            }
+        }),
+        MessageV2::SystemState(state) => json!({
+            "state": state.state.name(),
+            "control_mode": state.control_mode.name(),
+            "control_mode_raw": state.control_mode.raw(),
+            "battery_voltage": state.battery_voltage(),
+            "error_bits": state.errors.0,
+            "errors": state.errors.names().collect::<Vec<_>>(),
+            "unknown_error_bits": state.errors.unknown(),
+        }),
+        MessageV2::RcState(rc) => json!({
+            "swa": rc.swa.name(),
+            "swb": rc.swb.name(),
+            "swc": rc.swc.name(),
+            "swd": rc.swd.name(),
+            "right_horizontal": rc.right_horizontal,
+            "right_vertical": rc.right_vertical,
+            "left_vertical": rc.left_vertical,
+            "left_horizontal": rc.left_horizontal,
+            "knob": rc.knob,
+        }),
+        MessageV2::ActuatorHigh(a) => json!({
+            "motor": a.motor,
+            "rpm": a.rpm,
+            "current": a.current(),
+            "pulses": a.pulses,
+        }),
+        MessageV2::ActuatorLow(a) => json!({
+            "motor": a.motor,
+            "driver_voltage": a.driver_voltage(),
+            "driver_temperature": a.driver_temperature,
+            "motor_temperature": a.motor_temperature,
+            "driver_state_bits": a.driver_state.0,
+            "driver_state": a.driver_state.names().collect::<Vec<_>>(),
+            "unknown_driver_state_bits": a.driver_state.unknown(),
+        }),
+        MessageV2::Odometer(o) => json!({
+            "left": f64::from(o.left_mm) / 1000.0,
+            "right": f64::from(o.right_mm) / 1000.0,
+        }),
+        MessageV2::Version(v) => json!({
+            "controller_hardware": version(v.controller_hardware),
+            "driver_hardware": version(v.driver_hardware),
+            "controller_software": version(v.controller_software),
+            "driver_software": version(v.driver_software),
+        }),
+        MessageV2::VersionText(bytes) => json!({ "text": text(bytes) }),
+        MessageV2::Bms(b) => json!({
+            "charge_percent": b.charge_percent,
+            "health_percent": b.health_percent,
+            "voltage": f64::from(b.decivolts) / 10.0,
+            "current": f64::from(b.deciamps) / 10.0,
+            "temperature": f64::from(b.decidegrees) / 10.0,
+        }),
+        MessageV2::BmsAlarm(bytes) => json!({ "bytes": bytes.to_vec() }),
     }
 }
 

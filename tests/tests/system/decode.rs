@@ -73,3 +73,45 @@ fn frames_as_arguments() {
         "0x131 motion_feedback count=5 linear=0.150 angular=-0.200"
     );
 }
+
+#[test]
+fn protocol_v2_frames_by_their_ids_and_forced() {
+    // A Bunker Mini 2.0 in e-stop before 0x421 (protocol-v2-notes 8), and the host taking CAN
+    // control, then a v1 frame.
+    let lines = "(1700000000.000100) can0 211#0100010000800000\n\
+                 (1700000000.000200) can0 421#01\n\
+                 (1700000000.000300) can0 130#01000A0000000044\n";
+    let mut scout = command("scout");
+    scout.args(["decode", "--json"]);
+    let output = run_with_input(scout, lines.as_bytes(), LIMIT);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let frames: Vec<serde_json::Value> = String::from_utf8(output.stdout)
+        .expect("utf-8")
+        .lines()
+        .map(|line| serde_json::from_str(line).expect("JSON"))
+        .collect();
+    assert_eq!(frames.len(), 3);
+    assert_eq!(frames[0]["protocol"], 2);
+    assert_eq!(frames[0]["name"], "system_state");
+    assert_eq!(frames[0]["state"], "estop");
+    assert_eq!(frames[0]["unknown_error_bits"], 0x80);
+    assert_eq!(frames[1]["name"], "control_mode");
+    assert_eq!(frames[1]["control_mode"], "can");
+    assert_eq!(frames[2]["protocol"], 1);
+    assert_eq!(frames[2]["timestamp"], 1_700_000_000.0003);
+
+    // Forced to v1, the v2 frames are reported and the exit code says so.
+    let mut scout = command("scout");
+    scout.args(["decode", "--protocol", "v1"]);
+    let output = run_with_input(scout, lines.as_bytes(), LIMIT);
+    assert_eq!(output.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("line 1: unknown CAN id 0x211 (not SCOUT v1)"),
+        "{stderr}"
+    );
+}

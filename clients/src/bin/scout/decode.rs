@@ -1,11 +1,11 @@
-//! `scout decode`: candump text or serial hex to decoded frames.
+//! `scout decode`: candump text or serial hex to decoded frames, protocol v1 or v2.
 
 use std::io::{BufRead, BufWriter, Write};
 use std::process::ExitCode;
 
 use anyhow::Context;
-use clap::Args;
-use scout_clients::decode::{decode_line, frame_json, frame_text};
+use clap::{Args, ValueEnum};
+use scout_clients::decode::{Protocol, decode_line, frame_json, frame_text};
 use scout_protocol::units::DEFAULT_MAX_ANGULAR_SPEED;
 
 #[derive(Debug, Args)]
@@ -16,11 +16,30 @@ pub struct DecodeArgs {
     /// The chassis' maximum angular speed in rad/s (100 % of a command's angular byte).
     #[arg(long, default_value_t = DEFAULT_MAX_ANGULAR_SPEED)]
     max_angular: f64,
+    /// The protocol of CAN frames: by their ids (v1's and v2's do not overlap), or forced.
+    #[arg(long, value_enum, default_value_t = ProtocolArg::Auto)]
+    protocol: ProtocolArg,
     /// Lines to decode; standard input when none.
     lines: Vec<String>,
 }
 
+/// `--protocol`.
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum ProtocolArg {
+    /// v1 ids as v1, v2 ids as v2.
+    Auto,
+    /// Protocol v1 (the 2019 SCOUT) only.
+    V1,
+    /// Protocol v2 (SCOUT 2.0, SCOUT MINI) only.
+    V2,
+}
+
 pub fn run(args: &DecodeArgs) -> anyhow::Result<ExitCode> {
+    let protocol = match args.protocol {
+        ProtocolArg::Auto => Protocol::Auto,
+        ProtocolArg::V1 => Protocol::V1,
+        ProtocolArg::V2 => Protocol::V2,
+    };
     let stdout = std::io::stdout();
     let mut out = BufWriter::new(stdout.lock());
     let mut bad_lines = 0usize;
@@ -28,7 +47,7 @@ pub fn run(args: &DecodeArgs) -> anyhow::Result<ExitCode> {
         if line.trim().is_empty() {
             return Ok(());
         }
-        match decode_line(line) {
+        match decode_line(line, protocol) {
             Ok(frames) => {
                 for frame in frames {
                     if args.json {
