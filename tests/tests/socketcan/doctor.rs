@@ -2,6 +2,8 @@
 //! other node on the bus, and a bus-off error frame while it listens.
 
 use std::process::Command;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use scout_system_tests::{Sim, command, robot_name, run_with_input};
@@ -111,16 +113,26 @@ fn doctor_names_a_bus_off_it_hears() {
     }
     let _sim = Sim::start(&["--can", bus.name()]);
     let interface = bus.name().to_owned();
-    // CAN_ERR_FLAG with CAN_ERR_BUSOFF (linux/can/error.h), while the doctor listens.
+    // CAN_ERR_FLAG with CAN_ERR_BUSOFF (linux/can/error.h), every 200 ms while the doctor runs
+    // (the emulated CPU makes its start slow and uneven).
+    let running = Arc::new(AtomicBool::new(true));
+    let injecting = Arc::clone(&running);
     let injector = std::thread::spawn(move || {
-        std::thread::sleep(Duration::from_millis(700));
-        Command::new("cansend")
-            .args([&interface, "20000040#0000000000000000"])
-            .status()
-            .expect("cansend")
+        let mut sent = 0;
+        while injecting.load(Ordering::Relaxed) {
+            let status = Command::new("cansend")
+                .args([&interface, "20000040#0000000000000000"])
+                .status()
+                .expect("cansend");
+            assert!(status.success(), "cansend");
+            sent += 1;
+            std::thread::sleep(Duration::from_millis(200));
+        }
+        sent
     });
     let (code, checks) = doctor(bus.name());
-    assert!(injector.join().expect("injector").success(), "cansend");
+    running.store(false, Ordering::Relaxed);
+    assert!(injector.join().expect("injector") > 0);
     assert_eq!(code, Some(1), "{checks:#?}");
     let read = check(&checks, "port.read");
     assert_eq!(read["verdict"], "fail", "{checks:#?}");
