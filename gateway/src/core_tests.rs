@@ -17,7 +17,7 @@ use scout_protocol::{
     Counted, Light, LightCommand, LightMode, Message, MotionCommand, MotionFeedback,
 };
 use scout_sim::chassis::{Injection, Protection};
-use scout_sim::{Chassis, SimParams};
+use scout_sim::{Chassis, Feedback, SimParams};
 
 use crate::arbiter::{ClientKey, Origin};
 use crate::config::GatewayConfig;
@@ -115,7 +115,10 @@ impl Pair {
     fn step(&mut self) {
         let now = self.now;
         if self.open
-            && let Some(batch) = self.chassis.poll_feedback(now - self.epoch)
+            && let Some(batch) = self
+                .chassis
+                .poll_feedback(now - self.epoch)
+                .and_then(Feedback::v1)
             && self.feedback
         {
             for counted in batch {

@@ -11,7 +11,7 @@ use scout_io::{Incoming, Port};
 use scout_protocol::link::{RxError, RxEvent, StreamFraming, decode_can, encode_stream};
 use scout_protocol::slcan::{self, Bitrate, Slcan};
 use scout_protocol::{Counted, Transport, can};
-use scout_sim::{Chassis, SimParams};
+use scout_sim::{Chassis, Feedback, SimParams};
 
 use crate::lock::{Lock, LockError};
 use crate::wait::{Ready, wait};
@@ -218,10 +218,12 @@ impl Device {
     ) -> io::Result<()> {
         match self {
             Self::Sim { chassis, epoch } => {
-                if let Some(batch) = chassis.poll_feedback(now.saturating_sub(*epoch)) {
-                    batch
+                match chassis.poll_feedback(now.saturating_sub(*epoch)) {
+                    Some(Feedback::V1(batch)) => batch
                         .into_iter()
-                        .for_each(|counted| on_event(RxEvent::Message(counted)));
+                        .for_each(|counted| on_event(RxEvent::Message(counted))),
+                    // The in-process simulator is made with v1 firmware (`open`).
+                    Some(Feedback::V2(_)) | None => {}
                 }
             }
             Self::Port { port, framing, .. } => {

@@ -191,6 +191,12 @@ impl StateTracker {
                 self.version.observe(counted.message.kind().can_id(), now);
                 self.handle_message(counted, now)
             }
+            RxEvent::V2(message) => {
+                // A protocol v2 chassis: its frames tell the version, and are not ours to use.
+                self.version.observe(message.can_id(), now);
+                self.state.link.rejected_frames += 1;
+                Publish::No
+            }
             RxEvent::Rejected(rejected) => {
                 if let Some(id) = rejected.can_id() {
                     self.version.observe(id, now);

@@ -9,6 +9,7 @@
 //! - [`serial`]: 13-byte RS232 frames and a streaming decoder.
 //! - [`slcan`]: the ASCII lines of serial-line CAN adapters.
 //! - [`candump`]: candump's text formats.
+//! - [`model`]: the SCOUT models' limits and geometry.
 //! - [`units`]: m/s and rad/s to whole percent and back.
 //! - [`sequence`]: rolling counters and gap tracking.
 //! - [`v2`]: protocol v2 (SCOUT 2.0, SCOUT MINI) CAN frames.
@@ -26,6 +27,7 @@ pub mod fault;
 pub mod kinematics;
 pub mod link;
 pub mod message;
+pub mod model;
 pub mod sequence;
 pub mod serial;
 pub mod slcan;

@@ -4,7 +4,8 @@
 
 use crate::serial::{self, StreamDecoder};
 use crate::slcan::{self, LineDecoder, Slcan};
-use crate::{CanFrame, ControlMode, Counted, Message, can};
+use crate::v2::{self, MessageV2};
+use crate::{CanFrame, ControlMode, Counted, Message, MessageKind, can};
 
 /// How the chassis is reached: the one transport enum of the project (configuration, state,
 /// framing, control mode).
@@ -78,6 +79,8 @@ impl core::fmt::Display for Transport {
 pub enum RxError {
     /// A CAN frame (SocketCAN or slcan) that is not a valid SCOUT v1 frame.
     Can(can::CanError),
+    /// A CAN frame with a protocol v2 id that is not a valid v2 frame.
+    V2(v2::V2Error),
     /// A rejected serial frame.
     Serial(serial::SerialError),
     /// A malformed slcan line.
@@ -90,6 +93,7 @@ impl core::fmt::Display for RxError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
             Self::Can(error) => error.fmt(f),
+            Self::V2(error) => error.fmt(f),
             Self::Serial(error) => error.fmt(f),
             Self::Slcan(error) => error.fmt(f),
             Self::ForeignFrame(id) => write!(
@@ -138,7 +142,8 @@ impl RxError {
                 | can::CanError::BadLength { id, .. }
                 | can::CanError::Checksum { id, .. },
             ) => Some(id),
-            _ => None,
+            Self::V2(v2::V2Error::UnknownId { id } | v2::V2Error::BadLength { id, .. }) => Some(id),
+            Self::Serial(_) | Self::Slcan(_) | Self::ForeignFrame(_) => None,
         }
     }
 }
@@ -148,6 +153,8 @@ impl RxError {
 pub enum RxEvent {
     /// A valid message.
     Message(Counted),
+    /// A valid protocol v2 frame (a SCOUT 2.0 or MINI; v2's ids and v1's do not overlap).
+    V2(MessageV2),
     /// Bytes or a frame rejected, with the reason.
     Rejected(RxError),
     /// An slcan line that is not a frame: adapter set-up commands and answers.
@@ -163,8 +170,16 @@ impl From<Result<Counted, RxError>> for RxEvent {
     }
 }
 
-/// Decodes one CAN frame.
+/// Decodes one CAN frame: a v1 id as v1 (checksum and all), a v2 id as v2, anything else is
+/// an unknown id.
 pub fn decode_can(frame: &CanFrame) -> RxEvent {
+    let id = frame.id();
+    if MessageKind::from_can_id(id).is_none() && v2::is_v2_id(id) {
+        return match v2::decode(frame) {
+            Ok(message) => RxEvent::V2(message),
+            Err(error) => RxEvent::Rejected(RxError::V2(error)),
+        };
+    }
     can::decode(frame).map_err(RxError::from).into()
 }
 
@@ -282,6 +297,39 @@ mod tests {
     fn stream_transports_round_trip() {
         round_trip(Transport::Serial);
         round_trip(Transport::Slcan);
+    }
+
+    #[test]
+    fn can_frames_decode_in_the_protocol_their_id_belongs_to() {
+        let v1 = crate::can::encode(
+            &Message::MotionCommand(MotionCommand::stop(ControlMode::Can)),
+            3,
+        );
+        assert!(matches!(decode_can(&v1), RxEvent::Message(_)));
+        let take = CanFrame::new(0x421, &[1]).expect("frame");
+        assert_eq!(
+            decode_can(&take),
+            RxEvent::V2(MessageV2::ControlMode(v2::ControlModeV2::Can))
+        );
+        let short = CanFrame::new(0x211, &[0; 7]).expect("frame");
+        let RxEvent::Rejected(error) = decode_can(&short) else {
+            panic!("a short 0x211 is rejected")
+        };
+        assert_eq!(error.can_id(), Some(0x211));
+        assert!(!error.is_checksum());
+        let unknown = CanFrame::new(0x2F0, &[0; 8]).expect("frame");
+        assert_eq!(
+            decode_can(&unknown),
+            RxEvent::Rejected(RxError::Can(can::CanError::UnknownId { id: 0x2F0 }))
+        );
+        // Over slcan too.
+        let mut framing = StreamFraming::new(Transport::Slcan).expect("stream transport");
+        let mut events = Vec::new();
+        framing.push(b"t421101\r", |event| events.push(event));
+        assert_eq!(
+            events.last(),
+            Some(&RxEvent::V2(MessageV2::ControlMode(v2::ControlModeV2::Can)))
+        );
     }
 
     #[test]

@@ -7,6 +7,7 @@ use std::time::Duration;
 
 use scout_protocol::Severity;
 use scout_protocol::link::RxEvent;
+use scout_protocol::v2::{ControlModeV2, MessageV2, RcStateV2, SwitchPosition, SystemStateV2};
 use scout_protocol::version::{ProtocolVersion, VersionDetector, is_v2_only_id};
 use scout_protocol::{ChassisState, ControlMode, Direction, Message, SystemStatus, Transport};
 
@@ -34,6 +35,12 @@ pub struct Traffic {
     pub discarded_bytes: u64,
     /// The last system status.
     pub last_status: Option<SystemStatus>,
+    /// Valid protocol v2 frames by CAN id.
+    pub frames_v2: BTreeMap<u16, u64>,
+    /// The last v2 system state (0x211).
+    pub last_system_v2: Option<SystemStateV2>,
+    /// The last v2 RC state (0x241).
+    pub last_rc_v2: Option<RcStateV2>,
     version: VersionDetector,
 }
 
@@ -57,6 +64,19 @@ impl Traffic {
                     self.last_status = Some(status);
                 }
             }
+            RxEvent::V2(message) => {
+                let id = message.can_id();
+                self.version.observe(id, now);
+                *self.frames_v2.entry(id).or_default() += 1;
+                if message.is_command() {
+                    self.other_host_commands += 1;
+                }
+                match message {
+                    MessageV2::SystemState(state) => self.last_system_v2 = Some(*state),
+                    MessageV2::RcState(rc) => self.last_rc_v2 = Some(*rc),
+                    _ => {}
+                }
+            }
             RxEvent::Rejected(error) => {
                 if let Some(id) = error.can_id() {
                     self.version.observe(id, now);
@@ -75,7 +95,7 @@ impl Traffic {
     }
 
     fn valid_frames(&self) -> u64 {
-        self.frames.values().sum()
+        self.frames.values().sum::<u64>() + self.frames_v2.values().sum::<u64>()
     }
 
     fn ids(ids: &BTreeMap<u16, u64>) -> String {
@@ -88,12 +108,15 @@ impl Traffic {
     /// The verdicts after listening for `window` on `transport`, at `now`.
     pub fn checks(&self, transport: Transport, window: Duration, now: Duration) -> Vec<Check> {
         let mut checks = Vec::new();
-        let v2_ids: BTreeMap<u16, u64> = self
+        let mut v2_ids: BTreeMap<u16, u64> = self
             .rejected_ids
             .iter()
             .filter(|(id, _)| is_v2_only_id(**id))
             .map(|(id, count)| (*id, *count))
             .collect();
+        for (id, count) in &self.frames_v2 {
+            *v2_ids.entry(*id).or_default() += count;
+        }
         let valid = self.valid_frames();
         let anything =
             valid + self.checksum_errors + self.rejected + self.foreign + self.discarded_bytes;
@@ -147,11 +170,13 @@ impl Traffic {
             checks.push(Check::fail("traffic", what, fix));
         } else {
             let rate = valid as f64 / window.as_secs_f64().max(1e-3);
+            let mut ids = self.frames.clone();
+            ids.extend(self.frames_v2.iter().map(|(id, count)| (*id, *count)));
             checks.push(Check::pass(
                 "traffic",
                 format!(
                     "{valid} frames in {window:.1?} ({rate:.0}/s): {}",
-                    Self::ids(&self.frames)
+                    Self::ids(&ids)
                 ),
             ));
         }
@@ -160,12 +185,14 @@ impl Traffic {
             ProtocolVersion::V2 => Check::fail(
                 "protocol",
                 format!("protocol v2 ids and no 0x151: {}", Self::ids(&v2_ids)),
-                "a SCOUT 2.0 or MINI (protocol v2): this gateway speaks v1 only so far",
+                "a SCOUT 2.0 or MINI (protocol v2): scout-gateway speaks v1 only so far (the \
+                 chassis checks below read its v2 state)",
             ),
             ProtocolVersion::Unknown if !v2_ids.is_empty() => Check::fail(
                 "protocol",
                 format!("protocol v2 ids ({}) and no 0x151", Self::ids(&v2_ids)),
-                "a SCOUT 2.0 or MINI (protocol v2): this gateway speaks v1 only so far",
+                "a SCOUT 2.0 or MINI (protocol v2): scout-gateway speaks v1 only so far (the \
+                 chassis checks below read its v2 state)",
             ),
             ProtocolVersion::Unknown => Check::fail(
                 "protocol",
@@ -213,9 +240,120 @@ impl Traffic {
         } else {
             checks.push(Check::pass("other-host", "no other host sends commands"));
         }
-        checks.extend(chassis_checks(self.last_status.as_ref()));
+        match (&self.last_status, &self.last_system_v2) {
+            (None, Some(state)) => {
+                checks.extend(chassis_checks_v2(state, self.last_rc_v2.as_ref()));
+            }
+            (status, _) => checks.extend(chassis_checks(status.as_ref())),
+        }
         checks
     }
+}
+
+/// The check of a battery at `volts`.
+fn battery_check(volts: f64) -> Check {
+    if volts < LOW_BATTERY {
+        Check::warn(
+            "chassis.battery",
+            format!("{volts:.1} V"),
+            "charge the battery (the chassis faults at 22 V)",
+        )
+    } else {
+        Check::pass("chassis.battery", format!("{volts:.1} V"))
+    }
+}
+
+/// A protocol v2 chassis' own state from its 0x211 (and 0x241, when the RC transmitter is on):
+/// e-stop, who controls it and what the host must do (0x421), the RC's switches, errors,
+/// battery (protocol-v2-notes 5).
+pub fn chassis_checks_v2(state: &SystemStateV2, rc: Option<&RcStateV2>) -> Vec<Check> {
+    let mut checks = Vec::new();
+    checks.push(match state.state {
+        ChassisState::Normal => Check::pass("chassis.estop", "state normal"),
+        ChassisState::EStop => Check::fail(
+            "chassis.estop",
+            "the chassis reports its e-stop",
+            "release the e-stop buttons on the chassis; on SCOUT V2.5 and newer the RC's SWA down \
+             is a wireless e-stop too (put it up); then `scout release` for the gateway's stop",
+        ),
+        ChassisState::Exception | ChassisState::Unknown(_) => Check::fail(
+            "chassis.estop",
+            format!("the chassis reports state {}", state.state.name()),
+            "a system exception (seen after the RC and the host fought over the chassis with an \
+             e-stop between): power-cycle the chassis",
+        ),
+    });
+    checks.push(match state.control_mode {
+        ControlModeV2::Can => {
+            Check::pass("chassis.control", "CAN command mode: the host may drive")
+        }
+        ControlModeV2::Standby => Check::warn(
+            "chassis.control",
+            "standby: a v2 chassis obeys nothing but the control-mode frame until the host sends \
+             0x421 [01]",
+            "the host takes CAN control with 0x421 [01] (`cansend can0 421#01`); scout-gateway \
+             will send it itself once it speaks protocol v2",
+        ),
+        ControlModeV2::Rc => Check::warn(
+            "chassis.control",
+            "control mode rc: the RC transmitter holds the chassis",
+            "give control to the host: SWB up (command mode; middle is manual RC), or switch the \
+             RC off, then 0x421 [01] again; the gateway never fights the RC",
+        ),
+        ControlModeV2::Uart | ControlModeV2::Unknown(_) => Check::warn(
+            "chassis.control",
+            format!(
+                "control mode {} (raw {}; firmware before late 2023 numbered 0 as RC)",
+                state.control_mode.name(),
+                state.control_mode.raw()
+            ),
+            "the host takes CAN control with 0x421 [01]",
+        ),
+    });
+    checks.push(match rc {
+        None => Check::skip("chassis.rc", "no RC frame (0x241): the transmitter is off"),
+        Some(rc) if rc.swa == SwitchPosition::Down => Check::fail(
+            "chassis.rc",
+            "SWA is down: a wireless e-stop on SCOUT V2.5 and newer",
+            "put SWA up",
+        ),
+        Some(rc) if rc.swb != SwitchPosition::Up => Check::warn(
+            "chassis.rc",
+            format!("SWB is {}: the RC drives (manual)", rc.swb.name()),
+            "put SWB up to give the chassis to the host (command mode)",
+        ),
+        Some(_) => Check::pass("chassis.rc", "SWA up, SWB up (command mode)"),
+    });
+    let named: Vec<&str> = state.errors.names().collect();
+    let unknown = state.errors.unknown();
+    checks.push(match (named.is_empty(), unknown) {
+        (true, 0) => Check::pass("chassis.faults", "no error bits"),
+        (false, _) => Check::fail(
+            "chassis.faults",
+            format!(
+                "error bits 0x{:04X}: {}{}",
+                state.errors.0,
+                named.join(", "),
+                if unknown == 0 {
+                    String::new()
+                } else {
+                    format!(" and unknown bits 0x{unknown:04X}")
+                }
+            ),
+            "remove the cause (the motors' cables, the battery, the RC link), then clear with \
+             0x441 [00]",
+        ),
+        (true, unknown) => Check::warn(
+            "chassis.faults",
+            format!(
+                "error bits 0x{unknown:04X} that no source names for a SCOUT (a Bunker Mini \
+                 reports 0x0080 in e-stop)"
+            ),
+            "read them with the e-stop and RC checks above; the documents disagree on these bits",
+        ),
+    });
+    checks.push(battery_check(state.battery_voltage()));
+    checks
 }
 
 /// The chassis' own state from its 0x151: e-stop, who controls it, faults, battery.
@@ -286,16 +424,7 @@ pub fn chassis_checks(status: Option<&SystemStatus>) -> Vec<Check> {
             },
         )
     });
-    let volts = status.battery_voltage();
-    checks.push(if volts < LOW_BATTERY {
-        Check::warn(
-            "chassis.battery",
-            format!("{volts:.1} V"),
-            "charge the battery (the chassis faults at 22 V)",
-        )
-    } else {
-        Check::pass("chassis.battery", format!("{volts:.1} V"))
-    });
+    checks.push(battery_check(status.battery_voltage()));
     checks
 }
 
@@ -414,6 +543,66 @@ mod tests {
             "{faults:?}"
         );
         assert_eq!(find("chassis.battery").verdict, Verdict::Warn);
+    }
+
+    #[test]
+    fn a_v2_chassis_in_standby_with_the_rc_in_manual_says_what_to_do() {
+        use scout_protocol::v2::ErrorBitsV2;
+        let mut traffic = Traffic::new();
+        let state = SystemStateV2 {
+            state: ChassisState::Normal,
+            control_mode: ControlModeV2::Standby,
+            battery_decivolts: 259,
+            errors: ErrorBitsV2(0x0080),
+            reserved: 0,
+            count: 0,
+        };
+        let rc = RcStateV2 {
+            swa: SwitchPosition::Up,
+            swb: SwitchPosition::Middle,
+            swc: SwitchPosition::Up,
+            swd: SwitchPosition::Up,
+            right_horizontal: 0,
+            right_vertical: 0,
+            left_vertical: 0,
+            left_horizontal: 0,
+            knob: 0,
+            reserved: 0,
+            count: 0,
+        };
+        for i in 0..60 {
+            traffic.handle(&RxEvent::V2(MessageV2::SystemState(state)), i * 20 * MS);
+            traffic.handle(&RxEvent::V2(MessageV2::RcState(rc)), i * 20 * MS);
+        }
+        let checks = traffic.checks(Transport::Can, WINDOW, 1200 * MS);
+        let find = |name| checks.iter().find(|c| c.name == name).expect(name);
+        assert_eq!(find("traffic").verdict, Verdict::Pass, "{checks:#?}");
+        assert!(find("traffic").detail.contains("0x211 x60"), "{checks:#?}");
+        assert_eq!(find("protocol").verdict, Verdict::Fail);
+        let control = find("chassis.control");
+        assert_eq!(control.verdict, Verdict::Warn);
+        assert!(
+            control.fix.as_deref().is_some_and(|f| f.contains("421#01")),
+            "{control:?}"
+        );
+        assert_eq!(find("chassis.rc").verdict, Verdict::Warn);
+        assert!(
+            find("chassis.rc")
+                .fix
+                .as_deref()
+                .is_some_and(|f| f.contains("SWB up"))
+        );
+        assert_eq!(
+            find("chassis.faults").verdict,
+            Verdict::Warn,
+            "0x0080 is unknown"
+        );
+        assert_eq!(find("chassis.battery").verdict, Verdict::Pass);
+        assert_eq!(
+            find("errors").verdict,
+            Verdict::Pass,
+            "v2 frames are valid, not rejected"
+        );
     }
 
     #[test]

@@ -16,13 +16,21 @@ use scout_protocol::{
 use serde::Serialize;
 
 use scout_protocol::Transport;
+use scout_protocol::model::Model;
+use scout_protocol::v2::MessageV2;
+
+#[path = "chassis_v2.rs"]
+mod v2;
 
 /// The chassis' physical parameters and firmware constants.
 #[derive(Debug, Clone, PartialEq, serde::Deserialize, Serialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SimParams {
-    /// rad/s at 100 % angular command (protocol-notes 4.1).
+    /// rad/s at 100 % angular command (protocol-notes 4.1); protocol v2 firmware clamps its
+    /// commands to it.
     pub max_angular: f64,
+    /// m/s: protocol v2 firmware clamps its commands to it (v1's percent is of 1.5 m/s).
+    pub max_linear: f64,
     /// Distance between the left and right wheels, m (vendor SDK value).
     pub track_width: f64,
     /// Wheel radius, m.
@@ -54,6 +62,7 @@ impl Default for SimParams {
     fn default() -> Self {
         Self {
             max_angular: units::DEFAULT_MAX_ANGULAR_SPEED,
+            max_linear: units::MAX_LINEAR_SPEED,
             track_width: 0.583,
             wheel_radius: 0.165,
             gear_ratio: 32.0,
@@ -65,6 +74,22 @@ impl Default for SimParams {
             feedback_period: Duration::from_millis(20),
             command_timeout: Duration::from_millis(500),
             serial_light_timeout: Duration::from_millis(500),
+        }
+    }
+}
+
+impl SimParams {
+    /// The defaults with `model`'s limits and geometry.
+    pub fn for_model(model: Model) -> Self {
+        let limits = model.limits();
+        let geometry = model.geometry();
+        Self {
+            max_angular: limits.angular,
+            max_linear: limits.linear,
+            track_width: geometry.track,
+            wheel_radius: geometry.wheel_radius,
+            gear_ratio: geometry.gear_ratio,
+            ..Self::default()
         }
     }
 }
@@ -231,6 +256,8 @@ pub enum Ignored {
     Rc,
     /// A protection is latched, the battery is cut off or the e-stop is pressed.
     Inhibited,
+    /// Protocol v2: the chassis is not in CAN command mode (standby until 0x421 `[01]`).
+    NotCommandMode,
 }
 
 /// Statistics for tests and people: what the chassis received and did.
@@ -256,6 +283,9 @@ pub struct SimStats {
     pub battery_voltage: f64,
     /// The 0x151 fault names now set.
     pub faults: Vec<&'static str>,
+    /// Who controls the chassis, as its status frame reports it (`can`, `rc`; v2 also
+    /// `standby`).
+    pub control_mode: &'static str,
 }
 
 /// Counts of ignored motion commands.
@@ -267,6 +297,8 @@ pub struct IgnoredCounts {
     pub rc: u64,
     /// E-stop, latched protection or battery cut-off.
     pub inhibited: u64,
+    /// Protocol v2: not in CAN command mode (standby).
+    pub standby: u64,
 }
 
 /// Summary of the intervals between motion commands, in ms.
@@ -331,6 +363,37 @@ pub struct Chassis {
     intervals: IntervalRecorder,
     /// Valid commands received, by [`MessageKind::index`].
     commands: [u64; MessageKind::COUNT],
+    /// Protocol v2 firmware, when the chassis speaks v2.
+    v2: Option<v2::FirmwareV2>,
+    /// Valid v2 frames received, by CAN id.
+    commands_v2: std::collections::BTreeMap<u16, u64>,
+}
+
+/// The feedback frames of one period, in the chassis' protocol.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Feedback {
+    /// Protocol v1: seven frames with their rolling counts.
+    V1(FeedbackBatch),
+    /// Protocol v2: the period's frames (0x211 and 0x241 every fifth period) and any replies.
+    V2(Vec<MessageV2>),
+}
+
+impl Feedback {
+    /// The v1 frames, if the chassis speaks v1.
+    pub fn v1(self) -> Option<FeedbackBatch> {
+        match self {
+            Self::V1(batch) => Some(batch),
+            Self::V2(_) => None,
+        }
+    }
+
+    /// The v2 frames, if the chassis speaks v2.
+    pub fn v2(self) -> Option<Vec<MessageV2>> {
+        match self {
+            Self::V1(_) => None,
+            Self::V2(frames) => Some(frames),
+        }
+    }
 }
 
 /// The feedback frames of one period, in the order the real chassis sends them.
@@ -368,7 +431,16 @@ impl Chassis {
             stats: SimStats::default(),
             intervals: IntervalRecorder::default(),
             commands: [0; MessageKind::COUNT],
+            v2: None,
+            commands_v2: std::collections::BTreeMap::new(),
         }
+    }
+
+    /// The same chassis with protocol v2 firmware: standby at power-on until the host sends
+    /// 0x421 `[01]`; speeds clamped to `max_linear` and `max_angular`.
+    pub fn with_protocol_v2(mut self) -> Self {
+        self.v2 = Some(v2::FirmwareV2::new());
+        self
     }
 
     /// The parameters.
@@ -380,6 +452,11 @@ impl Chassis {
     /// motion command was ignored, if it was.
     pub fn handle_message(&mut self, now: Duration, counted: Counted) -> Option<Ignored> {
         self.advance(now);
+        if self.v2.is_some() {
+            // v2 firmware does not know v1's ids.
+            self.stats.rejected += 1;
+            return None;
+        }
         self.commands[counted.message.kind().index()] += 1;
         match counted.message {
             Message::MotionCommand(command) => self.handle_motion(now, command),
@@ -472,7 +549,12 @@ impl Chassis {
                     self.actual = Speeds::default();
                 }
             }
-            Injection::Rc(on) => self.rc = on,
+            Injection::Rc(on) => {
+                self.rc = on;
+                if let Some(firmware) = self.v2.as_mut() {
+                    firmware.set_rc(on);
+                }
+            }
             Injection::Protect(protection) => {
                 self.latched = self.latched.with(protection.fault(), true);
             }
@@ -496,7 +578,7 @@ impl Chassis {
 
     /// The feedback frames due at `now`, if a period has come. The schedule is absolute: a late
     /// poll sends one batch and skips the periods it missed.
-    pub fn poll_feedback(&mut self, now: Duration) -> Option<FeedbackBatch> {
+    pub fn poll_feedback(&mut self, now: Duration) -> Option<Feedback> {
         if now < self.next_feedback {
             return None;
         }
@@ -506,6 +588,9 @@ impl Chassis {
             self.next_feedback += period;
         }
         self.breath_tick = (self.breath_tick + 1) % BREATH_STEPS;
+        if self.v2.is_some() {
+            return Some(Feedback::V2(self.feedback_v2()));
+        }
         let status = Message::SystemStatus(self.system_status());
         let motion = Message::MotionFeedback(MotionFeedback {
             linear_mm_s: to_i16(self.actual.linear * 1000.0),
@@ -521,10 +606,10 @@ impl Chassis {
             Message::LightFeedback(self.lights()),
             status,
         ];
-        Some(messages.map(|message| Counted {
+        Some(Feedback::V1(messages.map(|message| Counted {
             message,
             count: self.counters[message.kind().index()].next_count(),
-        }))
+        })))
     }
 
     /// The speeds the chassis is driving toward at `now`: the last command, or zero when the
@@ -581,7 +666,16 @@ impl Chassis {
                     self.commands[kind.index()],
                 )
             })
+            .chain(
+                self.commands_v2
+                    .iter()
+                    .map(|(id, count)| (format!("0x{id:03X}"), *count)),
+            )
             .collect();
+        stats.control_mode = match &self.v2 {
+            Some(firmware) => firmware.mode().name(),
+            None => self.system_status().control_mode.name(),
+        };
         stats.actual = self.actual;
         stats.pose = self.pose;
         stats.battery_voltage = self.battery_voltage;
@@ -679,6 +773,14 @@ impl Chassis {
         }
         let Speeds { linear, angular } = self.actual;
         self.pose.step(linear, angular, dt);
+        if let Some(firmware) = self.v2.as_mut() {
+            let half_track = self.params.track_width / 2.0;
+            firmware.step(
+                linear - angular * half_track,
+                linear + angular * half_track,
+                dt,
+            );
+        }
         let acceleration = (linear - previous.linear) / dt;
         self.step_motors(acceleration, dt);
         self.update_latches();

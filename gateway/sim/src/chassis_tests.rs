@@ -7,7 +7,7 @@ use scout_protocol::{
     MessageKind, MotionCommand, Motor, can, candump, serial,
 };
 
-use crate::chassis::{Chassis, Ignored, Injection, MotorValue, Protection, SimParams};
+use crate::chassis::{Chassis, Feedback, Ignored, Injection, MotorValue, Protection, SimParams};
 use scout_protocol::Transport;
 
 const fn ms(millis: u64) -> Duration {
@@ -261,7 +261,10 @@ fn battery_discharges_with_load() {
 }
 
 fn light_feedback(chassis: &mut Chassis, now: Duration) -> LightCommand {
-    let batch = chassis.poll_feedback(now).expect("a feedback period");
+    let batch = chassis
+        .poll_feedback(now)
+        .and_then(Feedback::v1)
+        .expect("a feedback period");
     match batch[5].message {
         Message::LightFeedback(lights) => lights,
         other => panic!("0x141 expected, found {other:?}"),
@@ -323,6 +326,7 @@ fn every_feedback_id_counts_and_wraps() {
     for period in 0..300u64 {
         let batch = chassis
             .poll_feedback(ms(period * 20))
+            .and_then(Feedback::v1)
             .expect("one batch a period");
         assert_eq!(batch.len(), 7);
         for counted in batch {
@@ -365,7 +369,10 @@ fn manual_example_frames_reach_their_speeds() {
         let command = can::decode(&frame).expect("valid manual frame");
         let mut chassis = Chassis::new(SimParams::default(), Transport::Can);
         drive(&mut chassis, command, ms(0), ms(2000));
-        let feedback = chassis.poll_feedback(ms(2000)).expect("feedback");
+        let feedback = chassis
+            .poll_feedback(ms(2000))
+            .and_then(Feedback::v1)
+            .expect("feedback");
         let Message::MotionFeedback(motion) = feedback[0].message else {
             panic!("0x131 first")
         };
@@ -425,7 +432,10 @@ fn acceleration_is_limited_and_the_pose_integrates() {
         end,
         ms(3000),
     );
-    let batch = chassis.poll_feedback(end + ms(3000)).expect("feedback");
+    let batch = chassis
+        .poll_feedback(end + ms(3000))
+        .and_then(Feedback::v1)
+        .expect("feedback");
     let rpm = |i: usize| match batch[i].message {
         Message::MotorFeedback(m) => m.rpm,
         other => panic!("{other:?}"),

@@ -9,5 +9,7 @@ pub mod script;
 
 #[cfg(test)]
 mod chassis_tests;
+#[cfg(test)]
+mod chassis_v2_tests;
 
-pub use chassis::{Chassis, SimParams};
+pub use chassis::{Chassis, Feedback, SimParams};

@@ -9,21 +9,33 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use scout_protocol::slcan::{self, Bitrate, Slcan};
-use scout_protocol::{Counted, Message, can, serial};
+use scout_protocol::v2::MessageV2;
+use scout_protocol::{CanFrame, Counted, Message, can, serial};
 use serialport::{SerialPort, TTYPort};
 use tracing::{info, warn};
 
-use crate::chassis::{Chassis, Injection, SimParams};
+use crate::chassis::{Chassis, Feedback, Injection, SimParams};
 use crate::script::{HELP, SimCommand};
 use scout_io::{Incoming, Port};
 use scout_protocol::Transport;
 use scout_protocol::link::{RxEvent, StreamFraming, decode_can};
+
+/// The chassis firmware's protocol.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Protocol {
+    /// Protocol v1 (the 2019 SCOUT): serial, slcan or SocketCAN.
+    V1,
+    /// Protocol v2 (SCOUT 2.0, SCOUT MINI): CAN only (slcan or SocketCAN).
+    V2,
+}
 
 /// How the simulator is reached and what it simulates.
 #[derive(Debug, Clone)]
 pub struct SimOptions {
     /// The transport it speaks.
     pub transport: Transport,
+    /// The firmware's protocol.
+    pub protocol: Protocol,
     /// For [`Transport::Can`]: the SocketCAN interface.
     pub can_interface: Option<String>,
     /// A symbolic link kept pointing at the pseudo-terminal (stable across `unplug`).
@@ -174,9 +186,17 @@ pub fn run(
     out: &mut dyn Write,
 ) -> anyhow::Result<()> {
     scout_io::raise_priority(options.realtime_priority, "simulator loop");
+    let chassis = Chassis::new(options.params.clone(), options.transport);
+    let chassis = match (options.protocol, options.transport) {
+        (Protocol::V1, _) => chassis,
+        (Protocol::V2, Transport::Slcan | Transport::Can) => chassis.with_protocol_v2(),
+        (Protocol::V2, Transport::Serial | Transport::Sim) => anyhow::bail!(
+            "protocol v2 is CAN only (the vendor SDK implements no v2 over RS232): use --slcan or --can"
+        ),
+    };
     let mut simulator = Simulator {
         start: Instant::now(),
-        chassis: Chassis::new(options.params.clone(), options.transport),
+        chassis,
         framing: StreamFraming::new(options.transport),
         adapter: Adapter::default(),
         endpoint: None,
@@ -226,8 +246,10 @@ impl Simulator<'_> {
                 self.unplugged_until = Some(self.now() + Duration::from_secs(1));
             }
             let now = self.now();
-            if let Some(batch) = self.chassis.poll_feedback(now) {
-                self.send_feedback(&batch, now)?;
+            match self.chassis.poll_feedback(now) {
+                Some(Feedback::V1(batch)) => self.send_feedback(&batch, now)?,
+                Some(Feedback::V2(frames)) => self.send_feedback_v2(&frames, now)?,
+                None => {}
             }
             let wait = self
                 .chassis
@@ -378,6 +400,17 @@ impl Simulator<'_> {
                     self.chassis.handle_message(now, counted);
                 }
             }
+            RxEvent::V2(message) => {
+                if let (Some(trace), MessageV2::MotionCommand(command)) =
+                    (self.trace.as_mut(), &message)
+                {
+                    let (linear, angular) = (command.linear(), command.angular());
+                    trace.line(format_args!("C {} {linear} {angular}\n", Trace::now_ns()));
+                }
+                if !slcan || self.adapter.hears_chassis() {
+                    self.chassis.handle_v2(now, message);
+                }
+            }
             RxEvent::Rejected(error) if error.is_checksum() => {
                 self.chassis.handle_checksum_error(now)
             }
@@ -389,20 +422,102 @@ impl Simulator<'_> {
         Ok(())
     }
 
-    fn send_feedback(&mut self, batch: &[Counted], now: Duration) -> anyhow::Result<()> {
+    /// Whether feedback goes out at `now` (not silenced, plugged in, heard through the adapter):
+    /// the trace time of the write, stamped before it (a reader may wake before a later stamp
+    /// would be taken), and the slcan timestamp if the adapter adds them.
+    fn feedback_slot(&self, now: Duration) -> Option<(u64, Option<u16>)> {
         let heard = match self.options.transport {
             Transport::Slcan => self.adapter.hears_chassis(),
             Transport::Serial | Transport::Can | Transport::Sim => true,
         };
         if now < self.silent_until || self.endpoint.is_none() || !heard {
-            return Ok(());
+            return None;
         }
-        // Stamped before the writes: a reader may wake before a later stamp would be taken.
-        let written_ns = Trace::now_ns();
         let timestamp = self
             .adapter
             .timestamps
             .then_some((now.as_millis() % 60_000) as u16);
+        Some((Trace::now_ns(), timestamp))
+    }
+
+    /// One period's v2 frames. `corrupt` sends a frame one byte short (v2 has no checksum to
+    /// damage: a wrong length is what a receiver can catch).
+    fn send_feedback_v2(&mut self, frames: &[MessageV2], now: Duration) -> anyhow::Result<()> {
+        let Some((written_ns, timestamp)) = self.feedback_slot(now) else {
+            return Ok(());
+        };
+        let mut bytes = Vec::new();
+        for message in frames {
+            let mut frame = message.encode();
+            if self.corrupt_remaining > 0 {
+                self.corrupt_remaining -= 1;
+                self.stats.corrupted_frames += 1;
+                let data = frame.data();
+                frame = CanFrame::new(frame.id(), &data[..data.len().saturating_sub(1)])
+                    .context("shortening a feedback frame")?;
+            }
+            self.stats.frames_sent += 1;
+            self.put_frame(&frame, timestamp, &mut bytes);
+        }
+        self.write_bytes(&bytes)?;
+        self.trace_feedback(written_ns);
+        Ok(())
+    }
+
+    /// Sends `frame` on SocketCAN now, or appends its slcan line to `bytes`.
+    fn put_frame(&mut self, frame: &CanFrame, timestamp: Option<u16>, bytes: &mut Vec<u8>) {
+        let Some(endpoint) = self.endpoint.as_mut() else {
+            return;
+        };
+        if self.options.transport != Transport::Can {
+            bytes.extend_from_slice(
+                slcan::encode(&Slcan::Frame {
+                    frame: *frame,
+                    timestamp,
+                })
+                .as_bytes(),
+            );
+            return;
+        }
+        match endpoint.port.write_frame(frame) {
+            Ok(()) if self.stats.write_errors > self.write_errors_reported => {
+                info!(
+                    "CAN writes go through again after {} failures",
+                    self.stats.write_errors - self.write_errors_reported
+                );
+                self.write_errors_reported = self.stats.write_errors;
+            }
+            Ok(()) => {}
+            Err(error) => {
+                if self.stats.write_errors == self.write_errors_reported {
+                    warn!("CAN write failed: {error} (counting until one goes through)");
+                }
+                self.stats.write_errors += 1;
+            }
+        }
+    }
+
+    /// The trace's lines after a feedback batch was written at `written_ns`.
+    fn trace_feedback(&mut self, written_ns: u64) {
+        let actual = self.chassis.actual().linear;
+        let Some(trace) = self.trace.as_mut() else {
+            return;
+        };
+        trace.line(format_args!("F {written_ns}\n"));
+        if actual != trace.actual {
+            trace.actual = actual;
+            trace.line(format_args!("A {} {actual}\n", Trace::now_ns()));
+        }
+        // Readable while the simulator runs, at most one period behind.
+        if let Err(error) = trace.out.flush() {
+            warn!("writing the trace failed: {error}");
+        }
+    }
+
+    fn send_feedback(&mut self, batch: &[Counted], now: Duration) -> anyhow::Result<()> {
+        let Some((written_ns, timestamp)) = self.feedback_slot(now) else {
+            return Ok(());
+        };
         let mut bytes = Vec::with_capacity(batch.len() * 32);
         for counted in batch {
             let corrupt = self.corrupt_remaining > 0;
@@ -423,50 +538,14 @@ impl Simulator<'_> {
                     let mut data = [0u8; 8];
                     data.copy_from_slice(frame.data());
                     data[can::CHECKSUM] ^= checksum_damage;
-                    let frame = scout_protocol::CanFrame::new(frame.id(), &data)
-                        .context("re-encoding a feedback frame")?;
-                    if let (Transport::Can, Some(endpoint)) =
-                        (self.options.transport, self.endpoint.as_mut())
-                    {
-                        match endpoint.port.write_frame(&frame) {
-                            Ok(()) if self.stats.write_errors > self.write_errors_reported => {
-                                info!(
-                                    "CAN writes go through again after {} failures",
-                                    self.stats.write_errors - self.write_errors_reported
-                                );
-                                self.write_errors_reported = self.stats.write_errors;
-                            }
-                            Ok(()) => {}
-                            Err(error) => {
-                                if self.stats.write_errors == self.write_errors_reported {
-                                    warn!(
-                                        "CAN write failed: {error} (counting until one goes through)"
-                                    );
-                                }
-                                self.stats.write_errors += 1;
-                            }
-                        }
-                    } else {
-                        bytes.extend_from_slice(
-                            slcan::encode(&Slcan::Frame { frame, timestamp }).as_bytes(),
-                        );
-                    }
+                    let frame =
+                        CanFrame::new(frame.id(), &data).context("re-encoding a feedback frame")?;
+                    self.put_frame(&frame, timestamp, &mut bytes);
                 }
             }
         }
         self.write_bytes(&bytes)?;
-        if let Some(trace) = self.trace.as_mut() {
-            trace.line(format_args!("F {written_ns}\n"));
-            let actual = self.chassis.actual().linear;
-            if actual != trace.actual {
-                trace.actual = actual;
-                trace.line(format_args!("A {} {actual}\n", Trace::now_ns()));
-            }
-            // Readable while the simulator runs, at most one period behind.
-            if let Err(error) = trace.out.flush() {
-                warn!("writing the trace failed: {error}");
-            }
-        }
+        self.trace_feedback(written_ns);
         Ok(())
     }
 

@@ -102,7 +102,7 @@ fn protocol_v2_frames_by_their_ids_and_forced() {
     assert_eq!(frames[1]["name"], "control_mode");
     assert_eq!(frames[1]["control_mode"], "can");
     assert_eq!(frames[2]["protocol"], 1);
-    assert_eq!(frames[2]["timestamp"], 1_700_000_000.0003);
+    assert_eq!(frames[2]["timestamp"], 1_700_000_000.000_3);
 
     // Forced to v1, the v2 frames are reported and the exit code says so.
     let mut scout = command("scout");

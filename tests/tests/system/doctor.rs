@@ -229,11 +229,16 @@ fn garbage_at_the_wrong_baud_rate_fails_as_such() {
 
 #[test]
 fn a_protocol_v2_chassis_behind_slcan_is_named_with_what_to_do() {
-    // A SCOUT 2.0's system state (0x211) and motion state (0x221) every 20 ms, as an slcan
-    // adapter prints them.
-    let pty = Pty::new(|_| b"t2118000000000000FF00\rt22180000000000000000\r".to_vec());
-    let (code, checks) = doctor(&["--name", &robot_name("doctor-v2"), "--slcan", &pty.path]);
+    // The simulator's SCOUT 2.0 at power-on: standby until the host sends 0x421.
+    let mut sim = Sim::start(&["--slcan", "--protocol", "v2", "--model", "scout2"]);
+    let device = sim.port().to_owned();
+    let (code, checks) = doctor(&["--name", &robot_name("doctor-v2"), "--slcan", &device]);
     assert_eq!(code, Some(1), "{checks:#?}");
+    assert_eq!(
+        verdict(&checks, "traffic"),
+        "pass",
+        "v2 frames are valid: {checks:#?}"
+    );
     let protocol = check(&checks, "protocol");
     assert_eq!(protocol["verdict"], "fail", "{checks:#?}");
     assert!(
@@ -243,6 +248,31 @@ fn a_protocol_v2_chassis_behind_slcan_is_named_with_what_to_do() {
         "{protocol}"
     );
     assert!(fix(&checks, "protocol").contains("v2"), "{checks:#?}");
+    assert_eq!(verdict(&checks, "errors"), "pass", "{checks:#?}");
+    assert_eq!(verdict(&checks, "chassis.control"), "warn", "{checks:#?}");
+    assert!(
+        fix(&checks, "chassis.control").contains("421#01"),
+        "{checks:#?}"
+    );
+    assert_eq!(
+        verdict(&checks, "chassis.rc"),
+        "skip",
+        "the transmitter is off"
+    );
+    assert_eq!(verdict(&checks, "chassis.estop"), "pass");
+
+    // The RC in manual, the e-stop pressed: each named with what to do.
+    sim.send("rc on");
+    sim.send("estop on");
+    let (_, checks) = doctor(&["--name", &robot_name("doctor-v2"), "--slcan", &device]);
+    assert_eq!(verdict(&checks, "chassis.estop"), "fail", "{checks:#?}");
+    assert!(fix(&checks, "chassis.estop").contains("SWA"), "{checks:#?}");
+    assert_eq!(verdict(&checks, "chassis.control"), "warn", "{checks:#?}");
+    assert!(
+        fix(&checks, "chassis.control").contains("SWB up"),
+        "{checks:#?}"
+    );
+    assert_eq!(verdict(&checks, "chassis.rc"), "warn", "{checks:#?}");
 }
 
 #[test]

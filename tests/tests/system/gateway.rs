@@ -346,3 +346,44 @@ fn thirty_two_subscriber_processes_at_once() {
         assert_eq!(String::from_utf8_lossy(&output.stdout).lines().count(), 20);
     }
 }
+
+#[test]
+fn a_protocol_v2_chassis_is_named_and_never_moves() {
+    // This gateway speaks v1: a SCOUT 2.0 (the simulator's v2 firmware, over slcan) is detected
+    // and said so, and nothing the gateway sends moves it (v1's ids mean nothing to v2).
+    let name = robot_name("v2-refused");
+    let mut sim = Sim::start(&["--slcan", "--protocol", "v2", "--model", "scout2"]);
+    let device = sim.port().to_owned();
+    let _gateway = Gateway::start(&["--slcan", &device, "--name", &name]);
+    let states = connect(&name).subscribe().expect("subscribe");
+    let state = wait_for_state(&states, Duration::from_secs(10), |s| {
+        s["link"]["state"] == "protocol_v2"
+    });
+    assert_eq!(
+        state["motion"],
+        serde_json::Value::Null,
+        "nothing of v2 is published"
+    );
+    let (code, _, stderr) = scout_system_tests::scout(&[
+        "drive",
+        "--name",
+        &name,
+        "--linear",
+        "0.5",
+        "--duration",
+        "1",
+    ]);
+    let stats = sim.stats();
+    assert_eq!(
+        stats["actual"]["linear"], 0.0,
+        "{stats} ({code:?}: {stderr})"
+    );
+    assert_eq!(
+        stats["control_mode"], "standby",
+        "no 0x421 was sent: {stats}"
+    );
+    assert!(
+        stats["rejected"].as_u64() > Some(0),
+        "v1 frames are unknown to v2: {stats}"
+    );
+}

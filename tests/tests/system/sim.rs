@@ -274,3 +274,104 @@ fn script_file_injects_faults_on_schedule() {
     }
     let _ = std::fs::remove_dir_all(dir);
 }
+
+/// A host on the slcan link to a v2 chassis: opens the adapter, sends `setup` frames once, then
+/// `command` every 20 ms for `duration`; the v2 frames it received.
+fn v2_host(
+    port: &mut Box<dyn SerialPort>,
+    setup: &[scout_protocol::v2::MessageV2],
+    command: scout_protocol::v2::MessageV2,
+    duration: Duration,
+) -> Vec<scout_protocol::v2::MessageV2> {
+    let line = |message: &scout_protocol::v2::MessageV2| {
+        slcan::encode(&Slcan::Frame {
+            frame: message.encode(),
+            timestamp: None,
+        })
+    };
+    port.write_all(b"S6\rO\r").expect("write");
+    for message in setup {
+        port.write_all(line(message).as_bytes()).expect("write");
+    }
+    let mut lines = LineDecoder::new();
+    let mut buffer = [0u8; 1024];
+    let mut received = Vec::new();
+    let start = Instant::now();
+    let mut next = Instant::now();
+    while start.elapsed() < duration {
+        if Instant::now() >= next {
+            port.write_all(line(&command).as_bytes()).expect("write");
+            next += Duration::from_millis(20);
+        }
+        if let Ok(n) = port.read(&mut buffer) {
+            for decoded in buffer[..n].iter().filter_map(|b| lines.push(*b)) {
+                if let Ok(Slcan::Frame { frame, .. }) = decoded {
+                    received.push(scout_protocol::v2::decode(&frame).expect("a v2 frame"));
+                }
+            }
+        }
+    }
+    received
+}
+
+#[test]
+fn a_v2_chassis_drives_only_after_0x421_and_reports_in_v2() {
+    use scout_protocol::v2::{ControlModeV2, MessageV2, MotionV2};
+    let mut sim = Sim::start(&["--slcan", "--protocol", "v2", "--model", "scout-mini"]);
+    let mut port = open(sim.port());
+    let go = MessageV2::MotionCommand(MotionV2::from_si(2.0, 0.0));
+
+    // Without 0x421: standby, nothing moves, and the chassis says so in 0x211.
+    let frames = v2_host(&mut port, &[], go, Duration::from_millis(500));
+    let standby = frames.iter().rev().find_map(|f| match f {
+        MessageV2::SystemState(state) => Some(*state),
+        _ => None,
+    });
+    assert_eq!(
+        standby.map(|s| s.control_mode),
+        Some(ControlModeV2::Standby),
+        "{frames:?}"
+    );
+    assert!(frames.iter().any(|f| f.can_id() == 0x311), "odometers");
+    assert_eq!(sim.stats()["actual"]["linear"], 0.0);
+
+    // 0x421 [01], then the same stream: it moves, up to the MINI's 3 m/s (2 m/s asked).
+    let frames = v2_host(
+        &mut port,
+        &[MessageV2::ControlMode(ControlModeV2::Can)],
+        go,
+        Duration::from_millis(1500),
+    );
+    let last_motion = frames.iter().rev().find_map(|f| match f {
+        MessageV2::MotionState(motion) => Some(*motion),
+        _ => None,
+    });
+    assert!(
+        last_motion.is_some_and(|m| m.linear() > 1.0),
+        "accelerating toward 2 m/s: {last_motion:?}"
+    );
+    let stats = sim.quit();
+    assert_eq!(stats["control_mode"], "can");
+    assert!(stats["ignored"]["standby"].as_u64() >= Some(10), "{stats}");
+    assert_eq!(stats["commands"]["0x421"], 1);
+}
+
+#[test]
+fn a_v2_chassis_is_refused_on_serial() {
+    let output = scout_system_tests::run_with_input(
+        scout_system_tests::command("scout-sim"),
+        b"",
+        Duration::from_secs(10),
+    );
+    assert_eq!(
+        output.status.code(),
+        Some(2),
+        "no transport is a usage error"
+    );
+    let mut sim = scout_system_tests::command("scout-sim");
+    sim.args(["--serial", "--protocol", "v2"]);
+    let output = scout_system_tests::run_with_input(sim, b"", Duration::from_secs(10));
+    assert_eq!(output.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("CAN only"), "{stderr}");
+}

@@ -12,13 +12,15 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Sender, channel};
 
 use anyhow::Context;
-use clap::{ArgGroup, Parser};
+use clap::{ArgGroup, Parser, ValueEnum};
 use scout_protocol::Transport;
+use scout_protocol::model::Model;
 use scout_sim::SimParams;
-use scout_sim::run::{SimOptions, run};
+use scout_sim::run::{Protocol, SimOptions, run};
 use scout_sim::script::{self, SimCommand};
 
-/// A simulated AgileX SCOUT chassis (protocol v1).
+/// A simulated AgileX SCOUT chassis: protocol v1 (the 2019 SCOUT), or v2 (SCOUT 2.0, SCOUT
+/// MINI: CAN only, standby at power-on until the host sends 0x421 [01]).
 ///
 /// With --serial or --slcan it creates a pseudo-terminal and prints its path as the first line of
 /// standard output (`serial /dev/pts/N` or `slcan /dev/pts/N`); with --can it uses a SocketCAN
@@ -56,13 +58,60 @@ struct Cli {
     /// The maximum angular speed in rad/s (overrides the parameter file).
     #[arg(long)]
     max_angular: Option<f64>,
+    /// The firmware's protocol.
+    #[arg(long, value_enum, default_value_t = ProtocolArg::V1)]
+    protocol: ProtocolArg,
+    /// The model: its speed limits (v2 firmware clamps commands to them) and geometry [default:
+    /// scout with v1, scout2 with v2]. A parameter file overrides what it sets.
+    #[arg(long, value_enum)]
+    model: Option<ModelArg>,
     /// Seed for `garbage`.
     #[arg(long, default_value_t = 0x5C07)]
     seed: u64,
 }
 
+/// `--protocol`.
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum ProtocolArg {
+    /// Protocol v1.
+    V1,
+    /// Protocol v2.
+    V2,
+}
+
+/// `--model`.
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum ModelArg {
+    /// The 2019 SCOUT.
+    Scout,
+    /// SCOUT 2.0.
+    Scout2,
+    /// SCOUT MINI.
+    ScoutMini,
+    /// SCOUT MINI OMNI.
+    ScoutMiniOmni,
+}
+
+impl ModelArg {
+    fn model(self) -> Model {
+        match self {
+            Self::Scout => Model::Scout,
+            Self::Scout2 => Model::Scout2,
+            Self::ScoutMini => Model::ScoutMini,
+            Self::ScoutMiniOmni => Model::ScoutMiniOmni,
+        }
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    if matches!(cli.protocol, ProtocolArg::V2) && cli.serial {
+        eprintln!(
+            "scout-sim: protocol v2 is CAN only (the vendor SDK implements no v2 over RS232): use \
+             --slcan or --can"
+        );
+        return ExitCode::from(2);
+    }
     let _log = scout_io::logging::init();
     match simulate(cli) {
         Ok(()) => ExitCode::SUCCESS,
@@ -79,13 +128,25 @@ fn simulate(cli: Cli) -> anyhow::Result<()> {
         (None, true) => Transport::Slcan,
         (None, false) => Transport::Serial,
     };
+    let protocol = match cli.protocol {
+        ProtocolArg::V1 => Protocol::V1,
+        ProtocolArg::V2 => Protocol::V2,
+    };
+    let model = cli.model.map_or(
+        match protocol {
+            Protocol::V1 => Model::Scout,
+            Protocol::V2 => Model::Scout2,
+        },
+        ModelArg::model,
+    );
+    let base = SimParams::for_model(model);
     let mut params = match &cli.params {
         Some(path) => {
             let text = std::fs::read_to_string(path)
                 .with_context(|| format!("reading {}", path.display()))?;
-            toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))?
+            with_file(&base, &text).with_context(|| format!("parsing {}", path.display()))?
         }
-        None => SimParams::default(),
+        None => base,
     };
     if let Some(max_angular) = cli.max_angular {
         params.max_angular = max_angular;
@@ -105,6 +166,7 @@ fn simulate(cli: Cli) -> anyhow::Result<()> {
     }
     let options = SimOptions {
         transport,
+        protocol,
         can_interface: cli.can,
         link: cli.link,
         params,
@@ -113,6 +175,14 @@ fn simulate(cli: Cli) -> anyhow::Result<()> {
         realtime_priority: cli.realtime_priority,
     };
     run(options, &received, &stop, &mut std::io::stdout().lock())
+}
+
+/// `base` with the keys a parameter file sets replaced.
+fn with_file(base: &SimParams, text: &str) -> anyhow::Result<SimParams> {
+    let file: toml::Table = toml::from_str(text)?;
+    let mut merged = toml::Table::try_from(base)?;
+    merged.extend(file);
+    Ok(merged.try_into()?)
 }
 
 /// Sends each command of `input` to the simulator, sleeping on `wait` lines.

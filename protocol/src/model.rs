@@ -1,0 +1,137 @@
+//! The SCOUT models: their speed limits and geometry, as the public sources give them
+//! (protocol-v2-notes 6). One table for the simulator and the gateway.
+
+/// A SCOUT model.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Model {
+    /// The 2019 SCOUT (SCOUT 1.0 body; protocol v1 in this project's capture).
+    Scout,
+    /// SCOUT 2.0.
+    Scout2,
+    /// SCOUT MINI, skid-steer.
+    ScoutMini,
+    /// SCOUT MINI OMNI, mecanum wheels (also commands a lateral speed).
+    ScoutMiniOmni,
+}
+
+/// How fast a model may be commanded.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Limits {
+    /// m/s.
+    pub linear: f64,
+    /// rad/s.
+    pub angular: f64,
+    /// m/s, sideways (0 but on the OMNI).
+    pub lateral: f64,
+}
+
+/// A model's geometry.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Geometry {
+    /// Distance between the left and right wheels, m.
+    pub track: f64,
+    /// Wheel radius, m.
+    pub wheel_radius: f64,
+    /// Motor turns per wheel turn.
+    pub gear_ratio: f64,
+}
+
+impl Model {
+    /// Every model.
+    pub const ALL: [Model; 4] = [
+        Self::Scout,
+        Self::Scout2,
+        Self::ScoutMini,
+        Self::ScoutMiniOmni,
+    ];
+
+    /// The name on the command line and in logs.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Scout => "scout",
+            Self::Scout2 => "scout2",
+            Self::ScoutMini => "scout-mini",
+            Self::ScoutMiniOmni => "scout-mini-omni",
+        }
+    }
+
+    /// The model called `name` ([`Model::name`]).
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|model| model.name() == name)
+    }
+
+    /// The command limits. SCOUT and SCOUT 2.0: 1.5 m/s and 0.5235 rad/s (the vendor SDK's
+    /// limits; manual v1.2.12 on). MINI and OMNI: 3.0 m/s and 2.5235 rad/s, the OMNI ±2.0 m/s
+    /// sideways (vendor SDK `robot_limits.hpp` and the 2021 v2 SDK's clamps agree).
+    pub const fn limits(self) -> Limits {
+        match self {
+            Self::Scout | Self::Scout2 => Limits {
+                linear: crate::units::MAX_LINEAR_SPEED,
+                angular: crate::units::DEFAULT_MAX_ANGULAR_SPEED,
+                lateral: 0.0,
+            },
+            Self::ScoutMini => Limits {
+                linear: 3.0,
+                angular: 2.5235,
+                lateral: 0.0,
+            },
+            Self::ScoutMiniOmni => Limits {
+                linear: 3.0,
+                angular: 2.5235,
+                lateral: 2.0,
+            },
+        }
+    }
+
+    /// The geometry. SCOUT: the vendor SDK's track and the manual's 1:32 gearbox. SCOUT 2.0:
+    /// the vendor URDF (track 0.58306 m, wheel radius 0.16459 m; gearbox unpublished, the
+    /// SCOUT's assumed). MINI and OMNI: the vendor URDF's track 0.416503 m and the spec
+    /// sheet's 1:4.3 gearbox; no public source gives a plausible wheel radius, 0.0875 m (a
+    /// 175 mm wheel) is assumed: it only scales the motor rpm.
+    pub const fn geometry(self) -> Geometry {
+        match self {
+            Self::Scout => Geometry {
+                track: 0.583,
+                wheel_radius: 0.165,
+                gear_ratio: 32.0,
+            },
+            Self::Scout2 => Geometry {
+                track: 0.58306,
+                wheel_radius: 0.16459,
+                gear_ratio: 32.0,
+            },
+            Self::ScoutMini | Self::ScoutMiniOmni => Geometry {
+                track: 0.416503,
+                wheel_radius: 0.0875,
+                gear_ratio: 4.3,
+            },
+        }
+    }
+}
+
+impl core::fmt::Display for Model {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_round_trip_and_limits_are_the_sources() {
+        for model in Model::ALL {
+            assert_eq!(Model::from_name(model.name()), Some(model));
+        }
+        assert_eq!(Model::from_name("scout3"), None);
+        assert_eq!(Model::Scout2.limits().linear, 1.5);
+        assert_eq!(Model::ScoutMini.limits().angular, 2.5235);
+        assert_eq!(Model::ScoutMiniOmni.limits().lateral, 2.0);
+        assert_eq!(Model::ScoutMini.limits().lateral, 0.0);
+        assert_eq!(
+            Model::Scout.limits().angular,
+            crate::units::DEFAULT_MAX_ANGULAR_SPEED
+        );
+    }
+}
