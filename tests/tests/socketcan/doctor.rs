@@ -143,3 +143,29 @@ fn doctor_names_a_bus_off_it_hears() {
         "{read}"
     );
 }
+
+#[test]
+fn doctor_on_a_bus_with_a_v2_chassis_names_it_and_what_to_do() {
+    const TEST: &str = "doctor_on_a_bus_with_a_v2_chassis_names_it_and_what_to_do";
+    let Some(bus) = Bus::create(TEST) else { return };
+    let _sim = Sim::start(&[
+        "--can",
+        bus.name(),
+        "--protocol",
+        "v2",
+        "--model",
+        "scout-mini",
+    ]);
+    let (code, checks) = doctor(bus.name());
+    assert_eq!(code, Some(1), "{checks:#?}");
+    assert_eq!(check(&checks, "traffic")["verdict"], "pass", "{checks:#?}");
+    assert_eq!(check(&checks, "protocol")["verdict"], "fail", "{checks:#?}");
+    let control = check(&checks, "chassis.control");
+    assert_eq!(control["verdict"], "warn", "{checks:#?}");
+    assert!(
+        control["fix"]
+            .as_str()
+            .is_some_and(|f| f.contains("421#01")),
+        "{control}"
+    );
+}
