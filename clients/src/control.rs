@@ -99,8 +99,8 @@ pub struct Controller {
 #[derive(Debug)]
 pub struct Stopper {
     client: StopClient,
-    /// Made by [`Robot::stopper`]: the iceoryx2 stop service when the stop endpoint cannot be
-    /// reached.
+    /// Made by [`Stopper::with_fallback`]: the iceoryx2 stop service when the stop endpoint
+    /// cannot be reached.
     fallback: Option<StopService>,
 }
 
@@ -146,6 +146,20 @@ impl Stopper {
             client,
             fallback: None,
         })
+    }
+
+    /// [`Stopper::new`], falling back to the gateway's iceoryx2 stop service (opened on first
+    /// use) where the stop endpoint cannot be reached: this process in another network
+    /// namespace than the gateway.
+    pub fn with_fallback(robot: &str, name: &str) -> Result<Self, ClientError> {
+        let mut stopper = Self::new(robot, name)?;
+        stopper.fallback = Some(StopService {
+            robot: robot.to_owned(),
+            name: name.to_owned(),
+            port: None,
+            node: None,
+        });
+        Ok(stopper)
     }
 
     /// Latches a stop owned by this client's name: zero speed at once, until released. The
@@ -205,14 +219,7 @@ impl Robot {
     /// endpoint cannot be reached (this process in another network namespace than the
     /// gateway), it uses the iceoryx2 stop service instead.
     pub fn stopper(&self, name: &str) -> Result<Stopper, ClientError> {
-        let mut stopper = Stopper::new(self.name(), name)?;
-        stopper.fallback = Some(StopService {
-            robot: self.name().to_owned(),
-            name: name.to_owned(),
-            port: None,
-            node: None,
-        });
-        Ok(stopper)
+        Stopper::with_fallback(self.name(), name)
     }
 
     /// Reads the arbiter's status.

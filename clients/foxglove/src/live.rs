@@ -7,8 +7,8 @@
 
 use std::collections::BTreeSet;
 use std::net::SocketAddr;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use foxglove::websocket::service::{Request, Service, ServiceSchema};
@@ -116,6 +116,24 @@ pub fn reason_of(payload: &[u8]) -> Option<String> {
     Some(value.get("reason")?.as_str()?.to_owned())
 }
 
+/// The stop id a release request names: `{"through": N}`, the newest stop its sender saw.
+pub fn through_of(payload: &[u8]) -> Option<u64> {
+    let value: Value = serde_json::from_slice(payload).ok()?;
+    value.get("through")?.as_u64()
+}
+
+/// The release a caller asks for, through the newest stop it saw (`through`), never past the
+/// newest this view has seen: a stop latched after either survives.
+fn release_through(payload: &[u8], newest_seen: u64) -> Result<u64, String> {
+    match through_of(payload) {
+        Some(through) => Ok(through.min(newest_seen)),
+        None => Err(format!(
+            "say which stops you saw: {{\"through\": N}}, N the newest stop number in the \
+             Problems list (now #{newest_seen}); stops latched after it are kept"
+        )),
+    }
+}
+
 fn services(
     options: &LiveOptions,
     newest_stop: &Arc<AtomicU64>,
@@ -124,11 +142,16 @@ fn services(
     if !(options.estop || options.allow_release) {
         return Ok(services);
     }
-    let stopper = Arc::new(Mutex::new(
-        Stopper::new(&options.robot, &options.owner).map_err(LiveError::Owner)?,
-    ));
+    // The owner's name is checked now; each call makes a stopper of its own (a socket and a
+    // bind), so that no call waits on another: a stop is never queued behind a release or a
+    // slow answer.
+    Stopper::with_fallback(&options.robot, &options.owner).map_err(LiveError::Owner)?;
+    let stopper = {
+        let (robot, owner) = (options.robot.clone(), options.owner.clone());
+        move || Stopper::with_fallback(&robot, &owner).map_err(ControlError::Client)
+    };
     if options.estop {
-        let stopper = Arc::clone(&stopper);
+        let stopper = stopper.clone();
         let owner = options.owner.clone();
         services.push(
             Service::builder(
@@ -145,10 +168,7 @@ fn services(
                     "stop from Foxglove client {} as {owner}: {reason}",
                     request.client_id()
                 );
-                let result = stopper
-                    .lock()
-                    .unwrap_or_else(std::sync::PoisonError::into_inner)
-                    .stop(&reason);
+                let result = stopper().and_then(|mut stopper| stopper.stop(&reason));
                 Ok::<_, String>(answer(result, "stop latched"))
             }),
         );
@@ -156,24 +176,37 @@ fn services(
     if options.allow_release {
         let newest_stop = Arc::clone(newest_stop);
         let owner = options.owner.clone();
+        let request_schema = json!({ "through": { "type": "integer" } });
         services.push(
-            Service::builder(RELEASE_SERVICE, service_schema("scout.Release", json!({})))
-                .blocking_handler_fn(move |request: Request| {
-                    // Only stops this view has seen are released; a newer one survives.
-                    let through = newest_stop.load(Ordering::Relaxed);
-                    info!(
-                        "release of {owner}'s stops through #{through} from Foxglove client {}",
-                        request.client_id()
-                    );
-                    let result = stopper
-                        .lock()
-                        .unwrap_or_else(std::sync::PoisonError::into_inner)
-                        .release(ReleaseTarget::Own, through);
-                    Ok::<_, String>(answer(
-                        result,
-                        "released: nothing moves until a client takes control again",
-                    ))
-                }),
+            Service::builder(
+                RELEASE_SERVICE,
+                service_schema("scout.Release", request_schema),
+            )
+            .blocking_handler_fn(move |request: Request| {
+                let through =
+                    release_through(request.payload(), newest_stop.load(Ordering::Relaxed));
+                let result = match through {
+                    Ok(through) => {
+                        info!(
+                            "release of {owner}'s stops through #{through} from Foxglove \
+                                 client {}",
+                            request.client_id()
+                        );
+                        stopper().and_then(|mut s| s.release(ReleaseTarget::Own, through))
+                    }
+                    Err(why) => {
+                        return Ok::<_, String>(
+                            json!({ "success": false, "message": why })
+                                .to_string()
+                                .into_bytes(),
+                        );
+                    }
+                };
+                Ok(answer(
+                    result,
+                    "released: nothing moves until a client takes control again",
+                ))
+            }),
         );
     }
     Ok(services)
@@ -303,10 +336,10 @@ impl Live {
         if !gone.is_empty() {
             self.server.remove_status(gone);
         }
-        for (key, status) in now {
-            if !self.shown.contains(&key) {
-                self.server.publish_status(status);
-            }
+        // Every status (at least once a second): a client that connected since sees the stops
+        // holding the robot too (a status replaces the one with its id).
+        for (_, status) in now {
+            self.server.publish_status(status);
         }
         self.shown = keys;
     }
@@ -325,6 +358,19 @@ mod tests {
         assert_eq!(reason_of(b"not json"), None);
         assert_eq!(reason_of(br#"{"reason":3}"#), None);
         assert_eq!(reason_of(b""), None);
+    }
+
+    #[test]
+    fn a_release_names_the_stops_its_sender_saw_and_never_more_than_the_view_saw() {
+        assert_eq!(release_through(br#"{"through": 4}"#, 7), Ok(4));
+        assert_eq!(release_through(br#"{"through": 9}"#, 7), Ok(7));
+        for payload in [&b"{}"[..], b"", b"not json", br#"{"through": -1}"#] {
+            let refused = release_through(payload, 7).expect_err("no through");
+            assert!(
+                refused.contains("\"through\"") && refused.contains("#7"),
+                "{refused}"
+            );
+        }
     }
 
     #[test]

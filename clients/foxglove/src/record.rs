@@ -69,6 +69,15 @@ pub enum RecordError {
     /// Reading the gateway failed during the recording.
     #[error("reading the gateway: {0}")]
     Read(#[source] scout_clients::client::ClientError),
+    /// The closed file could not be synced to disk.
+    #[error("syncing {path} to disk: {source}")]
+    Sync {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
 }
 
 /// What was recorded.
@@ -121,14 +130,19 @@ pub fn record(options: &RecordOptions, stop: &AtomicBool) -> Result<Summary, Rec
     }
     // Connect before creating the file: no gateway leaves no empty file behind.
     let source = Source::start(&options.robot)?;
+    // Without --force, a file made in the meantime is not replaced either.
     let file = OpenOptions::new()
         .write(true)
-        .create(true)
-        .truncate(true)
+        .create_new(!options.force)
+        .create(options.force)
+        .truncate(options.force)
         .open(path)
-        .map_err(|source| RecordError::Create {
-            path: path.clone(),
-            source,
+        .map_err(|source| match source.kind() {
+            std::io::ErrorKind::AlreadyExists => RecordError::Exists(path.clone()),
+            _ => RecordError::Create {
+                path: path.clone(),
+                source,
+            },
         })?;
     let write_error = |source| RecordError::Write {
         path: path.clone(),
@@ -179,27 +193,30 @@ pub fn record(options: &RecordOptions, stop: &AtomicBool) -> Result<Summary, Rec
         {
             break Ok(());
         }
-        match source.next(Duration::from_millis(100)) {
-            Some(Update::Entries(entries)) => {
-                for entry in &entries {
-                    channels.write(entry);
+        if let Some(update) = source.next(Duration::from_millis(100)) {
+            match update {
+                Update::Entries(entries) => {
+                    for entry in &entries {
+                        channels.write(entry);
+                    }
                 }
+                Update::Missed(count) => missed_states += count,
+                Update::Silent(since) => {
+                    warn!(
+                        "no state from the gateway of {} for {since:.1?}: is it running? \
+                         (recording goes on)",
+                        options.robot
+                    );
+                    silent = Some(since);
+                }
+                Update::Flowing => silent = None,
+                Update::Failed(error) => break Err(RecordError::Read(error)),
             }
-            Some(Update::Missed(count)) => missed_states += count,
-            Some(Update::Silent(since)) => {
-                warn!(
-                    "no state from the gateway of {} for {since:.1?}: is it running? (recording \
-                     goes on)",
-                    options.robot
-                );
-                silent = Some(since);
-            }
-            Some(Update::Flowing) => silent = None,
-            Some(Update::Failed(error)) => break Err(RecordError::Read(error)),
-            None => {}
         }
         if last_sync.elapsed() >= SYNC_EVERY {
-            writer.flush().map_err(write_error)?;
+            if let Err(error) = writer.flush() {
+                break Err(write_error(error));
+            }
             last_sync = Instant::now();
         }
         if progress && last_progress.is_none_or(|at| at.elapsed() >= PROGRESS_EVERY) {
@@ -219,14 +236,21 @@ pub fn record(options: &RecordOptions, stop: &AtomicBool) -> Result<Summary, Rec
             last_progress = Some(Instant::now());
         }
     };
-    drop(source);
+    // What the reader read before it stopped goes into the file too.
+    for update in source.finish() {
+        match update {
+            Update::Entries(entries) => entries.iter().for_each(|entry| channels.write(entry)),
+            Update::Missed(count) => missed_states += count,
+            Update::Silent(_) | Update::Flowing | Update::Failed(_) => {}
+        }
+    }
     let closed = writer.close().map_err(write_error);
     if progress {
         eprintln!();
     }
     outcome?;
     let mut file = closed?;
-    file.flush().map_err(|source| RecordError::Create {
+    file.flush().map_err(|source| RecordError::Sync {
         path: path.clone(),
         source,
     })?;

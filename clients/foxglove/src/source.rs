@@ -92,14 +92,25 @@ impl Source {
     pub fn next(&self, timeout: Duration) -> Option<Update> {
         self.updates.recv_timeout(timeout).ok()
     }
-}
 
-impl Drop for Source {
-    fn drop(&mut self) {
+    /// Stops reading and hands over what was read and not yet taken, so that nothing read is
+    /// lost at the end of a recording.
+    pub fn finish(mut self) -> Vec<Update> {
+        self.stop_reading();
+        self.updates.try_iter().collect()
+    }
+
+    fn stop_reading(&mut self) {
         self.stop.store(true, Ordering::Relaxed);
         if let Some(thread) = self.thread.take() {
             let _ = thread.join();
         }
+    }
+}
+
+impl Drop for Source {
+    fn drop(&mut self) {
+        self.stop_reading();
     }
 }
 

@@ -9,9 +9,9 @@
 use std::io::{self, Read, Write};
 use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::thread::JoinHandle;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use tracing::{debug, warn};
 
@@ -21,8 +21,13 @@ pub const LEGACY: &str = "foxglove.websocket.v1";
 pub const CURRENT: &str = "foxglove.sdk.v1";
 /// The longest handshake head accepted, bytes.
 const MAX_HEAD: usize = 16 * 1024;
-/// How long a client may take to send its handshake.
+/// How long a client may take to send its whole handshake.
 const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(10);
+/// How long a write to a client may wait for it to read: a client that stops reading is
+/// dropped rather than holding its threads.
+const WRITE_TIMEOUT: Duration = Duration::from_secs(10);
+/// The most clients served at once (each costs two threads); more are refused.
+pub const MAX_CLIENTS: usize = 16;
 
 /// The header's name, compared without case.
 const HEADER: &str = "sec-websocket-protocol";
@@ -72,11 +77,21 @@ pub fn rewrite_response(head: &str) -> String {
         .join("\r\n")
 }
 
-/// Reads up to the end of an HTTP head (`\r\n\r\n`): the head, and what came after it.
-fn read_head(stream: &mut TcpStream) -> io::Result<(String, Vec<u8>)> {
+/// Reads up to the end of an HTTP head (`\r\n\r\n`) within `limit` in all: the head, and what
+/// came after it.
+fn read_head(stream: &mut TcpStream, limit: Duration) -> io::Result<(String, Vec<u8>)> {
+    let deadline = Instant::now() + limit;
     let mut bytes = Vec::new();
     let mut chunk = [0_u8; 2048];
     loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return Err(io::Error::new(
+                io::ErrorKind::TimedOut,
+                "the handshake took longer than 10 s",
+            ));
+        }
+        stream.set_read_timeout(Some(left))?;
         if let Some(end) = bytes.windows(4).position(|w| w == b"\r\n\r\n") {
             let rest = bytes.split_off(end + 4);
             let head = String::from_utf8(bytes)
@@ -105,8 +120,7 @@ fn pipe(mut from: TcpStream, mut to: TcpStream) {
 }
 
 fn serve(mut client: TcpStream, backend: SocketAddr) -> io::Result<()> {
-    client.set_read_timeout(Some(HANDSHAKE_TIMEOUT))?;
-    let (head, early) = read_head(&mut client)?;
+    let (head, early) = read_head(&mut client, HANDSHAKE_TIMEOUT)?;
     let (head, legacy) = rewrite_request(&head);
     let mut server = TcpStream::connect(backend)?;
     server.set_nodelay(true)?;
@@ -114,13 +128,13 @@ fn serve(mut client: TcpStream, backend: SocketAddr) -> io::Result<()> {
     server.write_all(head.as_bytes())?;
     server.write_all(&early)?;
     if legacy {
-        server.set_read_timeout(Some(HANDSHAKE_TIMEOUT))?;
-        let (response, rest) = read_head(&mut server)?;
+        let (response, rest) = read_head(&mut server, HANDSHAKE_TIMEOUT)?;
         server.set_read_timeout(None)?;
         client.write_all(rewrite_response(&response).as_bytes())?;
         client.write_all(&rest)?;
     }
     client.set_read_timeout(None)?;
+    client.set_write_timeout(Some(WRITE_TIMEOUT))?;
     let (client_in, server_in) = (client.try_clone()?, server.try_clone()?);
     std::thread::Builder::new()
         .name("foxglove-up".into())
@@ -145,22 +159,34 @@ impl Front {
         listener.set_nonblocking(true)?;
         let stop = Arc::new(AtomicBool::new(false));
         let accepting = Arc::clone(&stop);
+        let clients = Arc::new(AtomicUsize::new(0));
         let thread = std::thread::Builder::new()
             .name("foxglove-front".into())
             .spawn(move || {
                 while !accepting.load(Ordering::Relaxed) {
                     match listener.accept() {
                         Ok((client, peer)) => {
+                            if clients.fetch_add(1, Ordering::Relaxed) >= MAX_CLIENTS {
+                                clients.fetch_sub(1, Ordering::Relaxed);
+                                warn!(
+                                    "Foxglove client {peer} refused: {MAX_CLIENTS} clients are \
+                                     served already"
+                                );
+                                continue;
+                            }
                             debug!("Foxglove client {peer} connected");
                             let _ = client.set_nonblocking(false);
+                            let served = Arc::clone(&clients);
                             let spawned = std::thread::Builder::new()
                                 .name("foxglove-down".into())
                                 .spawn(move || {
                                     if let Err(error) = serve(client, backend) {
                                         warn!("Foxglove client {peer}: {error}");
                                     }
+                                    served.fetch_sub(1, Ordering::Relaxed);
                                 });
                             if let Err(error) = spawned {
+                                clients.fetch_sub(1, Ordering::Relaxed);
                                 warn!("Foxglove client {peer} refused: no thread ({error})");
                             }
                         }

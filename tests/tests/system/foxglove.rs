@@ -485,11 +485,27 @@ fn the_live_views_estop_is_a_stop_of_its_owner_shown_with_its_cause_and_released
     );
     drop(driver);
 
-    // With --allow-release, a second view releases its owner's stop; motion does not restart.
+    // With --allow-release, a second view releases its owner's stop, through the newest stop
+    // its caller saw (a release that does not say is refused, saying how); motion does not
+    // restart.
+    let stop_id = answer["stop"].as_u64().expect("the stop's id");
     let (_releaser, url) = live_view(&name, &["--allow-release", "--owner", "console"]);
-    let report = ws_client(&url, "1", &[("/scout/release", "{}")]);
+    let through = format!(r#"{{"through": {stop_id}}}"#);
+    let report = ws_client(
+        &url,
+        "1",
+        &[("/scout/release", "{}"), ("/scout/release", &through)],
+    );
+    let refused = &report["responses"]["1"]["body"];
+    assert_eq!(refused["success"], false, "{report}");
+    assert!(
+        refused["message"]
+            .as_str()
+            .is_some_and(|m| m.contains("through")),
+        "{refused}"
+    );
     assert_eq!(
-        report["responses"]["1"]["body"]["success"], true,
+        report["responses"]["2"]["body"]["success"], true,
         "{report}"
     );
     wait_for_status(&status, Duration::from_secs(5), |s| s["latched"] == false);
