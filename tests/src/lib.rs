@@ -681,6 +681,28 @@ pub fn drive_until_moving(sim: &mut Sim, name: &str, args: &[&str], limit: Durat
     panic!("the chassis never moved");
 }
 
+/// `scout doctor ARGS --json` (ARGS giving `--listen` too), run to its end: the exit code and
+/// the checks, one JSON object each.
+pub fn doctor(args: &[&str]) -> (Option<i32>, Vec<serde_json::Value>) {
+    let mut doctor = command("scout");
+    doctor.arg("doctor").args(args).arg("--json");
+    let output = run_with_input(doctor, b"", Duration::from_secs(120));
+    let checks = String::from_utf8_lossy(&output.stdout)
+        .lines()
+        .map(|line| serde_json::from_str(line).unwrap_or_else(|_| panic!("not JSON: {line}")))
+        .collect();
+    (output.status.code(), checks)
+}
+
+/// The check called `name` among `checks` (the last of that name).
+pub fn doctor_check<'a>(checks: &'a [serde_json::Value], name: &str) -> &'a serde_json::Value {
+    checks
+        .iter()
+        .rev()
+        .find(|c| c["check"] == name)
+        .unwrap_or_else(|| panic!("no check {name} in {checks:#?}"))
+}
+
 /// `scout release`: every stop, as an operator.
 pub fn release_all(name: &str) {
     let (code, _, stderr) = scout(&["release", "--name", name]);

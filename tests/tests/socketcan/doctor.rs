@@ -6,37 +6,15 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use scout_system_tests::{Sim, command, robot_name, run_with_input};
+use scout_system_tests::{Sim, doctor_check as check, robot_name};
 use serde_json::Value;
 
 use crate::{Bus, can_utils};
 
 /// `scout doctor --can IFACE --json`: the exit code and the checks.
 fn doctor(interface: &str) -> (Option<i32>, Vec<Value>) {
-    let mut doctor = command("scout");
-    doctor.args([
-        "doctor",
-        "--name",
-        &robot_name("doctor-can"),
-        "--can",
-        interface,
-        "--json",
-        "--listen",
-        "2",
-    ]);
-    let output = run_with_input(doctor, b"", Duration::from_secs(120));
-    let checks = String::from_utf8_lossy(&output.stdout)
-        .lines()
-        .map(|line| serde_json::from_str(line).unwrap_or_else(|_| panic!("not JSON: {line}")))
-        .collect();
-    (output.status.code(), checks)
-}
-
-fn check<'a>(checks: &'a [Value], name: &str) -> &'a Value {
-    checks
-        .iter()
-        .find(|c| c["check"] == name)
-        .unwrap_or_else(|| panic!("no check {name} in {checks:#?}"))
+    let name = robot_name("doctor-can");
+    scout_system_tests::doctor(&["--name", &name, "--can", interface, "--listen", "2"])
 }
 
 #[test]

@@ -10,33 +10,16 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use scout_system_tests::{
-    Gateway, Sim, command, connect, free_port, robot_name, run_with_input, tcp,
+    Gateway, Sim, command, connect, doctor_check as check, free_port, robot_name, run_with_input,
+    tcp,
 };
 use serde_json::Value;
 use serialport::{SerialPort, TTYPort};
 
-/// `scout doctor ARGS --json`: the exit code and the checks by name (the last of a name wins).
+/// `scout doctor ARGS --json`, listening 1.5 s: the exit code and the checks.
 fn doctor(args: &[&str]) -> (Option<i32>, Vec<Value>) {
-    let mut doctor = command("scout");
-    doctor
-        .arg("doctor")
-        .args(args)
-        .args(["--json", "--listen", "1.5"]);
-    let output = run_with_input(doctor, b"", Duration::from_secs(60));
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    let checks = stdout
-        .lines()
-        .map(|line| serde_json::from_str(line).unwrap_or_else(|_| panic!("not JSON: {line}")))
-        .collect();
-    (output.status.code(), checks)
-}
-
-fn check<'a>(checks: &'a [Value], name: &str) -> &'a Value {
-    checks
-        .iter()
-        .rev()
-        .find(|c| c["check"] == name)
-        .unwrap_or_else(|| panic!("no check {name} in {checks:#?}"))
+    let args: Vec<&str> = args.iter().copied().chain(["--listen", "1.5"]).collect();
+    scout_system_tests::doctor(&args)
 }
 
 fn verdict<'a>(checks: &'a [Value], name: &str) -> &'a str {
