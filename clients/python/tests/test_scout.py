@@ -39,8 +39,9 @@ def test_no_gateway_error_says_what_the_cli_says() -> None:
 
 
 def test_latest_and_next(robot: scout.Robot) -> None:
-    latest = robot.latest()
-    assert latest is not None, "the newest state is there at once"
+    # The gateway's services come up a moment before its first state: once one is published,
+    # latest() has it at once, without waiting.
+    until(lambda: robot.latest() is not None, 5.0, "a first state")
     first = robot.next(timeout=1.0)
     second = robot.next(timeout=1.0)
     assert second.seq == first.seq + 1
