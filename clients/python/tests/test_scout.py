@@ -213,9 +213,11 @@ WAITER = textwrap.dedent(
     import sys, scout
     robot = scout.Robot.connect(sys.argv[1])
     robot.latest()
-    print("waiting", flush=True)
     try:
-        robot.next(timeout=60)
+        print("waiting", flush=True)
+        # States queued before the gateway stopped come first; then next() blocks.
+        while True:
+            robot.next(timeout=60)
     except KeyboardInterrupt:
         print("interrupted", flush=True)
     """
