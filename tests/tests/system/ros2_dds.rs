@@ -436,13 +436,23 @@ fn graph_topics_and_driving(
     let _ = std::fs::remove_file(&settings);
 }
 
+/// The two distros' runs, one at a time: each is a gateway, two bridges and rclpy, and run
+/// together on 2 cores with the rest of the suite their discovery has missed its bounds (CI).
+static ONE_DISTRO_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 #[test]
 fn kilted_rclpy_on_fast_dds_sees_the_node_reads_every_topic_and_drives() {
+    let _alone = ONE_DISTRO_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
     graph_topics_and_driving("ros2_dds_kilted", "SCOUT_RCLPY_KILTED", false, &[], true);
 }
 
 #[test]
 fn jazzy_rclpy_on_fast_dds_over_udp_drives_with_twist_stamped() {
+    let _alone = ONE_DISTRO_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
     graph_topics_and_driving(
         "ros2_dds_jazzy",
         "SCOUT_RCLPY_JAZZY",
