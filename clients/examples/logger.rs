@@ -38,13 +38,13 @@ fn main() -> anyhow::Result<()> {
             anyhow::bail!("no state from gateway '{}' for 3 s", args.name);
         };
         let latency_us = monotonic_ns().saturating_sub(state.published_ns) / 1000;
-        let motion = state.motion.feedback();
+        let motion = state.motion;
         writeln!(
             out,
             "{},{latency_us},{},{:.1},{:.3},{:.3},{:.4},{:.4},{:.4},{},{},{}",
             state.seq,
             state.link.state().name(),
-            state.system.status().battery_voltage(),
+            state.system.battery_voltage(),
             motion.linear(),
             motion.angular(),
             state.odometry.x,

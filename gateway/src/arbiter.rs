@@ -6,8 +6,8 @@
 //!   its owner (a client's name) or by an operator, never while its cause persists, and a
 //!   release never restarts anything.
 //! - **Gaps end control.** A gap (the gateway starting after an unclean exit, the link lost, the
-//!   chassis silent, in e-stop, in fault, under RC, a tick overrun, a runaway, a CAN fault)
-//!   latches a stop with its cause.
+//!   chassis silent, in e-stop, in fault, under RC, a tick overrun, a runaway, a CAN fault, a
+//!   v2 chassis out of CAN command mode) latches a stop with its cause.
 //! - **Control is taken, not inherited.** A client drives only under a lease it took
 //!   (`take_control`); a stop, a gap, a release, a teleop takeover, staleness or the client's
 //!   death revokes it, and the client must take control again.
@@ -19,7 +19,6 @@ use std::time::Duration;
 
 use scout_interface::control::{ReleaseTarget, StopCause};
 use scout_protocol::FaultClear;
-use scout_protocol::units::{DEFAULT_MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED};
 use serde::{Deserialize, Serialize};
 use tracing::info;
 
@@ -86,10 +85,10 @@ pub struct ArbiterConfig {
     pub autonomy_max_age_ms: u64,
     /// Re-arm autonomy by itself after a takeover, stop or release (default: explicit resume).
     pub auto_resume: bool,
-    /// Caps for teleop, within the global ones.
-    pub teleop_caps: Caps,
-    /// Caps for autonomy, within the global ones.
-    pub autonomy_caps: Caps,
+    /// Caps for teleop, within the chassis' limits (default: the chassis' limits).
+    pub teleop_caps: Option<Caps>,
+    /// Caps for autonomy, within the chassis' limits (default: the chassis' limits).
+    pub autonomy_caps: Option<Caps>,
     /// Acceleration and deceleration limits.
     pub limits: RateLimits,
     /// Requests a second one client may send, sustained (stops are never limited).
@@ -133,14 +132,8 @@ impl Default for ArbiterConfig {
             teleop_max_age_ms: 250,
             autonomy_max_age_ms: 500,
             auto_resume: false,
-            teleop_caps: Caps {
-                linear: MAX_LINEAR_SPEED,
-                angular: DEFAULT_MAX_ANGULAR_SPEED,
-            },
-            autonomy_caps: Caps {
-                linear: MAX_LINEAR_SPEED,
-                angular: DEFAULT_MAX_ANGULAR_SPEED,
-            },
+            teleop_caps: None,
+            autonomy_caps: None,
             limits: RateLimits {
                 linear_acceleration: 1.0,
                 linear_deceleration: 2.0,
@@ -171,13 +164,17 @@ impl ArbiterConfig {
         let positive = |v: f64| v.is_finite() && v > 0.0;
         let caps = [self.teleop_caps, self.autonomy_caps];
         let limits = self.limits;
-        let all = caps.iter().flat_map(|c| [c.linear, c.angular]).chain([
-            limits.linear_acceleration,
-            limits.linear_deceleration,
-            limits.angular_acceleration,
-            limits.angular_deceleration,
-            self.request_rate_hz,
-        ]);
+        let all = caps
+            .iter()
+            .flatten()
+            .flat_map(|c| [c.linear, c.angular])
+            .chain([
+                limits.linear_acceleration,
+                limits.linear_deceleration,
+                limits.angular_acceleration,
+                limits.angular_deceleration,
+                self.request_rate_hz,
+            ]);
         if !all.into_iter().all(positive) || self.request_burst == 0 {
             return Err(
                 "arbiter caps, limits, request_rate_hz and request_burst must be positive".into(),
@@ -193,7 +190,7 @@ impl ArbiterConfig {
         })
     }
 
-    fn caps(&self, class: Class) -> Caps {
+    fn caps(&self, class: Class) -> Option<Caps> {
         match class {
             Class::Teleop => self.teleop_caps,
             Class::Autonomy => self.autonomy_caps,
@@ -382,15 +379,12 @@ pub struct Arbiter {
 }
 
 impl Arbiter {
-    /// An arbiter with `config` for a chassis whose maximum angular speed is `max_angular`.
+    /// An arbiter with `config` for a chassis that may go at most as fast as `global` says.
     /// `instance` tells this gateway's leases from another's. Autonomy starts disarmed.
-    pub fn new(config: ArbiterConfig, max_angular: f64, instance: u32) -> Self {
+    pub fn new(config: ArbiterConfig, global: Caps, instance: u32) -> Self {
         Self {
             config,
-            global: Caps {
-                linear: MAX_LINEAR_SPEED,
-                angular: max_angular,
-            },
+            global,
             stops: Vec::new(),
             present: Vec::new(),
             autonomy_armed: false,
@@ -427,7 +421,8 @@ impl Arbiter {
             StopCause::Client
             | StopCause::GatewayStart
             | StopCause::Overrun
-            | StopCause::Runaway => false,
+            | StopCause::Runaway
+            | StopCause::ChassisMode => false,
             StopCause::LinkLost
             | StopCause::ChassisSilent
             | StopCause::ChassisEstop
@@ -767,7 +762,7 @@ impl Arbiter {
         if age > life {
             return Err(Rejection::Stale { age, life });
         }
-        let caps = self.config.caps(class);
+        let caps = self.config.caps(class).unwrap_or(self.global);
         let (linear_cap, angular_cap) = (
             caps.linear.min(self.global.linear),
             caps.angular.min(self.global.angular),

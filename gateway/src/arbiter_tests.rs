@@ -5,6 +5,7 @@ use std::time::Duration;
 use proptest::prelude::*;
 use scout_interface::control::{RejectionKind, ReleaseTarget, StopCause};
 use scout_protocol::FaultClear;
+use scout_protocol::units::{DEFAULT_MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED};
 
 use super::*;
 
@@ -46,7 +47,14 @@ impl Bench {
 
     fn with(config: ArbiterConfig) -> Self {
         Self {
-            arbiter: Arbiter::new(config, DEFAULT_MAX_ANGULAR_SPEED, 7),
+            arbiter: Arbiter::new(
+                config,
+                Caps {
+                    linear: MAX_LINEAR_SPEED,
+                    angular: DEFAULT_MAX_ANGULAR_SPEED,
+                },
+                7,
+            ),
             now: ms(1000),
         }
     }

@@ -6,7 +6,8 @@ use std::time::Duration;
 
 use scout_bridge::ZenohConfig;
 use scout_interface::Transport;
-use scout_protocol::units::{DEFAULT_MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED};
+use scout_protocol::model::Model;
+use scout_protocol::version::Protocol;
 use scout_sim::SimParams;
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
@@ -24,8 +25,13 @@ pub struct GatewayConfig {
     pub transport: Option<Transport>,
     /// The tty or CAN interface.
     pub device: Option<String>,
-    /// rad/s at 100 % angular command (protocol-notes 4.1; firmware differs).
-    pub max_angular: f64,
+    /// The chassis' protocol: `auto` tells it from the frames (CAN and slcan; RS232 is v1).
+    pub protocol: ProtocolSetting,
+    /// The model, for its speed limits and geometry (default: `scout` on v1, `scout2` on v2).
+    pub model: Option<Model>,
+    /// The fastest the chassis may turn, rad/s; on protocol v1 also the rate at 100 % angular
+    /// command (protocol-notes 4.1; firmware differs). Default: the model's.
+    pub max_angular: Option<f64>,
     /// Periods and limits of the control loop.
     pub timing: Timing,
     /// Who drives: ages, caps, rate limits, autonomy re-arming.
@@ -34,8 +40,34 @@ pub struct GatewayConfig {
     pub safety: SafetyConfig,
     /// Remote peers through zenoh.
     pub zenoh: ZenohConfig,
-    /// The simulated chassis (`transport = "sim"`).
-    pub sim: SimParams,
+    /// The simulated chassis (`transport = "sim"`): keys of the simulator's parameters
+    /// (`scout-sim --params`), over the model's defaults.
+    pub sim: toml::Table,
+}
+
+/// Which protocol the gateway speaks to the chassis.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum ProtocolSetting {
+    /// Listen first and pick the protocol the chassis' feedback proves (nothing is sent until
+    /// then); feedback of both, or of none, is an error that says what was seen.
+    #[default]
+    Auto,
+    /// Protocol v1, the 2019 SCOUT (CAN and RS232).
+    V1,
+    /// Protocol v2, SCOUT 2.0 and SCOUT MINI firmware since 2020 (CAN only).
+    V2,
+}
+
+impl ProtocolSetting {
+    /// The protocol it fixes, if it fixes one.
+    pub const fn fixed(self) -> Option<Protocol> {
+        match self {
+            Self::Auto => None,
+            Self::V1 => Some(Protocol::V1),
+            Self::V2 => Some(Protocol::V2),
+        }
+    }
 }
 
 /// Periods and limits of the control loop.
@@ -105,12 +137,14 @@ impl Default for GatewayConfig {
             name: "scout".into(),
             transport: None,
             device: None,
-            max_angular: DEFAULT_MAX_ANGULAR_SPEED,
+            protocol: ProtocolSetting::Auto,
+            model: None,
+            max_angular: None,
             timing: Timing::default(),
             arbiter: ArbiterConfig::default(),
             safety: SafetyConfig::default(),
             zenoh: ZenohConfig::default(),
-            sim: SimParams::default(),
+            sim: toml::Table::new(),
         }
     }
 }
@@ -160,11 +194,19 @@ impl GatewayConfig {
     pub fn validate(&self) -> Result<DeviceSpec, ConfigError> {
         scout_interface::services::check_robot_name(&self.name)
             .map_err(|error| ConfigError::Invalid(error.to_string()))?;
-        if !(self.max_angular.is_finite() && self.max_angular > 0.0) {
+        if let Some(max_angular) = self.max_angular
+            && !(max_angular.is_finite() && max_angular > 0.0)
+        {
             return Err(ConfigError::Invalid(format!(
-                "max_angular must be a positive number of rad/s, found {}",
-                self.max_angular
+                "max_angular must be a positive number of rad/s, found {max_angular}"
             )));
+        }
+        if self.transport == Some(Transport::Serial) && self.protocol == ProtocolSetting::V2 {
+            return Err(ConfigError::Invalid(
+                "protocol v2 travels on CAN only (no vendor code speaks v2 over RS232): use \
+                 --slcan or --can, or --protocol v1 for a v1 chassis on RS232"
+                    .into(),
+            ));
         }
         if !(5..=100).contains(&self.timing.command_period_ms) {
             return Err(ConfigError::Invalid(format!(
@@ -214,11 +256,48 @@ impl GatewayConfig {
             Some(Transport::Serial) => DeviceSpec::Serial(device()?.into()),
             Some(Transport::Slcan) => DeviceSpec::Slcan(device()?.into()),
             Some(Transport::Can) => DeviceSpec::Can(device()?),
-            Some(Transport::Sim) => DeviceSpec::Sim(SimParams {
-                max_angular: self.max_angular,
-                ..self.sim.clone()
-            }),
+            Some(Transport::Sim) => {
+                let protocol = self.protocol.fixed().unwrap_or(Protocol::V1);
+                let model = self.model.unwrap_or(Model::default_for(protocol));
+                let params = SimParams {
+                    max_angular: self.max_angular(),
+                    ..SimParams::for_model(model)
+                }
+                .with_overrides(&self.sim)
+                .map_err(|error| ConfigError::Invalid(format!("[sim]: {error}")))?;
+                DeviceSpec::Sim { params, protocol }
+            }
         })
+    }
+
+    /// The protocol the gateway speaks from the start, if it is fixed: RS232 is v1 whatever
+    /// `auto` would say (only v1 has an RS232 framing).
+    pub fn fixed_protocol(&self) -> Option<Protocol> {
+        match (self.transport, self.protocol.fixed()) {
+            (_, Some(protocol)) => Some(protocol),
+            (Some(Transport::Serial), None) => Some(Protocol::V1),
+            (Some(Transport::Slcan | Transport::Can | Transport::Sim) | None, None) => None,
+        }
+    }
+
+    /// The model whose limits the gateway drives by: the configured one, else the default
+    /// of the fixed protocol, else the 2019 SCOUT's (the defaults of both protocols share
+    /// their limits).
+    pub fn limits_model(&self) -> Model {
+        self.model.unwrap_or(Model::default_for(
+            self.fixed_protocol().unwrap_or(Protocol::V1),
+        ))
+    }
+
+    /// The fastest the chassis may turn, rad/s: the configured value or the model's.
+    pub fn max_angular(&self) -> f64 {
+        self.max_angular
+            .unwrap_or(self.limits_model().limits().angular)
+    }
+
+    /// The fastest the chassis may go, m/s: the model's.
+    pub fn max_linear(&self) -> f64 {
+        self.limits_model().limits().linear
     }
 
     /// The motion command period.
@@ -233,8 +312,14 @@ impl GatewayConfig {
             "version": env!("CARGO_PKG_VERSION"),
             "transport": transport.name(),
             "device": device,
-            "max_linear": MAX_LINEAR_SPEED,
-            "max_angular": self.max_angular,
+            "protocol": match self.protocol {
+                ProtocolSetting::Auto => "auto",
+                ProtocolSetting::V1 => "v1",
+                ProtocolSetting::V2 => "v2",
+            },
+            "model": self.model.map(Model::name),
+            "max_linear": self.max_linear(),
+            "max_angular": self.max_angular(),
             "arbiter": self.arbiter,
             "state_rate_hz": self.zenoh.state_rate_hz,
             "remote_commands": {
@@ -274,7 +359,7 @@ mod tests {
         assert!(toml::from_str::<GatewayConfig>("nmae = \"x\"").is_err());
         let config = GatewayConfig {
             transport: Some(Transport::Sim),
-            max_angular: -1.0,
+            max_angular: Some(-1.0),
             ..Default::default()
         };
         assert!(
@@ -295,5 +380,53 @@ mod tests {
                 .to_string()
                 .contains("no device")
         );
+        let config = GatewayConfig {
+            transport: Some(Transport::Serial),
+            device: Some("/dev/ttyUSB0".into()),
+            protocol: ProtocolSetting::V2,
+            ..Default::default()
+        };
+        let error = config.validate().expect_err("v2 on RS232").to_string();
+        assert!(error.contains("CAN only"), "{error}");
+        let config: GatewayConfig =
+            toml::from_str("transport = \"sim\"\n[sim]\nbatery_voltage = 24.0").expect("toml");
+        let error = config
+            .validate()
+            .expect_err("a misspelt sim key")
+            .to_string();
+        assert!(
+            error.contains("[sim]") && error.contains("batery_voltage"),
+            "{error}"
+        );
+    }
+
+    #[test]
+    fn the_model_sets_the_limits_and_the_simulated_chassis() {
+        let config: GatewayConfig = toml::from_str(
+            "transport = \"sim\"\nprotocol = \"v2\"\nmodel = \"scout-mini\"\n[sim]\nbattery_voltage = 24.0",
+        )
+        .expect("toml");
+        assert_eq!((config.max_linear(), config.max_angular()), (3.0, 2.5235));
+        let Ok(DeviceSpec::Sim { params, protocol }) = config.validate() else {
+            panic!("a simulated chassis")
+        };
+        assert_eq!(protocol, Protocol::V2);
+        assert_eq!((params.max_linear, params.battery_voltage), (3.0, 24.0));
+        assert_eq!(params.track_width, Model::ScoutMini.geometry().track);
+        let serial = GatewayConfig {
+            transport: Some(Transport::Serial),
+            ..Default::default()
+        };
+        assert_eq!(serial.fixed_protocol(), Some(Protocol::V1), "RS232 is v1");
+        assert_eq!(GatewayConfig::default().fixed_protocol(), None);
+        assert_eq!(GatewayConfig::default().max_linear(), 1.5);
+        for (name, model) in [
+            ("scout2", Model::Scout2),
+            ("scout-mini-omni", Model::ScoutMiniOmni),
+        ] {
+            let config: GatewayConfig =
+                toml::from_str(&format!("model = \"{name}\"")).expect("model names");
+            assert_eq!(config.model, Some(model));
+        }
     }
 }

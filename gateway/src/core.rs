@@ -7,7 +7,7 @@
 //!
 //! Time is CLOCK_MONOTONIC as a [`Duration`] (the clock of every `*_ns` field).
 
-use std::collections::HashSet;
+use std::collections::{HashSet, VecDeque};
 use std::time::Duration;
 
 use scout_interface::control::{
@@ -16,19 +16,24 @@ use scout_interface::control::{
 };
 use scout_interface::remote::REMOTE_PREFIX;
 use scout_interface::services::Way;
-use scout_interface::state::{LinkState, StatePayload};
+use scout_interface::state::{ChassisPayload, LinkState, StatePayload};
 use scout_interface::stop_socket;
 use scout_interface::{FixedText, Transport};
-use scout_protocol::link::RxEvent;
+use scout_protocol::link::{Outgoing, RxEvent};
 use scout_protocol::sequence::RollingCounter;
-use scout_protocol::units::{self, MAX_LINEAR_SPEED};
+use scout_protocol::units;
+use scout_protocol::v2::{
+    ControlModeV2, ErrorClearV2, LightsV2, MessageV2, MotionV2, SystemStateV2, VersionRequestForm,
+};
+use scout_protocol::version::Protocol;
 use scout_protocol::{
-    ChassisState, ControlMode, Counted, LightCommand, Message, MotionCommand, Severity,
+    ChassisState, ControlMode, Counted, FaultClear, LightCommand, Message, MotionCommand, Severity,
     SystemStatus,
 };
 use tracing::{debug, info, warn};
 
-use crate::arbiter::{Accepted, Answer, Arbiter, LightsSetting, Origin, Output};
+use crate::arbiter::{Accepted, Answer, Arbiter, Caps, LightsSetting, Origin, Output};
+use crate::command_mode::CommandMode;
 use crate::config::{GatewayConfig, SafetyConfig};
 use crate::state::{PortCounters, Publish, StateTracker};
 
@@ -107,6 +112,7 @@ pub struct CoreStats {
 pub struct Core {
     robot: String,
     transport: Transport,
+    max_linear: f64,
     max_angular: f64,
     period: Duration,
     light_period: Duration,
@@ -136,6 +142,13 @@ pub struct Core {
     runaway: Runaway,
     /// When the last motion command was handed to the open port.
     last_motion_written: Option<Duration>,
+    /// A protocol v2 chassis' command mode (0x421, 0x211).
+    command_mode: CommandMode,
+    /// Whether this port session asked a v2 chassis for its firmware versions.
+    version_asked: bool,
+    /// Frames that follow the one just handed out (v2's error clear after its motion
+    /// command, standby after the last zero, the second version request).
+    follow_up: VecDeque<Outgoing>,
 }
 
 /// Watching the chassis move or turn faster than commanded.
@@ -187,15 +200,21 @@ impl Core {
             Transport::Serial => timing.serial_light_period_ms,
             Transport::Slcan | Transport::Can | Transport::Sim => timing.can_light_period_ms,
         };
+        let mut chassis = ChassisPayload::new(config.limits_model(), config.max_angular());
+        if config.model.is_none() {
+            chassis.model = 0;
+        }
+        let fixed = config.fixed_protocol();
         Self {
             robot: config.name.clone(),
             transport,
-            max_angular: config.max_angular,
+            max_linear: config.max_linear(),
+            max_angular: config.max_angular(),
             period: config.command_period(),
             light_period: Duration::from_millis(light_period_ms),
             stop_cycles: timing.stop_cycles,
             reconnect_max: Duration::from_millis(timing.reconnect_max_ms),
-            tracker: StateTracker::new(&config.name, transport, device, config.max_angular),
+            tracker: StateTracker::new(&config.name, transport, device, fixed, chassis),
             arbiter: Self::new_arbiter(config, now, start, instance),
             link: Link::Closed {
                 reopen_at: now,
@@ -221,11 +240,18 @@ impl Core {
             safety: config.safety.clone(),
             runaway: Runaway::default(),
             last_motion_written: None,
+            command_mode: CommandMode::new(),
+            version_asked: false,
+            follow_up: VecDeque::new(),
         }
     }
 
     fn new_arbiter(config: &GatewayConfig, now: Duration, start: Start, instance: u32) -> Arbiter {
-        let mut arbiter = Arbiter::new(config.arbiter.clone(), config.max_angular, instance);
+        let global = Caps {
+            linear: config.max_linear(),
+            angular: config.max_angular(),
+        };
+        let mut arbiter = Arbiter::new(config.arbiter.clone(), global, instance);
         match start {
             Start::Clean => {}
             Start::AfterUncleanExit => arbiter.handle_gap(
@@ -251,35 +277,58 @@ impl Core {
         self.status_due = true;
     }
 
-    /// The chassis' own state: e-stop, faults and RC are gaps while they last.
-    fn observe_system(&mut self, now: Duration, status: &SystemStatus) {
-        let estop = status.state == ChassisState::EStop;
+    /// The chassis' own state, in either protocol: e-stop, faults and RC are gaps while they
+    /// last. `faults` are the set bits' names and severities.
+    fn observe_chassis(
+        &mut self,
+        now: Duration,
+        state: ChassisState,
+        faults: impl Iterator<Item = (&'static str, Severity)>,
+        rc: bool,
+    ) {
+        let estop = state == ChassisState::EStop;
         self.set_condition(
             now,
             StopCause::ChassisEstop,
             estop,
             "the chassis is in e-stop",
         );
-        let abnormal = match status.state {
+        let abnormal = match state {
             ChassisState::Normal | ChassisState::EStop => None,
-            ChassisState::Exception | ChassisState::Unknown(_) => Some(status.state.name()),
+            ChassisState::Exception | ChassisState::Unknown(_) => Some(state.name()),
         };
-        let faults: Vec<&str> = status
-            .faults
-            .iter()
-            .filter(|f| matches!(f.severity(), Severity::Fault | Severity::Protection))
-            .map(|f| f.name())
+        let faults: Vec<&str> = faults
+            .filter(|(_, severity)| matches!(severity, Severity::Fault | Severity::Protection))
+            .map(|(name, _)| name)
             .chain(abnormal)
             .collect();
         let detail = format!("the chassis reports {}", faults.join(", "));
         self.set_condition(now, StopCause::ChassisFault, !faults.is_empty(), &detail);
-        let rc = status.control_mode == ControlMode::Rc;
         self.set_condition(
             now,
             StopCause::RcOverride,
             rc,
             "the RC transmitter took over",
         );
+    }
+
+    /// A v1 system status (0x151).
+    fn observe_system(&mut self, now: Duration, status: &SystemStatus) {
+        let faults = status.faults.iter().map(|f| (f.name(), f.severity()));
+        let rc = status.control_mode == ControlMode::Rc;
+        self.observe_chassis(now, status.state, faults, rc);
+    }
+
+    /// A v2 system state (0x211): as v1's, plus the command mode the gateway took.
+    fn observe_system_v2(&mut self, now: Duration, system: &SystemStateV2) {
+        let rc = system.control_mode == ControlModeV2::Rc;
+        self.observe_chassis(now, system.state, system.errors.faults(), rc);
+        if let Some(lost) = self.command_mode.handle_reported(system.control_mode) {
+            warn!("{}", lost.detail);
+            self.arbiter
+                .handle_gap(now, StopCause::ChassisMode, &lost.reason, false);
+            self.status_due = true;
+        }
     }
 
     /// The chassis moving or turning faster than commanded (beyond what braking explains), or
@@ -336,6 +385,11 @@ impl Core {
         self.tracker.link_state()
     }
 
+    /// The protocol spoken on the current port: the fixed one, or the detected one.
+    pub fn link_protocol(&self) -> Option<Protocol> {
+        self.tracker.protocol()
+    }
+
     /// How the core is doing.
     pub fn stats(&self) -> CoreStats {
         self.stats
@@ -364,6 +418,11 @@ impl Core {
         self.opened_at = now;
         // A new port: the time it was closed is the link's gap, not the wire's.
         self.last_motion_written = None;
+        // Perhaps another chassis, or the same one after a power cycle: nothing held, nothing
+        // asked.
+        self.command_mode.reset();
+        self.version_asked = false;
+        self.follow_up.clear();
         let reconnect = std::mem::replace(&mut self.opened_before, true);
         let publish = self.tracker.handle_connected(reconnect);
         self.publish_if(publish);
@@ -438,8 +497,8 @@ impl Core {
         ] {
             self.set_condition(now, cause, false, "");
         }
-        if let RxEvent::Message(counted) = event {
-            match &counted.message {
+        match event {
+            RxEvent::Message(counted) => match &counted.message {
                 Message::SystemStatus(status) => self.observe_system(now, status),
                 Message::MotionFeedback(motion) => {
                     self.observe_motion(now, motion.linear(), motion.angular());
@@ -448,7 +507,28 @@ impl Core {
                 | Message::LightFeedback(_)
                 | Message::MotionCommand(_)
                 | Message::LightCommand(_) => {}
-            }
+            },
+            RxEvent::V2(message) => match message {
+                MessageV2::SystemState(system) => self.observe_system_v2(now, system),
+                MessageV2::MotionState(motion) => {
+                    self.observe_motion(now, motion.linear(), motion.angular());
+                }
+                MessageV2::MotionCommand(_)
+                | MessageV2::LightCommand(_)
+                | MessageV2::ControlMode(_)
+                | MessageV2::ErrorClear(_)
+                | MessageV2::VersionRequest(_)
+                | MessageV2::LightState(_)
+                | MessageV2::RcState(_)
+                | MessageV2::ActuatorHigh(_)
+                | MessageV2::ActuatorLow(_)
+                | MessageV2::Odometer(_)
+                | MessageV2::Version(_)
+                | MessageV2::VersionText(_)
+                | MessageV2::Bms(_)
+                | MessageV2::BmsAlarm(_) => {}
+            },
+            RxEvent::Rejected(_) | RxEvent::Slcan(_) => {}
         }
     }
 
@@ -562,11 +642,16 @@ impl Core {
         }
     }
 
-    /// Whether shutdown is complete: the zero cycles went out, or there is no port to send on.
+    /// Whether shutdown is complete: the zero cycles (and on v2 the standby after them) went
+    /// out, or there is no port to send on, or no protocol to send in.
     pub fn is_finished(&self) -> bool {
         match self.shutdown {
             None => false,
-            Some(left) => left == 0 || self.link != Link::Open,
+            Some(left) => {
+                (left == 0 && self.follow_up.is_empty())
+                    || self.link != Link::Open
+                    || self.tracker.protocol().is_none()
+            }
         }
     }
 
@@ -576,10 +661,19 @@ impl Core {
     }
 
     /// The next frame to send now, if any: a stop at once, the motion command when its tick is
-    /// due, the light command when its period is due. Call until `None`; a frame that fails to
-    /// go out is reported with [`Core::handle_link_failed`].
-    pub fn poll_transmit(&mut self, now: Duration) -> Option<Counted> {
+    /// due, the light command when its period is due; on protocol v2 also the command mode
+    /// (0x421) when a client is about to drive, the error clear, the version request and
+    /// standby at exit. Call until `None`; a frame that fails to go out is reported with
+    /// [`Core::handle_link_failed`].
+    pub fn poll_transmit(&mut self, now: Duration) -> Option<Outgoing> {
         self.check_wire_gap(now);
+        if self.link != Link::Open {
+            self.follow_up.clear();
+        }
+        if let Some(frame) = self.follow_up.pop_front() {
+            self.tracker.handle_sent_other();
+            return Some(frame);
+        }
         if self.arbiter.take_urgent_stop() {
             self.stats.urgent_stops += 1;
             if let Some(frame) = self.motion(&Output::STOP, now) {
@@ -587,6 +681,9 @@ impl Core {
                 self.state_due = true;
                 return Some(frame);
             }
+        }
+        if let Some(frame) = self.poll_command_mode(now) {
+            return Some(frame);
         }
         if now >= self.next_command {
             self.check_silence(now);
@@ -601,8 +698,14 @@ impl Core {
             };
             self.status_due = true;
             if let Some(frame) = self.motion(&output, now) {
+                if let Outgoing::V2(_) = frame {
+                    self.follow_up_v2(&output);
+                }
                 return Some(frame);
             }
+        }
+        if let Some(frame) = self.poll_version_request() {
+            return Some(frame);
         }
         if let Some(lights) = self.lights()
             && now >= self.next_light
@@ -611,15 +714,93 @@ impl Core {
             if self.next_light <= now {
                 self.next_light = now + self.light_period;
             }
-            if self.link == Link::Open {
+            if self.link == Link::Open
+                && let Some(protocol) = self.tracker.protocol()
+            {
                 self.tracker.handle_sent_other();
-                return Some(Counted {
-                    message: Message::LightCommand(lights),
-                    count: self.light_count.next_count(),
+                let count = self.light_count.next_count();
+                return Some(match protocol {
+                    Protocol::V1 => Outgoing::V1(Counted {
+                        message: Message::LightCommand(lights),
+                        count,
+                    }),
+                    Protocol::V2 => Outgoing::V2(MessageV2::LightCommand(LightsV2 {
+                        host_control: u8::from(lights.enabled),
+                        front_mode: lights.front.mode,
+                        front_brightness: lights.front.brightness,
+                        rear_mode: lights.rear.mode,
+                        rear_brightness: lights.rear.brightness,
+                        reserved: [0; 2],
+                        count,
+                    })),
                 });
             }
         }
         None
+    }
+
+    /// Protocol v2: 0x421 `[01]` when a client is about to drive and the chassis is not in CAN
+    /// mode at the gateway's request; a take the chassis does not answer latches a stop.
+    fn poll_command_mode(&mut self, now: Duration) -> Option<Outgoing> {
+        if self.link != Link::Open
+            || self.shutdown.is_some()
+            || self.tracker.protocol() != Some(Protocol::V2)
+        {
+            return None;
+        }
+        let wanted = self.arbiter.selected(now).is_some();
+        match self.command_mode.poll(now, wanted) {
+            Ok(true) => {
+                info!("taking the chassis' CAN command mode (0x421 [01])");
+                self.tracker.handle_sent_other();
+                Some(Outgoing::V2(MessageV2::ControlMode(ControlModeV2::Can)))
+            }
+            Ok(false) => None,
+            Err(lost) => {
+                warn!("{}", lost.detail);
+                self.arbiter
+                    .handle_gap(now, StopCause::ChassisMode, &lost.reason, false);
+                self.status_due = true;
+                None
+            }
+        }
+    }
+
+    /// Protocol v2: what follows a motion command in the same tick (the error clear the
+    /// output asks for; standby after the last zero at exit).
+    fn follow_up_v2(&mut self, output: &Output) {
+        if let Some(code) = error_clear_v2(output.fault_clear) {
+            self.follow_up
+                .push_back(Outgoing::V2(MessageV2::ErrorClear(code)));
+        }
+        if self.shutdown == Some(0) {
+            info!("leaving the chassis in standby (0x421 [00])");
+            self.follow_up
+                .push_back(Outgoing::V2(MessageV2::ControlMode(ControlModeV2::Standby)));
+        }
+    }
+
+    /// Protocol v2: both forms of the version request, once a port session, when the chassis
+    /// has spoken (its answer lands in the state's `firmware`).
+    fn poll_version_request(&mut self) -> Option<Outgoing> {
+        if self.version_asked
+            || self.link != Link::Open
+            || self.shutdown.is_some()
+            || self.tracker.protocol() != Some(Protocol::V2)
+            || !self.tracker.state().system.received.valid
+        {
+            return None;
+        }
+        self.version_asked = true;
+        self.tracker.handle_version_requested();
+        self.tracker.handle_sent_other();
+        self.follow_up
+            .push_back(Outgoing::V2(MessageV2::VersionRequest(
+                VersionRequestForm::Text,
+            )));
+        Some(Outgoing::V2(MessageV2::VersionRequest(
+            VersionRequestForm::Binary,
+        )))
     }
 
     /// The next state or status to publish now, if any. Call until `None`.
@@ -655,6 +836,9 @@ impl Core {
     /// When the core next has something to do, if nothing comes in before.
     pub fn poll_timeout(&self) -> Duration {
         let mut deadline = self.next_command;
+        if let Some(at) = self.command_mode.poll_timeout() {
+            deadline = deadline.min(at);
+        }
         if self.lights().is_some() {
             deadline = deadline.min(self.next_light);
         }
@@ -680,10 +864,11 @@ impl Core {
             .unwrap_or(self.opened_at)
             .max(self.opened_at);
         if now.saturating_sub(since) > CHASSIS_TIMEOUT {
-            let detail = format!(
-                "no feedback from the chassis for {} ms",
-                now.saturating_sub(since).as_millis()
-            );
+            let silent_ms = now.saturating_sub(since).as_millis();
+            let detail = match self.tracker.mismatch() {
+                Some(mismatch) => mismatch.reason.clone(),
+                None => format!("no feedback from the chassis for {silent_ms} ms"),
+            };
             self.set_condition(now, StopCause::ChassisSilent, true, &detail);
         }
     }
@@ -734,26 +919,46 @@ impl Core {
         }
     }
 
-    /// `output` as a motion command in the link's control mode, if the port is open.
-    fn motion(&mut self, output: &Output, now: Duration) -> Option<Counted> {
+    /// `output` as a motion command in the chassis' protocol (on v1 in the link's control
+    /// mode), if the port is open and the protocol known.
+    fn motion(&mut self, output: &Output, now: Duration) -> Option<Outgoing> {
         if self.link != Link::Open {
             return None;
         }
-        let percent =
-            |speed: f64, max: f64| units::speed_to_percent(speed, max).map_or(0, |(p, _)| p);
-        let command = MotionCommand {
-            control_mode: self.transport.control_mode(),
-            fault_clear: output.fault_clear,
-            linear_percent: percent(output.linear, MAX_LINEAR_SPEED),
-            angular_percent: percent(output.angular, self.max_angular),
+        let (frame, linear, angular) = match self.tracker.protocol()? {
+            Protocol::V1 => {
+                let percent = |speed: f64, max: f64| {
+                    units::speed_to_percent(speed, max).map_or(0, |(p, _)| p)
+                };
+                let command = MotionCommand {
+                    control_mode: self.transport.control_mode(),
+                    fault_clear: output.fault_clear,
+                    linear_percent: percent(output.linear, self.max_linear),
+                    angular_percent: percent(output.angular, self.max_angular),
+                };
+                let counted = Counted {
+                    message: Message::MotionCommand(command),
+                    count: self.motion_count.next_count(),
+                };
+                (
+                    Outgoing::V1(counted),
+                    command.linear(self.max_linear),
+                    command.angular(self.max_angular),
+                )
+            }
+            Protocol::V2 => {
+                let command = MotionV2::from_si(output.linear, output.angular);
+                (
+                    Outgoing::V2(MessageV2::MotionCommand(command)),
+                    command.linear(),
+                    command.angular(),
+                )
+            }
         };
         self.stats.commands_sent += 1;
         self.last_motion_written = Some(now);
-        self.tracker.handle_sent_motion(&command, now);
-        Some(Counted {
-            message: Message::MotionCommand(command),
-            count: self.motion_count.next_count(),
-        })
+        self.tracker.handle_sent_motion(linear, angular, now);
+        Some(frame)
     }
 
     /// The light command to repeat: what clients asked for last (`auto`: host control off), or
@@ -839,4 +1044,21 @@ fn speaking_for(origin: &Origin, wire: &ControlRequest) -> Origin {
 
 fn millis(duration: Duration) -> f64 {
     duration.as_secs_f64() * 1000.0
+}
+
+/// The 0x441 code for a v1 fault-clear request: a motor's communication fault clears that
+/// motor's error; any other code clears every error (v2 has no finer codes); none sends none.
+fn error_clear_v2(code: FaultClear) -> Option<ErrorClearV2> {
+    Some(match code {
+        FaultClear::None => return None,
+        FaultClear::Motor1Comm => ErrorClearV2::Motor1,
+        FaultClear::Motor2Comm => ErrorClearV2::Motor2,
+        FaultClear::Motor3Comm => ErrorClearV2::Motor3,
+        FaultClear::Motor4Comm => ErrorClearV2::Motor4,
+        FaultClear::BatteryUnderVoltage
+        | FaultClear::BatteryOverVoltage
+        | FaultClear::DriverOverTemp
+        | FaultClear::MotorOverCurrent
+        | FaultClear::Unknown(_) => ErrorClearV2::All,
+    })
 }

@@ -2,6 +2,8 @@
 //! test `Pair`): both sans-IO, so minutes of robot time run in milliseconds, deterministically.
 //! These are the control loop's behaviour tests: the 20 ms grid and skipped ticks, the stop sent
 //! out of schedule, light repetition, reconnect backoff, state and status publication, shutdown.
+//! Every scenario about motion and safety runs against a chassis of each protocol (v1 and v2
+//! firmware, `both_protocols!`); v2's command mode, detection and mismatch have their own.
 
 use std::time::Duration;
 
@@ -12,15 +14,17 @@ use scout_interface::control::{
 use scout_interface::services::Way;
 use scout_interface::state::LinkState;
 use scout_interface::{Class, LightsSetting, StatePayload, StatusPayload, Transport};
-use scout_protocol::link::RxEvent;
-use scout_protocol::{
-    Counted, Light, LightCommand, LightMode, Message, MotionCommand, MotionFeedback,
-};
+use scout_protocol::link::{Outgoing, RxEvent};
+use scout_protocol::model::Model;
+use scout_protocol::units::MAX_LINEAR_SPEED;
+use scout_protocol::v2::{ControlModeV2, ErrorBitsV2, MessageV2, MotionV2, SystemStateV2};
+use scout_protocol::version::Protocol;
+use scout_protocol::{Counted, Light, LightCommand, LightMode, Message, MotionFeedback};
 use scout_sim::chassis::{Injection, Protection};
 use scout_sim::{Chassis, Feedback, SimParams};
 
 use crate::arbiter::{ClientKey, Origin};
-use crate::config::GatewayConfig;
+use crate::config::{GatewayConfig, ProtocolSetting};
 use crate::core::{
     CHASSIS_TIMEOUT, Core, FIRST_BACKOFF, Publication, STATE_HEARTBEAT, STATUS_HEARTBEAT, Start,
     WIRE_GAP_LIMIT,
@@ -55,6 +59,24 @@ const AUTONOMY: Client = Client("planner", 2, false);
 const OFFICER: Client = Client("officer", 3, false);
 const OPERATOR: Client = Client("operator", 4, true);
 
+/// A motion command as it went out, in m/s and rad/s, whatever the protocol.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Motion {
+    linear: f64,
+    angular: f64,
+}
+
+/// A configuration that speaks `protocol`.
+fn config(protocol: Protocol) -> GatewayConfig {
+    GatewayConfig {
+        protocol: match protocol {
+            Protocol::V1 => ProtocolSetting::V1,
+            Protocol::V2 => ProtocolSetting::V2,
+        },
+        ..GatewayConfig::default()
+    }
+}
+
 /// The core and a simulated chassis on one virtual clock.
 struct Pair {
     /// The time of the next step.
@@ -69,8 +91,10 @@ struct Pair {
     open: bool,
     /// Whether the chassis' feedback reaches the core (off: a silent chassis).
     feedback: bool,
+    /// Whether 0x421 reaches the chassis (off: a chassis that never takes the command mode).
+    mode_requests: bool,
     /// Frames that reached the chassis, with when.
-    sent: Vec<(Duration, Counted)>,
+    sent: Vec<(Duration, Outgoing)>,
     states: Vec<(Duration, StatePayload)>,
     statuses: Vec<(Duration, StatusPayload)>,
     open_attempts: Vec<Duration>,
@@ -79,8 +103,14 @@ struct Pair {
 }
 
 impl Pair {
+    /// A v1 gateway and chassis on `transport`.
     fn new(transport: Transport) -> Self {
-        Self::with_config(transport, &GatewayConfig::default())
+        Self::with_config(transport, &config(Protocol::V1))
+    }
+
+    /// A gateway and a simulated chassis speaking `protocol`, in-process.
+    fn of(protocol: Protocol) -> Self {
+        Self::with_config(Transport::Sim, &config(protocol))
     }
 
     fn with_config(transport: Transport, config: &GatewayConfig) -> Self {
@@ -88,9 +118,25 @@ impl Pair {
     }
 
     fn starting(transport: Transport, config: &GatewayConfig, start: Start) -> Self {
+        let firmware = config.fixed_protocol().unwrap_or(Protocol::V1);
+        Self::with_firmware(firmware, transport, config, start)
+    }
+
+    /// A gateway configured by `config` and a chassis whose firmware speaks `firmware`.
+    fn with_firmware(
+        firmware: Protocol,
+        transport: Transport,
+        config: &GatewayConfig,
+        start: Start,
+    ) -> Self {
         // Far from zero, as CLOCK_MONOTONIC is: nothing may assume time starts at zero.
         let start_time = Duration::from_secs(1000);
-        let mut chassis = Chassis::new(SimParams::default(), transport);
+        let model = config.model.unwrap_or(Model::default_for(firmware));
+        let chassis = Chassis::new(SimParams::for_model(model), transport);
+        let mut chassis = match firmware {
+            Protocol::V1 => chassis,
+            Protocol::V2 => chassis.with_protocol_v2(),
+        };
         let _ = chassis.poll_feedback(Duration::ZERO);
         let mut pair = Self {
             now: start_time,
@@ -100,6 +146,7 @@ impl Pair {
             plugged: true,
             open: false,
             feedback: true,
+            mode_requests: true,
             sent: Vec::new(),
             states: Vec::new(),
             statuses: Vec::new(),
@@ -115,14 +162,20 @@ impl Pair {
     fn step(&mut self) {
         let now = self.now;
         if self.open
-            && let Some(batch) = self
-                .chassis
-                .poll_feedback(now - self.epoch)
-                .and_then(Feedback::v1)
+            && let Some(feedback) = self.chassis.poll_feedback(now - self.epoch)
             && self.feedback
         {
-            for counted in batch {
-                self.core.handle_rx(now, &RxEvent::Message(counted));
+            match feedback {
+                Feedback::V1(batch) => {
+                    for counted in batch {
+                        self.core.handle_rx(now, &RxEvent::Message(counted));
+                    }
+                }
+                Feedback::V2(frames) => {
+                    for message in frames {
+                        self.core.handle_rx(now, &RxEvent::V2(message));
+                    }
+                }
             }
         }
         if self.core.poll_open(now) {
@@ -136,7 +189,16 @@ impl Pair {
         }
         while let Some(frame) = self.core.poll_transmit(now) {
             assert!(self.open, "a frame while the port is closed: {frame:?}");
-            self.chassis.handle_message(now - self.epoch, frame);
+            let at = now - self.epoch;
+            match frame {
+                Outgoing::V1(counted) => {
+                    self.chassis.handle_message(at, counted);
+                }
+                Outgoing::V2(MessageV2::ControlMode(_)) if !self.mode_requests => {}
+                Outgoing::V2(message) => {
+                    self.chassis.handle_v2(at, message);
+                }
+            }
             self.sent.push((now, frame));
         }
         while let Some(publication) = self.core.poll_publish(now) {
@@ -280,12 +342,29 @@ impl Pair {
         self.step();
     }
 
-    fn motion_commands(&self) -> Vec<(Duration, MotionCommand)> {
+    fn motion_commands(&self) -> Vec<(Duration, Motion)> {
+        let max_angular = self.chassis.params().max_angular;
         self.sent
             .iter()
-            .filter_map(|(at, counted)| match counted.message {
-                Message::MotionCommand(command) => Some((*at, command)),
-                _ => None,
+            .filter_map(|(at, frame)| match frame {
+                Outgoing::V1(Counted {
+                    message: Message::MotionCommand(command),
+                    ..
+                }) => Some((
+                    *at,
+                    Motion {
+                        linear: command.linear(MAX_LINEAR_SPEED),
+                        angular: command.angular(max_angular),
+                    },
+                )),
+                Outgoing::V2(MessageV2::MotionCommand(command)) => Some((
+                    *at,
+                    Motion {
+                        linear: command.linear(),
+                        angular: command.angular(),
+                    },
+                )),
+                Outgoing::V1(_) | Outgoing::V2(_) => None,
             })
             .collect()
     }
@@ -293,9 +372,72 @@ impl Pair {
     fn light_commands(&self) -> Vec<Duration> {
         self.sent
             .iter()
-            .filter(|(_, counted)| matches!(counted.message, Message::LightCommand(_)))
+            .filter(|(_, frame)| {
+                matches!(
+                    frame,
+                    Outgoing::V1(Counted {
+                        message: Message::LightCommand(_),
+                        ..
+                    }) | Outgoing::V2(MessageV2::LightCommand(_))
+                )
+            })
             .map(|(at, _)| *at)
             .collect()
+    }
+
+    /// The v2 frames sent other than motion commands, with when.
+    fn v2_others(&self) -> Vec<(Duration, MessageV2)> {
+        self.sent
+            .iter()
+            .filter_map(|(at, frame)| match frame {
+                Outgoing::V2(MessageV2::MotionCommand(_)) | Outgoing::V1(_) => None,
+                Outgoing::V2(message) => Some((*at, *message)),
+            })
+            .collect()
+    }
+
+    /// Feeds the core motion feedback in the chassis' protocol, as if it came from the port.
+    fn inject_motion(&mut self, linear_mm_s: i16, angular_mrad_s: i16, count: u8) {
+        let event = match self.core.link_protocol() {
+            Some(Protocol::V2) => RxEvent::V2(MessageV2::MotionState(MotionV2 {
+                linear_mm_s,
+                angular_mrad_s,
+                ..MotionV2::default()
+            })),
+            Some(Protocol::V1) | None => RxEvent::Message(Counted {
+                message: Message::MotionFeedback(MotionFeedback {
+                    linear_mm_s,
+                    angular_mrad_s,
+                }),
+                count,
+            }),
+        };
+        self.core.handle_rx(self.now, &event);
+    }
+
+    /// Feeds the core a system state in the chassis' protocol (the chassis in CAN mode).
+    fn inject_system(&mut self, state: u8, count: u8) {
+        let state = scout_protocol::ChassisState::from_raw(state);
+        let event = match self.core.link_protocol() {
+            Some(Protocol::V2) => RxEvent::V2(MessageV2::SystemState(SystemStateV2 {
+                state,
+                control_mode: ControlModeV2::Can,
+                battery_decivolts: 250,
+                errors: ErrorBitsV2(0),
+                reserved: 0,
+                count,
+            })),
+            Some(Protocol::V1) | None => RxEvent::Message(Counted {
+                message: Message::SystemStatus(scout_protocol::SystemStatus {
+                    state,
+                    control_mode: scout_protocol::ControlMode::Can,
+                    battery_decivolts: 250,
+                    faults: scout_protocol::FaultBits::NONE,
+                }),
+                count,
+            }),
+        };
+        self.core.handle_rx(self.now, &event);
     }
 
     fn states(&self) -> Vec<(Duration, StatePayload)> {
@@ -315,9 +457,8 @@ fn intervals(times: &[Duration]) -> Vec<Duration> {
     times.windows(2).map(|pair| pair[1] - pair[0]).collect()
 }
 
-#[test]
-fn motion_commands_go_out_on_the_20_ms_grid_for_ten_minutes() {
-    let mut pair = Pair::new(Transport::Sim);
+fn motion_commands_go_out_on_the_20_ms_grid_for_ten_minutes(protocol: Protocol) {
+    let mut pair = Pair::of(protocol);
     pair.run(Duration::from_secs(600));
     let times: Vec<Duration> = pair.motion_commands().iter().map(|(at, _)| *at).collect();
     assert!(times.len() > 30_000, "{}", times.len());
@@ -328,9 +469,8 @@ fn motion_commands_go_out_on_the_20_ms_grid_for_ten_minutes() {
     assert_eq!(pair.last_state().link.state(), LinkState::Ok);
 }
 
-#[test]
-fn a_late_tick_is_sent_once_and_the_missed_ones_are_skipped() {
-    let mut pair = Pair::new(Transport::Sim);
+fn a_late_tick_is_sent_once_and_the_missed_ones_are_skipped(protocol: Protocol) {
+    let mut pair = Pair::of(protocol);
     pair.run(ms(100));
     let grid = pair.core.poll_timeout();
     pair.now = grid;
@@ -349,9 +489,8 @@ fn a_late_tick_is_sent_once_and_the_missed_ones_are_skipped() {
     assert_eq!((stats.missed_ticks, stats.max_lateness), (3, ms(75)));
 }
 
-#[test]
-fn a_stop_goes_on_the_wire_at_once_not_at_the_next_tick() {
-    let mut pair = Pair::new(Transport::Sim);
+fn a_stop_goes_on_the_wire_at_once_not_at_the_next_tick(protocol: Protocol) {
+    let mut pair = Pair::of(protocol);
     pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(2));
     pair.run(ms(7));
     let asked = pair.now;
@@ -368,30 +507,28 @@ fn a_stop_goes_on_the_wire_at_once_not_at_the_next_tick() {
         .find(|(at, _)| *at >= asked)
         .expect("a command after the stop");
     assert_eq!(at, asked, "sent in the same iteration as the request");
-    assert_eq!((command.linear_percent, command.angular_percent), (0, 0));
+    assert_eq!((command.linear, command.angular), (0.0, 0.0));
     assert_eq!(pair.core.stats().urgent_stops, 1);
     let status = pair.statuses().last().expect("status").1;
     assert!(status.stopped());
     assert_eq!(status.stops()[0].owner.as_str(), "officer");
 }
 
-#[test]
-fn teleop_drives_the_chassis_and_a_stale_stream_ramps_to_zero() {
-    let mut pair = Pair::new(Transport::Sim);
+fn teleop_drives_the_chassis_and_a_stale_stream_ramps_to_zero(protocol: Protocol) {
+    let mut pair = Pair::of(protocol);
     pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(3));
     let moving = pair.chassis.actual().linear;
     assert!((moving - 0.5).abs() < 0.02, "{moving}");
-    assert!((pair.last_state().motion.feedback().linear() - 0.5).abs() < 0.02);
+    assert!((pair.last_state().motion.linear() - 0.5).abs() < 0.02);
     // No more commands: the command ages out (teleop 250 ms) and the output ramps down.
     pair.run(Duration::from_secs(2));
     assert_eq!(pair.chassis.actual().linear, 0.0);
     let (_, last) = *pair.motion_commands().last().expect("commands");
-    assert_eq!(last.linear_percent, 0);
+    assert_eq!(last.linear, 0.0);
 }
 
-#[test]
-fn a_dead_client_loses_control_at_once() {
-    let mut pair = Pair::new(Transport::Sim);
+fn a_dead_client_loses_control_at_once(protocol: Protocol) {
+    let mut pair = Pair::of(protocol);
     pair.request(AUTONOMY, &Request::Resume).expect("resume");
     pair.stream(AUTONOMY, Class::Autonomy, 0.4, Duration::from_secs(2));
     let dead_at = pair.now;
@@ -435,9 +572,8 @@ fn lights_repeat_every_25_ms_on_can_and_every_100_ms_on_serial() {
     }
 }
 
-#[test]
-fn a_failed_port_is_reopened_with_a_doubling_backoff() {
-    let mut config = GatewayConfig::default();
+fn a_failed_port_is_reopened_with_a_doubling_backoff(protocol: Protocol) {
+    let mut config = config(protocol);
     config.timing.reconnect_max_ms = 400;
     let mut pair = Pair::with_config(Transport::Sim, &config);
     pair.run(ms(100));
@@ -464,9 +600,10 @@ fn a_failed_port_is_reopened_with_a_doubling_backoff() {
     assert_eq!(FIRST_BACKOFF, ms(50));
 }
 
-#[test]
-fn state_is_published_per_feedback_on_link_changes_and_every_100_ms_while_silent() {
-    let mut pair = Pair::new(Transport::Sim);
+fn state_is_published_per_feedback_on_link_changes_and_every_100_ms_while_silent(
+    protocol: Protocol,
+) {
+    let mut pair = Pair::of(protocol);
     pair.run(Duration::from_secs(1));
     let frames = pair.last_state().link.rx_frames;
     assert!(frames >= 7 * 49, "{frames}");
@@ -496,9 +633,8 @@ fn state_is_published_per_feedback_on_link_changes_and_every_100_ms_while_silent
     assert!(seqs.windows(2).all(|w| w[1] == w[0] + 1));
 }
 
-#[test]
-fn status_is_published_on_change_and_once_a_second() {
-    let mut pair = Pair::new(Transport::Sim);
+fn status_is_published_on_change_and_once_a_second(protocol: Protocol) {
+    let mut pair = Pair::of(protocol);
     pair.run(Duration::from_secs(5));
     let idle = pair.statuses();
     let times: Vec<Duration> = idle.iter().map(|(at, _)| *at).collect();
@@ -527,9 +663,8 @@ fn status_is_published_on_change_and_once_a_second() {
     );
 }
 
-#[test]
-fn odometry_reset_is_answered_and_published() {
-    let mut pair = Pair::new(Transport::Sim);
+fn odometry_reset_is_answered_and_published(protocol: Protocol) {
+    let mut pair = Pair::of(protocol);
     pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(2));
     assert!(pair.last_state().odometry.x > 0.5);
     pair.request(OFFICER, &Request::ResetOdometry)
@@ -542,30 +677,24 @@ fn odometry_reset_is_answered_and_published() {
     );
 }
 
-#[test]
-fn shutdown_sends_zero_for_the_configured_cycles_then_finishes() {
-    let mut pair = Pair::new(Transport::Sim);
+fn shutdown_sends_zero_for_the_configured_cycles_then_finishes(protocol: Protocol) {
+    let mut pair = Pair::of(protocol);
     pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(1));
     pair.core.handle_shutdown();
     let began = pair.now;
     pair.run_until(Duration::from_secs(1), |pair| pair.core.is_finished());
-    let after: Vec<MotionCommand> = pair
+    let after: Vec<Motion> = pair
         .motion_commands()
         .into_iter()
         .filter(|(at, _)| *at >= began)
         .map(|(_, command)| command)
         .collect();
     assert_eq!(after.len(), 5);
-    assert!(
-        after
-            .iter()
-            .all(|c| c.linear_percent == 0 && c.angular_percent == 0)
-    );
+    assert!(after.iter().all(|c| c.linear == 0.0 && c.angular == 0.0));
 }
 
-#[test]
-fn malformed_requests_are_answered_and_counted() {
-    let mut pair = Pair::new(Transport::Sim);
+fn malformed_requests_are_answered_and_counted(protocol: Protocol) {
+    let mut pair = Pair::of(protocol);
     let wire = ControlRequest {
         kind: 200,
         ..ControlRequest::default()
@@ -624,8 +753,11 @@ proptest! {
     /// grid resumes), a stop is on the wire in the iteration that took it, and nothing moves
     /// while the stop is latched.
     #[test]
-    fn the_schedule_and_the_stop_hold_under_any_requests(events in prop::collection::vec(event(), 1..60)) {
-        let mut pair = Pair::new(Transport::Sim);
+    fn the_schedule_and_the_stop_hold_under_any_requests(
+        protocol in prop_oneof![Just(Protocol::V1), Just(Protocol::V2)],
+        events in prop::collection::vec(event(), 1..60),
+    ) {
+        let mut pair = Pair::of(protocol);
         let mut stops = Vec::new();
         let mut stalls = Vec::new();
         for event in events {
@@ -654,7 +786,7 @@ proptest! {
         pair.run(ms(100));
         let commands = pair.motion_commands();
         for stop in &stops {
-            let zero = commands.iter().find(|(at, c)| at == stop && c.linear_percent == 0);
+            let zero = commands.iter().find(|(at, c)| at == stop && c.linear == 0.0);
             prop_assert!(zero.is_some(), "no zero command at the stop's time {stop:?}");
         }
         // Stops between ticks only shorten the gaps: every gap is at most a tick, or has a stall.
@@ -687,7 +819,7 @@ fn stays_still(pair: &mut Pair, client: Client, time: Duration) {
         .into_iter()
         .rev()
         .take(10)
-        .any(|(_, command)| command.linear_percent != 0);
+        .any(|(_, command)| command.linear != 0.0);
     assert!(!moving, "only zero commands go out");
 }
 
@@ -709,9 +841,8 @@ fn release_and_check_nothing_restarts(pair: &mut Pair, client: Client) {
     assert!(pair.chassis.actual().linear > 0.3);
 }
 
-#[test]
-fn a_link_lost_and_back_does_not_restart_a_streaming_client() {
-    let mut pair = Pair::new(Transport::Sim);
+fn a_link_lost_and_back_does_not_restart_a_streaming_client(protocol: Protocol) {
+    let mut pair = Pair::of(protocol);
     pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(2));
     pair.unplug();
     assert_eq!(pair.stops(), [("gateway".into(), StopCause::LinkLost)]);
@@ -727,9 +858,8 @@ fn a_link_lost_and_back_does_not_restart_a_streaming_client() {
     release_and_check_nothing_restarts(&mut pair, TELEOP);
 }
 
-#[test]
-fn a_silent_chassis_is_a_gap_that_holds_until_it_speaks_again() {
-    let mut pair = Pair::new(Transport::Sim);
+fn a_silent_chassis_is_a_gap_that_holds_until_it_speaks_again(protocol: Protocol) {
+    let mut pair = Pair::of(protocol);
     pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(2));
     pair.feedback = false;
     pair.keep_streaming(TELEOP, 0.5, CHASSIS_TIMEOUT + ms(100));
@@ -749,9 +879,8 @@ fn a_silent_chassis_is_a_gap_that_holds_until_it_speaks_again() {
     release_and_check_nothing_restarts(&mut pair, TELEOP);
 }
 
-#[test]
-fn a_chassis_estop_episode_does_not_restart_motion() {
-    let mut pair = Pair::new(Transport::Sim);
+fn a_chassis_estop_episode_does_not_restart_motion(protocol: Protocol) {
+    let mut pair = Pair::of(protocol);
     pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(2));
     let at = pair.now - pair.epoch;
     pair.chassis.inject(at, Injection::EStop(true));
@@ -784,9 +913,8 @@ fn a_chassis_estop_episode_does_not_restart_motion() {
     release_and_check_nothing_restarts(&mut pair, TELEOP);
 }
 
-#[test]
-fn rc_and_latched_protections_are_gaps() {
-    let mut pair = Pair::new(Transport::Sim);
+fn rc_and_latched_protections_are_gaps(protocol: Protocol) {
+    let mut pair = Pair::of(protocol);
     pair.stream(TELEOP, Class::Teleop, 0.3, Duration::from_secs(1));
     let at = pair.now - pair.epoch;
     pair.chassis.inject(at, Injection::Rc(true));
@@ -811,12 +939,20 @@ fn rc_and_latched_protections_are_gaps() {
         .find(|s| s.cause == StopCause::ChassisFault.raw())
         .expect("listed");
     assert!(fault.persists, "the protection is still latched");
-    assert!(fault.reason.as_str().contains("driver_overtemp_protection"));
+    // v2's error word has one bit for a driver's protections.
+    let named = match protocol {
+        Protocol::V1 => "driver_overtemp_protection",
+        Protocol::V2 => "motor_driver",
+    };
+    assert!(
+        fault.reason.as_str().contains(named),
+        "{}",
+        fault.reason.as_str()
+    );
 }
 
-#[test]
-fn after_an_unclean_exit_the_gateway_starts_stopped() {
-    let config = GatewayConfig::default();
+fn after_an_unclean_exit_the_gateway_starts_stopped(protocol: Protocol) {
+    let config = config(protocol);
     let mut pair = Pair::starting(Transport::Sim, &config, Start::AfterUncleanExit);
     assert_eq!(pair.stops(), [("gateway".into(), StopCause::GatewayStart)]);
     let refused = pair.take(TELEOP, Class::Teleop).expect_err("stopped");
@@ -825,15 +961,14 @@ fn after_an_unclean_exit_the_gateway_starts_stopped() {
     assert_eq!(pair.chassis.actual().linear, 0.0);
     release_and_check_nothing_restarts(&mut pair, TELEOP);
     // A clean start: no stop, but autonomy disarmed until a resume.
-    let mut clean = Pair::new(Transport::Sim);
+    let mut clean = Pair::of(protocol);
     assert!(clean.stops().is_empty());
     let disarmed = clean.take(AUTONOMY, Class::Autonomy).expect_err("disarmed");
     assert_eq!(disarmed.kind, Some(RejectionKind::AutonomyDisarmed));
 }
 
-#[test]
-fn a_tick_later_than_the_chassis_timeout_is_an_overrun() {
-    let mut pair = Pair::new(Transport::Sim);
+fn a_tick_later_than_the_chassis_timeout_is_an_overrun(protocol: Protocol) {
+    let mut pair = Pair::of(protocol);
     pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(1));
     pair.now = pair.core.poll_timeout();
     pair.stall(CHASSIS_TIMEOUT + ms(100));
@@ -853,8 +988,12 @@ fn a_tick_later_than_the_chassis_timeout_is_an_overrun() {
 /// Streams, freezes the gateway for `stall` (SIGSTOP, starved of CPU) at `phase` into a tick,
 /// and streams on; returns whether an overrun latched, the largest gap between two motion
 /// commands written, and whether a command after the stall moved the robot.
-fn stall_and_stream_on(stall: Duration, phase: Duration) -> (bool, Duration, bool) {
-    let mut pair = Pair::new(Transport::Sim);
+fn stall_and_stream_on(
+    protocol: Protocol,
+    stall: Duration,
+    phase: Duration,
+) -> (bool, Duration, bool) {
+    let mut pair = Pair::of(protocol);
     pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(1));
     pair.now += phase;
     pair.step();
@@ -866,7 +1005,7 @@ fn stall_and_stream_on(stall: Duration, phase: Duration) -> (bool, Duration, boo
     let widest = intervals(&times).into_iter().max().unwrap_or_default();
     let moved_after = after[before..]
         .iter()
-        .any(|(_, command)| command.linear_percent != 0);
+        .any(|(_, command)| command.linear != 0.0);
     let overrun = pair
         .stops()
         .contains(&("gateway".into(), StopCause::Overrun));
@@ -877,11 +1016,10 @@ fn stall_and_stream_on(stall: Duration, phase: Duration) -> (bool, Duration, boo
     (overrun, widest, moved_after)
 }
 
-#[test]
-fn a_stall_that_may_have_let_the_chassis_time_out_latches_an_overrun() {
+fn a_stall_that_may_have_let_the_chassis_time_out_latches_an_overrun(protocol: Protocol) {
     // The review's SIGSTOP of 487-497 ms: wire gaps of 500-511 ms, and the old speed resumed.
     for stall in [410, 450, 487, 497, 600] {
-        let (overrun, widest, moved) = stall_and_stream_on(ms(stall), ms(7));
+        let (overrun, widest, moved) = stall_and_stream_on(protocol, ms(stall), ms(7));
         assert!(
             overrun,
             "a {stall} ms stall (a {widest:?} wire gap) latches"
@@ -889,7 +1027,7 @@ fn a_stall_that_may_have_let_the_chassis_time_out_latches_an_overrun() {
         assert!(!moved, "nothing moves after a {stall} ms stall");
     }
     // An ordinary stall (the review saw 109 ms) resumes.
-    let (overrun, widest, moved) = stall_and_stream_on(ms(109), ms(7));
+    let (overrun, widest, moved) = stall_and_stream_on(protocol, ms(109), ms(7));
     assert!(!overrun && moved, "{widest:?}");
 }
 
@@ -898,9 +1036,13 @@ proptest! {
     /// Any stall at any phase: a wire gap the chassis could have timed out on (over
     /// WIRE_GAP_LIMIT) always latches, and only a gap over it does.
     #[test]
-    fn every_wire_gap_beyond_the_limit_latches(stall_ms in 0u64..900, phase_us in 0u64..20_000) {
+    fn every_wire_gap_beyond_the_limit_latches(
+        protocol in prop_oneof![Just(Protocol::V1), Just(Protocol::V2)],
+        stall_ms in 0u64..900,
+        phase_us in 0u64..20_000,
+    ) {
         let (overrun, widest, moved) =
-            stall_and_stream_on(ms(stall_ms), Duration::from_micros(phase_us));
+            stall_and_stream_on(protocol, ms(stall_ms), Duration::from_micros(phase_us));
         prop_assert_eq!(overrun, widest > WIRE_GAP_LIMIT, "stall {} ms, widest gap {:?}", stall_ms, widest);
         if widest >= CHASSIS_TIMEOUT {
             prop_assert!(overrun && !moved);
@@ -910,19 +1052,12 @@ proptest! {
 
 /// Whether feedback of `linear_mm_s` and `angular_mrad_s`, while nothing is commanded, for
 /// longer than the runaway time, latches a runaway.
-fn feedback_latches_a_runaway(linear_mm_s: i16, angular_mrad_s: i16) -> bool {
-    let mut pair = Pair::new(Transport::Sim);
+fn feedback_latches_a_runaway(protocol: Protocol, linear_mm_s: i16, angular_mrad_s: i16) -> bool {
+    let mut pair = Pair::of(protocol);
     pair.run(ms(200));
     pair.feedback = false;
     for i in 0..40u8 {
-        let feedback = RxEvent::Message(Counted {
-            message: Message::MotionFeedback(MotionFeedback {
-                linear_mm_s,
-                angular_mrad_s,
-            }),
-            count: 100 + i,
-        });
-        pair.core.handle_rx(pair.now, &feedback);
+        pair.inject_motion(linear_mm_s, angular_mrad_s, 100 + i);
         pair.now += TICK;
         pair.step();
     }
@@ -930,19 +1065,17 @@ fn feedback_latches_a_runaway(linear_mm_s: i16, angular_mrad_s: i16) -> bool {
         .contains(&("gateway".into(), StopCause::Runaway))
 }
 
-#[test]
-fn a_chassis_faster_than_commanded_is_a_runaway() {
-    assert!(feedback_latches_a_runaway(1000, 0), "1 m/s");
+fn a_chassis_faster_than_commanded_is_a_runaway(protocol: Protocol) {
+    assert!(feedback_latches_a_runaway(protocol, 1000, 0), "1 m/s");
     // The review's case: still turning at 0.27 rad/s long after the command fell to zero.
-    assert!(feedback_latches_a_runaway(0, 270), "0.27 rad/s");
-    assert!(feedback_latches_a_runaway(0, -270), "-0.27 rad/s");
+    assert!(feedback_latches_a_runaway(protocol, 0, 270), "0.27 rad/s");
+    assert!(feedback_latches_a_runaway(protocol, 0, -270), "-0.27 rad/s");
     // Within the tolerances: no runaway.
-    assert!(!feedback_latches_a_runaway(200, 100));
+    assert!(!feedback_latches_a_runaway(protocol, 200, 100));
 }
 
-#[test]
-fn a_can_fault_latches_and_the_first_command_after_recovery_is_zero() {
-    let mut pair = Pair::new(Transport::Sim);
+fn a_can_fault_latches_and_the_first_command_after_recovery_is_zero(protocol: Protocol) {
+    let mut pair = Pair::of(protocol);
     pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(1));
     let failed = pair.now;
     pair.open = false;
@@ -960,12 +1093,11 @@ fn a_can_fault_latches_and_the_first_command_after_recovery_is_zero() {
         .into_iter()
         .find(|(at, _)| *at > failed)
         .expect("commands after the reopen");
-    assert_eq!(first.linear_percent, 0);
+    assert_eq!(first.linear, 0.0);
 }
 
-#[test]
-fn a_stop_comes_through_the_stop_service_with_every_control_slot_taken() {
-    let mut pair = Pair::new(Transport::Sim);
+fn a_stop_comes_through_the_stop_service_with_every_control_slot_taken(protocol: Protocol) {
+    let mut pair = Pair::of(protocol);
     for port in 100..100 + scout_interface::control::MAX_CLIENTS as u128 {
         let client = Client("holder", port, false);
         pair.request(
@@ -1001,9 +1133,8 @@ fn a_stop_comes_through_the_stop_service_with_every_control_slot_taken() {
     );
 }
 
-#[test]
-fn the_frame_after_an_overrun_is_already_zero() {
-    let mut pair = Pair::new(Transport::Sim);
+fn the_frame_after_an_overrun_is_already_zero(protocol: Protocol) {
+    let mut pair = Pair::of(protocol);
     pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(1));
     let stalled = pair.core.poll_timeout();
     pair.now = stalled;
@@ -1014,28 +1145,14 @@ fn the_frame_after_an_overrun_is_already_zero() {
         .into_iter()
         .find(|(at, _)| *at > stalled)
         .expect("a command after the stall");
-    assert_eq!(
-        first.linear_percent, 0,
-        "no motion after the chassis timed out"
-    );
+    assert_eq!(first.linear, 0.0, "no motion after the chassis timed out");
 }
 
-#[test]
-fn a_chassis_exception_state_is_a_gap() {
-    let mut pair = Pair::new(Transport::Sim);
-    let status = |state: u8, count: u8| {
-        RxEvent::Message(Counted {
-            message: Message::SystemStatus(scout_protocol::SystemStatus {
-                state: scout_protocol::ChassisState::from_raw(state),
-                control_mode: scout_protocol::ControlMode::Can,
-                battery_decivolts: 250,
-                faults: scout_protocol::FaultBits::NONE,
-            }),
-            count,
-        })
-    };
+fn a_chassis_exception_state_is_a_gap(protocol: Protocol) {
+    let mut pair = Pair::of(protocol);
+    pair.run(ms(100));
     pair.feedback = false;
-    pair.core.handle_rx(pair.now, &status(2, 200));
+    pair.inject_system(2, 200);
     pair.step();
     assert!(
         pair.stops()
@@ -1044,3 +1161,353 @@ fn a_chassis_exception_state_is_a_gap() {
         pair.stops()
     );
 }
+
+/// The 0x421 frames sent, with the mode each asked for.
+fn mode_requests(pair: &Pair) -> Vec<(Duration, ControlModeV2)> {
+    pair.v2_others()
+        .into_iter()
+        .filter_map(|(at, message)| match message {
+            MessageV2::ControlMode(mode) => Some((at, mode)),
+            _ => None,
+        })
+        .collect()
+}
+
+#[test]
+fn v2_the_command_mode_is_taken_only_when_a_client_drives_and_before_its_first_motion() {
+    let mut pair = Pair::of(Protocol::V2);
+    pair.run(Duration::from_secs(2));
+    assert!(mode_requests(&pair).is_empty(), "nothing taken at start-up");
+    assert_eq!(pair.chassis.stats().control_mode, "standby");
+    assert!(pair.motion_commands().iter().all(|(_, c)| c.linear == 0.0));
+    pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(2));
+    let requests = mode_requests(&pair);
+    assert_eq!(requests.len(), 1, "one request, answered: {requests:?}");
+    let (asked, mode) = requests[0];
+    assert_eq!(mode, ControlModeV2::Can);
+    let first_motion = pair
+        .sent
+        .iter()
+        .position(|(_, frame)| {
+            matches!(frame, Outgoing::V2(MessageV2::MotionCommand(c)) if c.linear_mm_s != 0)
+        })
+        .expect("it drove");
+    let request = pair
+        .sent
+        .iter()
+        .position(|(at, frame)| {
+            *at == asked && matches!(frame, Outgoing::V2(MessageV2::ControlMode(_)))
+        })
+        .expect("sent");
+    assert!(
+        request < first_motion,
+        "0x421 before the first motion on the wire"
+    );
+    assert!((pair.chassis.actual().linear - 0.5).abs() < 0.02);
+    assert_eq!(
+        pair.last_state().system.control_mode,
+        ControlModeV2::Can.raw()
+    );
+    assert!(pair.stops().is_empty());
+}
+
+#[test]
+fn v2_a_chassis_that_does_not_take_the_mode_latches_a_stop_that_says_what_to_check() {
+    let mut pair = Pair::of(Protocol::V2);
+    pair.mode_requests = false;
+    pair.run(ms(500));
+    pair.take(TELEOP, Class::Teleop).expect("take");
+    let answers = pair.keep_streaming(TELEOP, 0.5, Duration::from_secs(2));
+    assert!(answers.iter().any(Result::is_err), "revoked by the stop");
+    assert_eq!(
+        pair.stops(),
+        [("gateway".to_owned(), StopCause::ChassisMode)]
+    );
+    let status = pair.statuses().last().expect("status").1;
+    let reason = status.stops()[0].reason.as_str().to_owned();
+    assert!(
+        reason.contains("standby") && reason.contains("SWB"),
+        "{reason}"
+    );
+    let requests = mode_requests(&pair);
+    assert!(
+        (5..=6).contains(&requests.len()),
+        "repeated within the second: {requests:?}"
+    );
+    assert_eq!(pair.chassis.actual().linear, 0.0);
+    // Fixed (SWB up): a release and a new take drive.
+    pair.mode_requests = true;
+    release_and_check_nothing_restarts(&mut pair, TELEOP);
+}
+
+#[test]
+fn v2_standby_while_driving_stops_and_nothing_takes_the_mode_again_by_itself() {
+    let mut pair = Pair::of(Protocol::V2);
+    pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(2));
+    let at = pair.now - pair.epoch;
+    pair.chassis.inject(at, Injection::Standby);
+    let lost_at = pair.now;
+    pair.keep_streaming(TELEOP, 0.5, ms(300));
+    assert_eq!(
+        pair.stops(),
+        [("gateway".to_owned(), StopCause::ChassisMode)]
+    );
+    stays_still(&mut pair, TELEOP, Duration::from_secs(2));
+    assert!(
+        mode_requests(&pair).iter().all(|(at, _)| *at < lost_at),
+        "no 0x421 after the loss without a release and a new take"
+    );
+    release_and_check_nothing_restarts(&mut pair, TELEOP);
+    assert_eq!(mode_requests(&pair).len(), 2, "the new take asked again");
+}
+
+#[test]
+fn v2_the_rc_is_never_fought() {
+    let mut pair = Pair::of(Protocol::V2);
+    pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(1));
+    let at = pair.now - pair.epoch;
+    pair.chassis.inject(at, Injection::Rc(true));
+    let rc_at = pair.now;
+    pair.keep_streaming(TELEOP, 0.5, ms(300));
+    assert!(
+        pair.stops()
+            .contains(&("gateway".into(), StopCause::RcOverride))
+    );
+    // Clients keep trying to take control and drive while the RC holds the chassis.
+    for _ in 0..50 {
+        pair.leases.remove(&TELEOP.1);
+        let _ = pair.drive(TELEOP, Class::Teleop, 0.5);
+        pair.run(TICK);
+    }
+    assert!(
+        mode_requests(&pair).iter().all(|(at, _)| *at < rc_at),
+        "no 0x421 while the RC holds the chassis"
+    );
+    let at = pair.now - pair.epoch;
+    pair.chassis.inject(at, Injection::Rc(false));
+    pair.run(ms(300));
+    assert_eq!(
+        pair.chassis.stats().control_mode,
+        "standby",
+        "the RC left it in standby"
+    );
+    stays_still(&mut pair, TELEOP, Duration::from_secs(1));
+    release_and_check_nothing_restarts(&mut pair, TELEOP);
+}
+
+#[test]
+fn v2_exit_sends_zero_then_leaves_the_chassis_in_standby() {
+    let mut pair = Pair::of(Protocol::V2);
+    pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(1));
+    pair.core.handle_shutdown();
+    let began = pair.now;
+    pair.run_until(Duration::from_secs(1), |pair| pair.core.is_finished());
+    let after: Vec<&Outgoing> = pair
+        .sent
+        .iter()
+        .filter(|(at, _)| *at >= began)
+        .map(|(_, frame)| frame)
+        .collect();
+    let zero = Outgoing::V2(MessageV2::MotionCommand(MotionV2::default()));
+    let standby = Outgoing::V2(MessageV2::ControlMode(ControlModeV2::Standby));
+    assert_eq!(after, [&zero, &zero, &zero, &zero, &zero, &standby]);
+    assert_eq!(pair.chassis.stats().control_mode, "standby");
+}
+
+#[test]
+fn v2_firmware_versions_are_asked_once_and_published() {
+    let mut pair = Pair::of(Protocol::V2);
+    pair.run(Duration::from_secs(1));
+    let requests: Vec<MessageV2> = pair
+        .v2_others()
+        .into_iter()
+        .map(|(_, message)| message)
+        .filter(|message| matches!(message, MessageV2::VersionRequest(_)))
+        .collect();
+    assert_eq!(requests.len(), 2, "both forms, once: {requests:?}");
+    let state = pair.last_state();
+    assert!(state.firmware.received.valid);
+    assert!(
+        state.firmware.text.as_str().contains("scout-sim v2"),
+        "{:?}",
+        state.firmware.text.as_str()
+    );
+}
+
+#[test]
+fn v2_lights_and_error_clears_go_out_as_v2_frames() {
+    let mut pair = Pair::of(Protocol::V2);
+    pair.run(ms(300));
+    pair.request(
+        OFFICER,
+        &Request::Lights(LightsSetting::Manual(LightCommand {
+            enabled: true,
+            front: Light {
+                mode: LightMode::Custom,
+                brightness: 40,
+            },
+            rear: Light::default(),
+        })),
+    )
+    .expect("lights");
+    pair.run(ms(500));
+    let lights = pair.light_commands();
+    assert!(intervals(&lights).iter().all(|gap| *gap == ms(25)));
+    let state = pair.last_state();
+    assert!(state.lights.enabled);
+    assert_eq!(state.lights.feedback().front.brightness, 40);
+    let at = pair.now - pair.epoch;
+    pair.chassis.inject(
+        at,
+        Injection::MotorCommFault(scout_protocol::Motor::ALL[1], true),
+    );
+    pair.run(ms(300));
+    assert!(
+        pair.stops()
+            .contains(&("gateway".into(), StopCause::ChassisFault))
+    );
+    pair.request(
+        OPERATOR,
+        &Request::ClearFault(Some(scout_protocol::FaultClear::Motor2Comm)),
+    )
+    .expect("clear");
+    pair.run(ms(300));
+    let clears: Vec<MessageV2> = pair
+        .v2_others()
+        .into_iter()
+        .map(|(_, message)| message)
+        .filter(|message| matches!(message, MessageV2::ErrorClear(_)))
+        .collect();
+    assert!(!clears.is_empty());
+    assert!(
+        clears
+            .iter()
+            .all(|c| *c == MessageV2::ErrorClear(scout_protocol::v2::ErrorClearV2::Motor2))
+    );
+    assert_eq!(pair.last_state().faults(), [], "cleared on the chassis");
+}
+
+#[test]
+fn the_model_sets_the_limits_a_v2_chassis_is_driven_by() {
+    for (model, fastest) in [(Model::Scout2, 1.5), (Model::ScoutMini, 2.5)] {
+        let mut config = config(Protocol::V2);
+        config.model = Some(model);
+        config.arbiter.limits.linear_acceleration = 5.0;
+        let mut pair = Pair::with_config(Transport::Sim, &config);
+        let answer = pair.drive(TELEOP, Class::Teleop, 2.5).expect("accepted");
+        assert_eq!(answer.clamped, fastest < 2.5, "{model}");
+        pair.stream(TELEOP, Class::Teleop, 2.5, Duration::from_secs(4));
+        let top = pair
+            .motion_commands()
+            .iter()
+            .map(|(_, c)| c.linear)
+            .fold(0.0, f64::max);
+        assert_eq!(top, fastest, "{model}");
+        let state = pair.last_state();
+        assert_eq!(state.chassis.model(), Some(model));
+        assert!((state.motion.linear() - fastest).abs() < 0.05, "{model}");
+    }
+}
+
+#[test]
+fn with_auto_nothing_goes_out_until_the_protocol_is_told_then_it_drives() {
+    for firmware in Protocol::ALL {
+        let config = GatewayConfig::default();
+        let mut pair = Pair::with_firmware(firmware, Transport::Sim, &config, Start::Clean);
+        pair.run(ms(250));
+        assert!(
+            pair.sent.is_empty(),
+            "{firmware}: listening: {:?}",
+            pair.sent
+        );
+        assert_eq!(pair.core.link_protocol(), None);
+        pair.run(ms(200));
+        assert_eq!(pair.core.link_protocol(), Some(firmware));
+        assert_eq!(pair.last_state().link.protocol(), Some(firmware));
+        assert!(
+            pair.sent
+                .iter()
+                .all(|(_, frame)| frame.protocol() == firmware)
+        );
+        pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(2));
+        assert!(
+            (pair.chassis.actual().linear - 0.5).abs() < 0.02,
+            "{firmware}"
+        );
+    }
+}
+
+#[test]
+fn a_chassis_of_the_other_protocol_moves_nothing_and_the_stop_says_why() {
+    for firmware in Protocol::ALL {
+        let gateway = firmware.other();
+        let mut pair =
+            Pair::with_firmware(firmware, Transport::Sim, &config(gateway), Start::Clean);
+        pair.run(ms(400));
+        assert_eq!(pair.last_state().link.state(), LinkState::ProtocolMismatch);
+        pair.run(ms(400));
+        let status = pair.statuses().last().expect("status").1;
+        let silent = status
+            .stops()
+            .iter()
+            .find(|s| s.cause == StopCause::ChassisSilent.raw())
+            .expect("a stop");
+        let reason = silent.reason.as_str();
+        assert!(
+            reason.contains(&format!("--protocol {firmware}")),
+            "{reason}"
+        );
+        let refused = pair.take(TELEOP, Class::Teleop).expect_err("stopped");
+        assert_eq!(refused.kind, Some(RejectionKind::Latched));
+        assert!(
+            pair.sent
+                .iter()
+                .all(|(_, frame)| frame.protocol() == gateway)
+        );
+        assert_eq!(pair.chassis.actual().linear, 0.0);
+    }
+}
+
+/// Runs each scenario against a chassis of each protocol: `on_v1::NAME` and `on_v2::NAME`.
+macro_rules! both_protocols {
+    ($($name:ident),+ $(,)?) => {
+        mod on_v1 {
+            $(#[test]
+            fn $name() {
+                super::$name(scout_protocol::version::Protocol::V1);
+            })+
+        }
+        mod on_v2 {
+            $(#[test]
+            fn $name() {
+                super::$name(scout_protocol::version::Protocol::V2);
+            })+
+        }
+    };
+}
+
+both_protocols!(
+    motion_commands_go_out_on_the_20_ms_grid_for_ten_minutes,
+    a_late_tick_is_sent_once_and_the_missed_ones_are_skipped,
+    a_stop_goes_on_the_wire_at_once_not_at_the_next_tick,
+    teleop_drives_the_chassis_and_a_stale_stream_ramps_to_zero,
+    a_dead_client_loses_control_at_once,
+    state_is_published_per_feedback_on_link_changes_and_every_100_ms_while_silent,
+    status_is_published_on_change_and_once_a_second,
+    odometry_reset_is_answered_and_published,
+    shutdown_sends_zero_for_the_configured_cycles_then_finishes,
+    malformed_requests_are_answered_and_counted,
+    a_link_lost_and_back_does_not_restart_a_streaming_client,
+    a_silent_chassis_is_a_gap_that_holds_until_it_speaks_again,
+    a_chassis_estop_episode_does_not_restart_motion,
+    rc_and_latched_protections_are_gaps,
+    a_tick_later_than_the_chassis_timeout_is_an_overrun,
+    a_can_fault_latches_and_the_first_command_after_recovery_is_zero,
+    a_stop_comes_through_the_stop_service_with_every_control_slot_taken,
+    the_frame_after_an_overrun_is_already_zero,
+    a_failed_port_is_reopened_with_a_doubling_backoff,
+    after_an_unclean_exit_the_gateway_starts_stopped,
+    a_stall_that_may_have_let_the_chassis_time_out_latches_an_overrun,
+    a_chassis_faster_than_commanded_is_a_runaway,
+    a_chassis_exception_state_is_a_gap,
+);

@@ -8,9 +8,10 @@ use std::time::Duration;
 use iceoryx2::port::listener::Listener;
 use scout_interface::Ipc;
 use scout_io::{Incoming, Port};
-use scout_protocol::link::{RxError, RxEvent, StreamFraming, decode_can, encode_stream};
+use scout_protocol::Transport;
+use scout_protocol::link::{Outgoing, RxError, RxEvent, StreamFraming, decode_can, encode_stream};
 use scout_protocol::slcan::{self, Bitrate, Slcan};
-use scout_protocol::{Counted, Transport, can};
+use scout_protocol::version::Protocol;
 use scout_sim::{Chassis, Feedback, SimParams};
 
 use crate::lock::{Lock, LockError};
@@ -25,8 +26,13 @@ pub enum DeviceSpec {
     Slcan(PathBuf),
     /// A SocketCAN interface.
     Can(String),
-    /// The simulated chassis, in-process.
-    Sim(SimParams),
+    /// The simulated chassis, in-process, with the firmware of `protocol`.
+    Sim {
+        /// Its parameters.
+        params: SimParams,
+        /// Its firmware's protocol.
+        protocol: Protocol,
+    },
 }
 
 impl DeviceSpec {
@@ -36,7 +42,7 @@ impl DeviceSpec {
             Self::Serial(_) => Transport::Serial,
             Self::Slcan(_) => Transport::Slcan,
             Self::Can(_) => Transport::Can,
-            Self::Sim(_) => Transport::Sim,
+            Self::Sim { .. } => Transport::Sim,
         }
     }
 
@@ -45,7 +51,7 @@ impl DeviceSpec {
         match self {
             Self::Serial(path) | Self::Slcan(path) => path.display().to_string(),
             Self::Can(interface) => interface.clone(),
-            Self::Sim(_) => "simulator".into(),
+            Self::Sim { .. } => "simulator".into(),
         }
     }
 
@@ -58,7 +64,7 @@ impl DeviceSpec {
                 .display()
                 .to_string(),
             Self::Can(interface) => format!("can-{interface}"),
-            Self::Sim(_) => return Ok(None),
+            Self::Sim { .. } => return Ok(None),
         };
         let what = format!("device {}", self.name());
         Ok(Some(Lock::acquire(&format!("device-{key}"), &what, "")?))
@@ -73,9 +79,13 @@ impl DeviceSpec {
                 Port::open_tty(path).map_err(io::Error::from)?
             }
             Self::Can(interface) => Port::open_can(interface)?,
-            Self::Sim(params) => {
+            Self::Sim { params, protocol } => {
                 // The model's clock reads zero at `epoch`, the gateway's time of opening.
-                let chassis = Box::new(Chassis::new(params.clone(), Transport::Sim));
+                let chassis = Chassis::new(params.clone(), Transport::Sim);
+                let chassis = Box::new(match protocol {
+                    Protocol::V1 => chassis,
+                    Protocol::V2 => chassis.with_protocol_v2(),
+                });
                 return Ok(Device::Sim {
                     chassis,
                     epoch: now,
@@ -165,17 +175,21 @@ impl Device {
         write_all(port, &setup)
     }
 
-    /// Sends one message.
-    pub fn send(&mut self, counted: &Counted, now: Duration) -> io::Result<()> {
+    /// Sends one frame.
+    pub fn send(&mut self, frame: &Outgoing, now: Duration) -> io::Result<()> {
         match self {
             Self::Sim { chassis, epoch } => {
-                chassis.handle_message(now.saturating_sub(*epoch), *counted);
+                let at = now.saturating_sub(*epoch);
+                match frame {
+                    Outgoing::V1(counted) => chassis.handle_message(at, *counted),
+                    Outgoing::V2(message) => chassis.handle_v2(at, *message),
+                };
                 Ok(())
             }
             Self::Port {
                 port: port @ Port::Can(_),
                 ..
-            } => port.write_frame(&can::encode(&counted.message, counted.count)),
+            } => port.write_frame(&frame.can_frame()),
             Self::Port {
                 port,
                 transport,
@@ -183,7 +197,8 @@ impl Device {
                 ..
             } => {
                 out.clear();
-                encode_stream(*transport, &counted.message, counted.count, out);
+                encode_stream(*transport, frame, out)
+                    .map_err(|error| io::Error::new(io::ErrorKind::Unsupported, error))?;
                 write_all(port, out)
             }
         }
@@ -222,8 +237,10 @@ impl Device {
                     Some(Feedback::V1(batch)) => batch
                         .into_iter()
                         .for_each(|counted| on_event(RxEvent::Message(counted))),
-                    // The in-process simulator is made with v1 firmware (`open`).
-                    Some(Feedback::V2(_)) | None => {}
+                    Some(Feedback::V2(frames)) => frames
+                        .into_iter()
+                        .for_each(|message| on_event(RxEvent::V2(message))),
+                    None => {}
                 }
             }
             Self::Port { port, framing, .. } => {

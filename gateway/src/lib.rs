@@ -4,8 +4,9 @@
 //! - [`device`]: the port with its framing, or the simulated chassis in-process (`--sim`).
 //! - [`core`]: the sans-IO core: frames, requests, deaths and time in; frames to send, state and
 //!   status to publish and the next deadline out. It holds:
-//!   - [`state`]: the chassis state tracker (link state, statistics, odometry);
-//!   - [`arbiter`]: who drives: safety stop > teleop > autonomy.
+//!   - [`state`]: the chassis state tracker (protocol, link state, statistics, odometry);
+//!   - [`arbiter`]: who drives: safety stop > teleop > autonomy;
+//!   - [`command_mode`]: a protocol v2 chassis' command mode, taken with 0x421 and watched.
 //! - [`driver`]: the one thread that does I/O around the core: port, iceoryx2, clock, `ppoll`.
 //! - [`wait`]: waiting on the port and the clients' wake-up event at once.
 //! - [`monitor`]: dead-process detection for clients.
@@ -18,6 +19,7 @@
 //! starts beside the driver; the contract with every client is `scout-interface`.
 
 pub mod arbiter;
+pub mod command_mode;
 pub mod config;
 pub mod core;
 pub mod device;

@@ -1,22 +1,33 @@
-//! The one chassis state: received feedback, link statistics and state, odometry. Sans-IO: events
-//! and CLOCK_MONOTONIC times in, the payload to publish out.
+//! The one chassis state: received feedback in either protocol, link statistics and state, the
+//! protocol the chassis speaks, odometry. Sans-IO: events and CLOCK_MONOTONIC times in, the
+//! payload to publish out.
 
 use std::time::Duration;
 
-use scout_interface::state::{CommandPayload, LinkState, OdometryPayload, Received, StatePayload};
+use scout_interface::state::{
+    ChassisPayload, CommandPayload, LinkState, OdometryPayload, Received, StatePayload,
+};
 use scout_interface::{FixedText, Transport};
-use scout_protocol::kinematics::Pose;
+use scout_protocol::kinematics::{Pose, wrap_angle};
 use scout_protocol::link::RxEvent;
+use scout_protocol::model::Model;
 use scout_protocol::sequence::{Continuity, SequenceTracker};
 use scout_protocol::slcan::Slcan;
-use scout_protocol::version::{ProtocolVersion, VersionDetector};
-use scout_protocol::{Counted, Direction, Message, MotionCommand};
+use scout_protocol::v2::MessageV2;
+use scout_protocol::version::{Detection, Protocol, ProtocolDetector};
+use scout_protocol::{Counted, Direction, Message};
 use tracing::{error, info, warn};
 
 /// No valid feedback for this long: the link is `silent`.
 pub const SILENT_AFTER: Duration = Duration::from_millis(100);
-/// Odometry does not integrate across a gap longer than this (the speed over it is unknown).
+/// Odometry does not integrate body rates across a gap longer than this (the speed over it is
+/// unknown).
 const MAX_ODOMETRY_STEP: Duration = Duration::from_millis(100);
+/// The wheel odometers count across gaps up to this long (their distance is cumulative; the
+/// heading over a longer gap is too uncertain to place it).
+const MAX_ODOMETER_STEP: Duration = Duration::from_secs(1);
+/// The body rates move the pose only while no odometer reading came for this long.
+const ODOMETER_FRESH: Duration = Duration::from_millis(200);
 
 fn nanos(time: Duration) -> u64 {
     time.as_nanos() as u64
@@ -31,19 +42,6 @@ pub enum Publish {
     Yes,
 }
 
-/// The chassis state and what keeps it up to date.
-#[derive(Debug, Clone)]
-pub struct StateTracker {
-    state: StatePayload,
-    sequence: SequenceTracker,
-    version: VersionDetector,
-    link_state: LinkState,
-    last_feedback: Option<Duration>,
-    foreign_commands_reported: bool,
-    /// The link's port counters when the current port opened: a new port counts from zero.
-    counted_by_closed_ports: PortCounters,
-}
-
 /// What the port itself counts, from when it opened.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct PortCounters {
@@ -53,25 +51,70 @@ pub struct PortCounters {
     pub overflowed_frames: u64,
 }
 
+/// The chassis state and what keeps it up to date.
+#[derive(Debug, Clone)]
+pub struct StateTracker {
+    state: StatePayload,
+    sequence: SequenceTracker,
+    detector: ProtocolDetector,
+    /// The protocol the gateway was told to speak, if it was.
+    fixed: Option<Protocol>,
+    /// The protocol whose feedback is used on this port: the fixed one, or the detected one.
+    protocol: Option<Protocol>,
+    /// The configured model, if any (else the detected protocol's default).
+    model: Option<Model>,
+    /// Why nothing the chassis sends is used, when that is so.
+    mismatch: Option<Mismatch>,
+    link_state: LinkState,
+    last_feedback: Option<Duration>,
+    foreign_commands_reported: bool,
+    other_protocol_reported: bool,
+    unknown_bits_reported: u16,
+    /// The link's port counters when the current port opened: a new port counts from zero.
+    counted_by_closed_ports: PortCounters,
+    /// The yaw at the last odometer reading (v2): the heading of the next step is midway.
+    yaw_at_odometer: f64,
+}
+
 impl StateTracker {
-    /// A tracker for `robot` on `transport`/`device`, before the port is open.
-    pub fn new(robot: &str, transport: Transport, device: &str, max_angular: f64) -> Self {
+    /// A tracker for `robot` on `transport`/`device`, before the port is open, speaking `fixed`
+    /// or telling the protocol from the frames; `chassis` is the model and limits it drives
+    /// by (`model` 0 when none was configured: the detected protocol's default is shown).
+    pub fn new(
+        robot: &str,
+        transport: Transport,
+        device: &str,
+        fixed: Option<Protocol>,
+        chassis: ChassisPayload,
+    ) -> Self {
         let mut state = StatePayload {
             robot: FixedText::new(robot),
-            max_angular,
+            chassis,
             ..StatePayload::default()
         };
         state.link.transport = transport.raw();
         state.link.device = FixedText::new(device);
         state.link.state = LinkState::Disconnected.raw();
+        state.link.protocol = fixed.map_or(0, Protocol::raw);
+        let model = chassis.model();
+        if let (None, Some(protocol)) = (model, fixed) {
+            state.chassis.model = Model::default_for(protocol).raw();
+        }
         Self {
             state,
             sequence: SequenceTracker::new(),
-            version: VersionDetector::new(),
+            detector: ProtocolDetector::new(),
+            fixed,
+            protocol: fixed,
+            model,
+            mismatch: None,
             link_state: LinkState::Disconnected,
             last_feedback: None,
             foreign_commands_reported: false,
+            other_protocol_reported: false,
+            unknown_bits_reported: 0,
             counted_by_closed_ports: PortCounters::default(),
+            yaw_at_odometer: 0.0,
         }
     }
 
@@ -83,6 +126,17 @@ impl StateTracker {
     /// The current link state.
     pub fn link_state(&self) -> LinkState {
         self.link_state
+    }
+
+    /// The protocol the gateway speaks on this port: the fixed one, or the detected one (none
+    /// while listening, or after feedback of both).
+    pub fn protocol(&self) -> Option<Protocol> {
+        self.protocol
+    }
+
+    /// Why nothing the chassis sends is used, if that is so.
+    pub fn mismatch(&self) -> Option<&Mismatch> {
+        self.mismatch.as_ref()
     }
 
     /// The state as it would be published now (sequence number and time not yet stamped).
@@ -107,10 +161,15 @@ impl StateTracker {
         Publish::Yes
     }
 
-    /// The port opened (again): counts restart, another chassis may be at the other end.
+    /// The port opened (again): counts restart, another chassis may be at the other end (with
+    /// `auto`, its protocol is told anew).
     pub fn handle_connected(&mut self, reconnect: bool) -> Publish {
         self.sequence.reset();
-        self.version.reset();
+        self.detector.reset();
+        self.protocol = self.fixed;
+        self.state.link.protocol = self.fixed.map_or(0, Protocol::raw);
+        self.mismatch = None;
+        self.other_protocol_reported = false;
         self.last_feedback = None;
         self.counted_by_closed_ports = PortCounters {
             discarded_bytes: self.state.link.discarded_bytes,
@@ -135,12 +194,12 @@ impl StateTracker {
         self.state.link.overflowed_frames = before.overflowed_frames + port.overflowed_frames;
     }
 
-    /// A motion command was sent.
-    pub fn handle_sent_motion(&mut self, command: &MotionCommand, now: Duration) {
+    /// A motion command went out at `linear` m/s and `angular` rad/s, as the wire carries them.
+    pub fn handle_sent_motion(&mut self, linear: f64, angular: f64, now: Duration) {
         self.state.link.tx_frames += 1;
         self.state.command = CommandPayload {
-            linear: command.linear(),
-            angular: command.angular(self.state.max_angular),
+            linear,
+            angular,
             at_ns: nanos(now),
         };
     }
@@ -150,6 +209,11 @@ impl StateTracker {
         self.state.link.tx_frames += 1;
     }
 
+    /// The firmware versions were asked for: what answers comes anew.
+    pub fn handle_version_requested(&mut self) {
+        self.state.firmware = Default::default();
+    }
+
     /// Resets odometry to the origin.
     pub fn reset_odometry(&mut self) -> Publish {
         let resets = self.state.odometry.resets + 1;
@@ -157,23 +221,51 @@ impl StateTracker {
             resets,
             ..OdometryPayload::default()
         };
+        self.yaw_at_odometer = 0.0;
         Publish::Yes
     }
 
-    /// Time passes: the link goes silent after 100 ms without feedback, and a v2 chassis is
-    /// recognised.
+    /// Time passes: the protocol is told, the link goes silent after 100 ms without feedback.
     pub fn poll(&mut self, now: Duration) -> Publish {
         if self.link_state == LinkState::Disconnected {
             return Publish::No;
         }
-        if self.version.version(now) == ProtocolVersion::V2 {
-            if self.link_state != LinkState::ProtocolV2 {
-                error!(
-                    "the chassis speaks protocol v2, not supported by this gateway (v1 only): \
-                     nothing it sends is published"
+        let detection = self.detector.detection(now);
+        match (self.fixed, self.protocol, detection) {
+            (None, None, Detection::Found(protocol)) => {
+                info!(
+                    "the chassis speaks protocol {protocol} ({} seen, none of {}'s)",
+                    self.detector.ids(protocol),
+                    protocol.other()
                 );
+                self.use_protocol(protocol);
             }
-            return self.set_link_state(LinkState::ProtocolV2);
+            (None, None, Detection::Both) => self.set_mismatch(Mismatch {
+                reason: "feedback of both protocols: see the gateway's log".into(),
+                detail: format!(
+                    "feedback of both protocols arrives (v1: {}; v2: {}): two chassis, or \
+                     another node using their ids, on this bus; nothing is used until the port \
+                     reopens",
+                    self.detector.ids(Protocol::V1),
+                    self.detector.ids(Protocol::V2)
+                ),
+            }),
+            (Some(fixed), _, Detection::Found(other))
+                if other != fixed && !self.detector.heard(fixed) =>
+            {
+                self.set_mismatch(Mismatch {
+                    reason: format!("the chassis speaks {other}: use --protocol {other} or auto"),
+                    detail: format!(
+                        "the chassis speaks protocol {other} ({} seen), the gateway was started \
+                         with --protocol {fixed}: start it with --protocol {other}, or auto",
+                        self.detector.ids(other)
+                    ),
+                });
+            }
+            _ => {}
+        }
+        if self.mismatch.is_some() && self.last_feedback.is_none() {
+            return self.set_link_state(LinkState::ProtocolMismatch);
         }
         let silent = self
             .last_feedback
@@ -184,22 +276,58 @@ impl StateTracker {
         Publish::No
     }
 
+    fn use_protocol(&mut self, protocol: Protocol) {
+        self.protocol = Some(protocol);
+        self.state.link.protocol = protocol.raw();
+        if self.model.is_none() {
+            self.state.chassis.model = Model::default_for(protocol).raw();
+        }
+    }
+
+    fn set_mismatch(&mut self, mismatch: Mismatch) {
+        if self.mismatch.is_none() {
+            error!("{}", mismatch.detail);
+            self.mismatch = Some(mismatch);
+        }
+    }
+
+    /// Whether feedback of `protocol` is used now; frames of a protocol that is not are
+    /// counted as rejected, once the chassis' protocol is known.
+    fn accepts(&mut self, protocol: Protocol, id: u16) -> Accept {
+        match self.protocol {
+            Some(ours) if ours == protocol => match (protocol, self.fixed) {
+                // Until a 0x151 proves v1, ids v2 shares (0x131, 0x141) may mean something else.
+                (Protocol::V1, _) if !self.detector.heard(Protocol::V1) => Accept::Count,
+                _ => Accept::Use,
+            },
+            Some(ours) => {
+                if !self.other_protocol_reported {
+                    warn!(
+                        "a protocol {protocol} frame (0x{id:03X}) on a protocol {ours} link: \
+                         another node on the bus, or another chassis; counted as rejected"
+                    );
+                    self.other_protocol_reported = true;
+                }
+                Accept::Reject
+            }
+            None => Accept::Count,
+        }
+    }
+
     /// One thing received from the port at `now`.
     pub fn handle_rx(&mut self, event: &RxEvent, now: Duration) -> Publish {
         match event {
             RxEvent::Message(counted) => {
-                self.version.observe(counted.message.kind().can_id(), now);
+                self.detector.observe(counted.message.kind().can_id(), now);
                 self.handle_message(counted, now)
             }
             RxEvent::V2(message) => {
-                // A protocol v2 chassis: its frames tell the version, and are not ours to use.
-                self.version.observe(message.can_id(), now);
-                self.state.link.rejected_frames += 1;
-                Publish::No
+                self.detector.observe(message.can_id(), now);
+                self.handle_v2(message, now)
             }
             RxEvent::Rejected(rejected) => {
                 if let Some(id) = rejected.can_id() {
-                    self.version.observe(id, now);
+                    self.detector.observe(id, now);
                 }
                 if rejected.is_checksum() {
                     self.state.link.checksum_errors += 1;
@@ -216,18 +344,25 @@ impl StateTracker {
         }
     }
 
+    fn foreign_command(&mut self, name: &str, id: u16) -> Publish {
+        if !self.foreign_commands_reported {
+            warn!(
+                "another host sends {name} (0x{id:03X}) on the bus: two programs are commanding \
+                 the chassis"
+            );
+            self.foreign_commands_reported = true;
+        }
+        self.state.link.rejected_frames += 1;
+        Publish::No
+    }
+
     fn handle_message(&mut self, counted: &Counted, now: Duration) -> Publish {
         let kind = counted.message.kind();
         if kind.direction() == Direction::Command {
-            if !self.foreign_commands_reported {
-                warn!(
-                    "another host sends {} (0x{:03X}) on the bus: two programs are commanding \
-                     the chassis",
-                    kind.name(),
-                    kind.can_id()
-                );
-                self.foreign_commands_reported = true;
-            }
+            return self.foreign_command(kind.name(), kind.can_id());
+        }
+        let accept = self.accepts(Protocol::V1, kind.can_id());
+        if accept == Accept::Reject {
             self.state.link.rejected_frames += 1;
             return Publish::No;
         }
@@ -235,13 +370,12 @@ impl StateTracker {
         if let Continuity::Gap { lost } = self.sequence.observe(kind, counted.count) {
             self.state.link.dropped_frames += u64::from(lost);
         }
-        if self.version.version(now) != ProtocolVersion::V1 {
-            // Until a 0x151 proves v1, ids that v2 shares (0x131, 0x141) may mean something else.
+        if accept == Accept::Count {
             return Publish::No;
         }
         self.last_feedback = Some(now);
         if let Message::MotionFeedback(motion) = &counted.message {
-            self.integrate_odometry(motion.linear(), motion.angular(), now);
+            self.integrate_rates(motion.linear(), motion.angular(), now, true);
         }
         let received = Received {
             valid: true,
@@ -253,7 +387,61 @@ impl StateTracker {
         Publish::Yes
     }
 
-    fn integrate_odometry(&mut self, linear: f64, angular: f64, now: Duration) {
+    fn handle_v2(&mut self, message: &MessageV2, now: Duration) -> Publish {
+        if message.is_command() {
+            return self.foreign_command(message.name(), message.can_id());
+        }
+        let accept = self.accepts(Protocol::V2, message.can_id());
+        if accept == Accept::Reject {
+            self.state.link.rejected_frames += 1;
+            return Publish::No;
+        }
+        self.state.link.rx_frames += 1;
+        if let Some(Continuity::Gap { lost }) = self.sequence.observe_v2(message) {
+            self.state.link.dropped_frames += u64::from(lost);
+        }
+        if accept == Accept::Count {
+            return Publish::No;
+        }
+        self.last_feedback = Some(now);
+        match message {
+            MessageV2::MotionState(motion) => {
+                let translate = !self.odometer_fresh(now);
+                self.integrate_rates(motion.linear(), motion.angular(), now, translate);
+            }
+            MessageV2::Odometer(odometer) => {
+                self.integrate_odometer(odometer.left_mm, odometer.right_mm, now);
+            }
+            MessageV2::SystemState(system) => {
+                let unknown = system.errors.unknown();
+                if unknown != 0 && unknown != self.unknown_bits_reported {
+                    warn!(
+                        "the chassis reports error bits no source names: 0x{unknown:04X} (shown \
+                         as unknown_bit_N in the state, not acted on)"
+                    );
+                    self.unknown_bits_reported = unknown;
+                }
+            }
+            _ => {}
+        }
+        let received = Received {
+            valid: true,
+            count: message.count().unwrap_or(0),
+            at_ns: nanos(now),
+        };
+        self.state.store_v2(message, received);
+        self.set_link_state(LinkState::Ok);
+        Publish::Yes
+    }
+
+    fn odometer_fresh(&self, now: Duration) -> bool {
+        let odometer = &self.state.odometer.received;
+        odometer.valid && now.saturating_sub(Duration::from_nanos(odometer.at_ns)) <= ODOMETER_FRESH
+    }
+
+    /// Integrates the body rates since the previous motion feedback: the heading, and the
+    /// position too when `translate` (no wheel odometer does it).
+    fn integrate_rates(&mut self, linear: f64, angular: f64, now: Duration, translate: bool) {
         let previous = self.state.motion;
         if !previous.received.valid {
             return;
@@ -264,10 +452,13 @@ impl StateTracker {
         }
         let dt = step.as_secs_f64();
         // Trapezoid between the previous and this feedback.
-        let prior = previous.feedback();
-        let v = (prior.linear() + linear) / 2.0;
-        let w = (prior.angular() + angular) / 2.0;
+        let v = (previous.linear() + linear) / 2.0;
+        let w = (previous.angular() + angular) / 2.0;
         let odometry = &mut self.state.odometry;
+        if !translate {
+            odometry.yaw = wrap_angle(odometry.yaw + w * dt);
+            return;
+        }
         let mut pose = Pose {
             x: odometry.x,
             y: odometry.y,
@@ -276,15 +467,75 @@ impl StateTracker {
         pose.step(v, w, dt);
         (odometry.x, odometry.y, odometry.yaw) = (pose.x, pose.y, pose.yaw);
         odometry.distance += (v * dt).abs();
+        self.yaw_at_odometer = odometry.yaw;
     }
+
+    /// Moves the position by the wheel odometers' mean advance since the previous reading,
+    /// along the heading midway between then and now. A step longer than
+    /// [`MAX_ODOMETER_STEP`], or farther than the chassis can go in it (a counter reset by a
+    /// power cycle, a wrap), only takes the new reading as the reference.
+    fn integrate_odometer(&mut self, left_mm: i32, right_mm: i32, now: Duration) {
+        let previous = self.state.odometer;
+        let yaw = self.state.odometry.yaw;
+        let start_yaw = std::mem::replace(&mut self.yaw_at_odometer, yaw);
+        if !previous.received.valid {
+            return;
+        }
+        let step = now.saturating_sub(Duration::from_nanos(previous.received.at_ns));
+        if step > MAX_ODOMETER_STEP {
+            return;
+        }
+        let advance = |now: i32, then: i32| f64::from(now.wrapping_sub(then)) / 1000.0;
+        let (left, right) = (
+            advance(left_mm, previous.left_mm),
+            advance(right_mm, previous.right_mm),
+        );
+        let reach = self.state.chassis.max_linear * 2.0 * step.as_secs_f64().max(0.02) + 0.05;
+        if left.abs() > reach || right.abs() > reach {
+            warn!(
+                "the wheel odometers jumped by {left:.3} m and {right:.3} m in {} ms (a chassis \
+                 power cycle?): odometry continues from the new reading",
+                step.as_millis()
+            );
+            return;
+        }
+        let distance = (left + right) / 2.0;
+        let heading = start_yaw + wrap_angle(yaw - start_yaw) / 2.0;
+        let odometry = &mut self.state.odometry;
+        odometry.x += distance * heading.cos();
+        odometry.y += distance * heading.sin();
+        odometry.distance += distance.abs();
+    }
+}
+
+/// Why nothing the chassis sends is used.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Mismatch {
+    /// For the stop's reason (at most 64 bytes).
+    pub reason: String,
+    /// At length, with the ids seen, for the log.
+    pub detail: String,
+}
+
+/// What becomes of a valid feedback frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Accept {
+    /// It is the chassis' protocol: used.
+    Use,
+    /// Its protocol is not known to be the chassis' yet: counted, not used.
+    Count,
+    /// It is the other protocol's: rejected.
+    Reject,
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use scout_protocol::link::RxError;
-    use scout_protocol::units::DEFAULT_MAX_ANGULAR_SPEED;
-    use scout_protocol::{ChassisState, ControlMode, FaultBits, MotionFeedback, SystemStatus, can};
+    use scout_protocol::v2::{ControlModeV2, ErrorBitsV2, MotionV2, OdometerV2, SystemStateV2};
+    use scout_protocol::{
+        ChassisState, ControlMode, FaultBits, MotionCommand, MotionFeedback, SystemStatus, can,
+    };
 
     fn ms(n: u64) -> Duration {
         Duration::from_millis(n)
@@ -312,11 +563,38 @@ mod tests {
         })
     }
 
-    fn connected() -> StateTracker {
-        let mut tracker =
-            StateTracker::new("test", Transport::Can, "vcan0", DEFAULT_MAX_ANGULAR_SPEED);
+    fn system_v2(count: u8) -> RxEvent {
+        RxEvent::V2(MessageV2::SystemState(SystemStateV2 {
+            state: ChassisState::Normal,
+            control_mode: ControlModeV2::Standby,
+            battery_decivolts: 259,
+            errors: ErrorBitsV2(0),
+            reserved: 0,
+            count,
+        }))
+    }
+
+    fn motion_v2(linear_mm_s: i16, angular_mrad_s: i16) -> RxEvent {
+        RxEvent::V2(MessageV2::MotionState(MotionV2 {
+            linear_mm_s,
+            angular_mrad_s,
+            ..MotionV2::default()
+        }))
+    }
+
+    fn odometer(left_mm: i32, right_mm: i32) -> RxEvent {
+        RxEvent::V2(MessageV2::Odometer(OdometerV2 { left_mm, right_mm }))
+    }
+
+    fn connected_with(fixed: Option<Protocol>) -> StateTracker {
+        let chassis = ChassisPayload::new(Model::Scout, 0.5235);
+        let mut tracker = StateTracker::new("test", Transport::Can, "vcan0", fixed, chassis);
         assert_eq!(tracker.handle_connected(false), Publish::Yes);
         tracker
+    }
+
+    fn connected() -> StateTracker {
+        connected_with(Some(Protocol::V1))
     }
 
     #[test]
@@ -366,15 +644,93 @@ mod tests {
     }
 
     #[test]
-    fn protocol_v2_is_recognised_and_not_published() {
+    fn a_v2_chassis_on_a_v1_gateway_is_a_mismatch_and_nothing_is_used() {
         let mut tracker = connected();
-        let v2 = can::CanError::UnknownId { id: 0x221 };
-        tracker.handle_rx(&RxEvent::Rejected(RxError::Can(v2)), Duration::ZERO);
-        assert_eq!(tracker.handle_rx(&motion(0, 500, 0), ms(1)), Publish::No);
-        assert_eq!(tracker.poll(ms(999)), Publish::No);
-        assert_eq!(tracker.poll(ms(1000)), Publish::Yes);
-        assert_eq!(tracker.link_state(), LinkState::ProtocolV2);
+        tracker.handle_rx(&motion_v2(500, 0), Duration::ZERO);
+        assert_eq!(tracker.handle_rx(&system_v2(0), ms(1)), Publish::No);
+        assert_eq!(tracker.poll(ms(299)), Publish::No);
+        assert_eq!(tracker.poll(ms(300)), Publish::Yes);
+        assert_eq!(tracker.link_state(), LinkState::ProtocolMismatch);
+        let why = tracker.mismatch().expect("a reason");
+        assert!(
+            why.detail.contains("--protocol v2") && why.detail.contains("0x221"),
+            "{why:?}"
+        );
+        assert!(why.reason.len() <= 64 && why.reason.contains("--protocol v2"));
         assert!(!tracker.state().motion.received.valid);
+        assert_eq!(tracker.state().link.rejected_frames, 2);
+        // A reconnect starts over.
+        tracker.handle_connected(true);
+        assert_eq!(tracker.link_state(), LinkState::Silent);
+        assert!(tracker.mismatch().is_none());
+    }
+
+    #[test]
+    fn auto_tells_v2_uses_it_and_rejects_v1_afterwards() {
+        let mut tracker = connected_with(None);
+        assert_eq!(tracker.state().link.protocol, 0);
+        assert_eq!(tracker.state().chassis.model, Model::Scout.raw());
+        tracker.handle_rx(&system_v2(0), Duration::ZERO);
+        assert_eq!(tracker.protocol(), None, "listening");
+        assert!(!tracker.state().system.received.valid);
+        tracker.poll(ms(300));
+        assert_eq!(tracker.protocol(), Some(Protocol::V2));
+        assert_eq!(tracker.state().link.protocol(), Some(Protocol::V2));
+        assert_eq!(tracker.handle_rx(&system_v2(1), ms(310)), Publish::Yes);
+        assert_eq!(tracker.link_state(), LinkState::Ok);
+        assert_eq!(tracker.state().system.battery_decivolts, 259);
+        assert_eq!(tracker.handle_rx(&status(0), ms(320)), Publish::No);
+        assert_eq!(tracker.state().link.rejected_frames, 1);
+        // Another chassis after a reconnect is told anew.
+        tracker.handle_connected(true);
+        assert_eq!(tracker.protocol(), None);
+        tracker.handle_rx(&status(0), ms(400));
+        tracker.poll(ms(700));
+        assert_eq!(tracker.protocol(), Some(Protocol::V1));
+    }
+
+    #[test]
+    fn auto_with_a_configured_model_keeps_it() {
+        let chassis = ChassisPayload::new(Model::ScoutMini, 2.5235);
+        let mut tracker = StateTracker::new("t", Transport::Can, "can0", None, chassis);
+        tracker.handle_connected(false);
+        tracker.handle_rx(&system_v2(0), Duration::ZERO);
+        tracker.poll(ms(300));
+        assert_eq!(tracker.state().chassis.model(), Some(Model::ScoutMini));
+        let chassis = ChassisPayload {
+            model: 0,
+            ..ChassisPayload::new(Model::Scout, 0.5235)
+        };
+        let mut tracker = StateTracker::new("t", Transport::Can, "can0", None, chassis);
+        tracker.handle_connected(false);
+        tracker.handle_rx(&system_v2(0), Duration::ZERO);
+        tracker.poll(ms(300));
+        assert_eq!(tracker.state().chassis.model(), Some(Model::Scout2));
+    }
+
+    #[test]
+    fn feedback_of_both_protocols_is_a_mismatch_that_says_what_was_seen() {
+        let mut tracker = connected_with(None);
+        tracker.handle_rx(&status(0), Duration::ZERO);
+        tracker.handle_rx(&odometer(0, 0), ms(100));
+        tracker.poll(ms(500));
+        assert_eq!(tracker.link_state(), LinkState::ProtocolMismatch);
+        assert_eq!(tracker.protocol(), None);
+        let why = tracker.mismatch().expect("a reason");
+        assert!(
+            why.detail.contains("0x151") && why.detail.contains("0x311"),
+            "{why:?}"
+        );
+        assert!(why.reason.len() <= 64);
+    }
+
+    #[test]
+    fn v2_commands_from_another_host_are_counted_not_applied() {
+        let mut tracker = connected_with(Some(Protocol::V2));
+        let command = RxEvent::V2(MessageV2::MotionCommand(MotionV2::from_si(0.5, 0.0)));
+        assert_eq!(tracker.handle_rx(&command, ms(1)), Publish::No);
+        assert_eq!(tracker.state().link.rejected_frames, 1);
+        assert_eq!(tracker.state().link.rx_frames, 0);
     }
 
     #[test]
@@ -399,6 +755,53 @@ mod tests {
         assert_eq!(
             (odometry.x, odometry.y, odometry.yaw, odometry.resets),
             (0.0, 0.0, 0.0, 1)
+        );
+    }
+
+    #[test]
+    fn on_v2_the_odometers_move_the_position_and_the_rates_turn_it() {
+        let mut tracker = connected_with(Some(Protocol::V2));
+        // The body rates say 2 m/s, the odometers 1 m/s: the odometers win.
+        for i in 0..=50u64 {
+            let t = ms(i * 20);
+            let mm = i as i32 * 20;
+            tracker.handle_rx(&motion_v2(2000, 0), t);
+            tracker.handle_rx(&odometer(1000 + mm, -500 + mm), t);
+        }
+        let odometry = tracker.state().odometry;
+        assert!((odometry.x - 1.0).abs() < 1e-9, "{odometry:?}");
+        assert!((odometry.distance - 1.0).abs() < 1e-9);
+        // Frames lost: the odometers' distance still counts, the rates' heading holds.
+        tracker.handle_rx(&odometer(1000 + 1500, -500 + 1500), ms(1500));
+        assert!((tracker.state().odometry.x - 1.5).abs() < 1e-9);
+        // A quarter turn on the spot, then 1 m along the new heading.
+        let mut t = 1500;
+        for _ in 0..50 {
+            t += 20;
+            tracker.handle_rx(&motion_v2(0, 1571), ms(t));
+            tracker.handle_rx(&odometer(2500, 1000), ms(t));
+        }
+        for i in 1..=50 {
+            t += 20;
+            tracker.handle_rx(&motion_v2(1000, 0), ms(t));
+            tracker.handle_rx(&odometer(2500 + i * 20, 1000 + i * 20), ms(t));
+        }
+        let odometry = tracker.state().odometry;
+        assert!((odometry.yaw - 1.571).abs() < 0.03, "{odometry:?}");
+        assert!(
+            (odometry.x - 1.5).abs() < 0.05 && (odometry.y - 1.0).abs() < 0.05,
+            "{odometry:?}"
+        );
+        // A jump (the chassis power-cycled and its odometers restarted): not a step.
+        t += 20;
+        tracker.handle_rx(&odometer(0, 0), ms(t));
+        let after = tracker.state().odometry;
+        assert_eq!((after.x, after.y), (odometry.x, odometry.y));
+        t += 20;
+        tracker.handle_rx(&odometer(20, 20), ms(t));
+        assert!(
+            tracker.state().odometry.distance > after.distance,
+            "counts from the new reading"
         );
     }
 

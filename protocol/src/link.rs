@@ -5,7 +5,8 @@
 use crate::serial::{self, StreamDecoder};
 use crate::slcan::{self, LineDecoder, Slcan};
 use crate::v2::{self, MessageV2};
-use crate::{CanFrame, ControlMode, Counted, Message, MessageKind, can};
+use crate::version::Protocol;
+use crate::{CanFrame, ControlMode, Counted, MessageKind, can};
 
 /// How the chassis is reached: the one transport enum of the project (configuration, state,
 /// framing, control mode).
@@ -244,31 +245,73 @@ impl StreamFraming {
     }
 }
 
-/// Appends the bytes that carry `message` with `count` on a byte-stream transport: a serial
-/// frame on serial, an slcan line on every CAN transport.
+/// A frame the host sends, in the chassis' protocol.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Outgoing {
+    /// A protocol v1 message with its rolling count.
+    V1(Counted),
+    /// A protocol v2 message (its count, where it has one, is a field).
+    V2(MessageV2),
+}
+
+impl Outgoing {
+    /// The CAN frame that carries it.
+    pub fn can_frame(&self) -> CanFrame {
+        match self {
+            Self::V1(counted) => can::encode(&counted.message, counted.count),
+            Self::V2(message) => message.encode(),
+        }
+    }
+
+    /// The protocol it belongs to.
+    pub const fn protocol(&self) -> Protocol {
+        match self {
+            Self::V1(_) => Protocol::V1,
+            Self::V2(_) => Protocol::V2,
+        }
+    }
+}
+
+/// Protocol v2 has no RS232 framing that any vendor code implements: a v2 frame cannot go out
+/// on a serial link.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct NoSerialFraming;
+
+impl core::fmt::Display for NoSerialFraming {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str("protocol v2 frames travel on CAN only (no RS232 framing)")
+    }
+}
+
+impl core::error::Error for NoSerialFraming {}
+
+/// Appends the bytes that carry `frame` on a byte-stream transport: a serial frame on serial,
+/// an slcan line on every CAN transport.
 pub fn encode_stream(
     transport: Transport,
-    message: &Message,
-    count: u8,
+    frame: &Outgoing,
     out: &mut impl Extend<u8>,
-) {
-    match transport {
-        Transport::Serial => out.extend(serial::encode(message, count)),
-        Transport::Slcan | Transport::Can | Transport::Sim => {
-            let frame = can::encode(message, count);
+) -> Result<(), NoSerialFraming> {
+    match (transport, frame) {
+        (Transport::Serial, Outgoing::V1(counted)) => {
+            out.extend(serial::encode(&counted.message, counted.count));
+        }
+        (Transport::Serial, Outgoing::V2(_)) => return Err(NoSerialFraming),
+        (Transport::Slcan | Transport::Can | Transport::Sim, frame) => {
             let line = slcan::encode(&Slcan::Frame {
-                frame,
+                frame: frame.can_frame(),
                 timestamp: None,
             });
             out.extend(line.as_bytes().iter().copied());
         }
     }
+    Ok(())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::MotionCommand;
+    use crate::{Message, MotionCommand};
     use std::vec::Vec;
 
     fn round_trip(transport: Transport) -> Vec<RxEvent> {
@@ -277,7 +320,12 @@ mod tests {
             ..MotionCommand::stop(transport.control_mode())
         });
         let mut bytes = Vec::new();
-        encode_stream(transport, &message, 7, &mut bytes);
+        encode_stream(
+            transport,
+            &Outgoing::V1(Counted { message, count: 7 }),
+            &mut bytes,
+        )
+        .expect("v1 has every framing");
         let mut framing = StreamFraming::new(transport).expect("stream transport");
         let mut events = Vec::new();
         framing.push(&bytes, |event| events.push(event));
@@ -297,6 +345,22 @@ mod tests {
     fn stream_transports_round_trip() {
         round_trip(Transport::Serial);
         round_trip(Transport::Slcan);
+    }
+
+    #[test]
+    fn v2_frames_go_out_on_slcan_and_never_on_serial() {
+        let take = Outgoing::V2(MessageV2::ControlMode(v2::ControlModeV2::Can));
+        let mut line = Vec::new();
+        encode_stream(Transport::Slcan, &take, &mut line).expect("slcan carries v2");
+        assert_eq!(line, b"t42180100000000000000\r");
+        assert_eq!(take.can_frame().data(), [1, 0, 0, 0, 0, 0, 0, 0]);
+        assert_eq!(take.protocol(), Protocol::V2);
+        let mut bytes = Vec::new();
+        assert_eq!(
+            encode_stream(Transport::Serial, &take, &mut bytes),
+            Err(NoSerialFraming)
+        );
+        assert!(bytes.is_empty());
     }
 
     #[test]

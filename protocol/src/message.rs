@@ -276,9 +276,10 @@ impl MotionCommand {
         payload[ANGULAR] = self.angular_percent as u8;
     }
 
-    /// The commanded linear speed in m/s.
-    pub fn linear(&self) -> f64 {
-        units::percent_to_speed(self.linear_percent, units::MAX_LINEAR_SPEED)
+    /// The commanded linear speed in m/s, for a chassis whose 100 % is `max_linear` (the
+    /// SCOUT's 1.5 m/s, [`units::MAX_LINEAR_SPEED`]; the vendor SDK scales a MINI's by 3.0).
+    pub fn linear(&self, max_linear: f64) -> f64 {
+        units::percent_to_speed(self.linear_percent, max_linear)
     }
 
     /// The commanded angular speed in rad/s, for a chassis whose maximum is `max_angular`.

@@ -3,6 +3,8 @@
 
 /// A SCOUT model.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "kebab-case"))]
 pub enum Model {
     /// The 2019 SCOUT (SCOUT 1.0 body; protocol v1 in this project's capture).
     Scout,
@@ -58,6 +60,30 @@ impl Model {
     /// The model called `name` ([`Model::name`]).
     pub fn from_name(name: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|model| model.name() == name)
+    }
+
+    /// The byte that stands for it in shared memory.
+    pub const fn raw(self) -> u8 {
+        match self {
+            Self::Scout => 1,
+            Self::Scout2 => 2,
+            Self::ScoutMini => 3,
+            Self::ScoutMiniOmni => 4,
+        }
+    }
+
+    /// The model of a byte from [`Model::raw`].
+    pub fn from_raw(raw: u8) -> Option<Self> {
+        Self::ALL.into_iter().find(|model| model.raw() == raw)
+    }
+
+    /// The model assumed when none is given: the 2019 SCOUT on protocol v1, SCOUT 2.0 on v2
+    /// (the same limits: the slower of the models).
+    pub const fn default_for(protocol: crate::version::Protocol) -> Self {
+        match protocol {
+            crate::version::Protocol::V1 => Self::Scout,
+            crate::version::Protocol::V2 => Self::Scout2,
+        }
     }
 
     /// The command limits. SCOUT and SCOUT 2.0: 1.5 m/s and 0.5235 rad/s (the vendor SDK's
@@ -123,6 +149,16 @@ mod tests {
     fn names_round_trip_and_limits_are_the_sources() {
         for model in Model::ALL {
             assert_eq!(Model::from_name(model.name()), Some(model));
+            assert_eq!(Model::from_raw(model.raw()), Some(model));
+        }
+        assert_eq!(Model::from_raw(0), None);
+        for protocol in crate::version::Protocol::ALL {
+            let limits = Model::default_for(protocol).limits();
+            assert_eq!(
+                limits,
+                Model::Scout.limits(),
+                "the default is the slower model"
+            );
         }
         assert_eq!(Model::from_name("scout3"), None);
         assert_eq!(Model::Scout2.limits().linear, 1.5);

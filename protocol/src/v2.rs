@@ -13,6 +13,7 @@
 use core::ops::Range;
 
 use crate::can::CanFrame;
+use crate::fault::Severity;
 use crate::message::{ChassisState, LightMode, raw_enum};
 
 /// The CAN ids of protocol v2 that concern a SCOUT (protocol-v2-notes 2).
@@ -260,6 +261,59 @@ named_bits! {
         0x0200 => "host_comm",
     }
 }
+
+impl ErrorBitsV2 {
+    /// How serious a named bit is, as this project acts on it: the under-voltage warning and a
+    /// lost RC signal are warnings; the cut-off, a motor's or the driver's error and the host
+    /// communication error are faults (the gateway stops the robot while one is set). `None`
+    /// for an unnamed mask.
+    pub const fn severity(mask: u16) -> Option<Severity> {
+        Some(match mask {
+            0x0002 | 0x0004 => Severity::Warning,
+            0x0001 | 0x0008 | 0x0010 | 0x0020 | 0x0040 | 0x0100 | 0x0200 => Severity::Fault,
+            _ => return None,
+        })
+    }
+
+    /// Every set bit with its severity, in bit order: named bits by name, the others as
+    /// `unknown_bit_N` with [`Severity::Reserved`] (reported, never acted on: a Bunker Mini sets
+    /// 0x0080 while in e-stop).
+    pub fn faults(self) -> impl Iterator<Item = (&'static str, Severity)> {
+        (0..16u16)
+            .map(|bit| 1u16 << bit)
+            .filter(move |mask| self.0 & mask != 0)
+            .map(|mask| {
+                let named = Self::NAMED.iter().find(|(m, _)| *m == mask);
+                match (named, Self::severity(mask)) {
+                    (Some((_, name)), Some(severity)) => (*name, severity),
+                    _ => (
+                        UNKNOWN_BITS[mask.trailing_zeros() as usize],
+                        Severity::Reserved,
+                    ),
+                }
+            })
+    }
+}
+
+/// Names for bits no source names.
+const UNKNOWN_BITS: [&str; 16] = [
+    "unknown_bit_0",
+    "unknown_bit_1",
+    "unknown_bit_2",
+    "unknown_bit_3",
+    "unknown_bit_4",
+    "unknown_bit_5",
+    "unknown_bit_6",
+    "unknown_bit_7",
+    "unknown_bit_8",
+    "unknown_bit_9",
+    "unknown_bit_10",
+    "unknown_bit_11",
+    "unknown_bit_12",
+    "unknown_bit_13",
+    "unknown_bit_14",
+    "unknown_bit_15",
+];
 
 named_bits! {
     /// 0x261..=0x264 byte 5: the motor driver's state. Bits 0-4 as the SCOUT manual names
@@ -870,6 +924,27 @@ impl MessageV2 {
         }
     }
 
+    /// The rolling count, for the frames that carry one (0x121, 0x211, 0x231, 0x241).
+    pub const fn count(&self) -> Option<u8> {
+        match self {
+            Self::LightCommand(l) | Self::LightState(l) => Some(l.count),
+            Self::SystemState(s) => Some(s.count),
+            Self::RcState(r) => Some(r.count),
+            Self::MotionCommand(_)
+            | Self::ControlMode(_)
+            | Self::ErrorClear(_)
+            | Self::VersionRequest(_)
+            | Self::MotionState(_)
+            | Self::ActuatorHigh(_)
+            | Self::ActuatorLow(_)
+            | Self::Odometer(_)
+            | Self::Version(_)
+            | Self::VersionText(_)
+            | Self::Bms(_)
+            | Self::BmsAlarm(_) => None,
+        }
+    }
+
     /// Host to chassis (a command) or chassis to host.
     pub const fn is_command(&self) -> bool {
         matches!(
@@ -1244,5 +1319,38 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn error_bits_carry_a_severity_and_unknown_bits_are_kept() {
+        let faults: Vec<_> = ErrorBitsV2(0x0283).faults().collect();
+        assert_eq!(
+            faults,
+            [
+                ("battery_undervoltage_fault", Severity::Fault),
+                ("battery_undervoltage_warning", Severity::Warning),
+                ("unknown_bit_7", Severity::Reserved),
+                ("host_comm", Severity::Fault),
+            ]
+        );
+        for (mask, name) in ErrorBitsV2::NAMED {
+            assert!(
+                ErrorBitsV2::severity(*mask).is_some(),
+                "{name} has a severity"
+            );
+        }
+        // The Bunker Mini's e-stop word (protocol-v2-notes 8, C1): nothing to act on.
+        assert!(
+            ErrorBitsV2(0x0080)
+                .faults()
+                .all(|(_, severity)| severity == Severity::Reserved)
+        );
+    }
+
+    #[test]
+    fn counts_are_read_from_the_frames_that_carry_one() {
+        let system = decoded(0x211, &[0, 0, 1, 3, 0, 0, 0, 0xB1]);
+        assert_eq!(system.count(), Some(0xB1));
+        assert_eq!(decoded(0x221, &[0; 8]).count(), None);
     }
 }

@@ -89,7 +89,7 @@ fn manual_examples_mean_the_speeds_the_manual_says() {
     let Message::MotionCommand(forward) = can_vectors()[0].0 else {
         panic!("motion vector")
     };
-    assert!((forward.linear() - 0.15).abs() < 1e-12);
+    assert!((forward.linear(scout_protocol::units::MAX_LINEAR_SPEED) - 0.15).abs() < 1e-12);
     let Message::MotionCommand(turn) = can_vectors()[1].0 else {
         panic!("motion vector")
     };

@@ -33,27 +33,54 @@ fn light() -> Value {
     object(json!({ "mode": string(), "brightness": integer() }))
 }
 
-/// `scout.State`: the chassis state.
+fn nullable_of(kind: &str) -> Value {
+    json!({ "type": [kind, "null"] })
+}
+
+/// `scout.State`: the chassis state, the same keys in both protocols (`null` where a
+/// protocol has no such field).
 pub fn state() -> Value {
     let link = object(json!({
         "state": string(), "transport": string(), "device": string(),
+        "protocol": nullable_of("string"),
         "rx_frames": integer(), "checksum_errors": integer(), "dropped_frames": integer(),
         "rejected_frames": integer(), "overflowed_frames": integer(),
         "discarded_bytes": integer(), "tx_frames": integer(), "reconnects": integer(),
     }));
+    let chassis = object(json!({
+        "model": nullable_of("string"), "max_linear": number(), "max_angular": number(),
+        "track": number(), "wheel_radius": number(), "gear_ratio": number(),
+    }));
     let system = nullable(json!({
         "state": string(), "control_mode": string(), "battery_voltage": number(),
         "fault_bits": integer(), "faults": { "type": "array", "items": string() },
-        "age_ms": number(),
+        "unknown_fault_bits": integer(), "age_ms": number(),
     }));
-    let motion = nullable(json!({ "linear": number(), "angular": number(), "age_ms": number() }));
+    let motion = nullable(json!({
+        "linear": number(), "angular": number(), "lateral": number(), "age_ms": number(),
+    }));
     let motor = nullable(json!({
         "motor": integer(), "current": number(), "rpm": integer(),
-        "driver_temperature": integer(), "motor_temperature": integer(), "age_ms": number(),
+        "driver_temperature": nullable_of("integer"), "motor_temperature": nullable_of("integer"),
+        "pulses": nullable_of("integer"), "driver_voltage": nullable_of("number"),
+        "driver_state": { "type": ["array", "null"], "items": string() },
+        "driver_state_bits": nullable_of("integer"), "age_ms": number(),
     }));
     let lights = nullable(json!({
         "enabled": boolean(), "front": light(), "rear": light(), "age_ms": number(),
     }));
+    let odometer = nullable(json!({ "left": number(), "right": number(), "age_ms": number() }));
+    let rc = nullable(json!({
+        "swa": string(), "swb": string(), "swc": string(), "swd": string(),
+        "right_horizontal": integer(), "right_vertical": integer(), "left_vertical": integer(),
+        "left_horizontal": integer(), "knob": integer(), "age_ms": number(),
+    }));
+    let bms = nullable(json!({
+        "charge_percent": integer(), "health_percent": integer(), "voltage": number(),
+        "current": number(), "temperature": number(),
+        "alarms": { "type": ["array", "null"], "items": integer() }, "age_ms": number(),
+    }));
+    let firmware = nullable(json!({ "text": string(), "age_ms": number() }));
     let odometry = object(json!({
         "x": number(), "y": number(), "yaw": number(), "distance": number(),
         "resets": integer(),
@@ -64,9 +91,9 @@ pub fn state() -> Value {
         "type": "object",
         "properties": {
             "robot": string(), "seq": integer(), "age_ms": number(), "link": link,
-            "system": system, "motion": motion, "lights": lights,
-            "motors": { "type": "array", "items": motor },
-            "odometry": odometry, "command": command(),
+            "chassis": chassis, "system": system, "motion": motion, "lights": lights,
+            "motors": { "type": "array", "items": motor }, "odometer": odometer, "rc": rc,
+            "bms": bms, "firmware": firmware, "odometry": odometry, "command": command(),
         },
     })
 }
@@ -126,6 +153,7 @@ pub(crate) mod tests {
     use scout_interface::json::{state_json, status_json};
     use scout_interface::state::Received;
     use scout_interface::{StatePayload, StatusPayload};
+    use scout_protocol::version::Protocol;
 
     fn type_matches(schema: &Value, value: &Value) -> bool {
         let names: Vec<&str> = match &schema["type"] {
@@ -185,6 +213,24 @@ pub(crate) mod tests {
         wrong
     }
 
+    /// A state with every message of `protocol` received.
+    pub(crate) fn full_state_of(protocol: Protocol) -> StatePayload {
+        let mut state = full_state();
+        state.link.protocol = protocol.raw();
+        if protocol == Protocol::V2 {
+            let received = state.system.received;
+            for motor in &mut state.motors {
+                motor.driver_received = received;
+            }
+            state.odometer.received = received;
+            state.rc.received = received;
+            state.bms.received = received;
+            state.bms.alarms_received = received;
+            state.firmware.received = received;
+        }
+        state
+    }
+
     /// A state with every message received.
     pub(crate) fn full_state() -> StatePayload {
         let received = Received {
@@ -213,6 +259,8 @@ pub(crate) mod tests {
         let schema = state();
         for value in [
             state_json(&full_state(), 6_000_000),
+            state_json(&full_state_of(Protocol::V1), 6_000_000),
+            state_json(&full_state_of(Protocol::V2), 6_000_000),
             state_json(&StatePayload::default(), 0),
         ] {
             assert_eq!(undescribed(&schema, &value, "state"), Vec::<String>::new());

@@ -143,6 +143,11 @@ impl<'a> Reader<'a> {
         self.take::<8>().map(f64::from_le_bytes)
     }
 
+    #[cfg(test)]
+    pub fn f32(&mut self) -> Result<f32, CdrError> {
+        self.take::<4>().map(f32::from_le_bytes)
+    }
+
     /// Checks that nothing but alignment padding (less than 8 bytes) follows what was read.
     pub fn finish(&self) -> Result<(), CdrError> {
         match self.bytes.len() - self.at.min(self.bytes.len()) {

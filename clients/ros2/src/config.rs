@@ -83,8 +83,8 @@ pub struct Ros2Config {
     pub topics: Topics,
     /// The wheels' joint names, motor 1 to 4 (front right, front left, rear left, rear right).
     pub wheel_joints: [String; 4],
-    /// Motor shaft turns per wheel turn.
-    pub gear_ratio: f64,
+    /// Motor shaft turns per wheel turn (default: the gateway's model's).
+    pub gear_ratio: Option<f64>,
     /// The topics that drive, each as a class of the arbiter.
     pub cmd_vel: Vec<CmdVelTopic>,
     /// How long a cmd_vel stream that let its control lapse by its own silence must pause
@@ -183,7 +183,7 @@ impl Default for Ros2Config {
                 "rear_left_wheel".into(),
                 "rear_right_wheel".into(),
             ],
-            gear_ratio: 32.0,
+            gear_ratio: None,
             cmd_vel: vec![CmdVelTopic {
                 topic: "cmd_vel".into(),
                 class: Class::Autonomy,
@@ -337,8 +337,10 @@ impl Ros2Config {
                 });
             }
         }
-        if !(self.gear_ratio.is_finite() && self.gear_ratio > 0.0) {
-            return Err(Ros2ConfigError::BadGearRatio(self.gear_ratio));
+        if let Some(gear_ratio) = self.gear_ratio
+            && !(gear_ratio.is_finite() && gear_ratio > 0.0)
+        {
+            return Err(Ros2ConfigError::BadGearRatio(gear_ratio));
         }
         let (new, blocked) = (self.new_stream_after_ms, self.blocked_pause_ms);
         if !(500..=10_000).contains(&new) || !(new..=60_000).contains(&blocked) {
@@ -502,7 +504,7 @@ mod tests {
             ),
             (
                 Ros2Config {
-                    gear_ratio: 0.0,
+                    gear_ratio: Some(0.0),
                     ..Default::default()
                 },
                 "gear_ratio",

@@ -156,7 +156,11 @@ impl Transform<'_> {
 pub struct Battery<'a> {
     pub header: Header<'a>,
     pub voltage: f32,
-    /// 0..1, estimated from the voltage; NaN when unknown.
+    /// deg C; NaN when unknown.
+    pub temperature: f32,
+    /// A, negative while discharging; NaN when unknown.
+    pub current: f32,
+    /// 0..1; NaN when unknown.
     pub percentage: f32,
     /// POWER_SUPPLY_STATUS_* (0 unknown, 2 discharging).
     pub status: u8,
@@ -173,8 +177,8 @@ impl Battery<'_> {
         let mut w = Writer::new();
         self.header.write(&mut w);
         w.f32(self.voltage)
-            .f32(f32::NAN) // temperature
-            .f32(f32::NAN) // current
+            .f32(self.temperature)
+            .f32(self.current)
             .f32(f32::NAN) // charge
             .f32(f32::NAN) // capacity
             .f32(f32::NAN) // design_capacity
@@ -347,6 +351,8 @@ mod tests {
         let battery = Battery {
             header: header("base_link"),
             voltage: 25.5,
+            temperature: f32::NAN,
+            current: f32::NAN,
             percentage: 0.8,
             status: 2,
             health: 1,

@@ -9,7 +9,7 @@ use scout_interface::StatePayload;
 use scout_interface::control::StatusPayload;
 use scout_interface::json::{state_json, status_json};
 use scout_interface::state::{LinkState, Received};
-use scout_protocol::{ChassisState, Fault, FaultBits, Severity};
+use scout_protocol::{ChassisState, Severity};
 use serde_json::Value;
 
 use crate::config::Ros2Config;
@@ -228,21 +228,33 @@ impl Messages {
         }
     }
 
-    /// The wheels: speed from the motor shaft's rpm through the gearbox, angle integrated from
-    /// it (the chassis reports no wheel positions), effort as the motor current (A).
+    /// The wheels: speed from the motor shaft's rpm through the gearbox, effort as the motor
+    /// current (A); the angle from the wheel odometer of the wheel's side where the chassis
+    /// has one (protocol v2: that side's distance over the wheel radius), else integrated from
+    /// the speed. Motors 2 and 3 (left) turn mirrored, as their rpm does, so each wheel's angle
+    /// changes at the speed its joint reports.
     fn joints(&mut self, state: &StatePayload, clocks: Clocks, out: &mut Vec<Outgoing>) {
+        let gear_ratio = self.config.gear_ratio.unwrap_or(state.chassis.gear_ratio);
+        let odometer = state.odometer;
+        let radius = state.chassis.wheel_radius;
         let mut velocity = [0.0; 4];
         let mut effort = [0.0; 4];
         let mut newest = 0;
         for (i, motor) in state.motors.iter().enumerate() {
-            if !motor.received.valid {
+            if !motor.received.valid || !(gear_ratio > 0.0) {
                 continue;
             }
-            velocity[i] =
-                f64::from(motor.rpm) / self.config.gear_ratio * std::f64::consts::TAU / 60.0;
+            velocity[i] = f64::from(motor.rpm) / gear_ratio * std::f64::consts::TAU / 60.0;
             effort[i] = f64::from(motor.current_deciamps) / 10.0;
             let at = motor.received.at_ns;
-            if let Some(last) = self.last_motors[i]
+            if odometer.received.valid && radius > 0.0 {
+                let (side_mm, turning) = match i {
+                    // Motors 1 and 4 are on the right, 2 and 3 on the left (mirrored).
+                    0 | 3 => (odometer.right_mm, 1.0),
+                    _ => (odometer.left_mm, -1.0),
+                };
+                self.wheel_angles[i] = turning * f64::from(side_mm) / 1000.0 / radius;
+            } else if let Some(last) = self.last_motors[i]
                 && at > last
             {
                 let dt = Duration::from_nanos(at - last).as_secs_f64().min(0.1);
@@ -271,17 +283,30 @@ impl Messages {
         });
     }
 
-    /// The voltage the chassis reports; the charge is unmeasured (NaN), as the message defines.
+    /// The voltage the chassis reports; the charge, current and temperature from a smart
+    /// battery where one reports them (protocol v2's BMS), else unmeasured (NaN), as the
+    /// message defines.
     fn battery(&self, state: &StatePayload, stamp: Duration, out: &mut Vec<Outgoing>) {
-        let faults = FaultBits(state.system.fault_bits);
-        let health = if faults.contains(Fault::BatteryOvervoltageFault) {
+        let faults = state.faults();
+        let has = |name: &str| faults.iter().any(|fault| fault.name == name);
+        let health = if has("battery_overvoltage_fault") {
             HEALTH_OVERVOLTAGE
-        } else if faults.contains(Fault::BatteryUndervoltageFault) {
+        } else if has("battery_undervoltage_fault") {
             HEALTH_DEAD
         } else if state.system.received.valid {
             HEALTH_GOOD
         } else {
             HEALTH_UNKNOWN
+        };
+        let bms = &state.bms;
+        let (temperature, current, percentage) = if bms.received.valid {
+            (
+                f32::from(bms.decidegrees) / 10.0,
+                f32::from(bms.deciamps) / 10.0,
+                f32::from(bms.charge_percent.min(100)) / 100.0,
+            )
+        } else {
+            (f32::NAN, f32::NAN, f32::NAN)
         };
         out.push(Outgoing {
             topic: Topic::BatteryState,
@@ -291,7 +316,9 @@ impl Messages {
                     frame_id: &self.config.frames.base,
                 },
                 voltage: f32::from(state.system.battery_decivolts) / 10.0,
-                percentage: f32::NAN,
+                temperature,
+                current,
+                percentage,
                 status: STATUS_UNKNOWN,
                 health,
                 present: state.system.received.valid,
@@ -376,7 +403,7 @@ pub fn diagnostic_statuses(
     let link = Status {
         level: match link_state {
             LinkState::Ok => OK,
-            LinkState::Silent | LinkState::Disconnected | LinkState::ProtocolV2 => ERROR,
+            LinkState::Silent | LinkState::Disconnected | LinkState::ProtocolMismatch => ERROR,
         },
         name: format!("{node}: link"),
         message: link_state.name().to_owned(),
@@ -384,11 +411,11 @@ pub fn diagnostic_statuses(
         values: flatten(&json["link"]),
     };
     let system = &state.system;
-    let faults = FaultBits(system.fault_bits);
+    let faults = state.faults();
     let chassis_state = ChassisState::from_raw(system.state);
     let worst = faults
         .iter()
-        .map(|fault| fault.severity())
+        .map(|fault| fault.severity)
         .fold(OK, |level, severity| {
             level.max(match severity {
                 Severity::Warning | Severity::Reserved => WARN,
@@ -398,7 +425,7 @@ pub fn diagnostic_statuses(
     let (level, message) = if !system.received.valid || link_state != LinkState::Ok {
         (STALE, "no system status from the chassis".to_owned())
     } else {
-        let named: Vec<&str> = faults.iter().map(|fault| fault.name()).collect();
+        let named: Vec<&str> = faults.iter().map(|fault| fault.name).collect();
         let level = match chassis_state {
             ChassisState::Normal => worst,
             _ => ERROR,
@@ -489,6 +516,9 @@ fn flatten(value: &Value) -> Vec<(String, String)> {
 mod tests {
     use super::*;
     use crate::cdr::Reader;
+    use scout_interface::state::ChassisPayload;
+    use scout_protocol::model::Model;
+    use scout_protocol::version::Protocol;
 
     const SECOND: u64 = 1_000_000_000;
 
@@ -513,6 +543,8 @@ mod tests {
             ..Default::default()
         };
         state.link.state = LinkState::Ok.raw();
+        state.link.protocol = Protocol::V1.raw();
+        state.chassis = ChassisPayload::new(Model::Scout, 0.5235);
         state.motion.received = received(at_ns);
         state.motion.linear_mm_s = 500;
         state.motion.angular_mrad_s = -100;
@@ -650,5 +682,86 @@ mod tests {
         // 3200 rpm / 32 = 100 rpm = 10.47 rad/s, for 20 ms.
         let expected = 100.0 * std::f64::consts::TAU / 60.0 * 0.02;
         assert!((messages.wheel_angles[0] - expected).abs() < 1e-9);
+    }
+
+    /// A SCOUT MINI on protocol v2, its odometers at `left_mm` and `right_mm`, its right motors
+    /// turning forward and its left ones mirrored at `rpm`.
+    fn mini(at_ns: u64, left_mm: i32, right_mm: i32, rpm: i16) -> StatePayload {
+        let mut state = state(at_ns);
+        state.link.protocol = Protocol::V2.raw();
+        state.chassis = ChassisPayload::new(Model::ScoutMini, 2.5235);
+        state.odometer.received = received(at_ns);
+        state.odometer.left_mm = left_mm;
+        state.odometer.right_mm = right_mm;
+        for (i, motor) in state.motors.iter_mut().enumerate() {
+            motor.rpm = if matches!(i, 0 | 3) { rpm } else { -rpm };
+        }
+        state
+    }
+
+    #[test]
+    fn on_v2_wheel_angles_come_from_the_odometers_and_agree_with_the_speeds() {
+        let mut messages = Messages::new(Ros2Config::default());
+        let radius = Model::ScoutMini.geometry().wheel_radius;
+        let gear = Model::ScoutMini.geometry().gear_ratio;
+        // 0.5 m/s on both sides for 20 ms: 10 mm; the motors at the matching rpm.
+        let rpm = (0.5 / radius / std::f64::consts::TAU * 60.0 * gear).round() as i16;
+        messages.handle_state(
+            &mini(SECOND, 1000, 2000, rpm),
+            None,
+            clocks(SECOND),
+            &Vec::new,
+        );
+        let before = messages.wheel_angles;
+        let t = SECOND + 20_000_000;
+        let out = messages.handle_state(&mini(t, 1010, 2010, rpm), None, clocks(t), &Vec::new);
+        assert!(topics(&out).contains(&Topic::JointStates));
+        assert!(
+            (messages.wheel_angles[0] - 2.010 / radius).abs() < 1e-9,
+            "right: its odometer"
+        );
+        assert!(
+            (messages.wheel_angles[1] + 1.010 / radius).abs() < 1e-9,
+            "left, mirrored"
+        );
+        let speed = |i: usize| {
+            f64::from(mini(t, 0, 0, rpm).motors[i].rpm) / gear * std::f64::consts::TAU / 60.0
+        };
+        for i in 0..4 {
+            let rate = (messages.wheel_angles[i] - before[i]) / 0.02;
+            assert!(
+                (rate - speed(i)).abs() < 0.05 * speed(i).abs(),
+                "wheel {i}: {rate} vs {}",
+                speed(i)
+            );
+        }
+    }
+
+    #[test]
+    fn a_smart_battery_fills_the_charge_current_and_temperature() {
+        let mut messages = Messages::new(Ros2Config::default());
+        let mut state = mini(SECOND, 0, 0, 0);
+        state.bms.received = received(SECOND);
+        state.bms.charge_percent = 87;
+        state.bms.deciamps = -35;
+        state.bms.decidegrees = 312;
+        let out = messages.handle_state(&state, None, clocks(SECOND), &Vec::new);
+        let battery = out
+            .iter()
+            .find(|o| o.topic == Topic::BatteryState)
+            .expect("battery");
+        let mut reader = Reader::new(&battery.payload).expect("CDR");
+        reader.i32().and_then(|_| reader.u32()).expect("stamp");
+        reader.skip_string().expect("frame id");
+        assert_eq!(reader.f32(), Ok(25.5), "voltage");
+        assert_eq!(reader.f32(), Ok(31.2), "temperature");
+        assert_eq!(reader.f32(), Ok(-3.5), "current");
+        for _ in 0..3 {
+            assert!(
+                reader.f32().expect("NaN").is_nan(),
+                "charge and capacities unknown"
+            );
+        }
+        assert_eq!(reader.f32(), Ok(0.87), "percentage");
     }
 }

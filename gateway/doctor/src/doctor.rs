@@ -35,7 +35,7 @@ fn same_device(spec: &DeviceSpec, device: &str) -> bool {
             canonical(path) == canonical(Path::new(device))
         }
         DeviceSpec::Can(interface) => interface == device,
-        DeviceSpec::Sim(_) => false,
+        DeviceSpec::Sim { .. } => false,
     }
 }
 
@@ -54,7 +54,7 @@ pub fn run(options: &Options, report: &mut dyn FnMut(&Check)) -> Vec<Check> {
         let device = match spec {
             DeviceSpec::Serial(path) | DeviceSpec::Slcan(path) => port::tty_checks(path),
             DeviceSpec::Can(interface) => can::inspect(interface),
-            DeviceSpec::Sim(_) => Vec::new(),
+            DeviceSpec::Sim { .. } => Vec::new(),
         };
         let usable = !device.iter().any(|check| {
             check.verdict == Verdict::Fail
@@ -122,7 +122,7 @@ pub fn run(options: &Options, report: &mut dyn FnMut(&Check)) -> Vec<Check> {
                                 DeviceSpec::Serial(_) => "serial",
                                 DeviceSpec::Slcan(_) => "slcan",
                                 DeviceSpec::Can(_) => "can",
-                                DeviceSpec::Sim(_) => "sim",
+                                DeviceSpec::Sim { .. } => "sim",
                             },
                             spec.name()
                         ),

@@ -9,8 +9,60 @@ use scout_interface::services::{self, ServiceError};
 use scout_interface::stop_socket::{Ask, StopClient};
 use scout_interface::{LinkState, StatePayload};
 
+use scout_protocol::ChassisState;
+use scout_protocol::v2::{ControlModeV2, ErrorBitsV2, RcStateV2, SystemStateV2};
+use scout_protocol::version::Protocol;
+
 use crate::check::Check;
-use crate::traffic::chassis_checks;
+use crate::traffic::{chassis_checks, chassis_checks_v2};
+
+/// The RC frame is sent only while the transmitter is on: an older one is stale.
+const RC_FRESH: Duration = Duration::from_millis(500);
+
+/// The chassis' own state as the gateway publishes it, read in its protocol.
+fn chassis_state_checks(state: &StatePayload) -> Vec<Check> {
+    let system = &state.system;
+    match (state.protocol(), system.received.valid) {
+        (Some(Protocol::V2), true) => {
+            let system_v2 = SystemStateV2 {
+                state: ChassisState::from_raw(system.state),
+                control_mode: ControlModeV2::from_raw(system.control_mode),
+                battery_decivolts: system.battery_decivolts,
+                errors: ErrorBitsV2(system.fault_bits),
+                reserved: 0,
+                count: system.received.count,
+            };
+            let rc = &state.rc;
+            let fresh = rc.received.valid
+                && system.received.at_ns.saturating_sub(rc.received.at_ns)
+                    <= RC_FRESH.as_nanos() as u64;
+            let [swa, swb, swc, swd] = rc.switches();
+            let [
+                right_horizontal,
+                right_vertical,
+                left_vertical,
+                left_horizontal,
+                knob,
+            ] = rc.sticks;
+            let rc_v2 = fresh.then_some(RcStateV2 {
+                swa,
+                swb,
+                swc,
+                swd,
+                right_horizontal,
+                right_vertical,
+                left_vertical,
+                left_horizontal,
+                knob,
+                reserved: 0,
+                count: rc.received.count,
+            });
+            chassis_checks_v2(&system_v2, rc_v2.as_ref())
+        }
+        (Some(Protocol::V1), true) => chassis_checks(Some(&system.status_v1())),
+        (_, _) => chassis_checks(None),
+    }
+}
 
 /// What the gateway of a robot said.
 #[derive(Debug)]
@@ -102,10 +154,12 @@ pub fn inspect(robot: &str, window: Duration) -> Result<GatewayReport, ClientErr
             "see the gateway's log for the reason (`journalctl -u scout-gateway`): a device \
              unplugged, a CAN interface down",
         ),
-        LinkState::ProtocolV2 => Check::fail(
+        LinkState::ProtocolMismatch => Check::fail(
             "link",
-            "the chassis speaks protocol v2",
-            "a SCOUT 2.0 or MINI (protocol v2): this gateway speaks v1 only so far",
+            "protocol mismatch: the chassis speaks another protocol than the gateway was started \
+             with, or feedback of both protocols arrives",
+            "start the gateway with --protocol auto (the default), or with the protocol its log \
+             names; `scout status` shows the stop's reason",
         ),
     });
     let frames = link.rx_frames.saturating_sub(first.link.rx_frames);
@@ -159,10 +213,7 @@ pub fn inspect(robot: &str, window: Duration) -> Result<GatewayReport, ClientErr
              `scout status` and the gateway's log tell more",
         )
     });
-    let system = last.system;
-    checks.extend(chassis_checks(
-        system.received.valid.then(|| system.status()).as_ref(),
-    ));
+    checks.extend(chassis_state_checks(&last));
     if let Some(payload) = status.latest(Duration::from_secs(1))? {
         let json = status_json(&payload, services::monotonic_ns());
         let stops = json["stops"].as_array().cloned().unwrap_or_default();

@@ -8,7 +8,7 @@ use std::time::Duration;
 use scout_protocol::Severity;
 use scout_protocol::link::RxEvent;
 use scout_protocol::v2::{ControlModeV2, MessageV2, RcStateV2, SwitchPosition, SystemStateV2};
-use scout_protocol::version::{ProtocolVersion, VersionDetector, is_v2_only_id};
+use scout_protocol::version::{Detection, Protocol, ProtocolDetector, protocol_of_feedback_id};
 use scout_protocol::{ChassisState, ControlMode, Direction, Message, SystemStatus, Transport};
 
 use crate::check::Check;
@@ -41,7 +41,7 @@ pub struct Traffic {
     pub last_system_v2: Option<SystemStateV2>,
     /// The last v2 RC state (0x241).
     pub last_rc_v2: Option<RcStateV2>,
-    version: VersionDetector,
+    version: ProtocolDetector,
 }
 
 impl Traffic {
@@ -111,7 +111,7 @@ impl Traffic {
         let mut v2_ids: BTreeMap<u16, u64> = self
             .rejected_ids
             .iter()
-            .filter(|(id, _)| is_v2_only_id(**id))
+            .filter(|(id, _)| protocol_of_feedback_id(**id) == Some(Protocol::V2))
             .map(|(id, count)| (*id, *count))
             .collect();
         for (id, count) in &self.frames_v2 {
@@ -180,24 +180,42 @@ impl Traffic {
                 ),
             ));
         }
-        checks.push(match self.version.version(now) {
-            ProtocolVersion::V1 => Check::pass("protocol", "v1 (0x151 seen): supported"),
-            ProtocolVersion::V2 => Check::fail(
+        checks.push(match self.version.detection(now) {
+            Detection::Found(Protocol::V1) => Check::pass(
                 "protocol",
-                format!("protocol v2 ids and no 0x151: {}", Self::ids(&v2_ids)),
-                "a SCOUT 2.0 or MINI (protocol v2): scout-gateway speaks v1 only so far (the \
-                 chassis checks below read its v2 state)",
+                format!(
+                    "v1 ({} seen): scout-gateway --protocol v1 or auto",
+                    self.version.ids(Protocol::V1)
+                ),
             ),
-            ProtocolVersion::Unknown if !v2_ids.is_empty() => Check::fail(
+            Detection::Found(Protocol::V2) => Check::pass(
                 "protocol",
-                format!("protocol v2 ids ({}) and no 0x151", Self::ids(&v2_ids)),
-                "a SCOUT 2.0 or MINI (protocol v2): scout-gateway speaks v1 only so far (the \
-                 chassis checks below read its v2 state)",
+                format!(
+                    "v2, a SCOUT 2.0 or MINI ({} seen): scout-gateway --protocol v2 or auto (it \
+                     takes the command mode, 0x421, when a client drives)",
+                    self.version.ids(Protocol::V2)
+                ),
             ),
-            ProtocolVersion::Unknown => Check::fail(
+            Detection::Both => Check::fail(
                 "protocol",
-                "no 0x151 system status: the protocol is unknown",
-                "a v1 chassis sends 0x151 every 20 ms: listen longer, or check the ids above",
+                format!(
+                    "feedback of both protocols: v1 {}, v2 {}",
+                    self.version.ids(Protocol::V1),
+                    self.version.ids(Protocol::V2)
+                ),
+                "two chassis, or another node using their ids, on one bus: take the other \
+                 node off (scout-gateway refuses such a bus)",
+            ),
+            Detection::Listening if !v2_ids.is_empty() => Check::fail(
+                "protocol",
+                format!("protocol v2 ids ({}) only briefly", Self::ids(&v2_ids)),
+                "listen longer (--window), the chassis' feedback comes every 20 ms",
+            ),
+            Detection::Listening => Check::fail(
+                "protocol",
+                "no feedback that tells the protocol (v1's 0x151, v2's 0x211/0x221)",
+                "a chassis sends its feedback every 20 ms: check the ids above, the wiring and \
+                 the bitrate",
             ),
         });
         let bad = self.checksum_errors + self.rejected + self.foreign;
@@ -287,12 +305,11 @@ pub fn chassis_checks_v2(state: &SystemStateV2, rc: Option<&RcStateV2>) -> Vec<C
         ControlModeV2::Can => {
             Check::pass("chassis.control", "CAN command mode: the host may drive")
         }
-        ControlModeV2::Standby => Check::warn(
+        ControlModeV2::Standby => Check::pass(
             "chassis.control",
-            "standby: a v2 chassis obeys nothing but the control-mode frame until the host sends \
-             0x421 [01]",
-            "the host takes CAN control with 0x421 [01] (`cansend can0 421#01`); scout-gateway \
-             will send it itself once it speaks protocol v2",
+            "standby, as after power-on: a v2 chassis obeys nothing but the control-mode frame \
+             until the host sends 0x421 [01]; scout-gateway sends it when a client takes control \
+             and drives (by hand: `cansend can0 421#01`)",
         ),
         ControlModeV2::Rc => Check::warn(
             "chassis.control",
@@ -500,7 +517,7 @@ mod tests {
     }
 
     #[test]
-    fn v2_ids_without_0x151_fail_as_protocol_v2() {
+    fn v2_ids_without_0x151_are_protocol_v2_with_how_to_start_the_gateway() {
         let mut traffic = Traffic::new();
         for i in 0..60 {
             let error = RxError::Can(scout_protocol::can::CanError::UnknownId { id: 0x211 });
@@ -511,9 +528,30 @@ mod tests {
             .iter()
             .find(|c| c.name == "protocol")
             .expect("protocol");
-        assert_eq!(protocol.verdict, Verdict::Fail);
+        assert_eq!(protocol.verdict, Verdict::Pass);
         assert!(protocol.detail.contains("0x211"), "{protocol:?}");
-        assert!(protocol.fix.as_deref().is_some_and(|f| f.contains("v2")));
+        assert!(protocol.detail.contains("--protocol v2"), "{protocol:?}");
+    }
+
+    #[test]
+    fn feedback_of_both_protocols_fails_with_the_ids_of_each() {
+        let mut traffic = Traffic::new();
+        traffic.handle(
+            &status(ChassisState::Normal, ControlMode::Can, 0, 250),
+            Duration::ZERO,
+        );
+        let error = RxError::Can(scout_protocol::can::CanError::UnknownId { id: 0x221 });
+        traffic.handle(&RxEvent::Rejected(error), 100 * MS);
+        let checks = traffic.checks(Transport::Can, WINDOW, 1200 * MS);
+        let protocol = checks
+            .iter()
+            .find(|c| c.name == "protocol")
+            .expect("protocol");
+        assert_eq!(protocol.verdict, Verdict::Fail);
+        assert!(
+            protocol.detail.contains("0x151") && protocol.detail.contains("0x221"),
+            "{protocol:?}"
+        );
     }
 
     #[test]
@@ -578,13 +616,14 @@ mod tests {
         let find = |name| checks.iter().find(|c| c.name == name).expect(name);
         assert_eq!(find("traffic").verdict, Verdict::Pass, "{checks:#?}");
         assert!(find("traffic").detail.contains("0x211 x60"), "{checks:#?}");
-        assert_eq!(find("protocol").verdict, Verdict::Fail);
+        assert_eq!(find("protocol").verdict, Verdict::Pass);
         let control = find("chassis.control");
-        assert_eq!(control.verdict, Verdict::Warn);
-        assert!(
-            control.fix.as_deref().is_some_and(|f| f.contains("421#01")),
-            "{control:?}"
+        assert_eq!(
+            control.verdict,
+            Verdict::Pass,
+            "standby is how a v2 chassis starts"
         );
+        assert!(control.detail.contains("421#01"), "{control:?}");
         assert_eq!(find("chassis.rc").verdict, Verdict::Warn);
         assert!(
             find("chassis.rc")

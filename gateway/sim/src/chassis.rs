@@ -79,6 +79,15 @@ impl Default for SimParams {
 }
 
 impl SimParams {
+    /// These parameters with the keys `table` sets replaced (a `--params` file, the gateway's
+    /// `[sim]` table); an unknown key or a wrong type is an error.
+    pub fn with_overrides(&self, table: &toml::Table) -> Result<Self, toml::de::Error> {
+        let mut merged = toml::Table::try_from(self)
+            .map_err(|error| <toml::de::Error as serde::de::Error>::custom(error.to_string()))?;
+        merged.extend(table.clone());
+        merged.try_into()
+    }
+
     /// The defaults with `model`'s limits and geometry.
     pub fn for_model(model: Model) -> Self {
         let limits = model.limits();
@@ -192,6 +201,8 @@ pub enum Injection {
     PinMotor(Motor, MotorValue, f64),
     /// Unpin all of a motor's values.
     UnpinMotor(Motor),
+    /// Protocol v2 firmware falls back to standby by itself (ignored by v1 firmware).
+    Standby,
 }
 
 #[derive(Debug, Clone, Copy, Default)]
@@ -493,7 +504,7 @@ impl Chassis {
             self.intervals.record(now.saturating_sub(previous));
         }
         self.stats.last_command = Some(LastCommand {
-            linear: command.linear(),
+            linear: command.linear(self.params.max_linear),
             angular: command.angular(self.params.max_angular),
             control_mode: command.control_mode.name(),
             fault_clear: command.fault_clear.name(),
@@ -510,7 +521,7 @@ impl Chassis {
         self.clear_fault(command.fault_clear);
         self.last_valid_motion = Some(now);
         self.target = Speeds {
-            linear: command.linear(),
+            linear: command.linear(self.params.max_linear),
             angular: command.angular(self.params.max_angular),
         };
         if self.drive_inhibited() {
@@ -567,6 +578,11 @@ impl Chassis {
             Injection::Battery(volts) => self.battery_voltage = volts,
             Injection::PinMotor(motor, value, to) => self.motors[motor.index()].pin(value, to),
             Injection::UnpinMotor(motor) => self.motors[motor.index()].unpin(),
+            Injection::Standby => {
+                if let Some(firmware) = self.v2.as_mut() {
+                    firmware.fall_back_to_standby();
+                }
+            }
         }
         self.update_latches();
     }

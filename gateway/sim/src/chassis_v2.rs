@@ -77,6 +77,13 @@ impl FirmwareV2 {
         };
     }
 
+    /// Standby, unless the RC holds the chassis (what a firmware does by itself, for tests).
+    pub(super) fn fall_back_to_standby(&mut self) {
+        if self.mode != ControlModeV2::Rc {
+            self.mode = ControlModeV2::Standby;
+        }
+    }
+
     /// Who controls the chassis now.
     pub(super) fn mode(&self) -> ControlModeV2 {
         self.mode

@@ -19,15 +19,7 @@ use crate::script::{HELP, SimCommand};
 use scout_io::{Incoming, Port};
 use scout_protocol::Transport;
 use scout_protocol::link::{RxEvent, StreamFraming, decode_can};
-
-/// The chassis firmware's protocol.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Protocol {
-    /// Protocol v1 (the 2019 SCOUT): serial, slcan or SocketCAN.
-    V1,
-    /// Protocol v2 (SCOUT 2.0, SCOUT MINI): CAN only (slcan or SocketCAN).
-    V2,
-}
+pub use scout_protocol::version::Protocol;
 
 /// How the simulator is reached and what it simulates.
 #[derive(Debug, Clone)]
@@ -390,9 +382,10 @@ impl Simulator<'_> {
                 if let (Some(trace), Message::MotionCommand(command)) =
                     (self.trace.as_mut(), &counted.message)
                 {
+                    let params = &self.options.params;
                     let (linear, angular) = (
-                        command.linear(),
-                        command.angular(self.options.params.max_angular),
+                        command.linear(params.max_linear),
+                        command.angular(params.max_angular),
                     );
                     trace.line(format_args!("C {} {linear} {angular}\n", Trace::now_ns()));
                 }
@@ -611,5 +604,6 @@ fn describe(injection: Injection) -> String {
             format!("motor {} {value:?} pinned at {to}", motor.number())
         }
         Injection::UnpinMotor(motor) => format!("motor {} values automatic", motor.number()),
+        Injection::Standby => "v2 firmware fell back to standby (v1: nothing)".into(),
     }
 }

@@ -11,6 +11,7 @@ pub const HELP: &str = "\
 commands (one a line; # starts a comment):
   estop on|off                 emergency stop pressed / released
   rc on|off                    RC transmitter on (host commands ignored) / off
+  standby                      v2 firmware falls back to standby by itself (v1: nothing)
   protect overtemp|overcurrent latch a protection (cleared by the fault-clear code)
   warn overtemp|overcurrent on|off   force a warning / back to automatic
   motor-fault N on|off         motor N (1..4) communication fault
@@ -74,6 +75,7 @@ fn parse_words(words: &[&str]) -> Result<SimCommand, String> {
     Ok(match words {
         ["estop", state] => Inject(Injection::EStop(on_off(state)?)),
         ["rc", state] => Inject(Injection::Rc(on_off(state)?)),
+        ["standby"] => Inject(Injection::Standby),
         ["protect", "overtemp"] => Inject(Injection::Protect(Protection::DriverOvertemp)),
         ["protect", "overcurrent"] => Inject(Injection::Protect(Protection::MotorOvercurrent)),
         ["warn", "overtemp", state] => {
@@ -149,6 +151,7 @@ mod tests {
         let cases = [
             ("estop on", SimCommand::Inject(Injection::EStop(true))),
             ("rc off", SimCommand::Inject(Injection::Rc(false))),
+            ("standby", SimCommand::Inject(Injection::Standby)),
             (
                 "protect overtemp",
                 SimCommand::Inject(Injection::Protect(Protection::DriverOvertemp)),

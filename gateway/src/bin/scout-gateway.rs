@@ -14,7 +14,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use anyhow::Context;
 use clap::{ArgGroup, Parser};
 use scout_bridge::Bridge;
-use scout_gateway::config::GatewayConfig;
+use scout_gateway::config::{GatewayConfig, ProtocolSetting};
 use scout_gateway::core::Start;
 use scout_gateway::device::DeviceSpec;
 use scout_gateway::driver::Driver;
@@ -24,6 +24,7 @@ use scout_interface::Transport;
 use scout_interface::remote::Permission;
 use scout_interface::services;
 use scout_io::notify::ServiceManager;
+use scout_protocol::model::Model;
 use tracing::info;
 
 /// The one process that owns a SCOUT chassis port: it decodes the chassis' feedback, publishes
@@ -49,7 +50,16 @@ struct Cli {
     /// Configuration file (TOML); see config/scout-gateway.toml. Default: $SCOUT_GATEWAY_CONFIG.
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
-    /// rad/s at 100 % angular command [default: 0.5235].
+    /// The chassis' protocol: auto tells it from the chassis' feedback before sending anything
+    /// (CAN and slcan; RS232 is v1) [default: auto].
+    #[arg(long, value_enum, value_name = "PROTOCOL")]
+    protocol: Option<ProtocolSetting>,
+    /// The model, for its speed limits and geometry: scout, scout2, scout-mini,
+    /// scout-mini-omni [default: scout on v1, scout2 on v2].
+    #[arg(long, value_name = "MODEL", value_parser = parse_model)]
+    model: Option<Model>,
+    /// The fastest the chassis may turn, rad/s; on v1 also the rate at 100 % angular command
+    /// [default: the model's, 0.5235 for the SCOUT].
     #[arg(long, value_name = "RAD_S")]
     max_angular: Option<f64>,
     /// Zenoh endpoint to listen on (repeatable) [default: tcp/127.0.0.1:7448].
@@ -69,6 +79,14 @@ struct Cli {
     /// release, resume, lights, clear_fault).
     #[arg(long, value_name = "LIST", value_delimiter = ',')]
     remote_commands: Option<Vec<Permission>>,
+}
+
+/// A model by its name.
+fn parse_model(name: &str) -> Result<Model, String> {
+    Model::from_name(name).ok_or_else(|| {
+        let names: Vec<&str> = Model::ALL.iter().map(|model| model.name()).collect();
+        format!("unknown model '{name}': one of {}", names.join(", "))
+    })
 }
 
 /// The exit code for usage, configuration and ownership errors.
@@ -115,7 +133,13 @@ fn configure(cli: &Cli) -> anyhow::Result<GatewayConfig> {
         config.name = name.clone();
     }
     if let Some(max_angular) = cli.max_angular {
-        config.max_angular = max_angular;
+        config.max_angular = Some(max_angular);
+    }
+    if let Some(protocol) = cli.protocol {
+        config.protocol = protocol;
+    }
+    if let Some(model) = cli.model {
+        config.model = Some(model);
     }
     if !cli.zenoh_listen.is_empty() {
         config.zenoh.listen = cli.zenoh_listen.clone();

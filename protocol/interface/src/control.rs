@@ -107,6 +107,9 @@ wire_enum! {
         Runaway = 9 => "runaway",
         /// The CAN bus or adapter failed (write errors, bus-off, error-passive).
         LinkFault = 10 => "link_fault",
+        /// A protocol v2 chassis is not, or no longer, in CAN command mode: it did not take
+        /// 0x421, or fell back to standby (the RC's own takeover is `rc_override`).
+        ChassisMode = 11 => "chassis_mode",
     }
 }
 
@@ -628,7 +631,7 @@ pub struct LightsRequest {
 
 /// A request from a client to the gateway's arbiter.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::ControlRequest.v5")]
+#[type_name("scout::ControlRequest.v6")]
 #[repr(C)]
 pub struct ControlRequest {
     /// [`RequestKind`] as `u8`.
@@ -670,7 +673,7 @@ pub struct ControlRequest {
 
 /// The gateway's answer to one request.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("scout::ControlResponse.v5")]
+#[type_name("scout::ControlResponse.v6")]
 #[repr(C)]
 pub struct ControlResponse {
     /// The request's `seq`.
@@ -767,7 +770,7 @@ pub struct SourcePayload {
 
 /// The arbiter's status, published on every change and at least once a second.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::StatusPayload.v5")]
+#[type_name("scout::StatusPayload.v6")]
 #[repr(C)]
 pub struct StatusPayload {
     /// Rises by one with every publication.

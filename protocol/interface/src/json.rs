@@ -2,8 +2,10 @@
 //! and of the arbiter's status (`scout status --json`, zenoh `scout/ROBOT/status`), and of one
 //! decoded message (`scout decode --json`): the schema the README documents, in one place.
 
+use scout_protocol::units::MAX_LINEAR_SPEED;
 use scout_protocol::v2::{LightsV2, MessageV2, MotionV2, VersionRequestForm};
-use scout_protocol::{FaultClear, Light, Message, MessageKind, Motor};
+use scout_protocol::version::Protocol;
+use scout_protocol::{ChassisState, FaultClear, Light, Message};
 use serde_json::{Map, Value, json};
 
 use crate::control::{Class, LightsControl, RejectionKind, StatusPayload, StopCause};
@@ -23,7 +25,7 @@ pub fn message_fields(message: &Message, max_angular: f64) -> Value {
         Message::MotionCommand(command) => json!({
             "control_mode": command.control_mode.name(),
             "fault_clear": command.fault_clear.name(),
-            "linear": command.linear(),
+            "linear": command.linear(MAX_LINEAR_SPEED),
             "angular": command.angular(max_angular),
             "linear_percent": command.linear_percent,
             "angular_percent": command.angular_percent,
@@ -153,46 +155,54 @@ pub fn message_fields_v2(message: &MessageV2) -> Value {
     }
 }
 
-/// The state JSON key a feedback message has of its own; `None` for the motors' (entries of
-/// the `motors` list) and for host-to-chassis commands.
-fn feedback_key(kind: MessageKind) -> Option<&'static str> {
-    match kind {
-        MessageKind::SystemStatus => Some("system"),
-        MessageKind::MotionFeedback => Some("motion"),
-        MessageKind::LightFeedback => Some("lights"),
-        MessageKind::MotorFeedback(_) | MessageKind::MotionCommand | MessageKind::LightCommand => {
-            None
-        }
-    }
+/// `age_ms` of a frame received at `received`, or `None` before the first one.
+fn age(received: &Received, now_ns: u64) -> Option<f64> {
+    received.valid.then(|| age_ms(received.at_ns, now_ns))
 }
 
-/// The fields of a received message plus its `age_ms`, or `null` before the first one.
-fn received_json(received: Option<(Received, Message)>, max_angular: f64, now_ns: u64) -> Value {
-    let Some((received, message)) = received else {
+/// `fields` with their `age_ms`, or `null` before the first frame.
+fn section(received: &Received, now_ns: u64, fields: impl FnOnce() -> Value) -> Value {
+    let Some(age) = age(received, now_ns) else {
         return Value::Null;
     };
-    let mut fields = message_fields(&message, max_angular);
+    let mut fields = fields();
     if let Value::Object(object) = &mut fields {
-        object.insert("age_ms".into(), age_ms(received.at_ns, now_ns).into());
+        object.insert("age_ms".into(), age.into());
     }
     fields
 }
 
+fn motor_json(state: &StatePayload, index: usize, now_ns: u64) -> Value {
+    let motor = &state.motors[index];
+    let v2 = state.protocol() == Some(Protocol::V2);
+    let driver = motor.driver_received.valid;
+    section(&motor.received, now_ns, || {
+        let state_bits = motor.driver_state();
+        json!({
+            "motor": index + 1,
+            "current": motor.current(),
+            "rpm": motor.rpm,
+            "driver_temperature": driver.then_some(motor.driver_temperature),
+            "motor_temperature": driver.then_some(motor.motor_temperature),
+            "pulses": v2.then_some(motor.pulses),
+            "driver_voltage": (v2 && driver).then(|| f64::from(motor.driver_decivolts) / 10.0),
+            "driver_state": (v2 && driver).then(|| state_bits.names().collect::<Vec<_>>()),
+            "driver_state_bits": (v2 && driver).then_some(state_bits.0),
+        })
+    })
+}
+
 /// The state JSON's top-level keys, in the order the README documents them.
-pub const STATE_KEYS: [&str; 10] = [
-    "robot", "seq", "age_ms", "link", "system", "motion", "lights", "motors", "odometry", "command",
+pub const STATE_KEYS: [&str; 15] = [
+    "robot", "seq", "age_ms", "link", "chassis", "system", "motion", "lights", "motors",
+    "odometer", "rc", "bms", "firmware", "odometry", "command",
 ];
 
 /// One top-level field of the state JSON ([`STATE_KEYS`]), or `None` for a key the schema does
 /// not have. `now_ns` (CLOCK_MONOTONIC) sets the ages. A client that reads a few fields makes
-/// only those; [`state_json`] is all of them.
+/// only those; [`state_json`] is all of them. The same keys in both protocols: a field a
+/// protocol does not have is `null`.
 pub fn state_field(state: &StatePayload, key: &str, now_ns: u64) -> Option<Value> {
-    let feedback = |wanted: &str| {
-        MessageKind::ALL
-            .into_iter()
-            .find(|kind| feedback_key(*kind) == Some(wanted))
-            .map(|kind| received_json(state.received(kind), state.max_angular, now_ns))
-    };
     Some(match key {
         "robot" => state.robot.as_str().into(),
         "seq" => state.seq.into(),
@@ -203,6 +213,7 @@ pub fn state_field(state: &StatePayload, key: &str, now_ns: u64) -> Option<Value
                 "state": link.state().name(),
                 "transport": link.transport().map_or("unknown", |t| t.name()),
                 "device": link.device.as_str(),
+                "protocol": link.protocol().map(Protocol::name),
                 "rx_frames": link.rx_frames,
                 "checksum_errors": link.checksum_errors,
                 "dropped_frames": link.dropped_frames,
@@ -213,18 +224,109 @@ pub fn state_field(state: &StatePayload, key: &str, now_ns: u64) -> Option<Value
                 "reconnects": link.reconnects,
             })
         }
-        "system" | "motion" | "lights" => feedback(key)?,
-        "motors" => Motor::ALL
-            .into_iter()
-            .map(|motor| {
-                received_json(
-                    state.received(MessageKind::MotorFeedback(motor)),
-                    state.max_angular,
-                    now_ns,
-                )
+        "chassis" => {
+            let chassis = &state.chassis;
+            json!({
+                "model": chassis.model().map(|model| model.name()),
+                "max_linear": chassis.max_linear,
+                "max_angular": chassis.max_angular,
+                "track": chassis.track,
+                "wheel_radius": chassis.wheel_radius,
+                "gear_ratio": chassis.gear_ratio,
             })
+        }
+        "system" => {
+            let system = &state.system;
+            section(&system.received, now_ns, || {
+                json!({
+                    "state": ChassisState::from_raw(system.state).name(),
+                    "control_mode": state.control_mode_name().unwrap_or("unknown"),
+                    "battery_voltage": system.battery_voltage(),
+                    "fault_bits": system.fault_bits,
+                    "faults": state.faults().iter().map(|f| f.name).collect::<Vec<_>>(),
+                    "unknown_fault_bits": state.unknown_fault_bits(),
+                })
+            })
+        }
+        "motion" => {
+            let motion = &state.motion;
+            section(&motion.received, now_ns, || {
+                json!({
+                    "linear": motion.linear(),
+                    "angular": motion.angular(),
+                    "lateral": motion.lateral(),
+                })
+            })
+        }
+        "lights" => {
+            let lights = &state.lights;
+            section(&lights.received, now_ns, || {
+                let lights = lights.feedback();
+                json!({
+                    "enabled": lights.enabled,
+                    "front": light_json(&lights.front),
+                    "rear": light_json(&lights.rear),
+                })
+            })
+        }
+        "motors" => (0..state.motors.len())
+            .map(|index| motor_json(state, index, now_ns))
             .collect::<Vec<_>>()
             .into(),
+        "odometer" => {
+            let odometer = &state.odometer;
+            section(&odometer.received, now_ns, || {
+                json!({
+                    "left": f64::from(odometer.left_mm) / 1000.0,
+                    "right": f64::from(odometer.right_mm) / 1000.0,
+                })
+            })
+        }
+        "rc" => {
+            let rc = &state.rc;
+            section(&rc.received, now_ns, || {
+                let [swa, swb, swc, swd] = rc.switches();
+                let [
+                    right_horizontal,
+                    right_vertical,
+                    left_vertical,
+                    left_horizontal,
+                    knob,
+                ] = rc.sticks;
+                json!({
+                    "swa": swa.name(),
+                    "swb": swb.name(),
+                    "swc": swc.name(),
+                    "swd": swd.name(),
+                    "right_horizontal": right_horizontal,
+                    "right_vertical": right_vertical,
+                    "left_vertical": left_vertical,
+                    "left_horizontal": left_horizontal,
+                    "knob": knob,
+                })
+            })
+        }
+        "bms" => {
+            let bms = &state.bms;
+            section(&bms.received, now_ns, || {
+                json!({
+                    "charge_percent": bms.charge_percent,
+                    "health_percent": bms.health_percent,
+                    "voltage": f64::from(bms.decivolts) / 10.0,
+                    "current": f64::from(bms.deciamps) / 10.0,
+                    "temperature": f64::from(bms.decidegrees) / 10.0,
+                    "alarms": bms.alarms_received.valid.then(|| bms.alarms.to_vec()),
+                })
+            })
+        }
+        "firmware" => {
+            let firmware = &state.firmware;
+            section(
+                &firmware.received,
+                now_ns,
+                || json!({ "text": firmware.text.as_str().trim_end() }),
+            )
+        }
         "odometry" => json!({
             "x": state.odometry.x,
             "y": state.odometry.y,
@@ -369,6 +471,7 @@ mod tests {
             robot: FixedText::new("scout"),
             ..Default::default()
         };
+        state.link.protocol = Protocol::V1.raw();
         state.store(
             &Message::SystemStatus(SystemStatus {
                 state: ChassisState::EStop,
@@ -398,5 +501,67 @@ mod tests {
         assert_eq!(json["motors"].as_array().map(Vec::len), Some(4));
         assert!(json["odometry"]["x"].is_number());
         assert!(json["command"]["linear"].is_number());
+        assert_eq!(json["link"]["protocol"], "v1");
+        for key in ["odometer", "rc", "bms", "firmware"] {
+            assert_eq!(json[key], Value::Null, "{key}: v2 only");
+        }
+        let keys: Vec<&str> = json
+            .as_object()
+            .expect("object")
+            .keys()
+            .map(String::as_str)
+            .collect();
+        assert_eq!(keys, STATE_KEYS);
+    }
+
+    #[test]
+    fn a_v2_state_has_the_same_keys_and_its_own_values() {
+        let mut state = StatePayload::default();
+        state.link.protocol = Protocol::V2.raw();
+        let received = Received {
+            valid: true,
+            count: 0,
+            at_ns: 1_000_000,
+        };
+        let frame = |id: u16, data: [u8; 8]| {
+            scout_protocol::v2::decode(&scout_protocol::CanFrame::new(id, &data).expect("frame"))
+                .expect("v2")
+        };
+        state.store_v2(&frame(0x211, [0, 3, 1, 3, 0x02, 0x81, 0, 7]), received);
+        state.store_v2(&frame(0x221, [0, 0x96, 0xFF, 0xCE, 0, 0, 0, 0]), received);
+        state.store_v2(&frame(0x251, [0, 100, 0, 15, 0, 0, 1, 0]), received);
+        state.store_v2(
+            &frame(0x311, [0, 0, 3, 0xE8, 0xFF, 0xFF, 0xFC, 0x18]),
+            received,
+        );
+        let json = state_json(&state, 2_000_000);
+        assert_eq!(json["link"]["protocol"], "v2");
+        assert_eq!(json["system"]["control_mode"], "rc");
+        assert_eq!(json["system"]["battery_voltage"], 25.9);
+        assert_eq!(
+            json["system"]["faults"],
+            json!(["battery_undervoltage_fault", "unknown_bit_7", "host_comm"])
+        );
+        assert_eq!(json["system"]["unknown_fault_bits"], 0x80);
+        assert_eq!(json["motion"]["linear"], 0.15);
+        assert_eq!(json["motion"]["angular"], -0.05);
+        assert_eq!(json["motors"][0]["rpm"], 100);
+        assert_eq!(json["motors"][0]["pulses"], 256);
+        assert_eq!(
+            json["motors"][0]["driver_temperature"],
+            Value::Null,
+            "no 0x261 yet"
+        );
+        assert_eq!(json["motors"][1], Value::Null);
+        assert_eq!(json["odometer"]["left"], 1.0);
+        assert_eq!(json["odometer"]["right"], -1.0);
+        assert_eq!(json["odometer"]["age_ms"], 1.0);
+        let keys: Vec<&str> = json
+            .as_object()
+            .expect("object")
+            .keys()
+            .map(String::as_str)
+            .collect();
+        assert_eq!(keys, STATE_KEYS);
     }
 }

@@ -28,8 +28,8 @@ pub mod state;
 pub mod stop_socket;
 pub mod text;
 
-/// The layout version in every payload's iceoryx2 type name (`scout::StatePayload.v5`).
-pub const LAYOUT_VERSION: u32 = 5;
+/// The layout version in every payload's iceoryx2 type name (`scout::StatePayload.v6`).
+pub const LAYOUT_VERSION: u32 = 6;
 
 pub use control::{
     Accepted, Class, ControlRequest, ControlResponse, LightsSetting, Rejection, RejectionKind,

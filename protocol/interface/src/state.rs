@@ -1,12 +1,16 @@
-//! The chassis state a gateway publishes zero-copy: the latest of every feedback message with
-//! its receive time, the link, odometry and the last command. [`StatePayload::store`] and
-//! [`StatePayload::received`] match every message kind, so a new feedback message does not
-//! compile until it has a place here.
+//! The chassis state a gateway publishes zero-copy: the latest of every feedback frame with its
+//! receive time, in either protocol (v1's frames and v2's fill the same fields where they mean
+//! the same thing, and v2's own where they do not), the link, the chassis model, odometry and
+//! the last command. [`StatePayload::store`] and [`StatePayload::store_v2`] match every message
+//! of each protocol, so a new feedback message does not compile until it has a place here.
 
 use iceoryx2::prelude::ZeroCopySend;
+use scout_protocol::model::Model;
+use scout_protocol::v2::{ControlModeV2, DriverStateV2, ErrorBitsV2, MessageV2, SwitchPosition};
+use scout_protocol::version::Protocol;
 use scout_protocol::{
-    ChassisState, ControlMode, FaultBits, Light, LightCommand, LightMode, Message, MessageKind,
-    MotionFeedback, Motor, MotorFeedback, SystemStatus, Transport,
+    ChassisState, ControlMode, FaultBits, Light, LightCommand, LightMode, Message, Severity,
+    SystemStatus, Transport,
 };
 
 use crate::text::FixedText;
@@ -20,8 +24,9 @@ wire_enum! {
         Silent = 1 => "silent",
         /// The port is closed or failing; the gateway is reopening it.
         Disconnected = 2 => "disconnected",
-        /// The chassis speaks protocol v2, which this gateway does not support.
-        ProtocolV2 = 3 => "protocol_v2",
+        /// The chassis speaks another protocol than the gateway was told to use, or feedback of
+        /// both protocols arrives: nothing it sends is used (the log says what was seen).
+        ProtocolMismatch = 3 => "protocol_mismatch",
     }
 }
 
@@ -33,13 +38,16 @@ pub struct LinkPayload {
     pub state: u8,
     /// [`Transport`] as `u8` ([`Transport::raw`]).
     pub transport: u8,
+    /// The chassis' protocol as `u8` ([`Protocol::raw`]; 0 until it is known).
+    pub protocol: u8,
     /// Valid frames received.
     pub rx_frames: u64,
     /// Frames rejected for their checksum.
     pub checksum_errors: u64,
     /// Frames lost, from gaps in the rolling counts.
     pub dropped_frames: u64,
-    /// Other rejected input: unknown ids, bad lengths, malformed slcan lines.
+    /// Other rejected input: unknown ids, bad lengths, malformed slcan lines, another host's
+    /// commands, the other protocol's frames.
     pub rejected_frames: u64,
     /// Bytes thrown away while resynchronising (serial).
     pub discarded_bytes: u64,
@@ -64,6 +72,50 @@ impl LinkPayload {
     pub fn transport(&self) -> Option<Transport> {
         Transport::from_raw(self.transport)
     }
+
+    /// The chassis' protocol, once known.
+    pub fn protocol(&self) -> Option<Protocol> {
+        Protocol::from_raw(self.protocol)
+    }
+}
+
+/// What the gateway knows of the chassis it drives: the model and the limits and geometry it
+/// drives it with.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+pub struct ChassisPayload {
+    /// [`Model`] as `u8` ([`Model::raw`]; 0 until it is known).
+    pub model: u8,
+    /// The fastest the gateway lets it go, m/s.
+    pub max_linear: f64,
+    /// The fastest the gateway lets it turn, rad/s (on v1 also the rate at 100 %).
+    pub max_angular: f64,
+    /// Distance between the left and right wheels, m.
+    pub track: f64,
+    /// Wheel radius, m.
+    pub wheel_radius: f64,
+    /// Motor turns per wheel turn.
+    pub gear_ratio: f64,
+}
+
+impl ChassisPayload {
+    /// The payload for `model`, driven at most at `max_angular` rad/s.
+    pub fn new(model: Model, max_angular: f64) -> Self {
+        let geometry = model.geometry();
+        Self {
+            model: model.raw(),
+            max_linear: model.limits().linear,
+            max_angular,
+            track: geometry.track,
+            wheel_radius: geometry.wheel_radius,
+            gear_ratio: geometry.gear_ratio,
+        }
+    }
+
+    /// The model, once known.
+    pub fn model(&self) -> Option<Model> {
+        Model::from_raw(self.model)
+    }
 }
 
 /// When a feedback frame was last received: `valid` is false until the first one.
@@ -72,29 +124,31 @@ impl LinkPayload {
 pub struct Received {
     /// Whether a frame of this kind has been received since the link came up.
     pub valid: bool,
-    /// The rolling count of the last frame.
+    /// The rolling count of the last frame (0 for v2 frames that carry none).
     pub count: u8,
     /// CLOCK_MONOTONIC time of the last frame, ns.
     pub at_ns: u64,
 }
 
-/// The 0x151 system status.
+/// The chassis' system state: v1's 0x151 or v2's 0x211, raw as the chassis sent it (the
+/// control mode and fault word mean different things in each protocol:
+/// [`StatePayload::control_mode_name`] and [`StatePayload::faults`] read them).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
 #[repr(C)]
 pub struct SystemPayload {
     /// When it was received.
     pub received: Received,
-    /// Raw chassis state byte (0 normal, 1 e-stop, 2 exception).
+    /// Raw chassis state byte (0 normal, 1 e-stop, 2 exception; the same in both protocols).
     pub state: u8,
-    /// Raw control mode byte (0 RC, 1 CAN, 2 serial).
+    /// Raw control mode byte (v1: 0 RC, 1 CAN, 2 serial; v2: 0 standby, 1 CAN, 2 UART, 3 RC).
     pub control_mode: u8,
     /// Battery voltage, 0.1 V.
     pub battery_decivolts: u16,
-    /// The fault word (byte 4 high).
+    /// The fault word (v1: 0x151 bytes 4-5; v2: 0x211 bytes 4-5).
     pub fault_bits: u16,
 }
 
-/// The 0x131 motion feedback.
+/// The body rates: v1's 0x131 or v2's 0x221.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
 #[repr(C)]
 pub struct MotionPayload {
@@ -104,22 +158,33 @@ pub struct MotionPayload {
     pub linear_mm_s: i16,
     /// mrad/s.
     pub angular_mrad_s: i16,
+    /// Leftward, mm/s (v2, MINI OMNI; 0 otherwise).
+    pub lateral_mm_s: i16,
 }
 
-/// One 0x200..0x203 motor feedback.
+/// One motor: v1's 0x200..0x203, or v2's 0x251..0x254 (speed, current, encoder) and
+/// 0x261..0x264 (its driver).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
 #[repr(C)]
 pub struct MotorPayload {
-    /// When it was received.
+    /// When the speed and current were received.
     pub received: Received,
     /// 0.1 A, signed.
     pub current_deciamps: i16,
     /// Shaft rpm.
     pub rpm: i16,
+    /// Encoder position, pulses (v2).
+    pub pulses: i32,
+    /// When the driver's values were received (on v1 they come with the speed).
+    pub driver_received: Received,
     /// deg C.
-    pub driver_temperature: i8,
+    pub driver_temperature: i16,
     /// deg C.
     pub motor_temperature: i8,
+    /// The driver's supply, 0.1 V (v2).
+    pub driver_decivolts: u16,
+    /// The driver's state bits (v2, 0x261.. byte 5).
+    pub driver_state: u8,
 }
 
 /// One light of a light feedback or request.
@@ -150,7 +215,7 @@ impl LightPayload {
     }
 }
 
-/// The 0x141 light feedback.
+/// The light state: v1's 0x141 or v2's 0x231.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
 #[repr(C)]
 pub struct LightsPayload {
@@ -164,7 +229,64 @@ pub struct LightsPayload {
     pub rear: LightPayload,
 }
 
-/// Odometry integrated from 0x131 in the gateway, since start or the last reset.
+/// The wheel odometers (v2's 0x311): cumulative distances as the chassis counts them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
+#[repr(C)]
+pub struct OdometerPayload {
+    /// When it was received.
+    pub received: Received,
+    /// Left side, mm.
+    pub left_mm: i32,
+    /// Right side, mm.
+    pub right_mm: i32,
+}
+
+/// The RC transmitter (v2's 0x241).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
+#[repr(C)]
+pub struct RcPayload {
+    /// When it was received.
+    pub received: Received,
+    /// SWA, SWB, SWC, SWD as raw two-bit positions (0b10 up, 0b01 middle, 0b11 down).
+    pub switches: [u8; 4],
+    /// Right stick horizontal, right vertical, left vertical, left horizontal, knob VRA.
+    pub sticks: [i8; 5],
+}
+
+/// A smart battery (v2's 0x361 and 0x362, sent only with a BMS fitted).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
+#[repr(C)]
+pub struct BmsPayload {
+    /// When 0x361 was received.
+    pub received: Received,
+    /// State of charge, %.
+    pub charge_percent: u8,
+    /// State of health, %.
+    pub health_percent: u8,
+    /// Pack voltage, 0.1 V.
+    pub decivolts: i16,
+    /// Pack current, 0.1 A.
+    pub deciamps: i16,
+    /// Temperature, 0.1 deg C.
+    pub decidegrees: i16,
+    /// When 0x362 was received.
+    pub alarms_received: Received,
+    /// 0x362's alarm and warning bytes, raw (their layout changed between vendor releases).
+    pub alarms: [u8; 8],
+}
+
+/// The chassis' firmware versions, as its reply to the version request said them (v2).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
+#[repr(C)]
+pub struct FirmwarePayload {
+    /// When the last part of the reply was received.
+    pub received: Received,
+    /// The versions, as text.
+    pub text: FixedText<96>,
+}
+
+/// Odometry integrated in the gateway, since start or the last reset: from the body rates on
+/// v1; on v2 the distance from the wheel odometers and the heading from the body rates.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
 pub struct OdometryPayload {
@@ -184,7 +306,7 @@ pub struct OdometryPayload {
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
 pub struct CommandPayload {
-    /// m/s, as sent (after percent rounding).
+    /// m/s, as sent (after the wire's rounding).
     pub linear: f64,
     /// rad/s, as sent.
     pub angular: f64,
@@ -194,7 +316,7 @@ pub struct CommandPayload {
 
 /// The chassis state a gateway publishes on every decoded feedback frame and link change.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::StatePayload.v5")]
+#[type_name("scout::StatePayload.v6")]
 #[repr(C)]
 pub struct StatePayload {
     /// Increases by one with every publication.
@@ -205,25 +327,47 @@ pub struct StatePayload {
     pub robot: FixedText<32>,
     /// The link.
     pub link: LinkPayload,
-    /// 0x151.
+    /// The model, its limits and geometry.
+    pub chassis: ChassisPayload,
+    /// The system state.
     pub system: SystemPayload,
-    /// 0x131.
+    /// The body rates.
     pub motion: MotionPayload,
-    /// 0x200..0x203, motor 1 first.
+    /// Motor 1 first.
     pub motors: [MotorPayload; 4],
-    /// 0x141.
+    /// The lights.
     pub lights: LightsPayload,
+    /// The wheel odometers (v2).
+    pub odometer: OdometerPayload,
+    /// The RC transmitter (v2).
+    pub rc: RcPayload,
+    /// The smart battery (v2, when fitted).
+    pub bms: BmsPayload,
+    /// The firmware versions (v2).
+    pub firmware: FirmwarePayload,
     /// Odometry.
     pub odometry: OdometryPayload,
     /// The last motion command sent.
     pub command: CommandPayload,
-    /// The maximum angular speed the gateway converts with, rad/s.
-    pub max_angular: f64,
+}
+
+/// A fault or warning the chassis reports, named as `scout decode` names it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ChassisFault {
+    /// The bit's name.
+    pub name: &'static str,
+    /// How serious it is.
+    pub severity: Severity,
 }
 
 impl StatePayload {
-    /// Keeps a received feedback message as the latest of its kind. Returns `false` for a
-    /// host-to-chassis command, which has no place in the state.
+    /// The chassis' protocol, once known.
+    pub fn protocol(&self) -> Option<Protocol> {
+        self.link.protocol()
+    }
+
+    /// Keeps a received protocol v1 feedback message as the latest of its kind. Returns
+    /// `false` for a host-to-chassis command, which has no place in the state.
     pub fn store(&mut self, message: &Message, received: Received) -> bool {
         match message {
             Message::SystemStatus(status) => {
@@ -240,6 +384,7 @@ impl StatePayload {
                     received,
                     linear_mm_s: motion.linear_mm_s,
                     angular_mrad_s: motion.angular_mrad_s,
+                    lateral_mm_s: 0,
                 };
             }
             Message::MotorFeedback(motor) => {
@@ -247,8 +392,10 @@ impl StatePayload {
                     received,
                     current_deciamps: motor.current_deciamps,
                     rpm: motor.rpm,
-                    driver_temperature: motor.driver_temperature,
+                    driver_received: received,
+                    driver_temperature: i16::from(motor.driver_temperature),
                     motor_temperature: motor.motor_temperature,
+                    ..MotorPayload::default()
                 };
             }
             Message::LightFeedback(lights) => {
@@ -264,38 +411,203 @@ impl StatePayload {
         true
     }
 
-    /// The latest message of `kind` with when it came, or `None` before the first one and for
-    /// host-to-chassis commands.
-    pub fn received(&self, kind: MessageKind) -> Option<(Received, Message)> {
-        let (received, message) = match kind {
-            MessageKind::SystemStatus => (
-                self.system.received,
-                Message::SystemStatus(self.system.status()),
-            ),
-            MessageKind::MotionFeedback => (
-                self.motion.received,
-                Message::MotionFeedback(self.motion.feedback()),
-            ),
-            MessageKind::MotorFeedback(motor) => {
-                let payload = &self.motors[motor.index()];
-                (
-                    payload.received,
-                    Message::MotorFeedback(payload.feedback(motor)),
-                )
+    /// Keeps a received protocol v2 feedback frame. Returns `false` for a host-to-chassis
+    /// command, which has no place in the state. A version reply in text comes eight
+    /// characters a frame and is appended to what came before (the gateway clears it when it
+    /// asks again).
+    pub fn store_v2(&mut self, message: &MessageV2, received: Received) -> bool {
+        let motor_index = |motor: u8| usize::from(motor.clamp(1, 4) - 1);
+        match message {
+            MessageV2::SystemState(system) => {
+                self.system = SystemPayload {
+                    received,
+                    state: system.state.raw(),
+                    control_mode: system.control_mode.raw(),
+                    battery_decivolts: system.battery_decivolts,
+                    fault_bits: system.errors.0,
+                };
             }
-            MessageKind::LightFeedback => (
-                self.lights.received,
-                Message::LightFeedback(self.lights.feedback()),
-            ),
-            MessageKind::MotionCommand | MessageKind::LightCommand => return None,
-        };
-        received.valid.then_some((received, message))
+            MessageV2::MotionState(motion) => {
+                self.motion = MotionPayload {
+                    received,
+                    linear_mm_s: motion.linear_mm_s,
+                    angular_mrad_s: motion.angular_mrad_s,
+                    lateral_mm_s: motion.lateral_mm_s,
+                };
+            }
+            MessageV2::LightState(lights) => {
+                self.lights = LightsPayload {
+                    received,
+                    enabled: lights.host_controls(),
+                    front: LightPayload::new(Light {
+                        mode: lights.front_mode,
+                        brightness: lights.front_brightness,
+                    }),
+                    rear: LightPayload::new(Light {
+                        mode: lights.rear_mode,
+                        brightness: lights.rear_brightness,
+                    }),
+                };
+            }
+            MessageV2::ActuatorHigh(high) => {
+                let motor = &mut self.motors[motor_index(high.motor)];
+                motor.received = received;
+                motor.rpm = high.rpm;
+                motor.current_deciamps = high.current_deciamps;
+                motor.pulses = high.pulses;
+            }
+            MessageV2::ActuatorLow(low) => {
+                let motor = &mut self.motors[motor_index(low.motor)];
+                motor.driver_received = received;
+                motor.driver_decivolts = low.driver_decivolts;
+                motor.driver_temperature = low.driver_temperature;
+                motor.motor_temperature = low.motor_temperature;
+                motor.driver_state = low.driver_state.0;
+            }
+            MessageV2::Odometer(odometer) => {
+                self.odometer = OdometerPayload {
+                    received,
+                    left_mm: odometer.left_mm,
+                    right_mm: odometer.right_mm,
+                };
+            }
+            MessageV2::RcState(rc) => {
+                self.rc = RcPayload {
+                    received,
+                    switches: [rc.swa.raw(), rc.swb.raw(), rc.swc.raw(), rc.swd.raw()],
+                    sticks: [
+                        rc.right_horizontal,
+                        rc.right_vertical,
+                        rc.left_vertical,
+                        rc.left_horizontal,
+                        rc.knob,
+                    ],
+                };
+            }
+            MessageV2::Bms(bms) => {
+                self.bms.received = received;
+                self.bms.charge_percent = bms.charge_percent;
+                self.bms.health_percent = bms.health_percent;
+                self.bms.decivolts = bms.decivolts;
+                self.bms.deciamps = bms.deciamps;
+                self.bms.decidegrees = bms.decidegrees;
+            }
+            MessageV2::BmsAlarm(bytes) => {
+                self.bms.alarms_received = received;
+                self.bms.alarms = *bytes;
+            }
+            MessageV2::Version(version) => {
+                let v = |word: u16| (word >> 8, word & 0xFF);
+                let (ch, dh, cs, ds) = (
+                    v(version.controller_hardware),
+                    v(version.driver_hardware),
+                    v(version.controller_software),
+                    v(version.driver_software),
+                );
+                let text = format!(
+                    "controller hw {}.{} sw {}.{}, driver hw {}.{} sw {}.{}",
+                    ch.0, ch.1, cs.0, cs.1, dh.0, dh.1, ds.0, ds.1
+                );
+                self.firmware = FirmwarePayload {
+                    received,
+                    text: FixedText::new(&text),
+                };
+            }
+            MessageV2::VersionText(bytes) => {
+                let mut text = self.firmware.text.as_str().to_owned();
+                text.extend(bytes.iter().map(|&b| {
+                    if (32..=126).contains(&b) {
+                        b as char
+                    } else {
+                        ' '
+                    }
+                }));
+                self.firmware = FirmwarePayload {
+                    received,
+                    text: FixedText::new(&text),
+                };
+            }
+            MessageV2::MotionCommand(_)
+            | MessageV2::LightCommand(_)
+            | MessageV2::ControlMode(_)
+            | MessageV2::ErrorClear(_)
+            | MessageV2::VersionRequest(_) => return false,
+        }
+        true
+    }
+
+    /// The chassis state (normal, e-stop, exception), once reported.
+    pub fn chassis_state(&self) -> Option<ChassisState> {
+        self.system
+            .received
+            .valid
+            .then(|| ChassisState::from_raw(self.system.state))
+    }
+
+    /// The control mode's name in the chassis' protocol (v1: `rc`, `can`, `serial`; v2:
+    /// `standby`, `can`, `uart`, `rc`), once reported.
+    pub fn control_mode_name(&self) -> Option<&'static str> {
+        if !self.system.received.valid {
+            return None;
+        }
+        let raw = self.system.control_mode;
+        Some(match self.protocol()? {
+            Protocol::V1 => ControlMode::from_raw(raw).name(),
+            Protocol::V2 => ControlModeV2::from_raw(raw).name(),
+        })
+    }
+
+    /// Whether the RC transmitter holds the chassis, as the last system state says.
+    pub fn rc_in_control(&self) -> bool {
+        let raw = self.system.control_mode;
+        self.system.received.valid
+            && match self.protocol() {
+                Some(Protocol::V1) => ControlMode::from_raw(raw) == ControlMode::Rc,
+                Some(Protocol::V2) => ControlModeV2::from_raw(raw) == ControlModeV2::Rc,
+                None => false,
+            }
+    }
+
+    /// Every fault bit set in the last system state, named and graded as in the chassis'
+    /// protocol (v1's sixteen named bits; v2's named bits, the rest as `unknown_bit_N`).
+    pub fn faults(&self) -> Vec<ChassisFault> {
+        let bits = self.system.fault_bits;
+        if !self.system.received.valid {
+            return Vec::new();
+        }
+        match self.protocol() {
+            Some(Protocol::V1) => FaultBits(bits)
+                .iter()
+                .map(|fault| ChassisFault {
+                    name: fault.name(),
+                    severity: fault.severity(),
+                })
+                .collect(),
+            Some(Protocol::V2) => ErrorBitsV2(bits)
+                .faults()
+                .map(|(name, severity)| ChassisFault { name, severity })
+                .collect(),
+            None => Vec::new(),
+        }
+    }
+
+    /// The fault bits no source names (v2; v1's reserved bits), for people to report.
+    pub fn unknown_fault_bits(&self) -> u16 {
+        match self.protocol() {
+            Some(Protocol::V1) => FaultBits(self.system.fault_bits)
+                .iter()
+                .filter(|fault| fault.severity() == Severity::Reserved)
+                .fold(0, |bits, fault| bits | fault.mask()),
+            Some(Protocol::V2) => ErrorBitsV2(self.system.fault_bits).unknown(),
+            None => 0,
+        }
     }
 }
 
 impl SystemPayload {
-    /// The status it carries.
-    pub fn status(&self) -> SystemStatus {
+    /// The status it carries, read as protocol v1's 0x151 (for v1 tools; see
+    /// [`StatePayload::faults`] for either protocol).
+    pub fn status_v1(&self) -> SystemStatus {
         SystemStatus {
             state: ChassisState::from_raw(self.state),
             control_mode: ControlMode::from_raw(self.control_mode),
@@ -303,28 +615,39 @@ impl SystemPayload {
             faults: FaultBits(self.fault_bits),
         }
     }
+
+    /// Battery voltage, V.
+    pub fn battery_voltage(&self) -> f64 {
+        f64::from(self.battery_decivolts) / 10.0
+    }
 }
 
 impl MotionPayload {
-    /// The feedback it carries.
-    pub fn feedback(&self) -> MotionFeedback {
-        MotionFeedback {
-            linear_mm_s: self.linear_mm_s,
-            angular_mrad_s: self.angular_mrad_s,
-        }
+    /// m/s.
+    pub fn linear(&self) -> f64 {
+        f64::from(self.linear_mm_s) / 1000.0
+    }
+
+    /// rad/s.
+    pub fn angular(&self) -> f64 {
+        f64::from(self.angular_mrad_s) / 1000.0
+    }
+
+    /// m/s, leftward.
+    pub fn lateral(&self) -> f64 {
+        f64::from(self.lateral_mm_s) / 1000.0
     }
 }
 
 impl MotorPayload {
-    /// The feedback it carries, for `motor`.
-    pub fn feedback(&self, motor: Motor) -> MotorFeedback {
-        MotorFeedback {
-            motor,
-            current_deciamps: self.current_deciamps,
-            rpm: self.rpm,
-            driver_temperature: self.driver_temperature,
-            motor_temperature: self.motor_temperature,
-        }
+    /// Current, A.
+    pub fn current(&self) -> f64 {
+        f64::from(self.current_deciamps) / 10.0
+    }
+
+    /// The driver's state bits (v2).
+    pub fn driver_state(&self) -> DriverStateV2 {
+        DriverStateV2(self.driver_state)
     }
 }
 
@@ -339,10 +662,17 @@ impl LightsPayload {
     }
 }
 
+impl RcPayload {
+    /// SWA, SWB, SWC, SWD.
+    pub fn switches(&self) -> [SwitchPosition; 4] {
+        self.switches.map(SwitchPosition::from_raw)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use scout_protocol::Direction;
+    use scout_protocol::{CanFrame, Direction, MessageKind, v2};
 
     #[test]
     fn link_state_round_trips() {
@@ -351,25 +681,22 @@ mod tests {
         }
     }
 
-    fn sample(kind: MessageKind) -> Message {
-        Message::parse(kind, &[1, 2, 3, 4, 5, 6])
-    }
+    const RECEIVED: Received = Received {
+        valid: true,
+        count: 9,
+        at_ns: 42,
+    };
 
     #[test]
-    fn every_feedback_message_is_stored_and_read_back() {
-        let received = Received {
-            valid: true,
-            count: 9,
-            at_ns: 42,
-        };
+    fn every_v1_feedback_message_has_a_place_and_commands_have_none() {
         for kind in MessageKind::ALL {
             let mut state = StatePayload::default();
-            let message = sample(kind);
-            let stored = state.store(&message, received);
+            let message = Message::parse(kind, &[1, 2, 3, 4, 5, 6]);
+            let stored = state.store(&message, RECEIVED);
             match kind.direction() {
                 Direction::Feedback => {
                     assert!(stored, "{kind:?}");
-                    assert_eq!(state.received(kind), Some((received, message)), "{kind:?}");
+                    assert_ne!(state, StatePayload::default(), "{kind:?} left no trace");
                 }
                 Direction::Command => {
                     assert!(!stored, "{kind:?}");
@@ -377,5 +704,92 @@ mod tests {
                 }
             }
         }
+    }
+
+    fn v2(id: u16, data: [u8; 8]) -> MessageV2 {
+        v2::decode(&CanFrame::new(id, &data).expect("frame")).expect("a v2 frame")
+    }
+
+    #[test]
+    fn every_v2_feedback_frame_has_a_place_and_commands_have_none() {
+        let ids = [
+            0x111, 0x121, 0x421, 0x441, 0x411, 0x211, 0x221, 0x231, 0x241, 0x251, 0x254, 0x261,
+            0x264, 0x311, 0x41A, 0x4A1, 0x361, 0x362,
+        ];
+        for id in ids {
+            let message = v2(id, [1, 2, 3, 4, 5, 6, 7, 8]);
+            let mut state = StatePayload::default();
+            let stored = state.store_v2(&message, RECEIVED);
+            assert_eq!(stored, !message.is_command(), "0x{id:03X}");
+            assert_eq!(state == StatePayload::default(), !stored, "0x{id:03X}");
+        }
+    }
+
+    #[test]
+    fn v2_frames_fill_the_shared_fields_and_their_own() {
+        let mut state = StatePayload::default();
+        state.link.protocol = Protocol::V2.raw();
+        // The Bunker Mini's frames in e-stop (protocol-v2-notes 8, C1) and a HUNTER SE's.
+        state.store_v2(&v2(0x211, [1, 0, 1, 0, 0, 0x80, 0, 0]), RECEIVED);
+        state.store_v2(
+            &v2(0x311, [0xFF, 0xFF, 0xFF, 0xC1, 0, 0, 0, 0x12]),
+            RECEIVED,
+        );
+        state.store_v2(&v2(0x252, [0, 0, 0, 7, 0, 0xFF, 0xFB, 0x77]), RECEIVED);
+        state.store_v2(&v2(0x263, [1, 7, 0, 0x27, 0xD8, 0x40, 0, 0]), RECEIVED);
+        state.store_v2(&v2(0x241, [0xAA, 0, 0, 0, 0, 0, 0, 0x61]), RECEIVED);
+        assert_eq!(state.chassis_state(), Some(ChassisState::EStop));
+        assert_eq!(state.control_mode_name(), Some("standby"));
+        assert!(!state.rc_in_control());
+        assert_eq!(state.system.battery_voltage(), 25.6);
+        assert_eq!(
+            state.faults(),
+            [ChassisFault {
+                name: "unknown_bit_7",
+                severity: Severity::Reserved
+            }]
+        );
+        assert_eq!(state.unknown_fault_bits(), 0x0080);
+        assert_eq!((state.odometer.left_mm, state.odometer.right_mm), (-63, 18));
+        let motor = state.motors[1];
+        assert_eq!((motor.current(), motor.pulses), (0.7, 0x00FF_FB77));
+        let driver = state.motors[2];
+        assert_eq!(driver.driver_decivolts, 263);
+        assert_eq!(
+            (driver.driver_temperature, driver.motor_temperature),
+            (39, -40)
+        );
+        assert!(!state.motors[2].received.valid, "0x253 not received yet");
+        assert_eq!(state.rc.switches(), [SwitchPosition::Up; 4]);
+    }
+
+    #[test]
+    fn the_same_raw_control_mode_reads_by_protocol() {
+        let mut state = StatePayload::default();
+        state.system.received = RECEIVED;
+        state.system.control_mode = 0;
+        assert_eq!(state.control_mode_name(), None, "protocol not known yet");
+        state.link.protocol = Protocol::V1.raw();
+        assert_eq!(state.control_mode_name(), Some("rc"));
+        assert!(state.rc_in_control());
+        state.link.protocol = Protocol::V2.raw();
+        assert_eq!(state.control_mode_name(), Some("standby"));
+        assert!(!state.rc_in_control());
+        state.system.control_mode = 3;
+        assert!(state.rc_in_control());
+    }
+
+    #[test]
+    fn version_replies_become_text() {
+        let mut state = StatePayload::default();
+        state.store_v2(&v2(0x41A, [1, 0, 1, 0, 2, 3, 1, 5]), RECEIVED);
+        assert_eq!(
+            state.firmware.text.as_str(),
+            "controller hw 1.0 sw 2.3, driver hw 1.0 sw 1.5"
+        );
+        let mut state = StatePayload::default();
+        state.store_v2(&v2(0x4A1, *b"scout v2"), RECEIVED);
+        state.store_v2(&v2(0x4A1, [b' ', b'1', b'.', b'0', 0, 0, 0, 0]), RECEIVED);
+        assert_eq!(state.firmware.text.as_str(), "scout v2 1.0    ");
     }
 }

@@ -132,13 +132,9 @@ fn simulate(cli: Cli) -> anyhow::Result<()> {
         ProtocolArg::V1 => Protocol::V1,
         ProtocolArg::V2 => Protocol::V2,
     };
-    let model = cli.model.map_or(
-        match protocol {
-            Protocol::V1 => Model::Scout,
-            Protocol::V2 => Model::Scout2,
-        },
-        ModelArg::model,
-    );
+    let model = cli
+        .model
+        .map_or(Model::default_for(protocol), ModelArg::model);
     let base = SimParams::for_model(model);
     let mut params = match &cli.params {
         Some(path) => {
@@ -180,9 +176,7 @@ fn simulate(cli: Cli) -> anyhow::Result<()> {
 /// `base` with the keys a parameter file sets replaced.
 fn with_file(base: &SimParams, text: &str) -> anyhow::Result<SimParams> {
     let file: toml::Table = toml::from_str(text)?;
-    let mut merged = toml::Table::try_from(base)?;
-    merged.extend(file);
-    Ok(merged.try_into()?)
+    Ok(base.with_overrides(&file)?)
 }
 
 /// Sends each command of `input` to the simulator, sleeping on `wait` lines.
