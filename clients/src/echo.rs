@@ -109,7 +109,17 @@ fn draw(state: &StatePayload, out: &mut dyn Write) -> std::io::Result<()> {
         .unwrap_or_else(|| "none".into());
     // Clear the screen and go home, then draw.
     write!(out, "\x1b[2J\x1b[H")?;
-    writeln!(out, "robot {}   seq {}", text(&json["robot"]), json["seq"])?;
+    let chassis = &json["chassis"];
+    writeln!(
+        out,
+        "robot {}   seq {}   {} on protocol {} ({} m/s, {} rad/s at most)",
+        text(&json["robot"]),
+        json["seq"],
+        text(&chassis["model"]),
+        text(&link["protocol"]),
+        number(&chassis["max_linear"], 2),
+        number(&chassis["max_angular"], 4),
+    )?;
     writeln!(
         out,
         "link  {} ({} {})  rx {}  tx {}  checksum errors {}  dropped {}  rejected {}  overflowed {}  reconnects {}",
@@ -172,5 +182,40 @@ fn draw(state: &StatePayload, out: &mut dyn Write) -> std::io::Result<()> {
         number(&odometry["yaw"], 3),
         number(&odometry["distance"], 2),
     )?;
+    // What only a protocol v2 chassis reports.
+    let odometer = &json["odometer"];
+    if !odometer.is_null() {
+        writeln!(
+            out,
+            "odometer left {} m  right {} m",
+            number(&odometer["left"], 3),
+            number(&odometer["right"], 3),
+        )?;
+    }
+    let rc = &json["rc"];
+    if !rc.is_null() {
+        writeln!(
+            out,
+            "rc       SWA {}  SWB {}  SWC {}  SWD {}",
+            text(&rc["swa"]),
+            text(&rc["swb"]),
+            text(&rc["swc"]),
+            text(&rc["swd"]),
+        )?;
+    }
+    let bms = &json["bms"];
+    if !bms.is_null() {
+        writeln!(
+            out,
+            "bms      {}%  {} V  {} A  {} C",
+            bms["charge_percent"],
+            number(&bms["voltage"], 1),
+            number(&bms["current"], 1),
+            number(&bms["temperature"], 1),
+        )?;
+    }
+    if let Some(firmware) = json["firmware"]["text"].as_str() {
+        writeln!(out, "firmware {firmware}")?;
+    }
     out.flush()
 }

@@ -257,7 +257,7 @@ impl GatewayConfig {
             Some(Transport::Slcan) => DeviceSpec::Slcan(device()?.into()),
             Some(Transport::Can) => DeviceSpec::Can(device()?),
             Some(Transport::Sim) => {
-                let protocol = self.protocol.fixed().unwrap_or(Protocol::V1);
+                let protocol = self.fixed_protocol().unwrap_or(Protocol::V1);
                 let model = self.model.unwrap_or(Model::default_for(protocol));
                 let params = SimParams {
                     max_angular: self.max_angular(),
@@ -271,12 +271,13 @@ impl GatewayConfig {
     }
 
     /// The protocol the gateway speaks from the start, if it is fixed: RS232 is v1 whatever
-    /// `auto` would say (only v1 has an RS232 framing).
+    /// `auto` would say (only v1 has an RS232 framing), and the simulated chassis speaks what
+    /// the gateway made it speak (`auto`: v1).
     pub fn fixed_protocol(&self) -> Option<Protocol> {
         match (self.transport, self.protocol.fixed()) {
             (_, Some(protocol)) => Some(protocol),
-            (Some(Transport::Serial), None) => Some(Protocol::V1),
-            (Some(Transport::Slcan | Transport::Can | Transport::Sim) | None, None) => None,
+            (Some(Transport::Serial | Transport::Sim), None) => Some(Protocol::V1),
+            (Some(Transport::Slcan | Transport::Can) | None, None) => None,
         }
     }
 

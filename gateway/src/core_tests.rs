@@ -1413,7 +1413,7 @@ fn the_model_sets_the_limits_a_v2_chassis_is_driven_by() {
 fn with_auto_nothing_goes_out_until_the_protocol_is_told_then_it_drives() {
     for firmware in Protocol::ALL {
         let config = GatewayConfig::default();
-        let mut pair = Pair::with_firmware(firmware, Transport::Sim, &config, Start::Clean);
+        let mut pair = Pair::with_firmware(firmware, Transport::Can, &config, Start::Clean);
         pair.run(ms(250));
         assert!(
             pair.sent.is_empty(),
@@ -1442,7 +1442,7 @@ fn a_chassis_of_the_other_protocol_moves_nothing_and_the_stop_says_why() {
     for firmware in Protocol::ALL {
         let gateway = firmware.other();
         let mut pair =
-            Pair::with_firmware(firmware, Transport::Sim, &config(gateway), Start::Clean);
+            Pair::with_firmware(firmware, Transport::Can, &config(gateway), Start::Clean);
         pair.run(ms(400));
         assert_eq!(pair.last_state().link.state(), LinkState::ProtocolMismatch);
         pair.run(ms(400));

@@ -11,7 +11,7 @@ use std::time::Duration;
 
 use scout_system_tests::{
     Gateway, Sim, command, connect, doctor_check as check, free_port, robot_name, run_with_input,
-    tcp,
+    tcp, wait_for_state,
 };
 use serde_json::Value;
 use serialport::{SerialPort, TTYPort};
@@ -216,26 +216,34 @@ fn a_protocol_v2_chassis_behind_slcan_is_named_with_what_to_do() {
     let mut sim = Sim::start(&["--slcan", "--protocol", "v2", "--model", "scout2"]);
     let device = sim.port().to_owned();
     let (code, checks) = doctor(&["--name", &robot_name("doctor-v2"), "--slcan", &device]);
-    assert_eq!(code, Some(1), "{checks:#?}");
+    assert_eq!(
+        code,
+        Some(0),
+        "a v2 chassis at power-on is ready: {checks:#?}"
+    );
     assert_eq!(
         verdict(&checks, "traffic"),
         "pass",
         "v2 frames are valid: {checks:#?}"
     );
     let protocol = check(&checks, "protocol");
-    assert_eq!(protocol["verdict"], "fail", "{checks:#?}");
+    assert_eq!(protocol["verdict"], "pass", "{checks:#?}");
+    let detail = protocol["detail"].as_str().unwrap_or_default();
     assert!(
-        protocol["detail"]
-            .as_str()
-            .is_some_and(|d| d.contains("0x211")),
+        detail.contains("0x221") && detail.contains("--protocol v2"),
         "{protocol}"
     );
-    assert!(fix(&checks, "protocol").contains("v2"), "{checks:#?}");
     assert_eq!(verdict(&checks, "errors"), "pass", "{checks:#?}");
-    assert_eq!(verdict(&checks, "chassis.control"), "warn", "{checks:#?}");
+    let control = check(&checks, "chassis.control");
+    assert_eq!(
+        control["verdict"], "pass",
+        "standby until 0x421: {checks:#?}"
+    );
     assert!(
-        fix(&checks, "chassis.control").contains("421#01"),
-        "{checks:#?}"
+        control["detail"]
+            .as_str()
+            .is_some_and(|d| d.contains("421#01")),
+        "{control}"
     );
     assert_eq!(
         verdict(&checks, "chassis.rc"),
@@ -256,6 +264,22 @@ fn a_protocol_v2_chassis_behind_slcan_is_named_with_what_to_do() {
         "{checks:#?}"
     );
     assert_eq!(verdict(&checks, "chassis.rc"), "warn", "{checks:#?}");
+
+    // The same through a gateway that drives it (protocol v2, told by its frames).
+    let name = robot_name("doctor-v2-gw");
+    let _gateway = Gateway::start(&["--slcan", &device, "--name", &name]);
+    let states = connect(&name).subscribe().expect("subscribe");
+    wait_for_state(&states, Duration::from_secs(10), |s| {
+        s["link"]["protocol"] == "v2" && !s["system"].is_null()
+    });
+    let (_, checks) = doctor(&["--name", &name]);
+    assert_eq!(verdict(&checks, "link"), "pass", "{checks:#?}");
+    assert_eq!(verdict(&checks, "chassis.estop"), "fail", "{checks:#?}");
+    assert_eq!(verdict(&checks, "chassis.rc"), "warn", "{checks:#?}");
+    assert!(
+        fix(&checks, "chassis.control").contains("SWB up"),
+        "{checks:#?}"
+    );
 }
 
 #[test]

@@ -28,14 +28,32 @@ from typing import Any, AsyncIterator, Dict, Iterator, Optional, Type, Union
 
 from . import _scout
 from ._errors import NoAnswerError, NoGatewayError, Rejected, ScoutError, VersionError
-from ._state import Command, Light, Lights, Link, Motion, Motor, Odometry, State, System
+from ._state import (
+    Bms,
+    Chassis,
+    Command,
+    Firmware,
+    Light,
+    Lights,
+    Link,
+    Motion,
+    Motor,
+    Odometer,
+    Odometry,
+    Rc,
+    State,
+    System,
+)
 
 __all__ = [
     "LAYOUT_VERSION",
     "Answer",
+    "Bms",
+    "Chassis",
     "Class",
     "Command",
     "Controller",
+    "Firmware",
     "Light",
     "Lights",
     "Link",
@@ -43,7 +61,9 @@ __all__ = [
     "Motor",
     "NoAnswerError",
     "NoGatewayError",
+    "Odometer",
     "Odometry",
+    "Rc",
     "Rejected",
     "Robot",
     "ScoutError",

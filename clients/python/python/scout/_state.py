@@ -16,6 +16,8 @@ class Link:
     state: str
     transport: str
     device: str
+    protocol: Optional[str]
+    """The chassis' protocol, "v1" or "v2"; None until the gateway has told it."""
     rx_frames: int
     checksum_errors: int
     dropped_frames: int
@@ -27,23 +29,42 @@ class Link:
 
 
 @dataclass(frozen=True)
+class Chassis:
+    """The model the gateway drives and its limits (m/s, rad/s) and geometry (m)."""
+
+    model: Optional[str]
+    max_linear: float
+    max_angular: float
+    track: float
+    wheel_radius: float
+    gear_ratio: float
+
+
+@dataclass(frozen=True)
 class System:
-    """The chassis' system status (0x151): state, control mode, battery, faults by name."""
+    """The chassis' system status (v1 0x151, v2 0x211): state, control mode, battery, faults.
+
+    The control mode and fault names are the chassis protocol's: v1's control modes are rc,
+    can and serial; v2's standby, can, uart and rc.
+    """
 
     state: str
     control_mode: str
     battery_voltage: float
     fault_bits: int
     faults: List[str]
+    unknown_fault_bits: int
     age_ms: float
 
 
 @dataclass(frozen=True)
 class Motion:
-    """The speeds the chassis reports (0x131): m/s and rad/s."""
+    """The speeds the chassis reports (v1 0x131, v2 0x221): m/s and rad/s; lateral on a MINI
+    OMNI."""
 
     linear: float
     angular: float
+    lateral: float
     age_ms: float
 
 
@@ -67,13 +88,64 @@ class Lights:
 
 @dataclass(frozen=True)
 class Motor:
-    """One motor's driver feedback (0x201-0x204): A, rpm, degrees C."""
+    """One motor (v1 0x200-0x203; v2 0x251-0x254 and 0x261-0x264): A, rpm, degrees C; on v2
+    also its encoder pulses and its driver's voltage and state (None on v1)."""
 
     motor: int
     current: float
     rpm: int
-    driver_temperature: int
-    motor_temperature: int
+    driver_temperature: Optional[int]
+    motor_temperature: Optional[int]
+    pulses: Optional[int]
+    driver_voltage: Optional[float]
+    driver_state: Optional[List[str]]
+    driver_state_bits: Optional[int]
+    age_ms: float
+
+
+@dataclass(frozen=True)
+class Odometer:
+    """A v2 chassis' wheel odometers (0x311): cumulative distance of each side, m."""
+
+    left: float
+    right: float
+    age_ms: float
+
+
+@dataclass(frozen=True)
+class Rc:
+    """A v2 chassis' RC transmitter (0x241): switch positions (up, middle, down) and sticks."""
+
+    swa: str
+    swb: str
+    swc: str
+    swd: str
+    right_horizontal: int
+    right_vertical: int
+    left_vertical: int
+    left_horizontal: int
+    knob: int
+    age_ms: float
+
+
+@dataclass(frozen=True)
+class Bms:
+    """A v2 chassis' smart battery (0x361, 0x362): %, V, A, degrees C, raw alarm bytes."""
+
+    charge_percent: int
+    health_percent: int
+    voltage: float
+    current: float
+    temperature: float
+    alarms: Optional[List[int]]
+    age_ms: float
+
+
+@dataclass(frozen=True)
+class Firmware:
+    """A v2 chassis' firmware versions, as its answer to the version request says them."""
+
+    text: str
     age_ms: float
 
 
@@ -147,6 +219,12 @@ class State:
         return link
 
     @property
+    def chassis(self) -> Chassis:
+        """The model the gateway drives and its limits and geometry."""
+        chassis: Chassis = self._field("chassis", lambda fields: Chassis(**fields))
+        return chassis
+
+    @property
     def system(self) -> Optional[System]:
         """The chassis' system status, or None before the first."""
         system: Optional[System] = self._field("system", lambda f: _optional(System, f))
@@ -171,6 +249,34 @@ class State:
             "motors", lambda items: [_optional(Motor, item) for item in items]
         )
         return motors
+
+    @property
+    def odometer(self) -> Optional[Odometer]:
+        """The wheel odometers (protocol v2), or None before the first (always on v1)."""
+        odometer: Optional[Odometer] = self._field(
+            "odometer", lambda f: _optional(Odometer, f)
+        )
+        return odometer
+
+    @property
+    def rc(self) -> Optional[Rc]:
+        """The RC transmitter (protocol v2, while it is on), or None before the first."""
+        rc: Optional[Rc] = self._field("rc", lambda f: _optional(Rc, f))
+        return rc
+
+    @property
+    def bms(self) -> Optional[Bms]:
+        """The smart battery (protocol v2, when fitted), or None before the first."""
+        bms: Optional[Bms] = self._field("bms", lambda f: _optional(Bms, f))
+        return bms
+
+    @property
+    def firmware(self) -> Optional[Firmware]:
+        """The firmware versions (protocol v2), or None before the answer."""
+        firmware: Optional[Firmware] = self._field(
+            "firmware", lambda f: _optional(Firmware, f)
+        )
+        return firmware
 
     @property
     def odometry(self) -> Odometry:
