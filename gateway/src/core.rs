@@ -424,7 +424,7 @@ impl Core {
         self.version_asked = false;
         self.follow_up.clear();
         let reconnect = std::mem::replace(&mut self.opened_before, true);
-        let publish = self.tracker.handle_connected(reconnect);
+        let publish = self.tracker.handle_connected(now, reconnect);
         self.publish_if(publish);
         self.next_command = self.next_command.max(now);
     }

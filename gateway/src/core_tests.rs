@@ -1468,6 +1468,33 @@ fn a_chassis_of_the_other_protocol_moves_nothing_and_the_stop_says_why() {
     }
 }
 
+#[test]
+fn with_auto_a_chassis_that_says_nothing_is_a_stop_that_says_so() {
+    let mut pair = Pair::with_firmware(
+        Protocol::V1,
+        Transport::Can,
+        &GatewayConfig::default(),
+        Start::Clean,
+    );
+    pair.feedback = false;
+    pair.run(ms(700));
+    let status = pair.statuses().last().expect("status").1;
+    let silent = status
+        .stops()
+        .iter()
+        .find(|s| s.cause == StopCause::ChassisSilent.raw())
+        .expect("a stop");
+    assert!(
+        silent.reason.as_str().contains("nothing received"),
+        "{:?}",
+        silent.reason.as_str()
+    );
+    assert!(
+        pair.sent.is_empty(),
+        "nothing sent while the protocol is not told"
+    );
+}
+
 /// Runs each scenario against a chassis of each protocol: `on_v1::NAME` and `on_v2::NAME`.
 macro_rules! both_protocols {
     ($($name:ident),+ $(,)?) => {

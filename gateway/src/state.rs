@@ -14,7 +14,7 @@ use scout_protocol::model::Model;
 use scout_protocol::sequence::{Continuity, SequenceTracker};
 use scout_protocol::slcan::Slcan;
 use scout_protocol::v2::MessageV2;
-use scout_protocol::version::{Detection, Protocol, ProtocolDetector};
+use scout_protocol::version::{Detection, IdsSeen, Protocol, ProtocolDetector};
 use scout_protocol::{Counted, Direction, Message};
 use tracing::{error, info, warn};
 
@@ -28,6 +28,10 @@ const MAX_ODOMETRY_STEP: Duration = Duration::from_millis(100);
 const MAX_ODOMETER_STEP: Duration = Duration::from_secs(1);
 /// The body rates move the pose only while no odometer reading came for this long.
 const ODOMETER_FRESH: Duration = Duration::from_millis(200);
+/// With `auto`, how long after the port opened a protocol not yet told is an error worth
+/// saying (what arrived, if anything): the chassis' command timeout, so that the
+/// `chassis_silent` stop latched then says it.
+pub const UNTOLD_AFTER: Duration = Duration::from_millis(500);
 
 fn nanos(time: Duration) -> u64 {
     time.as_nanos() as u64
@@ -65,6 +69,13 @@ pub struct StateTracker {
     model: Option<Model>,
     /// Why nothing the chassis sends is used, when that is so.
     mismatch: Option<Mismatch>,
+    /// With `auto`: why the protocol is not told yet, once that has lasted [`UNTOLD_AFTER`].
+    untold: Option<Mismatch>,
+    /// Every CAN id received on this port (the first few), for what to say when nothing tells
+    /// the protocol.
+    ids_heard: IdsSeen,
+    /// When the port opened.
+    opened_at: Option<Duration>,
     link_state: LinkState,
     last_feedback: Option<Duration>,
     foreign_commands_reported: bool,
@@ -108,6 +119,9 @@ impl StateTracker {
             protocol: fixed,
             model,
             mismatch: None,
+            untold: None,
+            ids_heard: IdsSeen::default(),
+            opened_at: None,
             link_state: LinkState::Disconnected,
             last_feedback: None,
             foreign_commands_reported: false,
@@ -134,9 +148,10 @@ impl StateTracker {
         self.protocol
     }
 
-    /// Why nothing the chassis sends is used, if that is so.
+    /// Why nothing the chassis sends is used, if that is so: a protocol mismatch, or with
+    /// `auto` nothing that tells the protocol for [`UNTOLD_AFTER`].
     pub fn mismatch(&self) -> Option<&Mismatch> {
-        self.mismatch.as_ref()
+        self.mismatch.as_ref().or(self.untold.as_ref())
     }
 
     /// The state as it would be published now (sequence number and time not yet stamped).
@@ -163,12 +178,15 @@ impl StateTracker {
 
     /// The port opened (again): counts restart, another chassis may be at the other end (with
     /// `auto`, its protocol is told anew).
-    pub fn handle_connected(&mut self, reconnect: bool) -> Publish {
+    pub fn handle_connected(&mut self, now: Duration, reconnect: bool) -> Publish {
         self.sequence.reset();
         self.detector.reset();
         self.protocol = self.fixed;
         self.state.link.protocol = self.fixed.map_or(0, Protocol::raw);
         self.mismatch = None;
+        self.untold = None;
+        self.ids_heard = IdsSeen::default();
+        self.opened_at = Some(now);
         self.other_protocol_reported = false;
         self.last_feedback = None;
         self.counted_by_closed_ports = PortCounters {
@@ -262,7 +280,41 @@ impl StateTracker {
                     ),
                 });
             }
+            (None, None, Detection::Listening)
+                if self.untold.is_none()
+                    && self
+                        .opened_at
+                        .is_some_and(|at| now.saturating_sub(at) >= UNTOLD_AFTER) =>
+            {
+                let (reason, detail) = if self.ids_heard.is_empty() {
+                    (
+                        "nothing received: power, wiring, bitrate?".to_owned(),
+                        format!(
+                            "nothing received from the chassis in {} ms: is it on, CAN_H/CAN_L \
+                             wired and terminated, the bus at 500 kbit/s? (`scout doctor`)",
+                            UNTOLD_AFTER.as_millis()
+                        ),
+                    )
+                } else {
+                    (
+                        format!("no v1 or v2 feedback; ids {}", self.ids_heard),
+                        format!(
+                            "the protocol is not told after {} ms: frames arrive (ids {}) but \
+                             no chassis feedback of v1 (0x151, 0x200-0x203) or v2 (0x211, 0x221, \
+                             0x251-0x264, 0x311); another device on this bus? (`scout doctor`)",
+                            UNTOLD_AFTER.as_millis(),
+                            self.ids_heard
+                        ),
+                    )
+                };
+                error!("{detail}");
+                self.untold = Some(Mismatch { reason, detail });
+            }
+            (None, None, Detection::Listening) => {}
             _ => {}
+        }
+        if self.protocol.is_some() {
+            self.untold = None;
         }
         if self.mismatch.is_some() && self.last_feedback.is_none() {
             return self.set_link_state(LinkState::ProtocolMismatch);
@@ -316,6 +368,15 @@ impl StateTracker {
 
     /// One thing received from the port at `now`.
     pub fn handle_rx(&mut self, event: &RxEvent, now: Duration) -> Publish {
+        let id = match event {
+            RxEvent::Message(counted) => Some(counted.message.kind().can_id()),
+            RxEvent::V2(message) => Some(message.can_id()),
+            RxEvent::Rejected(rejected) => rejected.can_id(),
+            RxEvent::Slcan(_) => None,
+        };
+        if let Some(id) = id {
+            self.ids_heard.insert(id);
+        }
         match event {
             RxEvent::Message(counted) => {
                 self.detector.observe(counted.message.kind().can_id(), now);
@@ -589,7 +650,10 @@ mod tests {
     fn connected_with(fixed: Option<Protocol>) -> StateTracker {
         let chassis = ChassisPayload::new(Model::Scout, 0.5235);
         let mut tracker = StateTracker::new("test", Transport::Can, "vcan0", fixed, chassis);
-        assert_eq!(tracker.handle_connected(false), Publish::Yes);
+        assert_eq!(
+            tracker.handle_connected(Duration::ZERO, false),
+            Publish::Yes
+        );
         tracker
     }
 
@@ -660,7 +724,7 @@ mod tests {
         assert!(!tracker.state().motion.received.valid);
         assert_eq!(tracker.state().link.rejected_frames, 2);
         // A reconnect starts over.
-        tracker.handle_connected(true);
+        tracker.handle_connected(Duration::ZERO, true);
         assert_eq!(tracker.link_state(), LinkState::Silent);
         assert!(tracker.mismatch().is_none());
     }
@@ -682,7 +746,7 @@ mod tests {
         assert_eq!(tracker.handle_rx(&status(0), ms(320)), Publish::No);
         assert_eq!(tracker.state().link.rejected_frames, 1);
         // Another chassis after a reconnect is told anew.
-        tracker.handle_connected(true);
+        tracker.handle_connected(Duration::ZERO, true);
         assert_eq!(tracker.protocol(), None);
         tracker.handle_rx(&status(0), ms(400));
         tracker.poll(ms(700));
@@ -693,7 +757,7 @@ mod tests {
     fn auto_with_a_configured_model_keeps_it() {
         let chassis = ChassisPayload::new(Model::ScoutMini, 2.5235);
         let mut tracker = StateTracker::new("t", Transport::Can, "can0", None, chassis);
-        tracker.handle_connected(false);
+        tracker.handle_connected(Duration::ZERO, false);
         tracker.handle_rx(&system_v2(0), Duration::ZERO);
         tracker.poll(ms(300));
         assert_eq!(tracker.state().chassis.model(), Some(Model::ScoutMini));
@@ -702,7 +766,7 @@ mod tests {
             ..ChassisPayload::new(Model::Scout, 0.5235)
         };
         let mut tracker = StateTracker::new("t", Transport::Can, "can0", None, chassis);
-        tracker.handle_connected(false);
+        tracker.handle_connected(Duration::ZERO, false);
         tracker.handle_rx(&system_v2(0), Duration::ZERO);
         tracker.poll(ms(300));
         assert_eq!(tracker.state().chassis.model(), Some(Model::Scout2));
@@ -814,5 +878,41 @@ mod tests {
         });
         assert_eq!(tracker.handle_rx(&command, ms(1)), Publish::No);
         assert_eq!(tracker.state().link.rejected_frames, 1);
+    }
+
+    #[test]
+    fn auto_says_what_arrived_when_nothing_tells_the_protocol() {
+        let mut tracker = connected_with(None);
+        tracker.poll(UNTOLD_AFTER - ms(1));
+        assert!(tracker.mismatch().is_none());
+        tracker.poll(UNTOLD_AFTER);
+        let why = tracker.mismatch().expect("said").clone();
+        assert!(
+            why.reason.contains("nothing received") && why.reason.len() <= 64,
+            "{why:?}"
+        );
+        // Frames that tell nothing (v1's and v2's shared ids, another node's).
+        let mut tracker = connected_with(None);
+        tracker.handle_rx(&motion(0, 0, 0), ms(10));
+        tracker.handle_rx(
+            &RxEvent::Rejected(RxError::Can(can::CanError::UnknownId { id: 0x2F0 })),
+            ms(20),
+        );
+        tracker.poll(UNTOLD_AFTER);
+        let why = tracker.mismatch().expect("said").clone();
+        assert!(
+            why.reason.contains("0x131, 0x2F0") && why.reason.len() <= 64,
+            "{why:?}"
+        );
+        assert_eq!(
+            tracker.link_state(),
+            LinkState::Silent,
+            "not a mismatch: nothing to use yet"
+        );
+        // The chassis speaks at last: told, and the reason is gone.
+        tracker.handle_rx(&status(0), UNTOLD_AFTER + ms(10));
+        tracker.poll(UNTOLD_AFTER + ms(400));
+        assert_eq!(tracker.protocol(), Some(Protocol::V1));
+        assert!(tracker.mismatch().is_none());
     }
 }

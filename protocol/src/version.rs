@@ -112,7 +112,8 @@ impl IdsSeen {
     /// How many distinct ids are kept.
     pub const CAPACITY: usize = 8;
 
-    fn insert(&mut self, id: u16) {
+    /// Keeps `id` if it is new and there is room.
+    pub fn insert(&mut self, id: u16) {
         if !self.as_slice().contains(&id) && self.len < Self::CAPACITY {
             self.ids[self.len] = id;
             self.len += 1;
