@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
+use iceoryx2::prelude::ZeroCopySend;
 use scout_system_tests::skip;
 
 /// The Python with `scout` installed, or why there is none.
@@ -70,4 +71,66 @@ fn the_python_package_passes_its_tests_against_real_gateways() {
         "pytest failed:\n{stdout}\n{}",
         String::from_utf8_lossy(&output.stderr)
     );
+}
+
+/// The state payload of the layout before this one: a gateway built from an older release.
+#[derive(Debug, Clone, Copy, Default, ZeroCopySend)]
+#[type_name("scout::StatePayload.v5")]
+#[repr(C)]
+struct OlderState {
+    seq: u64,
+}
+
+#[test]
+fn a_gateway_of_another_interface_version_is_a_version_error_saying_what_the_cli_says() {
+    let test = "python_version_error";
+    let python = match python() {
+        Ok(python) => python,
+        Err(why) => {
+            assert!(
+                std::env::var_os("SCOUT_REQUIRE_PYTHON").is_none(),
+                "{test}: {why}"
+            );
+            return skip(test, &why);
+        }
+    };
+    // What an older gateway leaves in shared memory: the state services with its own layout.
+    let name = scout_system_tests::robot_name("py-version");
+    let service = scout_clients::interface::services::state_service(&name);
+    let node = iceoryx2::prelude::NodeBuilder::new()
+        .create::<iceoryx2::prelude::ipc::Service>()
+        .expect("an iceoryx2 node");
+    let service_name: iceoryx2::prelude::ServiceName =
+        service.as_str().try_into().expect("a service name");
+    let _events = node
+        .service_builder(&service_name)
+        .event()
+        .open_or_create()
+        .expect("the event service");
+    let _older = node
+        .service_builder(&service_name)
+        .publish_subscribe::<OlderState>()
+        .open_or_create()
+        .expect("an older state service");
+    let (code, _, cli) = scout_system_tests::scout(&["status", "--name", &name]);
+    assert_eq!(code, Some(1), "{cli}");
+    assert!(cli.contains("another interface version"), "{cli}");
+    let script = format!(
+        "import scout\n\
+         try:\n    scout.Robot.connect({name:?})\n\
+         except scout.VersionError as error:\n    print('scout: ' + str(error))\n\
+         else:\n    raise SystemExit('connected to another layout')\n"
+    );
+    let output = Command::new(python)
+        .args(["-c", &script])
+        .stdin(Stdio::null())
+        .output()
+        .expect("run python");
+    let said = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        output.status.success(),
+        "{said}{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert_eq!(said.trim(), cli.trim(), "the same message as the CLI");
 }
