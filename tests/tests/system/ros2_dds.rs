@@ -461,3 +461,60 @@ fn jazzy_rclpy_on_fast_dds_over_udp_drives_with_twist_stamped() {
         false,
     );
 }
+
+/// A SCOUT MINI on protocol v2 through the same bridge, unchanged: real rclpy reads its odometry
+/// (from the wheel odometers), wheel angles from the odometers and battery, and drives it.
+#[test]
+fn a_v2_scout_mini_through_real_rclpy_reads_its_odometers_and_drives() {
+    let test = "ros2_dds_v2";
+    let _alone = ONE_DISTRO_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    let Some((namespace, python)) = prerequisites(test, "SCOUT_RCLPY_KILTED") else {
+        return;
+    };
+    let name = robot_name(test);
+    let domain = domain(7);
+    let mut sim = Sim::start(&["--slcan", "--protocol", "v2", "--model", "scout-mini"]);
+    let device = sim.port().to_owned();
+    let _gateway = Gateway::start(&["--slcan", &device, "--name", &name, "--model", "scout-mini"]);
+    let state = connect(&name).subscribe().expect("state");
+    scout_system_tests::wait_for_state(&state, LIMIT, |s| s["link"]["protocol"] == "v2");
+    let mut node = RclpyNode::start(&namespace, &python, domain, &[]);
+    let started = Instant::now();
+    let bridge = DdsBridge::start(&namespace, &name, domain, &[]);
+    let odometry = node.ask(json!({"cmd": "echo", "topic": "/odom",
+        "type": "nav_msgs/msg/Odometry", "count": 20, "qos": "sensor_data"}));
+    assert!(odometry["rate_hz"].as_f64() > Some(25.0), "{odometry}");
+
+    std::thread::sleep(BLOCKED_PAUSE.saturating_sub(started.elapsed()));
+    ok(&["resume", "--name", &name]);
+    node.publish(1.0, false);
+    moving(&mut sim, LIMIT);
+    let moved = scout_system_tests::wait_for_state(&state, LIMIT, |s| {
+        s["odometer"]["right"].as_f64() > Some(0.5)
+    });
+    node.ask(json!({"cmd": "quiet"}));
+    comes_to_rest(&mut sim, LIMIT);
+    let at_rest = scout_system_tests::wait_for_state(&state, LIMIT, |s| {
+        s["motion"]["linear"].as_f64() == Some(0.0)
+    });
+    let odometry = node.echo("/odom", "nav_msgs/msg/Odometry", 1, "default");
+    let x = odometry[0]["x"].as_f64().expect("x");
+    let distance = at_rest["odometry"]["distance"].as_f64().expect("distance");
+    assert!(
+        x > 0.5 && (x - distance).abs() < 0.05,
+        "/odom x {x}, driven {distance}"
+    );
+    let joints = node.echo("/joint_states", "sensor_msgs/msg/JointState", 1, "default");
+    let radius = at_rest["chassis"]["wheel_radius"].as_f64().expect("radius");
+    let right = at_rest["odometer"]["right"].as_f64().expect("odometer");
+    let position = joints[0]["position"][0].as_f64().expect("a position");
+    assert!(
+        (position - right / radius).abs() < 0.01,
+        "front right wheel at {position} rad, its side's odometer {right} m / {radius} m ({moved})"
+    );
+    let left = joints[0]["position"][1].as_f64().expect("a position");
+    assert!(left < -0.5 / radius, "the left wheels mirrored: {joints:?}");
+    bridge.stop();
+}

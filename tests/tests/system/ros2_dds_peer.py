@@ -61,7 +61,11 @@ def summary(message):
     if isinstance(message, BatteryState):
         return {"voltage": message.voltage, "stamp": stamp(message.header)}
     if isinstance(message, JointState):
-        return {"name": list(message.name), "velocity": list(message.velocity)}
+        return {
+            "name": list(message.name),
+            "position": list(message.position),
+            "velocity": list(message.velocity),
+        }
     if isinstance(message, DiagnosticArray):
         return {
             "status": [
