@@ -1,6 +1,7 @@
 //! The measurements, in order: state latency on three paths and with many subscribers, command
 //! and e-stop latency (local and through zenoh), tick jitter idle, loaded and under a flood,
-//! recovery, cost and decode throughput; then the table, the JSON and the plots.
+//! recovery, cost, both protocols side by side over slcan, and decode throughput; then the
+//! table, the JSON and the plots.
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -24,6 +25,7 @@ pub struct Options {
 }
 
 /// Window lengths and sample counts.
+#[derive(Debug, Clone, Copy)]
 struct Plan {
     window: f64,
     commands: usize,
@@ -84,8 +86,8 @@ fn us(ns: u64) -> f64 {
 struct Scratch(PathBuf);
 
 impl Scratch {
-    fn new() -> anyhow::Result<Scratch> {
-        let dir = std::env::temp_dir().join(format!("scout-bench-{}", std::process::id()));
+    fn new(label: &str) -> anyhow::Result<Scratch> {
+        let dir = std::env::temp_dir().join(format!("scout-bench-{}{label}", std::process::id()));
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
         Ok(Scratch(dir))
     }
@@ -110,8 +112,48 @@ impl Drop for Scratch {
     }
 }
 
+/// How the bench's chassis is reached: the simulator's firmware and the port in between.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Rig {
+    /// Protocol v1 over RS232: the main run.
+    SerialV1,
+    /// Protocol v1 behind a serial-line CAN adapter.
+    SlcanV1,
+    /// Protocol v2 (SCOUT 2.0) behind a serial-line CAN adapter.
+    SlcanV2,
+}
+
+impl Rig {
+    /// The simulator's arguments for its firmware and port.
+    fn sim_args(self) -> &'static [&'static str] {
+        match self {
+            Self::SerialV1 => &["--serial"],
+            Self::SlcanV1 => &["--slcan"],
+            Self::SlcanV2 => &["--slcan", "--protocol", "v2", "--model", "scout2"],
+        }
+    }
+
+    /// The gateway's flag for the port.
+    fn port_flag(self) -> &'static str {
+        match self {
+            Self::SerialV1 => "--serial",
+            Self::SlcanV1 | Self::SlcanV2 => "--slcan",
+        }
+    }
+
+    /// Its key in the JSON and its name in the table.
+    fn key_and_label(self) -> (&'static str, &'static str) {
+        match self {
+            Self::SerialV1 => ("serial_v1", "v1, RS232"),
+            Self::SlcanV1 => ("slcan_v1", "v1 (SCOUT), slcan"),
+            Self::SlcanV2 => ("slcan_v2", "v2 (SCOUT 2.0), slcan"),
+        }
+    }
+}
+
 /// The robot under test: the simulator on a pseudo-terminal behind a stable link, its gateway.
 struct Bench {
+    rig: Rig,
     /// SCHED_FIFO priority of the thread while it stops the robot (see [`Realtime`]).
     client_priority: u8,
     scratch: Scratch,
@@ -123,9 +165,45 @@ struct Bench {
 }
 
 impl Bench {
+    /// The simulator of `rig` (real-time, traced, behind a stable link) and no gateway yet.
+    fn start(
+        rig: Rig,
+        name: String,
+        endpoint: String,
+        plan: Plan,
+        priority: u8,
+    ) -> anyhow::Result<Bench> {
+        let scratch = Scratch::new(match rig {
+            Rig::SerialV1 => "",
+            Rig::SlcanV1 => "-slcan-v1",
+            Rig::SlcanV2 => "-slcan-v2",
+        })?;
+        let mut args = rig.sim_args().to_vec();
+        let (link, trace) = (scratch.text("chassis.tty"), scratch.text("chassis.trace"));
+        args.extend([
+            "--realtime-priority",
+            "60",
+            "--link",
+            &link,
+            "--trace",
+            &trace,
+        ]);
+        let sim = Sim::start(&args)?;
+        Ok(Bench {
+            rig,
+            client_priority: priority,
+            name,
+            endpoint,
+            scratch,
+            sim,
+            gateway: None,
+            plan,
+        })
+    }
+
     fn gateway_args(&self, zenoh: bool) -> Vec<String> {
         let mut args = vec![
-            "--serial".to_owned(),
+            self.rig.port_flag().to_owned(),
             self.scratch.text("chassis.tty"),
             "--name".to_owned(),
             self.name.clone(),
@@ -199,29 +277,17 @@ pub fn run(options: &Options) -> anyhow::Result<()> {
             stops: 50,
         }
     };
-    let scratch = Scratch::new()?;
     let port = std::net::TcpListener::bind("127.0.0.1:0")?
         .local_addr()?
         .port();
     progress("starting the simulator and the gateway");
-    let sim = Sim::start(&[
-        "--serial",
-        "--realtime-priority",
-        "60",
-        "--link",
-        &scratch.text("chassis.tty"),
-        "--trace",
-        &scratch.text("chassis.trace"),
-    ])?;
-    let mut bench = Bench {
-        client_priority: options.client_priority,
-        name: format!("bench-{}", std::process::id()),
-        endpoint: format!("tcp/127.0.0.1:{port}"),
-        scratch,
-        sim,
-        gateway: None,
+    let mut bench = Bench::start(
+        Rig::SerialV1,
+        format!("bench-{}", std::process::id()),
+        format!("tcp/127.0.0.1:{port}"),
         plan,
-    };
+        options.client_priority,
+    )?;
     let mut report = Report::default();
     let states = bench.start_gateway(true)?;
 
@@ -234,6 +300,14 @@ pub fn run(options: &Options) -> anyhow::Result<()> {
     watchers(&mut bench, &mut report)?;
     recovery(&mut bench, &mut report, states)?;
     cost(&mut bench, &mut report)?;
+    let plan = bench.plan;
+    if let Some(gateway) = bench.gateway.take() {
+        gateway.kill();
+    }
+    drop(bench);
+    for rig in [Rig::SlcanV1, Rig::SlcanV2] {
+        protocol(rig, plan, options.client_priority, &mut report)?;
+    }
     decode_throughput(&mut report);
 
     insert(
@@ -251,6 +325,45 @@ pub fn run(options: &Options) -> anyhow::Result<()> {
         crate::plot::draw(dir, &report.paths, &report.ticks)?;
         progress(&format!("plots drawn in {}", dir.display()));
     }
+    Ok(())
+}
+
+/// One protocol behind one transport, for comparison: the state's latency to an iceoryx2
+/// subscriber, drive and e-stop latency to the chassis, and the motion command's interval idle;
+/// in the JSON under the rig's key, in the table after its name.
+fn protocol(rig: Rig, plan: Plan, priority: u8, report: &mut Report) -> anyhow::Result<()> {
+    let (key, label) = rig.key_and_label();
+    progress(&format!("{label}: the simulator and a gateway"));
+    let name = format!("bench-{key}-{}", std::process::id());
+    let mut bench = Bench::start(rig, name, String::new(), plan, priority)?;
+    let states = bench.start_gateway(false)?;
+    let mut figures = Report::default();
+    progress(&format!("{label}: state latency"));
+    let window = bench.plan.window.to_string();
+    let mut roles = Roles::default();
+    let out = bench.scratch.text("iox-1-0");
+    roles.spawn(&["subscribe", &bench.name, &out, &window])?;
+    roles.wait()?;
+    let one = iceoryx2_latencies(&bench, 1, &trace(&bench)?)?;
+    figures.latency("state_latency_us", "state, iceoryx2", &one.end_to_end);
+    command_latency(&mut bench, &mut figures, &states)?;
+    progress(&format!("{label}: motion command interval, idle"));
+    let from = monotonic_ns();
+    std::thread::sleep(Duration::from_secs_f64(bench.plan.window));
+    let ticks = trace(&bench)?.ticks(from, monotonic_ns());
+    let json = ticks.json();
+    figures.rows.push((
+        "motion command interval, idle (ms)".into(),
+        format!(
+            "mean {} / p99 dev {} / max {} ({})",
+            json["mean"], json["p99_dev"], json["max"], json["n"]
+        ),
+    ));
+    insert(&mut figures.json, "tick_interval_ms", json);
+    for (what, value) in figures.rows {
+        report.rows.push((format!("{label}: {what}"), value));
+    }
+    insert(&mut report.json, key, Value::Object(figures.json));
     if let Some(gateway) = bench.gateway.take() {
         gateway.kill();
     }

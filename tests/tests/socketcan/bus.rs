@@ -264,3 +264,57 @@ fn garbage_and_wrong_checksum_frames_are_refused_and_counted() {
         Some(26.0)
     );
 }
+
+#[test]
+fn a_v2_scout_mini_is_told_taken_driven_stopped_and_left_in_standby() {
+    let Some(bus) = Bus::create("a_v2_scout_mini_is_told_taken_driven_stopped_and_left_in_standby")
+    else {
+        return;
+    };
+    let name = robot_name("can-v2");
+    let mut sim = Sim::start(&[
+        "--can",
+        bus.name(),
+        "--protocol",
+        "v2",
+        "--model",
+        "scout-mini",
+    ]);
+    let mut gateway = Gateway::start(&[
+        "--can",
+        bus.name(),
+        "--name",
+        &name,
+        "--model",
+        "scout-mini",
+    ]);
+    let state = connect_within(&name, LIMIT).subscribe().expect("subscribe");
+    let told = wait_for_state(&state, LIMIT, |s| {
+        s["link"]["state"] == "ok" && !s["system"].is_null()
+    });
+    assert_eq!(told["link"]["protocol"], "v2", "{told}");
+    assert_eq!(told["system"]["control_mode"], "standby", "{told}");
+    release_all(&name);
+    assert!(
+        sim.stats()["commands"]["0x421"].is_null(),
+        "nothing takes the chassis before a client drives"
+    );
+    let _driver = drive_until_moving(&mut sim, &name, &["--linear", "0.5"], LIMIT);
+    let stats = sim.stats();
+    assert_eq!(stats["control_mode"], "can", "{stats}");
+    let intervals = &stats["motion_command_intervals"];
+    eprintln!(
+        "0x111 as the simulator saw it: {} commands, mean {} ms, max {} ms, p99 {} ms",
+        intervals["count"], intervals["mean_ms"], intervals["max_ms"], intervals["p99_ms"]
+    );
+    wait_for_state(&state, LIMIT, |s| {
+        s["odometer"]["left"].as_f64() > Some(0.1) && s["motion"]["linear"].as_f64() > Some(0.2)
+    });
+    let (code, _, stderr) = scout(&["estop", "--name", &name, "--reason", "test"]);
+    assert_eq!(code, Some(0), "{stderr}");
+    chassis_commanded(&mut sim, 0.0);
+    chassis_stays_still_after_braking(&mut sim);
+    gateway.signal(nix::sys::signal::Signal::SIGTERM);
+    assert_eq!(gateway.wait_exit(LIMIT), Some(0));
+    assert_eq!(sim.stats()["control_mode"], "standby", "standby on exit");
+}
