@@ -12,7 +12,9 @@ use std::time::Duration;
 
 // The backend's own paths: the crate root names them only while DDS is ros2-client's one backend
 // (the system tests' rmw_zenoh peer turns on its zenoh backend in the same build).
-use ros2_client::dds::{Context, ContextOptions, Publisher, Server, ServiceMapping, Subscription};
+use ros2_client::dds::{
+    Context, ContextOptions, Node, Publisher, Server, ServiceMapping, Subscription,
+};
 use ros2_client::{
     MessageTypeName, Name, NodeName, NodeOptions, QosProfile, ServiceTypeName,
     qos::{Durability, History, WhenFull},
@@ -232,22 +234,88 @@ fn ros_name(name: &str) -> Result<Name, BridgeError> {
     Name::parse(name).map_err(|error| BridgeError::Dds(format!("the name {name}: {error:?}")))
 }
 
-/// The node's publishers on DDS.
+/// Consecutive failed writes on one topic after which its writer is made anew.
+///
+/// RustDDS (0.15.1) holds a reliable writer's send window at 8192 samples and counts a newly
+/// matched reliable reader as having acknowledged nothing, so once a writer has sent more than
+/// 8192 samples (164 s at 50 Hz) every write fails until the new reader's first ACKNACK: a
+/// sample or none for a healthy reader, but for a reader that never acknowledges (a stopped
+/// process, its ACKNACKs lost on the way) the topic stays dead for every subscriber, until its
+/// participant's lease ends or for good. A new writer starts its count at zero. 25 writes are
+/// half a second of /odom.
+pub const RECREATE_AFTER: u32 = 25;
+
+/// A run of failed writes on one topic.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct FailureStreak {
+    failed: u32,
+}
+
+impl FailureStreak {
+    /// Records a write; `true` when the writer should be made anew (the streak starts over).
+    pub fn record(&mut self, succeeded: bool) -> bool {
+        if succeeded {
+            self.failed = 0;
+            return false;
+        }
+        self.failed += 1;
+        if self.failed >= RECREATE_AFTER {
+            self.failed = 0;
+            return true;
+        }
+        false
+    }
+}
+
+/// One topic's writer.
+struct Writer {
+    topic: Topic,
+    dds_topic: ros2_client::dds::rustdds::Topic,
+    publisher: Publisher<EncodedCdr>,
+    streak: FailureStreak,
+}
+
+/// The node's publishers on DDS, and the node, which makes a writer anew when one is stuck.
 pub struct DdsPublishers {
-    publishers: Vec<(Topic, Publisher<EncodedCdr>)>,
+    node: Node,
+    writers: Vec<Writer>,
+}
+
+/// What a failed write says, without its payload.
+fn describe(error: &ros2_client::WriteError<EncodedCdr>) -> String {
+    match error {
+        ros2_client::WriteError::WouldBlock { .. } => {
+            "the reliable send window is full (a subscriber has not acknowledged)".into()
+        }
+        other => other.to_string(),
+    }
 }
 
 impl Publishers for DdsPublishers {
     fn publish(&mut self, topic: Topic, payload: Vec<u8>) -> Result<(), String> {
-        let Some((_, publisher)) = self.publishers.iter().find(|(t, _)| *t == topic) else {
+        let Some(writer) = self.writers.iter_mut().find(|w| w.topic == topic) else {
             return Ok(());
         };
         let body = payload
             .strip_prefix(&ENCAPSULATION[..])
             .ok_or("a payload without the CDR little-endian header")?;
-        publisher
-            .publish(EncodedCdr(body.to_vec()))
-            .map_err(|error| format!("{error:?}"))
+        let result = writer.publisher.publish(EncodedCdr(body.to_vec()));
+        if writer.streak.record(result.is_ok()) {
+            match self
+                .node
+                .create_publisher::<EncodedCdr>(&writer.dds_topic, None)
+            {
+                Ok(publisher) => {
+                    warn!(
+                        "ros2: {RECREATE_AFTER} writes of {topic:?} failed in a row: its writer \
+                         is made anew (a subscriber that never acknowledges held it)"
+                    );
+                    writer.publisher = publisher;
+                }
+                Err(error) => warn!("ros2: making a new writer of {topic:?}: {error:?}"),
+            }
+        }
+        result.map_err(|error| describe(&error))
     }
 }
 
@@ -327,7 +395,12 @@ pub fn start(
         let publisher = node
             .create_publisher::<EncodedCdr>(&dds_topic, None)
             .map_err(dds_error("making a publisher"))?;
-        publishers.push((topic, publisher));
+        publishers.push(Writer {
+            topic,
+            dds_topic,
+            publisher,
+            streak: FailureStreak::default(),
+        });
     }
     let mut readers = Vec::new();
     for cmd_vel in &config.cmd_vel {
@@ -376,8 +449,8 @@ pub fn start(
         std::thread::Builder::new()
             .name("ros2-dds".into())
             .spawn(move || {
-                // The node and participant live on this thread, as long as the bridge runs.
-                let _node = node;
+                // The participant lives on this thread (the node on the state thread's
+                // publishers), as long as the bridge runs.
                 let _context = context;
                 if let Err(error) = receive(poll, &readers, &servers, &senders, &halt) {
                     senders.fail(format!("waiting for DDS input: {error}"));
@@ -385,7 +458,10 @@ pub fn start(
             })?
     };
     Ok((
-        DdsPublishers { publishers },
+        DdsPublishers {
+            node,
+            writers: publishers,
+        },
         DdsNode {
             halt,
             receiver: Some(receiver),
@@ -598,5 +674,21 @@ mod tests {
     fn type_names_split_as_ros2_client_wants() {
         let name = type_name(&crate::msgs::ODOMETRY);
         assert_eq!(name.dds_msg_type(), "nav_msgs::msg::dds_::Odometry_");
+    }
+
+    #[test]
+    fn a_writer_is_made_anew_only_after_a_run_of_failed_writes() {
+        let mut streak = FailureStreak::default();
+        // A healthy subscriber joining costs a failed write now and then: never a new writer.
+        for i in 0..10_000 {
+            assert!(!streak.record(i % 7 != 0));
+        }
+        let made_anew: Vec<u32> = (1..=60).filter(|_| streak.record(false)).collect();
+        assert_eq!(
+            made_anew.len(),
+            2,
+            "every {RECREATE_AFTER} failures in a row"
+        );
+        assert!(!streak.record(true));
     }
 }

@@ -145,7 +145,10 @@ fn doctor_on_a_bus_with_a_v2_chassis_names_it_and_what_to_do() {
         "{protocol}"
     );
     let control = check(&checks, "chassis.control");
-    assert_eq!(control["verdict"], "pass", "standby until 0x421: {checks:#?}");
+    assert_eq!(
+        control["verdict"], "pass",
+        "standby until 0x421: {checks:#?}"
+    );
     assert!(
         control["detail"]
             .as_str()
