@@ -21,6 +21,7 @@ use scout_clients::control::{ControlError, Controller, Lights, StatusReader, Sto
 use scout_clients::interface::LAYOUT_VERSION;
 use scout_clients::interface::json::{STATE_KEYS, state_field, state_json, status_json};
 use scout_clients::interface::services::ServiceError;
+use scout_clients::interface::stop_socket::StopSocketError;
 use scout_clients::{Accepted, Class, ReleaseTarget, StatePayload, StatusPayload, monotonic_ns};
 use scout_protocol::FaultClear;
 use scout_protocol::message::{Light, LightCommand, LightMode};
@@ -69,6 +70,10 @@ impl From<ControlError> for Failure {
             },
             ControlError::NoAnswer { .. } => Failure::NoAnswer(error.to_string()),
             ControlError::Client(client) => client.into(),
+            // The stop endpoint has no gateway behind it: the gateway is gone, as the CLI says.
+            ControlError::Stop(StopSocketError::NoGateway { .. }) => {
+                Failure::NoGateway(error.to_string())
+            }
             ControlError::Request(_) | ControlError::Stop(_) => Failure::Other(error.to_string()),
         }
     }
@@ -323,8 +328,8 @@ impl NativeRobot {
         &self.name
     }
 
-    /// The newest state (a dict of the `scout echo --json` schema), or None before the first.
-    /// Skips the ones not read.
+    /// The newest state (a view of it, read field by field in the `scout echo --json` schema),
+    /// or None before the first. Skips the ones not read.
     fn latest<'py>(&mut self, py: Python<'py>) -> PyResult<Option<Bound<'py, StateView>>> {
         if let Some(newest) = self
             .states

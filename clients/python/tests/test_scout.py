@@ -108,7 +108,7 @@ def test_states_async(robot: scout.Robot) -> None:
 def test_teleop_drives_and_leaving_the_block_stops(robot: scout.Robot) -> None:
     with robot.controller("pytest-teleop", scout.Class.TELEOP) as controller:
         answer = controller.take_control()
-        assert answer.lease is not None and controller.lease == answer.lease
+        assert answer.accepted and answer.lease is not None and controller.lease == answer.lease
         deadline = time.monotonic() + 5.0
         while True:
             answer = controller.drive(0.5, 0.0)
@@ -309,3 +309,13 @@ def test_a_protocol_v2_chassis_reads_and_drives_the_same() -> None:
         until(lambda: robot.next().command.linear == 0.0, 3.0, "zero on the wire")
     finally:
         started.stop()
+
+
+def test_status_is_the_scout_status_json_schema(robot: scout.Robot) -> None:
+    until(lambda: robot.latest() is not None, 5.0, "a first state")
+    cli = scout_cli("status", "--name", robot.name, "--json")
+    assert cli.returncode == 0, cli.stderr
+    echoed = json.loads(cli.stdout)
+    status = robot.status()
+    assert keys(status) == keys(echoed)
+    assert status["robot"] == echoed["robot"] == robot.name

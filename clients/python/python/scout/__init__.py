@@ -86,7 +86,7 @@ class Class(str, enum.Enum):
 
 @dataclass(frozen=True)
 class Answer:
-    """The arbiter's answer to an accepted request."""
+    """The arbiter's answer to an accepted request (a refused one raises `Rejected`)."""
 
     clamped: bool
     """A speed was beyond the class' caps and was clamped."""
@@ -94,6 +94,11 @@ class Answer:
     """For `take_control`: the lease this controller's drive commands name."""
     stop: Optional[int]
     """For a stop: the id of the stop it latched (or refreshed)."""
+
+    @property
+    def accepted(self) -> bool:
+        """Always True: an answer is an acceptance, a refusal raises `Rejected`."""
+        return True
 
     @staticmethod
     def _from(fields: Dict[str, Any]) -> "Answer":
