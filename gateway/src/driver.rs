@@ -50,10 +50,12 @@ struct Endpoints {
 impl Endpoints {
     fn create(robot: &str) -> anyhow::Result<Self> {
         match services::remove_dead_nodes() {
-            Ok(0) => {}
-            Ok(removed) => {
-                info!("removed the stale iceoryx2 resources of {removed} dead process(es)")
-            }
+            Ok(removed) if removed.is_empty() => {}
+            Ok(removed) => info!(
+                "removed the stale iceoryx2 resources of {} dead process(es): {}",
+                removed.len(),
+                removed.join(", ")
+            ),
             Err(error) => warn!("listing iceoryx2 nodes to clean up failed: {error:?}"),
         }
         let node = services::node(&format!("scout-gateway-{robot}"))

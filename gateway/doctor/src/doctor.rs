@@ -48,6 +48,51 @@ pub fn run(options: &Options, report: &mut dyn FnMut(&Check)) -> Vec<Check> {
             checks.push(check);
         }
     };
+    // First: connecting to a gateway cleans up after dead processes, and this check says what
+    // they left.
+    let leftovers = match services::remove_dead_nodes() {
+        Ok(removed) if removed.is_empty() => {
+            Check::pass("iceoryx2", "no resources left by dead processes")
+        }
+        Ok(removed) => {
+            let gateways: Vec<&str> = removed
+                .iter()
+                .filter_map(|name| name.strip_prefix("scout-gateway-"))
+                .collect();
+            let what = if gateways.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    ", among them the gateway of robot {} (it was killed or crashed: its next \
+                     start latches gateway_start until someone checks the robot and releases it)",
+                    gateways.join(", ")
+                )
+            };
+            Check::warn(
+                "iceoryx2",
+                format!(
+                    "removed the shared-memory resources of {} dead processes ({}){what}",
+                    removed.len(),
+                    removed
+                        .iter()
+                        .map(|name| if name.is_empty() {
+                            "unnamed"
+                        } else {
+                            name.as_str()
+                        })
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+                "nothing more to do; a gateway or client killed (SIGKILL, power loss) leaves them",
+            )
+        }
+        Err(error) => Check::warn(
+            "iceoryx2",
+            format!("cannot list iceoryx2 nodes: {error:?}"),
+            "check that /dev/shm and /tmp/iceoryx2 are writable",
+        ),
+    };
+    emit(vec![leftovers], &mut checks);
     let robot = &options.robot;
     let mut gateway_checked = false;
     if let Some(spec) = &options.port {
@@ -154,19 +199,5 @@ pub fn run(options: &Options, report: &mut dyn FnMut(&Check)) -> Vec<Check> {
             &mut checks,
         );
     }
-    let leftovers = match services::remove_dead_nodes() {
-        Ok(0) => Check::pass("iceoryx2", "no resources left by dead processes"),
-        Ok(removed) => Check::warn(
-            "iceoryx2",
-            format!("removed the shared-memory resources of {removed} dead processes"),
-            "nothing more to do; a gateway or client killed (SIGKILL, power loss) leaves them",
-        ),
-        Err(error) => Check::warn(
-            "iceoryx2",
-            format!("cannot list iceoryx2 nodes: {error:?}"),
-            "check that /dev/shm and /tmp/iceoryx2 are writable",
-        ),
-    };
-    emit(vec![leftovers], &mut checks);
     checks
 }

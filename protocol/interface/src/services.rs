@@ -157,14 +157,21 @@ pub fn node(name: &str) -> Result<Node<Ipc>, NodeCreationFailure> {
     builder.create::<Ipc>()
 }
 
-/// Removes what dead processes (SIGKILL, crash) left in shared memory; returns how many.
-pub fn remove_dead_nodes() -> Result<usize, iceoryx2::node::NodeListFailure> {
-    let mut removed = 0;
+/// Removes what dead processes (SIGKILL, crash) left in shared memory; returns the names of
+/// their nodes (`scout-gateway-ROBOT`, `scout-client-ROBOT`...; empty for an unnamed one).
+pub fn remove_dead_nodes() -> Result<Vec<String>, iceoryx2::node::NodeListFailure> {
+    use iceoryx2::node::NodeView;
+    let mut removed = Vec::new();
     Node::<Ipc>::list(Config::global_config(), |state| {
-        if let NodeState::Dead(view) = state
-            && view.try_remove_stale_resources().is_ok()
-        {
-            removed += 1;
+        if let NodeState::Dead(view) = state {
+            let name = view
+                .details()
+                .as_ref()
+                .map(|details| details.name().as_str().to_owned())
+                .unwrap_or_default();
+            if view.try_remove_stale_resources().is_ok() {
+                removed.push(name);
+            }
         }
         CallbackProgression::Continue
     })?;

@@ -239,7 +239,7 @@ fn a_recording_with_a_duration_ends_by_itself_and_one_cut_by_sigkill_reads_up_to
     }
     let name = robot_name("record-cut");
     let dir = TempDir::new(&name);
-    let mut sim = Sim::start(&["--serial"]);
+    let sim = Sim::start(&["--serial"]);
     let device = sim.port().to_owned();
     let _gateway = Gateway::start(&["--serial", &device, "--name", &name]);
     connect(&name);
@@ -310,7 +310,7 @@ fn a_recording_with_a_duration_ends_by_itself_and_one_cut_by_sigkill_reads_up_to
         name.as_str(),
         "the last message read is whole"
     );
-    let _ = sim.stats();
+    drop(sim);
 }
 
 #[test]
