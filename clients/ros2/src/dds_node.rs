@@ -155,7 +155,100 @@ pub struct TriggerResponse {
     message: String,
 }
 
-impl ros2_client::Message for Whole<TriggerRequest> {}
+/// rmw_cyclonedds' request header, which it writes before every request and expects before
+/// its reply (`cdds_request_header_t`: the client's id and the call's sequence number, two
+/// 64-bit integers); kept as the bytes it came in, little-endian as on every platform ROS 2
+/// runs on, and written back the same.
+pub const CYCLONE_HEADER: usize = 16;
+
+/// A Trigger call as either DDS service mapping carries it: Fast DDS' (and RustDDS' Enhanced
+/// mapping) puts the request alone in the sample, the call's identity in its inline QoS;
+/// rmw_cyclonedds puts its 16-byte header before the request. Told apart by length: the request
+/// is one byte, padding less than 8; with the header 17 bytes and the same padding. Anything
+/// else is refused as [`Whole`] refuses it.
+#[derive(Debug, Clone)]
+pub struct TriggerCall {
+    cyclone_header: Option<[u8; CYCLONE_HEADER]>,
+}
+
+impl<'de> Deserialize<'de> for TriggerCall {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct Visitor;
+        impl<'de> serde::de::Visitor<'de> for Visitor {
+            type Value = TriggerCall;
+            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str("a Trigger request, after rmw_cyclonedds' header or not")
+            }
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(
+                self,
+                mut seq: A,
+            ) -> Result<TriggerCall, A::Error> {
+                // The sample a byte at a time, up to what the longest form holds.
+                let mut bytes = Vec::with_capacity(32);
+                while bytes.len() < CYCLONE_HEADER + 8 + 1 {
+                    match seq.next_element::<u8>() {
+                        Ok(Some(byte)) => bytes.push(byte),
+                        Ok(None) | Err(_) => break,
+                    }
+                }
+                match bytes.len() {
+                    0 => Err(serde::de::Error::custom("an empty sample")),
+                    1..=8 => Ok(TriggerCall {
+                        cyclone_header: None,
+                    }),
+                    17..=24 => {
+                        let mut header = [0; CYCLONE_HEADER];
+                        header.copy_from_slice(&bytes[..CYCLONE_HEADER]);
+                        Ok(TriggerCall {
+                            cyclone_header: Some(header),
+                        })
+                    }
+                    _ => Err(serde::de::Error::custom(CdrError::Trailing(
+                        bytes.len() - 1,
+                    ))),
+                }
+            }
+        }
+        deserializer.deserialize_tuple(usize::MAX, Visitor)
+    }
+}
+
+/// Written as the Enhanced mapping's request (a request type must be writable to be served).
+impl Serialize for TriggerCall {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeTuple;
+        let mut tuple = serializer.serialize_tuple(2)?;
+        if let Some(header) = &self.cyclone_header {
+            tuple.serialize_element(header)?;
+        }
+        tuple.serialize_element(&0u8)?;
+        tuple.end()
+    }
+}
+
+/// A Trigger reply in the form its call came in: after rmw_cyclonedds' header when the call
+/// had one.
+#[derive(Debug, Clone, Deserialize)]
+pub struct TriggerReply {
+    #[serde(skip)]
+    cyclone_header: Option<[u8; CYCLONE_HEADER]>,
+    response: TriggerResponse,
+}
+
+impl Serialize for TriggerReply {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeTuple;
+        let mut tuple = serializer.serialize_tuple(2)?;
+        if let Some(header) = &self.cyclone_header {
+            tuple.serialize_element(header)?;
+        }
+        tuple.serialize_element(&self.response)?;
+        tuple.end()
+    }
+}
+
+impl ros2_client::Message for TriggerCall {}
+impl ros2_client::Message for TriggerReply {}
 impl ros2_client::Message for TriggerResponse {}
 
 /// Decodes a payload (with its encapsulation header) as a DDS reader of `T` does, with RustDDS'
@@ -186,9 +279,10 @@ pub fn decode_cmd_vel(bytes: &[u8], stamped: bool) -> Result<PlanarTwist, CdrErr
     }
 }
 
-/// Decodes a Trigger request as the bridge's DDS service does: the fuzz target's entry to it.
-pub fn decode_trigger_request(bytes: &[u8]) -> Result<(), CdrError> {
-    decode::<Whole<TriggerRequest>>(bytes).map(|_| ())
+/// Decodes a Trigger request as the bridge's DDS service does (either service mapping): the
+/// fuzz target's entry to it. `Ok(true)` for rmw_cyclonedds' form.
+pub fn decode_trigger_request(bytes: &[u8]) -> Result<bool, CdrError> {
+    decode::<TriggerCall>(bytes).map(|call| call.cyclone_header.is_some())
 }
 
 /// `package/msg/Name` as ros2-client names a type.
@@ -353,7 +447,7 @@ enum CmdVelReader {
     Stamped(Subscription<Whole<TwistStamped>>),
 }
 
-type TriggerServer = Server<Whole<TriggerRequest>, TriggerResponse>;
+type TriggerServer = Server<TriggerCall, TriggerReply>;
 
 /// Makes the participant and the node with its publishers, cmd_vel readers and services.
 pub fn start(
@@ -565,17 +659,20 @@ fn take_twists(topic: usize, reader: &CmdVelReader, senders: &Senders) {
 fn take_calls(kind: ServiceKind, server: &Arc<TriggerServer>, senders: &Senders) {
     loop {
         match server.receive_request() {
-            Ok(Some((id, _request))) => {
+            Ok(Some((id, call))) => {
                 let server = Arc::clone(server);
                 senders.call(
                     kind,
                     Call {
                         reply: Box::new(move |success, message| {
-                            let response = TriggerResponse {
-                                success,
-                                message: message.to_owned(),
+                            let reply = TriggerReply {
+                                cyclone_header: call.cyclone_header,
+                                response: TriggerResponse {
+                                    success,
+                                    message: message.to_owned(),
+                                },
                             };
-                            if let Err(error) = server.send_response(id, response) {
+                            if let Err(error) = server.send_response(id, reply) {
                                 warn!("ros2: replying to a {kind:?} call failed: {error:?}");
                             }
                         }),
@@ -630,8 +727,54 @@ mod tests {
             decode_cmd_vel(&xcdr2, false),
             Err(CdrError::Encapsulation([0x00, 0x07]))
         );
-        assert_eq!(decode_trigger_request(&[0, 1, 0, 0, 0]), Ok(()));
+        assert_eq!(decode_trigger_request(&[0, 1, 0, 0, 0]), Ok(false));
         assert!(decode_trigger_request(&[0, 1, 0, 0]).is_err());
+    }
+
+    #[test]
+    fn a_cyclone_call_is_told_by_its_header_and_answered_after_it() {
+        use rustdds::no_key::SerializerAdapter;
+        // rmw_cyclonedds: the client's id and the call's number, then the request's byte.
+        let mut header = [0u8; CYCLONE_HEADER];
+        header[..8].copy_from_slice(&0x1122_3344_5566_7788u64.to_le_bytes());
+        header[8..].copy_from_slice(&7i64.to_le_bytes());
+        let mut payload = ENCAPSULATION.to_vec();
+        payload.extend(header);
+        payload.extend([0, 0, 0, 0]);
+        assert_eq!(decode_trigger_request(&payload), Ok(true));
+        let call = decode::<TriggerCall>(&payload).expect("a Cyclone call");
+        let reply = TriggerReply {
+            cyclone_header: call.cyclone_header,
+            response: TriggerResponse {
+                success: true,
+                message: "stopped".into(),
+            },
+        };
+        let written =
+            rustdds::CDRSerializerAdapter::<TriggerReply>::to_bytes(&reply).expect("serializes");
+        // The header back, then the response aligned from the header's start: the bool at 16,
+        // the string's length at 20.
+        let mut wanted = header.to_vec();
+        wanted.extend([1, 0, 0, 0]);
+        wanted.extend(8u32.to_le_bytes());
+        wanted.extend(b"stopped\0");
+        assert_eq!(&written[..], &wanted[..]);
+        // The Enhanced mapping's reply is the response alone, as rosbags writes it.
+        let plain = TriggerReply {
+            cyclone_header: None,
+            response: TriggerResponse {
+                success: true,
+                message: "stopped".into(),
+            },
+        };
+        let written =
+            rustdds::CDRSerializerAdapter::<TriggerReply>::to_bytes(&plain).expect("serializes");
+        let rosbags = crate::msgs::encode_trigger_response(true, "stopped");
+        assert_eq!(&written[..], &rosbags[ENCAPSULATION.len()..]);
+        // Between the two forms' lengths: refused.
+        let mut odd = ENCAPSULATION.to_vec();
+        odd.extend([0; 12]);
+        assert!(decode_trigger_request(&odd).is_err());
     }
 
     #[test]

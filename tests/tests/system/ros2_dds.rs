@@ -518,3 +518,43 @@ fn a_v2_scout_mini_through_real_rclpy_reads_its_odometers_and_drives() {
     assert!(left < -0.5 / radius, "the left wheels mirrored: {joints:?}");
     bridge.stop();
 }
+
+/// A call as rmw_cyclonedds makes it (its request header in the sample) from a plain Cyclone
+/// DDS participant: answered after the same header, and the stop latched as the service's own.
+#[test]
+fn a_cyclone_dds_call_in_its_own_service_mapping_is_answered_and_stops_the_robot() {
+    let test = "ros2_dds_cyclone_call";
+    let Some((namespace, python)) = prerequisites(test, "SCOUT_RCLPY_KILTED") else {
+        return;
+    };
+    let name = robot_name(test);
+    let domain = domain(11);
+    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    connect(&name);
+    let bridge = DdsBridge::start(&namespace, &name, domain, &[]);
+    let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/system/cyclone_trigger_call.py");
+    let output = namespace
+        .command(&python)
+        .arg(script)
+        .arg("/scout/estop")
+        .env("ROS_DOMAIN_ID", domain.to_string())
+        .env(
+            "CYCLONEDDS_URI",
+            "<CycloneDDS><Domain><General><AllowMulticast>spdp</AllowMulticast></General>\
+             </Domain></CycloneDDS>",
+        )
+        .stdin(Stdio::null())
+        .stderr(Stdio::inherit())
+        .output()
+        .expect("run the Cyclone DDS call");
+    let answer: Value = serde_json::from_slice(&output.stdout)
+        .unwrap_or_else(|_| panic!("Cyclone DDS call: {output:?}"));
+    assert_eq!(answer["success"], true, "{answer}");
+    let (_, status, _) = scout(&["status", "--name", &name, "--json"]);
+    assert!(
+        status.contains(&format!("ros2:{domain}:/scout")),
+        "{status}"
+    );
+    bridge.stop();
+}
