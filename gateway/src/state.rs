@@ -648,7 +648,7 @@ mod tests {
     }
 
     fn connected_with(fixed: Option<Protocol>) -> StateTracker {
-        let chassis = ChassisPayload::new(Model::Scout, 0.5235);
+        let chassis = ChassisPayload::new(Model::Scout, Model::Scout.limits().angular);
         let mut tracker = StateTracker::new("test", Transport::Can, "vcan0", fixed, chassis);
         assert_eq!(
             tracker.handle_connected(Duration::ZERO, false),
@@ -763,7 +763,7 @@ mod tests {
         assert_eq!(tracker.state().chassis.model(), Some(Model::ScoutMini));
         let chassis = ChassisPayload {
             model: 0,
-            ..ChassisPayload::new(Model::Scout, 0.5235)
+            ..ChassisPayload::new(Model::Scout, Model::Scout.limits().angular)
         };
         let mut tracker = StateTracker::new("t", Transport::Can, "can0", None, chassis);
         tracker.handle_connected(Duration::ZERO, false);

@@ -241,7 +241,9 @@ impl Messages {
         let mut effort = [0.0; 4];
         let mut newest = 0;
         for (i, motor) in state.motors.iter().enumerate() {
-            if !motor.received.valid || !(gear_ratio > 0.0) {
+            if !motor.received.valid
+                || gear_ratio.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
+            {
                 continue;
             }
             velocity[i] = f64::from(motor.rpm) / gear_ratio * std::f64::consts::TAU / 60.0;
@@ -544,7 +546,7 @@ mod tests {
         };
         state.link.state = LinkState::Ok.raw();
         state.link.protocol = Protocol::V1.raw();
-        state.chassis = ChassisPayload::new(Model::Scout, 0.5235);
+        state.chassis = ChassisPayload::new(Model::Scout, Model::Scout.limits().angular);
         state.motion.received = received(at_ns);
         state.motion.linear_mm_s = 500;
         state.motion.angular_mrad_s = -100;
@@ -727,8 +729,8 @@ mod tests {
         let speed = |i: usize| {
             f64::from(mini(t, 0, 0, rpm).motors[i].rpm) / gear * std::f64::consts::TAU / 60.0
         };
-        for i in 0..4 {
-            let rate = (messages.wheel_angles[i] - before[i]) / 0.02;
+        for (i, (after, before)) in messages.wheel_angles.iter().zip(before).enumerate() {
+            let rate = (after - before) / 0.02;
             assert!(
                 (rate - speed(i)).abs() < 0.05 * speed(i).abs(),
                 "wheel {i}: {rate} vs {}",
