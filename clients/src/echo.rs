@@ -214,8 +214,10 @@ fn draw(state: &StatePayload, out: &mut dyn Write) -> std::io::Result<()> {
             number(&bms["temperature"], 1),
         )?;
     }
-    if let Some(firmware) = json["firmware"]["text"].as_str() {
-        writeln!(out, "firmware {firmware}")?;
+    for form in ["versions", "text"] {
+        if let Some(firmware) = json["firmware"][form].as_str() {
+            writeln!(out, "firmware {firmware}")?;
+        }
     }
     out.flush()
 }

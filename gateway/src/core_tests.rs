@@ -1332,6 +1332,10 @@ fn v2_firmware_versions_are_asked_once_and_published() {
         "{:?}",
         state.firmware.text.as_str()
     );
+    assert!(
+        state.firmware.versions.as_str().contains("sw 2.3"),
+        "both forms answered, kept apart"
+    );
 }
 
 #[test]

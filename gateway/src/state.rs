@@ -332,7 +332,9 @@ impl StateTracker {
         self.protocol = Some(protocol);
         self.state.link.protocol = protocol.raw();
         if self.model.is_none() {
-            self.state.chassis.model = Model::default_for(protocol).raw();
+            // The protocol's default model: its geometry (the limits are the same for both).
+            let max_angular = self.state.chassis.max_angular;
+            self.state.chassis = ChassisPayload::new(Model::default_for(protocol), max_angular);
         }
     }
 
@@ -770,6 +772,13 @@ mod tests {
         tracker.handle_rx(&system_v2(0), Duration::ZERO);
         tracker.poll(ms(300));
         assert_eq!(tracker.state().chassis.model(), Some(Model::Scout2));
+        let told = tracker.state().chassis;
+        assert_eq!(
+            told.track,
+            Model::Scout2.geometry().track,
+            "its geometry too"
+        );
+        assert_eq!(told.wheel_radius, Model::Scout2.geometry().wheel_radius);
     }
 
     #[test]

@@ -29,6 +29,13 @@ pub enum Middleware {
 /// The RMW implementation that selects rmw_zenoh.
 pub const RMW_ZENOH: &str = "rmw_zenoh_cpp";
 
+impl Ros2Config {
+    /// The distro the bridge speaks to: the setting, else Jazzy's (Iron and later).
+    pub fn distro(&self) -> Distro {
+        self.distro.unwrap_or_default()
+    }
+}
+
 impl Middleware {
     /// The middleware every ROS node on this machine would use: `$RMW_IMPLEMENTATION`
     /// (`rmw_zenoh_cpp` is zenoh; unset or any other, a DDS implementation, is DDS), with why.
@@ -73,8 +80,9 @@ pub struct Ros2Config {
     pub connect: Vec<String>,
     /// A zenoh configuration file (JSON5) instead of the client-mode defaults.
     pub zenoh_config: Option<String>,
-    /// `jazzy` (type hashes, Jazzy and later) or `humble` (none).
-    pub distro: Distro,
+    /// `jazzy` (Iron and later: type hashes over zenoh, 16-byte GIDs over DDS) or `humble`
+    /// (no type hashes, 24-byte GIDs); unset: as `$ROS_DISTRO` says (`--humble` overrides).
+    pub distro: Option<Distro>,
     /// Publish the odom -> base transform on `/tf` (off when robot_localization publishes it).
     pub publish_tf: bool,
     /// Frame ids.
@@ -173,7 +181,7 @@ impl Default for Ros2Config {
             middleware: None,
             connect: Vec::new(),
             zenoh_config: None,
-            distro: Distro::Jazzy,
+            distro: None,
             publish_tf: true,
             frames: Frames::default(),
             topics: Topics::default(),
@@ -428,7 +436,7 @@ mod tests {
         .expect("valid TOML");
         assert_eq!(config.frames.odom, "odom");
         assert_eq!(config.frames.base, "base_footprint");
-        assert_eq!(config.distro, Distro::Humble);
+        assert_eq!(config.distro, Some(Distro::Humble));
         assert_eq!(config.cmd_vel[0].class, Class::Autonomy);
         assert!(config.cmd_vel[0].stamped);
         assert_eq!(config.cmd_vel[1].class, Class::Teleop);

@@ -1,36 +1,36 @@
-//! The bridge's node on DDS, as ROS 2's default middlewares (Fast DDS, Cyclone DDS) speak it:
-//! a RustDDS participant made a ROS node by `ros2-client` (it publishes `ros_discovery_info`,
-//! so `ros2 node list` shows it), with the same topics, services and QoS ROS users expect. One
-//! thread waits on the cmd_vel readers and the service servers and hands what arrives to the
-//! bridge's queues ([`Senders`]); the writer's GUID, sequence number and source timestamp play
-//! the part of rmw_zenoh's attachment.
+//! The bridge's node on DDS, as ROS 2's default middlewares (Fast DDS, Cyclone DDS) speak it, on
+//! RustDDS: a participant with the topics, services and QoS ROS users expect, made a ROS node by
+//! its `ros_discovery_info` ([`crate::ros_discovery`]; its GIDs 24 bytes long for Humble, 16 from
+//! Iron on, a setting read at start), so `ros2 node list` shows it. One thread waits on the
+//! cmd_vel readers and the service requests and hands what arrives to the bridge's queues
+//! ([`Senders`]); the writer's GUID, sequence number and source timestamp play the part of
+//! rmw_zenoh's attachment. Names, types, QoS and the services' request identity are as
+//! `ros2-client` 0.12 wrote them, which Fast DDS and Cyclone DDS graphs were tested against.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
-use std::time::Duration;
+use std::time::Duration as StdDuration;
 
-// The backend's own paths: the crate root names them only while DDS is ros2-client's one backend
-// (the system tests' rmw_zenoh peer turns on its zenoh backend in the same build).
-use ros2_client::dds::{
-    Context, ContextOptions, Node, Publisher, Server, ServiceMapping, Subscription,
-};
-use ros2_client::{
-    MessageTypeName, Name, NodeName, NodeOptions, QosProfile, ServiceTypeName,
-    qos::{Durability, History, WhenFull},
-};
 use rustdds::mio1::{Events, Interest, Poll, Token};
+use rustdds::no_key::{DataWriterCdr, SimpleDataReaderCdr};
+use rustdds::{
+    DomainParticipant, DomainParticipantBuilder, Duration, GUID, QosPolicies, QosPolicyBuilder,
+    RTPSEntity, SampleIdentity, SequenceNumber, Timestamp, TopicKind, WriteOptionsBuilder, policy,
+};
 use serde::{Deserialize, Serialize};
-use tracing::warn;
+use tracing::{info, warn};
 
 use crate::bridge::{BridgeError, Call, CmdVel, Counters, Publishers, Senders, ServiceKind};
 use crate::cdr::{CdrError, ENCAPSULATION};
 use crate::config::Ros2Config;
 use crate::msgs::{MessageType, PlanarTwist};
 use crate::publish::Topic;
+use crate::rmw::Distro;
+use crate::ros_discovery::{self, NodeEntities};
 use crate::stream::Origin;
 
-fn dds_error(what: &str) -> impl Fn(ros2_client::CreateError) -> BridgeError + '_ {
+fn dds_error(what: &str) -> impl Fn(rustdds::dds::CreateError) -> BridgeError + '_ {
     move |error| BridgeError::Dds(format!("{what}: {error:?}"))
 }
 
@@ -247,10 +247,6 @@ impl Serialize for TriggerReply {
     }
 }
 
-impl ros2_client::Message for TriggerCall {}
-impl ros2_client::Message for TriggerReply {}
-impl ros2_client::Message for TriggerResponse {}
-
 /// Decodes a payload (with its encapsulation header) as a DDS reader of `T` does, with RustDDS'
 /// CDR deserializer, refusing the encodings the reader refuses.
 fn decode<T: serde::de::DeserializeOwned>(bytes: &[u8]) -> Result<T, CdrError> {
@@ -285,47 +281,85 @@ pub fn decode_trigger_request(bytes: &[u8]) -> Result<bool, CdrError> {
     decode::<TriggerCall>(bytes).map(|call| call.cyclone_header.is_some())
 }
 
-/// `package/msg/Name` as ros2-client names a type.
-fn type_name(message: &MessageType) -> MessageTypeName {
-    let (package, rest) = message.name.split_once('/').unwrap_or(("", message.name));
-    let name = rest.rsplit('/').next().unwrap_or(rest);
-    MessageTypeName::new(package, name)
+/// A DDS type name: `nav_msgs/msg/Odometry` is `nav_msgs::msg::dds_::Odometry_`.
+fn type_name(message: &MessageType) -> String {
+    dds_type(message.name, "")
+}
+
+/// `package/kind/Name` with `suffix` as DDS names it: `package::kind::dds_::Name{suffix}_`.
+fn dds_type(name: &str, suffix: &str) -> String {
+    let mut parts = name.split('/');
+    let (package, kind, name) = (
+        parts.next().unwrap_or_default(),
+        parts.next().unwrap_or_default(),
+        parts.next().unwrap_or_default(),
+    );
+    format!("{package}::{kind}::dds_::{name}{suffix}_")
+}
+
+/// The QoS of ROS 2's profiles as DDS policies: `reliability`, volatile, keep last `depth`,
+/// and no deadline, lifespan or liveliness lease.
+fn qos(reliability: policy::Reliability, depth: i32) -> QosPolicies {
+    QosPolicyBuilder::new()
+        .durability(policy::Durability::Volatile)
+        .reliability(reliability)
+        .history(policy::History::KeepLast { depth })
+        .liveliness(policy::Liveliness::Automatic {
+            lease_duration: Duration::INFINITE,
+        })
+        .deadline(policy::Deadline(Duration::INFINITE))
+        .lifespan(policy::Lifespan {
+            duration: Duration::INFINITE,
+        })
+        .build()
 }
 
 /// The QoS a ROS publisher of `topic` offers: reliable and volatile, which reliable and
 /// best-effort (sensor data) subscribers both accept; `/tf` keeps 100 as tf2's broadcaster does.
 /// A write that cannot be queued at once fails (counted as `publish_failed`) instead of holding
-/// the state thread up to 100 ms: the next state, 20 ms later, is worth more than a late one.
-fn publisher_qos(topic: Topic) -> QosProfile {
+/// the state thread: the next state, 20 ms later, is worth more than a late one.
+fn publisher_qos(topic: Topic) -> QosPolicies {
     let depth = match topic {
         Topic::Tf => 100,
         Topic::Odom | Topic::BatteryState | Topic::JointStates | Topic::Diagnostics => 10,
     };
-    QosProfile::publisher_default()
-        .reliability_reliable(WhenFull::Fail)
-        .durability(Durability::Volatile)
-        .history(History::KeepLast { depth })
+    qos(
+        policy::Reliability::Reliable {
+            max_blocking_time: Duration::ZERO,
+        },
+        depth,
+    )
 }
 
 /// cmd_vel is read best effort: it matches reliable and best-effort publishers alike, and a
 /// lost command is better than a late one.
-fn cmd_vel_qos() -> QosProfile {
-    QosProfile::subscription_default()
-        .reliability_best_effort()
-        .durability(Durability::Volatile)
-        .history(History::KeepLast { depth: 10 })
+fn cmd_vel_qos() -> QosPolicies {
+    qos(policy::Reliability::BestEffort, 10)
 }
 
-/// Services: ROS 2's default service QoS (reliable, volatile, keep last 10).
-fn service_qos() -> QosProfile {
-    QosProfile::publisher_default()
-        .reliability_reliable(WhenFull::DEFAULT)
-        .durability(Durability::Volatile)
-        .history(History::KeepLast { depth: 10 })
+/// Services: ROS 2's default service QoS (reliable, volatile, keep last 10; a reply waits up to
+/// 100 ms for room).
+fn service_qos() -> QosPolicies {
+    qos(
+        policy::Reliability::Reliable {
+            max_blocking_time: Duration::from_millis(100),
+        },
+        10,
+    )
 }
 
-fn ros_name(name: &str) -> Result<Name, BridgeError> {
-    Name::parse(name).map_err(|error| BridgeError::Dds(format!("the name {name}: {error:?}")))
+/// `ros_discovery_info`'s QoS, as rmw_dds_common's: late joiners get the last sample.
+fn discovery_qos() -> QosPolicies {
+    QosPolicyBuilder::new()
+        .durability(policy::Durability::TransientLocal)
+        .deadline(policy::Deadline(Duration::INFINITE))
+        .ownership(policy::Ownership::Shared)
+        .reliable(Duration::ZERO)
+        .history(policy::History::KeepLast { depth: 1 })
+        .lifespan(policy::Lifespan {
+            duration: Duration::INFINITE,
+        })
+        .build()
 }
 
 /// Consecutive failed writes on one topic after which its writer is made anew.
@@ -361,27 +395,61 @@ impl FailureStreak {
     }
 }
 
+/// The node as the graph knows it: its entry in `ros_discovery_info`, written at start, when a
+/// writer is made anew, and empty when the node goes.
+struct Graph {
+    writer: DataWriterCdr<EncodedCdr>,
+    participant: ros_discovery::Guid,
+    node: NodeEntities,
+    distro: Distro,
+}
+
+impl Graph {
+    fn announce(&self, nodes: &[NodeEntities]) {
+        let sample = ros_discovery::encode(self.participant, nodes, self.distro);
+        let body = sample[ENCAPSULATION.len()..].to_vec();
+        if let Err(error) = self.writer.write(EncodedCdr(body), Some(Timestamp::now())) {
+            warn!("ros2: writing ros_discovery_info: {}", describe(&error));
+        }
+    }
+}
+
+impl Drop for Graph {
+    fn drop(&mut self) {
+        self.announce(&[]);
+    }
+}
+
 /// One topic's writer.
 struct Writer {
     topic: Topic,
-    dds_topic: ros2_client::dds::rustdds::Topic,
-    publisher: Publisher<EncodedCdr>,
+    dds_topic: rustdds::Topic,
+    writer: DataWriterCdr<EncodedCdr>,
     streak: FailureStreak,
 }
 
-/// The node's publishers on DDS, and the node, which makes a writer anew when one is stuck.
+/// The node's publishers on DDS, which make a writer anew when one is stuck, and its entry in
+/// the graph.
 pub struct DdsPublishers {
-    node: Node,
+    publisher: rustdds::Publisher,
     writers: Vec<Writer>,
+    graph: Graph,
+    /// Keeps the participant while writers may still be made.
+    _participant: DomainParticipant,
 }
 
 /// What a failed write says, without its payload.
-fn describe(error: &ros2_client::WriteError<EncodedCdr>) -> String {
+fn describe<D>(error: &rustdds::dds::WriteError<D>) -> String {
     match error {
-        ros2_client::WriteError::WouldBlock { .. } => {
+        rustdds::dds::WriteError::WouldBlock { .. } => {
             "the reliable send window is full (a subscriber has not acknowledged)".into()
         }
-        other => other.to_string(),
+        rustdds::dds::WriteError::Serialization { reason, .. } => {
+            format!("serializing: {reason}")
+        }
+        rustdds::dds::WriteError::Poisoned { reason, .. } => format!("RustDDS: {reason}"),
+        rustdds::dds::WriteError::Io(error) => format!("I/O: {error}"),
+        rustdds::dds::WriteError::Internal { reason } => format!("RustDDS: {reason}"),
     }
 }
 
@@ -393,18 +461,25 @@ impl Publishers for DdsPublishers {
         let body = payload
             .strip_prefix(&ENCAPSULATION[..])
             .ok_or("a payload without the CDR little-endian header")?;
-        let result = writer.publisher.publish(EncodedCdr(body.to_vec()));
+        let result = writer
+            .writer
+            .write(EncodedCdr(body.to_vec()), Some(Timestamp::now()));
         if writer.streak.record(result.is_ok()) {
             match self
-                .node
-                .create_publisher::<EncodedCdr>(&writer.dds_topic, None)
+                .publisher
+                .create_datawriter_no_key(&writer.dds_topic, None)
             {
-                Ok(publisher) => {
+                Ok(made) => {
                     warn!(
                         "ros2: {RECREATE_AFTER} writes of {topic:?} failed in a row: its writer \
                          is made anew (a subscriber that never acknowledges held it)"
                     );
-                    writer.publisher = publisher;
+                    let old = std::mem::replace(&mut writer.writer, made);
+                    self.graph
+                        .node
+                        .replace_writer(old.guid().to_bytes(), writer.writer.guid().to_bytes());
+                    drop(old);
+                    self.graph.announce(std::slice::from_ref(&self.graph.node));
                 }
                 Err(error) => warn!("ros2: making a new writer of {topic:?}: {error:?}"),
             }
@@ -413,8 +488,7 @@ impl Publishers for DdsPublishers {
     }
 }
 
-/// What keeps the node in the graph: its receive thread (stopped and joined on drop), the node
-/// and the participant.
+/// What keeps the node's readers served: its receive thread (stopped and joined on drop).
 pub struct DdsNode {
     halt: Arc<AtomicBool>,
     receiver: Option<JoinHandle<()>>,
@@ -443,11 +517,32 @@ impl std::fmt::Debug for DdsNode {
 
 /// A cmd_vel reader of either type.
 enum CmdVelReader {
-    Twist(Subscription<Whole<Twist>>),
-    Stamped(Subscription<Whole<TwistStamped>>),
+    Twist(SimpleDataReaderCdr<Whole<Twist>>),
+    Stamped(SimpleDataReaderCdr<Whole<TwistStamped>>),
 }
 
-type TriggerServer = Server<TriggerCall, TriggerReply>;
+impl CmdVelReader {
+    fn guid(&self) -> GUID {
+        match self {
+            Self::Twist(reader) => reader.guid(),
+            Self::Stamped(reader) => reader.guid(),
+        }
+    }
+}
+
+/// A Trigger service: its request reader and its reply writer (the Enhanced mapping's endpoints;
+/// rmw_cyclonedds' calls come on the same, see [`TriggerCall`]).
+struct TriggerService {
+    kind: ServiceKind,
+    requests: SimpleDataReaderCdr<TriggerCall>,
+    replies: Arc<DataWriterCdr<TriggerReply>>,
+}
+
+/// The DDS name of the absolute ROS name `name` with `prefix` and `suffix`: `rt/odom`,
+/// `rq/scout/estopRequest`.
+fn dds_name(prefix: &str, name: &str, suffix: &str) -> String {
+    format!("{prefix}{name}{suffix}")
+}
 
 /// Makes the participant and the node with its publishers, cmd_vel readers and services.
 pub fn start(
@@ -456,105 +551,170 @@ pub fn start(
 ) -> Result<(DdsPublishers, DdsNode), BridgeError> {
     let domain = u16::try_from(config.domain)
         .map_err(|_| BridgeError::Dds(format!("ROS domain {} is out of range", config.domain)))?;
-    let context = Context::with_options(ContextOptions::new().domain_id(domain))
+    let distro = config.distro();
+    info!(
+        "ros2: DDS domain {domain}, ros_discovery_info with {}-byte GIDs ({})",
+        ros_discovery::gid_length(distro),
+        match distro {
+            Distro::Humble => "Humble",
+            Distro::Jazzy => "Iron and later: Jazzy, Kilted",
+        }
+    );
+    let participant = DomainParticipantBuilder::new(domain)
+        .build()
         .map_err(dds_error("making the DDS participant"))?;
-    let namespace = if config.namespace.is_empty() {
-        "/"
-    } else {
-        config.namespace.as_str()
-    };
-    let node_name = NodeName::new(namespace, &config.node)
-        .map_err(|error| BridgeError::Dds(format!("the node name: {error:?}")))?;
-    let mut node = context
-        .new_node(
-            node_name,
-            NodeOptions::new()
-                .enable_rosout(false)
-                .start_parameter_services(false),
+    let publisher = participant
+        .create_publisher(&qos(
+            policy::Reliability::Reliable {
+                max_blocking_time: Duration::from_millis(100),
+            },
+            1,
+        ))
+        .map_err(dds_error("making the DDS publisher"))?;
+    let subscriber = participant
+        .create_subscriber(&qos(policy::Reliability::BestEffort, 1))
+        .map_err(dds_error("making the DDS subscriber"))?;
+    let discovery_topic = participant
+        .create_topic(
+            ros_discovery::TOPIC.into(),
+            ros_discovery::TYPE.into(),
+            &discovery_qos(),
+            TopicKind::NoKey,
         )
-        .map_err(|error| BridgeError::Dds(format!("making the node: {error:?}")))?;
-    let mut publishers = Vec::new();
+        .map_err(dds_error("making ros_discovery_info"))?;
+    let discovery_writer: DataWriterCdr<EncodedCdr> = publisher
+        .create_datawriter_no_key(&discovery_topic, None)
+        .map_err(dds_error("writing ros_discovery_info"))?;
+
+    let mut writers = Vec::new();
     for topic in Topic::ALL {
         let Some(name) = topic.name(config) else {
             continue;
         };
-        let qos = publisher_qos(topic);
-        let dds_topic = node
+        let dds_topic = participant
             .create_topic(
-                &ros_name(&config.resolve(name))?,
+                dds_name("rt", &config.resolve(name), ""),
                 type_name(&topic.message()),
-                &qos,
+                &publisher_qos(topic),
+                TopicKind::NoKey,
             )
             .map_err(dds_error("making a topic"))?;
-        let publisher = node
-            .create_publisher::<EncodedCdr>(&dds_topic, None)
+        let writer = publisher
+            .create_datawriter_no_key(&dds_topic, None)
             .map_err(dds_error("making a publisher"))?;
-        publishers.push(Writer {
+        writers.push(Writer {
             topic,
             dds_topic,
-            publisher,
+            writer,
             streak: FailureStreak::default(),
         });
     }
     let mut readers = Vec::new();
     for cmd_vel in &config.cmd_vel {
-        let name = ros_name(&config.resolve(&cmd_vel.topic))?;
         let message = if cmd_vel.stamped {
             crate::msgs::TWIST_STAMPED
         } else {
             crate::msgs::TWIST
         };
-        let dds_topic = node
-            .create_topic(&name, type_name(&message), &cmd_vel_qos())
+        let dds_topic = participant
+            .create_topic(
+                dds_name("rt", &config.resolve(&cmd_vel.topic), ""),
+                type_name(&message),
+                &cmd_vel_qos(),
+                TopicKind::NoKey,
+            )
             .map_err(dds_error("making the cmd_vel topic"))?;
         readers.push(if cmd_vel.stamped {
             CmdVelReader::Stamped(
-                node.create_subscription(&dds_topic, None)
+                subscriber
+                    .create_simple_datareader_no_key(&dds_topic, None)
                     .map_err(dds_error("subscribing to cmd_vel"))?,
             )
         } else {
             CmdVelReader::Twist(
-                node.create_subscription(&dds_topic, None)
+                subscriber
+                    .create_simple_datareader_no_key(&dds_topic, None)
                     .map_err(dds_error("subscribing to cmd_vel"))?,
             )
         });
     }
-    let mut servers = Vec::new();
+    let mut services = Vec::new();
     for &kind in ServiceKind::served(config) {
-        let server: TriggerServer = node
-            .create_server(
-                ServiceMapping::Enhanced,
-                &ros_name(&config.resolve(kind.name(config)))?,
-                &ServiceTypeName::new("std_srvs", "Trigger"),
-                service_qos(),
-                service_qos(),
-            )
-            .map_err(dds_error("making a service"))?;
-        servers.push((kind, server));
+        let name = config.resolve(kind.name(config));
+        let topic = |prefix: &str, suffix: &str, kind: &str| {
+            participant
+                .create_topic(
+                    dds_name(prefix, &name, suffix),
+                    dds_type("std_srvs/srv/Trigger", kind),
+                    &service_qos(),
+                    TopicKind::NoKey,
+                )
+                .map_err(dds_error("making a service's topic"))
+        };
+        let (request_topic, reply_topic) = (
+            topic("rq", "Request", "_Request")?,
+            topic("rr", "Reply", "_Response")?,
+        );
+        let requests = subscriber
+            .create_simple_datareader_no_key(&request_topic, Some(service_qos()))
+            .map_err(dds_error("reading a service's requests"))?;
+        let replies = publisher
+            .create_datawriter_no_key(&reply_topic, Some(service_qos()))
+            .map_err(dds_error("writing a service's replies"))?;
+        services.push(TriggerService {
+            kind,
+            requests,
+            replies: Arc::new(replies),
+        });
     }
-    let poll = register(&mut readers, &mut servers).map_err(BridgeError::Thread)?;
-    let servers: Vec<_> = servers
-        .into_iter()
-        .map(|(kind, server)| (kind, Arc::new(server)))
-        .collect();
+
+    // The node in the graph: its readers and writers, the discovery writer last (as
+    // ros2-client and rmw list it).
+    let namespace = if config.namespace.is_empty() {
+        "/".to_owned()
+    } else {
+        config.namespace.clone()
+    };
+    let mut node = NodeEntities {
+        namespace,
+        name: config.node.clone(),
+        readers: readers.iter().map(|r| r.guid().to_bytes()).collect(),
+        writers: writers.iter().map(|w| w.writer.guid().to_bytes()).collect(),
+    };
+    for service in &services {
+        node.readers.push(service.requests.guid().to_bytes());
+        node.writers.push(service.replies.guid().to_bytes());
+    }
+    node.writers.push(discovery_writer.guid().to_bytes());
+    let graph = Graph {
+        writer: discovery_writer,
+        participant: participant.guid().to_bytes(),
+        node,
+        distro,
+    };
+    graph.announce(std::slice::from_ref(&graph.node));
+
+    let poll = register(&mut readers, &mut services).map_err(BridgeError::Thread)?;
     let halt = Arc::new(AtomicBool::new(false));
     let receiver = {
         let halt = Arc::clone(&halt);
+        let participant = participant.clone();
         std::thread::Builder::new()
             .name("ros2-dds".into())
             .spawn(move || {
-                // The participant lives on this thread (the node on the state thread's
-                // publishers), as long as the bridge runs.
-                let _context = context;
-                if let Err(error) = receive(poll, &readers, &servers, &senders, &halt) {
+                // The participant lives as long as this thread serves its readers.
+                let _participant = participant;
+                if let Err(error) = receive(poll, &readers, &services, &senders, &halt) {
                     senders.fail(format!("waiting for DDS input: {error}"));
                 }
             })?
     };
     Ok((
         DdsPublishers {
-            node,
-            writers: publishers,
+            publisher,
+            writers,
+            graph,
+            _participant: participant,
         },
         DdsNode {
             halt,
@@ -563,11 +723,11 @@ pub fn start(
     ))
 }
 
-/// A poll that wakes when a cmd_vel reader or a server has input: reader `i` is token `i`, the
-/// servers follow.
+/// A poll that wakes when a cmd_vel reader or a service has input: reader `i` is token `i`, the
+/// services follow.
 fn register(
     readers: &mut [CmdVelReader],
-    servers: &mut [(ServiceKind, TriggerServer)],
+    services: &mut [TriggerService],
 ) -> std::io::Result<Poll> {
     let poll = Poll::new()?;
     for (index, reader) in readers.iter_mut().enumerate() {
@@ -583,21 +743,24 @@ fn register(
             }
         }
     }
-    for (index, (_, server)) in servers.iter_mut().enumerate() {
-        poll.registry()
-            .register(server, Token(readers.len() + index), Interest::READABLE)?;
+    for (index, service) in services.iter_mut().enumerate() {
+        poll.registry().register(
+            &mut service.requests,
+            Token(readers.len() + index),
+            Interest::READABLE,
+        )?;
     }
     Ok(poll)
 }
 
 /// How often the receive thread looks whether the bridge stops.
-const HALT_POLL: Duration = Duration::from_millis(100);
+const HALT_POLL: StdDuration = StdDuration::from_millis(100);
 
-/// Waits on the readers and servers, and queues what arrives.
+/// Waits on the readers and services, and queues what arrives.
 fn receive(
     mut poll: Poll,
     readers: &[CmdVelReader],
-    servers: &[(ServiceKind, Arc<TriggerServer>)],
+    services: &[TriggerService],
     senders: &Senders,
     halt: &AtomicBool,
 ) -> std::io::Result<()> {
@@ -611,8 +774,8 @@ fn receive(
         }
         // Edge-triggered: everything that arrived is taken, whichever woke the poll (the
         // e-stop service first).
-        for (kind, server) in servers {
-            take_calls(*kind, server, senders);
+        for service in services {
+            take_calls(service, senders);
         }
         for (index, reader) in readers.iter().enumerate() {
             take_twists(index, reader, senders);
@@ -621,28 +784,50 @@ fn receive(
     Ok(())
 }
 
-fn origin(info: &ros2_client::MessageInfo) -> Option<Origin> {
+/// A DDS timestamp as ROS time, ns (`None` for the invalid and infinite ones).
+fn nanos(timestamp: Timestamp) -> Option<i64> {
+    if timestamp == Timestamp::INVALID || timestamp == Timestamp::INFINITE {
+        return None;
+    }
+    let ticks = timestamp.to_ticks();
+    let seconds = (ticks >> 32) as i64;
+    let fraction = (((ticks & 0xFFFF_FFFF) as i64) * 1_000_000_000) >> 32;
+    Some(seconds * 1_000_000_000 + fraction)
+}
+
+/// Where a sample came from: its writer, its sequence number and its source time.
+fn origin<D>(sample: &rustdds::no_key::DeserializedCacheChange<D>) -> Option<Origin> {
     Some(Origin {
-        gid: info.publisher_gid().to_bytes16(),
-        sequence: info.sequence_number(),
-        sent_ns: info.source_timestamp()?.to_nanos(),
+        gid: sample.writer_guid().to_bytes(),
+        sequence: i64::from(sample.sequence_number),
+        sent_ns: nanos(sample.source_timestamp()?)?,
     })
 }
 
 fn take_twists(topic: usize, reader: &CmdVelReader, senders: &Senders) {
+    match reader {
+        CmdVelReader::Twist(reader) => reader.drain_read_notifications(),
+        CmdVelReader::Stamped(reader) => reader.drain_read_notifications(),
+    }
     loop {
         let taken = match reader {
-            CmdVelReader::Twist(reader) => reader.take().map(|message| {
-                message.map(|(Whole(twist), info)| (PlanarTwist::from(&twist), info))
+            CmdVelReader::Twist(reader) => reader.try_take_one().map(|sample| {
+                sample.map(|sample| {
+                    let origin = origin(&sample);
+                    (PlanarTwist::from(&sample.into_value().0), origin)
+                })
             }),
-            CmdVelReader::Stamped(reader) => reader.take().map(|message| {
-                message.map(|(Whole(stamped), info)| (PlanarTwist::from(&stamped.twist), info))
+            CmdVelReader::Stamped(reader) => reader.try_take_one().map(|sample| {
+                sample.map(|sample| {
+                    let origin = origin(&sample);
+                    (PlanarTwist::from(&sample.into_value().0.twist), origin)
+                })
             }),
         };
         match taken {
-            Ok(Some((twist, info))) => senders.twist(CmdVel {
+            Ok(Some((twist, origin))) => senders.twist(CmdVel {
                 topic,
-                origin: origin(&info),
+                origin,
                 twist: Ok(twist),
             }),
             Ok(None) => break,
@@ -656,11 +841,29 @@ fn take_twists(topic: usize, reader: &CmdVelReader, senders: &Senders) {
     }
 }
 
-fn take_calls(kind: ServiceKind, server: &Arc<TriggerServer>, senders: &Senders) {
+/// The identity a reply names: the request's related sample identity where its writer sent one
+/// (Fast DDS), else the request's own writer and sequence number; Fast DDS' unknown sequence
+/// number is the request's own (as `ros2-client` did).
+fn request_identity<D>(request: &rustdds::no_key::DeserializedCacheChange<D>) -> SampleIdentity {
+    let mut identity = request.related_sample_identity().unwrap_or(SampleIdentity {
+        writer_guid: request.writer_guid(),
+        sequence_number: request.sequence_number,
+    });
+    if identity.sequence_number == SequenceNumber::UNKNOWN {
+        identity.sequence_number = request.sequence_number;
+    }
+    identity
+}
+
+fn take_calls(service: &TriggerService, senders: &Senders) {
+    let kind = service.kind;
+    service.requests.drain_read_notifications();
     loop {
-        match server.receive_request() {
-            Ok(Some((id, call))) => {
-                let server = Arc::clone(server);
+        match service.requests.try_take_one() {
+            Ok(Some(request)) => {
+                let identity = request_identity(&request);
+                let call = request.into_value();
+                let replies = Arc::clone(&service.replies);
                 senders.call(
                     kind,
                     Call {
@@ -672,8 +875,15 @@ fn take_calls(kind: ServiceKind, server: &Arc<TriggerServer>, senders: &Senders)
                                     message: message.to_owned(),
                                 },
                             };
-                            if let Err(error) = server.send_response(id, reply) {
-                                warn!("ros2: replying to a {kind:?} call failed: {error:?}");
+                            let options = WriteOptionsBuilder::new()
+                                .source_timestamp(Timestamp::now())
+                                .related_sample_identity(identity)
+                                .build();
+                            if let Err(error) = replies.write_with_options(reply, options) {
+                                warn!(
+                                    "ros2: replying to a {kind:?} call failed: {}",
+                                    describe(&error)
+                                );
                             }
                         }),
                     },
@@ -814,9 +1024,29 @@ mod tests {
     }
 
     #[test]
-    fn type_names_split_as_ros2_client_wants() {
-        let name = type_name(&crate::msgs::ODOMETRY);
-        assert_eq!(name.dds_msg_type(), "nav_msgs::msg::dds_::Odometry_");
+    fn names_are_the_dds_names_ros_2_uses() {
+        assert_eq!(
+            type_name(&crate::msgs::ODOMETRY),
+            "nav_msgs::msg::dds_::Odometry_"
+        );
+        assert_eq!(
+            dds_type("std_srvs/srv/Trigger", "_Request"),
+            "std_srvs::srv::dds_::Trigger_Request_"
+        );
+        assert_eq!(dds_name("rt", "/robot1/odom", ""), "rt/robot1/odom");
+        assert_eq!(
+            dds_name("rr", "/scout/estop", "Reply"),
+            "rr/scout/estopReply"
+        );
+    }
+
+    #[test]
+    fn source_times_become_ros_nanoseconds() {
+        // 1 700 000 000 s and a quarter (2^30 of 2^32) after the epoch.
+        let stamp = Timestamp::from_ticks((1_700_000_000u64 << 32) | (1 << 30));
+        assert_eq!(nanos(stamp), Some(1_700_000_000_250_000_000));
+        assert_eq!(nanos(Timestamp::INVALID), None);
+        assert_eq!(nanos(Timestamp::INFINITE), None);
     }
 
     #[test]

@@ -1,8 +1,8 @@
-//! scout-ros2: ROS 2 over rmw_zenoh, without a ROS install: `scout ros2` (the `scout-ros2` program), the bridge that makes the chassis
-//! a ROS 2 node ([`bridge`]), with its settings ([`config`]), the messages it makes from the
-//! state ([`publish`]), when a cmd_vel stream may take control ([`stream`]), the CDR of its
-//! messages ([`msgs`], [`cdr`]) and what rmw_zenoh puts around them ([`rmw`]: data keys, the
-//! sample attachment, liveliness tokens).
+//! scout-ros2: the chassis as a ROS 2 node, without a ROS install: `scout ros2` (the `scout-ros2`
+//! program), the bridge ([`bridge`]) over DDS ([`dds_node`], with its [`ros_discovery`] entry)
+//! or rmw_zenoh ([`zenoh_node`], [`rmw`]: data keys, the sample attachment, liveliness tokens),
+//! with its settings ([`config`]), the messages it makes from the state ([`publish`]), when a
+//! cmd_vel stream may take control ([`stream`]) and the CDR of its messages ([`msgs`], [`cdr`]).
 
 pub mod bridge;
 pub mod cdr;
@@ -11,5 +11,6 @@ pub mod dds_node;
 pub mod msgs;
 pub mod publish;
 pub mod rmw;
+pub mod ros_discovery;
 pub mod stream;
 pub mod zenoh_node;

@@ -50,7 +50,8 @@ pub struct Ros2Args {
     /// Do not publish odom -> base_link on /tf (robot_localization publishes it).
     #[arg(long)]
     no_tf: bool,
-    /// Speak to ROS 2 Humble (no type hashes).
+    /// Speak to ROS 2 Humble (over zenoh no type hashes, over DDS 24-byte GIDs) [default: as
+    /// $ROS_DISTRO says].
     #[arg(long)]
     humble: bool,
     /// A zenoh configuration file (JSON5) instead of client mode towards --connect.
@@ -80,7 +81,7 @@ impl Ros2Args {
             config.publish_tf = false;
         }
         if self.humble {
-            config.distro = Distro::Humble;
+            config.distro = Some(Distro::Humble);
         }
         if self.zenoh_config.is_some() {
             config.zenoh_config = self.zenoh_config.clone();
@@ -144,7 +145,7 @@ fn run(args: &Ros2Args) -> anyhow::Result<ExitCode> {
         .with_target(false)
         .with_env_filter(
             EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| EnvFilter::new("info,rustdds=warn,ros2_client=warn")),
+                .unwrap_or_else(|_| EnvFilter::new("info,rustdds=warn")),
         )
         .init();
     let stop = Arc::new(AtomicBool::new(false));
@@ -161,6 +162,13 @@ fn run(args: &Ros2Args) -> anyhow::Result<ExitCode> {
         }
     };
     info!("scout ros2: speaking {} ({why})", middleware.name());
+    let mut config = config;
+    let (distro, why) = match config.distro {
+        Some(distro) => (distro, "chosen in the settings or with --humble".into()),
+        None => Distro::from_ros_distro(std::env::var("ROS_DISTRO").ok().as_deref()),
+    };
+    info!("scout ros2: to ROS 2 {} and later ({why})", distro.name());
+    config.distro = Some(distro);
     match bridge::run(&args.name, &config, middleware, &stop) {
         Ok(()) => Ok(ExitCode::SUCCESS),
         Err(BridgeError::Client(error)) => Err(error.into()),

@@ -25,6 +25,33 @@ pub enum Distro {
 }
 
 impl Distro {
+    /// The distro every ROS node on this machine speaks: `$ROS_DISTRO` (`humble`, and the
+    /// older `galactic` and `foxy`, have Humble's wire; anything else, or unset, Jazzy's), with
+    /// why.
+    pub fn from_ros_distro(ros_distro: Option<&str>) -> (Self, String) {
+        match ros_distro {
+            Some(name @ ("humble" | "galactic" | "foxy")) => {
+                (Distro::Humble, format!("ROS_DISTRO is {name}"))
+            }
+            Some(name) if !name.is_empty() => (
+                Distro::Jazzy,
+                format!("ROS_DISTRO is {name}: Iron and later share Jazzy's wire"),
+            ),
+            Some(_) | None => (
+                Distro::Jazzy,
+                "ROS_DISTRO is not set: Jazzy's wire (Iron and later)".into(),
+            ),
+        }
+    }
+
+    /// The name in settings and logs.
+    pub fn name(self) -> &'static str {
+        match self {
+            Distro::Jazzy => "jazzy",
+            Distro::Humble => "humble",
+        }
+    }
+
     pub fn hash(self, message: &MessageType) -> &'static str {
         match self {
             Distro::Jazzy => message.hash,

@@ -97,7 +97,7 @@ impl Declared {
         let entity = self.next_entity;
         let key = self
             .node
-            .entity_token(entity, kind, name, message, config.distro);
+            .entity_token(entity, kind, name, message, config.distro());
         let gid = rmw::gid(&key);
         self.tokens.push(
             session
@@ -194,7 +194,12 @@ pub fn start(
         let message = topic.message();
         let gid = declared.declare(&session, EntityKind::Publisher, &name, &message, config)?;
         let publisher = session
-            .declare_publisher(rmw::data_key(config.domain, &name, &message, config.distro))
+            .declare_publisher(rmw::data_key(
+                config.domain,
+                &name,
+                &message,
+                config.distro(),
+            ))
             .congestion_control(CongestionControl::Drop)
             .wait()
             .map_err(zenoh_error("declaring a publisher"))?;
@@ -243,7 +248,7 @@ pub fn start(
     for &kind in ServiceKind::served(config) {
         let name = config.resolve(kind.name(config));
         declared.declare(&session, EntityKind::Service, &name, &msgs::TRIGGER, config)?;
-        let key = rmw::data_key(config.domain, &name, &msgs::TRIGGER, config.distro);
+        let key = rmw::data_key(config.domain, &name, &msgs::TRIGGER, config.distro());
         let senders = senders.clone();
         queryables.push(
             session

@@ -275,13 +275,16 @@ pub struct BmsPayload {
     pub alarms: [u8; 8],
 }
 
-/// The chassis' firmware versions, as its reply to the version request said them (v2).
+/// The chassis' firmware versions, as its replies to the version requests said them (v2): the
+/// older binary form (0x41A) and the current text form (0x4A1), whichever it answers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
 #[repr(C)]
 pub struct FirmwarePayload {
-    /// When the last part of the reply was received.
+    /// When the last part of a reply was received.
     pub received: Received,
-    /// The versions, as text.
+    /// The binary reply's four versions, as text (empty before one).
+    pub versions: FixedText<64>,
+    /// The text reply, eight characters a frame, as received (empty before one).
     pub text: FixedText<96>,
 }
 
@@ -504,14 +507,12 @@ impl StatePayload {
                     v(version.controller_software),
                     v(version.driver_software),
                 );
-                let text = format!(
+                let versions = format!(
                     "controller hw {}.{} sw {}.{}, driver hw {}.{} sw {}.{}",
                     ch.0, ch.1, cs.0, cs.1, dh.0, dh.1, ds.0, ds.1
                 );
-                self.firmware = FirmwarePayload {
-                    received,
-                    text: FixedText::new(&text),
-                };
+                self.firmware.received = received;
+                self.firmware.versions = FixedText::new(&versions);
             }
             MessageV2::VersionText(bytes) => {
                 let mut text = self.firmware.text.as_str().to_owned();
@@ -522,10 +523,8 @@ impl StatePayload {
                         ' '
                     }
                 }));
-                self.firmware = FirmwarePayload {
-                    received,
-                    text: FixedText::new(&text),
-                };
+                self.firmware.received = received;
+                self.firmware.text = FixedText::new(&text);
             }
             MessageV2::MotionCommand(_)
             | MessageV2::LightCommand(_)
@@ -784,12 +783,15 @@ mod tests {
         let mut state = StatePayload::default();
         state.store_v2(&v2(0x41A, [1, 0, 1, 0, 2, 3, 1, 5]), RECEIVED);
         assert_eq!(
-            state.firmware.text.as_str(),
+            state.firmware.versions.as_str(),
             "controller hw 1.0 sw 2.3, driver hw 1.0 sw 1.5"
         );
-        let mut state = StatePayload::default();
         state.store_v2(&v2(0x4A1, *b"scout v2"), RECEIVED);
         state.store_v2(&v2(0x4A1, [b' ', b'1', b'.', b'0', 0, 0, 0, 0]), RECEIVED);
         assert_eq!(state.firmware.text.as_str(), "scout v2 1.0    ");
+        assert!(
+            state.firmware.versions.as_str().starts_with("controller"),
+            "kept apart"
+        );
     }
 }

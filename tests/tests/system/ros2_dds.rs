@@ -328,6 +328,12 @@ fn graph_topics_and_driving(
             "{graph}"
         );
     }
+    // The node's own endpoints, as rclpy matches them to it through ros_discovery_info.
+    assert_eq!(
+        graph["scout_publishers"]["/odom"],
+        json!(["nav_msgs/msg/Odometry"]),
+        "{graph}"
+    );
 
     // Odometry at the state rate, with a sensor-data (best effort) subscriber as Nav2's
     // costmaps and robot_localization use; the battery's voltage as the gateway reports it.
@@ -557,4 +563,84 @@ fn a_cyclone_dds_call_in_its_own_service_mapping_is_answered_and_stops_the_robot
         "{status}"
     );
     bridge.stop();
+}
+
+/// What a Humble graph reads of the node over DDS: its `ros_discovery_info` entry in Humble's
+/// layout (24-byte GIDs; no Humble rclpy is on PyPI, so a plain Cyclone DDS reader of that
+/// layout stands in), naming the node's writers by the GUIDs of its DDS publications. The same
+/// reader in Jazzy's layout checks the default.
+#[test]
+fn a_humble_graph_reads_the_nodes_endpoints_in_its_own_gid_layout() {
+    let test = "ros2_dds_humble";
+    let Some((namespace, python)) = prerequisites(test, "SCOUT_RCLPY_KILTED") else {
+        return;
+    };
+    let name = robot_name(test);
+    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    connect(&name);
+    let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/system/discovery_info_reader.py");
+    for (salt, distro, length) in [(13, "humble", 24), (17, "jazzy", 16)] {
+        let domain = domain(salt);
+        let mut bridge_command = namespace.binary("scout-ros2");
+        bridge_command
+            .args(["--name", &name, "--middleware", "dds", "--domain"])
+            .arg(domain.to_string())
+            .env("ROS_DISTRO", distro)
+            .env("RUST_LOG", "info,rustdds=warn")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null());
+        let mut bridge = Background::spawn(bridge_command);
+        let output = namespace
+            .command(&python)
+            .arg(&script)
+            .args([length.to_string().as_str(), "scout"])
+            .env("ROS_DOMAIN_ID", domain.to_string())
+            .env(
+                "CYCLONEDDS_URI",
+                "<CycloneDDS><Domain><General><AllowMulticast>spdp</AllowMulticast></General>\
+                 </Domain></CycloneDDS>",
+            )
+            .stdin(Stdio::null())
+            .stderr(Stdio::inherit())
+            .output()
+            .expect("run the discovery reader");
+        bridge.signal(Signal::SIGINT);
+        assert_eq!(bridge.wait_exit(LIMIT), Some(0), "the bridge exits 0");
+        let seen: Value = serde_json::from_slice(&output.stdout)
+            .unwrap_or_else(|_| panic!("discovery reader ({distro}): {output:?}"));
+        assert!(seen.get("error").is_none(), "{distro}: {seen}");
+        let writers: Vec<&str> = seen["writers"]
+            .as_array()
+            .map(|w| w.iter().filter_map(Value::as_str).collect())
+            .unwrap_or_default();
+        assert!(
+            writers.iter().all(|gid| gid.len() == 2 * length),
+            "{distro}: {seen}"
+        );
+        if length == 24 {
+            assert!(
+                writers.iter().all(|gid| gid.ends_with("0000000000000000")),
+                "{seen}"
+            );
+        }
+        for topic in ["rt/odom", "rt/tf", "rt/joint_states", "rr/scout/estopReply"] {
+            let guids = seen["publications"][topic]
+                .as_array()
+                .unwrap_or_else(|| panic!("{distro}: no publication on {topic}: {seen}"));
+            assert!(
+                guids
+                    .iter()
+                    .filter_map(Value::as_str)
+                    .any(|guid| { writers.iter().any(|gid| gid.starts_with(guid)) }),
+                "{distro}: the node does not name its {topic} writer: {seen}"
+            );
+        }
+        let participant = seen["participant"].as_str().unwrap_or_default();
+        assert!(
+            writers.iter().all(|gid| gid[..24] == participant[..24]),
+            "{distro}: the writers are the participant's: {seen}"
+        );
+    }
 }
