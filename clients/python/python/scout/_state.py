@@ -183,12 +183,11 @@ class State:
         self._made: Dict[str, Any] = {}
 
     def _field(self, key: str, make: Callable[[Any], Any]) -> Any:
-        try:
-            return self._made[key]
-        except KeyError:
+        made = self._made.get(key, _UNMADE)
+        if made is _UNMADE:
             made = make(self._view.field(key))
             self._made[key] = made
-            return made
+        return made
 
     @property
     def published_ns(self) -> int:
@@ -300,6 +299,10 @@ class State:
         speed = "-" if motion is None else f"{motion.linear:+.2f} m/s"
         battery = "-" if system is None else f"{system.battery_voltage:.1f} V"
         return f"<State {self.robot} #{self.seq} link={self.link.state} {speed} {battery}>"
+
+
+_UNMADE = object()
+"""A section not read yet (None is a section the chassis has not reported)."""
 
 
 def _optional(kind: Any, fields: Optional[Dict[str, Any]]) -> Any:
