@@ -85,6 +85,9 @@ pub struct StateTracker {
     counted_by_closed_ports: PortCounters,
     /// The yaw at the last odometer reading (v2): the heading of the next step is midway.
     yaw_at_odometer: f64,
+    /// The protocol whose feedback the sections hold, kept across ports: a chassis of the
+    /// other protocol behind a reopened port clears them.
+    sections_from: Option<Protocol>,
 }
 
 impl StateTracker {
@@ -129,6 +132,7 @@ impl StateTracker {
             unknown_bits_reported: 0,
             counted_by_closed_ports: PortCounters::default(),
             yaw_at_odometer: 0.0,
+            sections_from: fixed,
         }
     }
 
@@ -331,6 +335,22 @@ impl StateTracker {
     fn use_protocol(&mut self, protocol: Protocol) {
         self.protocol = Some(protocol);
         self.state.link.protocol = protocol.raw();
+        if self.sections_from.is_some_and(|from| from != protocol) {
+            // Another chassis: nothing the one before reported is shown as this one's (its
+            // system bits would read as the other protocol's, its odometers, RC, battery and
+            // firmware would stay forever).
+            info!("the chassis behind the port changed protocol: its sections start empty");
+            let state = &mut self.state;
+            state.system = Default::default();
+            state.motion = Default::default();
+            state.motors = Default::default();
+            state.lights = Default::default();
+            state.odometer = Default::default();
+            state.rc = Default::default();
+            state.bms = Default::default();
+            state.firmware = Default::default();
+        }
+        self.sections_from = Some(protocol);
         if self.model.is_none() {
             // The protocol's default model: its geometry (the limits are the same for both).
             let max_angular = self.state.chassis.max_angular;
@@ -747,12 +767,27 @@ mod tests {
         assert_eq!(tracker.state().system.battery_decivolts, 259);
         assert_eq!(tracker.handle_rx(&status(0), ms(320)), Publish::No);
         assert_eq!(tracker.state().link.rejected_frames, 1);
-        // Another chassis after a reconnect is told anew.
-        tracker.handle_connected(Duration::ZERO, true);
-        assert_eq!(tracker.protocol(), None);
-        tracker.handle_rx(&status(0), ms(400));
+        tracker.handle_rx(&odometer(1000, 1000), ms(330));
+        assert!(tracker.state().odometer.received.valid);
+        // The same chassis after a reconnect: what it reported stays until it reports anew.
+        tracker.handle_connected(ms(400), true);
+        tracker.handle_rx(&system_v2(0), ms(400));
         tracker.poll(ms(700));
+        assert_eq!(tracker.protocol(), Some(Protocol::V2));
+        assert!(tracker.state().odometer.received.valid);
+        // Another chassis after a reconnect is told anew, and nothing of the one before is
+        // shown as its.
+        tracker.handle_connected(ms(800), true);
+        assert_eq!(tracker.protocol(), None);
+        tracker.handle_rx(&status(0), ms(800));
+        tracker.poll(ms(1100));
         assert_eq!(tracker.protocol(), Some(Protocol::V1));
+        let state = tracker.state();
+        assert!(!state.odometer.received.valid, "{:?}", state.odometer);
+        assert!(!state.system.received.valid, "v2 bits are not v1's");
+        assert_eq!(state.system.battery_decivolts, 0);
+        tracker.handle_rx(&status(1), ms(1110));
+        assert!(tracker.state().system.received.valid);
     }
 
     #[test]
