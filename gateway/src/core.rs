@@ -323,7 +323,7 @@ impl Core {
     fn observe_system_v2(&mut self, now: Duration, system: &SystemStateV2) {
         let rc = system.control_mode == ControlModeV2::Rc;
         self.observe_chassis(now, system.state, system.errors.faults(), rc);
-        if let Some(lost) = self.command_mode.handle_reported(system.control_mode) {
+        if let Some(lost) = self.command_mode.handle_reported(system.control_mode, now) {
             warn!("{}", lost.detail);
             self.arbiter
                 .handle_gap(now, StopCause::ChassisMode, &lost.reason, false);
@@ -853,9 +853,17 @@ impl Core {
         deadline
     }
 
-    /// Feedback silent for longer than the chassis' command timeout is a gap.
+    /// Feedback silent for longer than the chassis' command timeout is a gap, and so at once is
+    /// a protocol mismatch (nothing the chassis sends is used).
     fn check_silence(&mut self, now: Duration) {
         if self.link != Link::Open {
+            return;
+        }
+        if self.tracker.link_state() == LinkState::ProtocolMismatch
+            && let Some(mismatch) = self.tracker.mismatch()
+        {
+            let reason = mismatch.reason.clone();
+            self.set_condition(now, StopCause::ChassisSilent, true, &reason);
             return;
         }
         let since = self

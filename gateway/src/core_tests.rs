@@ -1472,6 +1472,167 @@ fn a_chassis_of_the_other_protocol_moves_nothing_and_the_stop_says_why() {
     }
 }
 
+/// Feedback of `protocol` that proves it (v1's 0x151, v2's 0x211), as another chassis or node
+/// on the bus would send it.
+fn proof_of(protocol: Protocol) -> RxEvent {
+    match protocol {
+        Protocol::V1 => RxEvent::Message(Counted {
+            message: Message::SystemStatus(scout_protocol::SystemStatus {
+                state: scout_protocol::ChassisState::Normal,
+                control_mode: scout_protocol::ControlMode::Can,
+                battery_decivolts: 250,
+                faults: scout_protocol::FaultBits::NONE,
+            }),
+            count: 0,
+        }),
+        Protocol::V2 => RxEvent::V2(MessageV2::SystemState(SystemStateV2 {
+            state: scout_protocol::ChassisState::Normal,
+            control_mode: ControlModeV2::Can,
+            battery_decivolts: 250,
+            errors: ErrorBitsV2(0),
+            reserved: 0,
+            count: 0,
+        })),
+    }
+}
+
+#[test]
+fn the_other_protocol_joining_the_bus_while_driving_stops_at_once_and_nothing_is_used() {
+    for firmware in Protocol::ALL {
+        for config in [config(firmware), GatewayConfig::default()] {
+            let what = format!("{firmware} chassis, --protocol {:?}", config.protocol);
+            let mut pair = Pair::with_firmware(firmware, Transport::Can, &config, Start::Clean);
+            pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(2));
+            assert!(pair.chassis.actual().linear > 0.4, "{what}: drives");
+            // Another chassis (or a node using its ids) of the other protocol joins.
+            let joined = pair.now;
+            let proof = proof_of(firmware.other());
+            pair.core.handle_rx(joined, &proof);
+            let answers = pair.keep_streaming(TELEOP, 0.5, ms(100));
+            assert!(answers.iter().any(Result::is_err), "{what}: revoked");
+            let first_zero = pair
+                .motion_commands()
+                .into_iter()
+                .find(|(at, command)| *at >= joined && command.linear == 0.0)
+                .map(|(at, _)| at)
+                .expect("a zero command");
+            assert!(
+                first_zero - joined <= TICK,
+                "{what}: the stop went out {:?} after",
+                first_zero - joined
+            );
+            assert_eq!(
+                pair.last_state().link.state(),
+                LinkState::ProtocolMismatch,
+                "{what}"
+            );
+            let status = pair.statuses().last().expect("status").1;
+            let stop = status
+                .stops()
+                .iter()
+                .find(|s| s.cause == StopCause::ChassisSilent.raw())
+                .map(|s| s.reason.as_str().to_owned())
+                .expect("a stop");
+            assert!(stop.contains("both protocols"), "{what}: {stop}");
+            // Nothing the bus says is used any more, and nothing moves until the port reopens.
+            let rejected = pair.last_state().link.rejected_frames;
+            pair.run(ms(200));
+            assert!(pair.last_state().link.rejected_frames > rejected, "{what}");
+            let refused = pair.take(TELEOP, Class::Teleop).expect_err("stopped");
+            assert_eq!(refused.kind, Some(RejectionKind::Latched), "{what}");
+            pair.run(Duration::from_secs(1));
+            assert_eq!(pair.chassis.actual().linear, 0.0, "{what}");
+        }
+    }
+}
+
+#[test]
+fn v2_a_stop_while_the_mode_is_asked_ends_the_asking() {
+    let mut pair = Pair::of(Protocol::V2);
+    pair.mode_requests = false;
+    pair.run(ms(500));
+    pair.take(TELEOP, Class::Teleop).expect("take");
+    pair.keep_streaming(TELEOP, 0.5, ms(100));
+    assert_eq!(mode_requests(&pair).len(), 1);
+    pair.request(
+        OFFICER,
+        &Request::Stop {
+            reason: "person ahead".into(),
+        },
+    )
+    .expect("a stop is accepted");
+    let stopped = pair.now;
+    pair.mode_requests = true;
+    pair.keep_streaming(TELEOP, 0.5, Duration::from_secs(2));
+    assert!(
+        mode_requests(&pair).iter().all(|(at, _)| *at < stopped),
+        "no 0x421 after the stop: {:?}",
+        mode_requests(&pair)
+    );
+    assert_eq!(pair.chassis.stats().control_mode, "standby");
+    assert_eq!(
+        pair.stops(),
+        [("officer".to_owned(), StopCause::Client)],
+        "no take timeout said on top of the stop"
+    );
+}
+
+#[test]
+fn v2_an_rc_episode_hidden_in_lost_feedback_is_not_followed_by_a_take() {
+    let mut pair = Pair::of(Protocol::V2);
+    pair.mode_requests = false;
+    pair.run(ms(500));
+    pair.take(TELEOP, Class::Teleop).expect("take");
+    pair.keep_streaming(TELEOP, 0.5, ms(40));
+    assert_eq!(mode_requests(&pair).len(), 1, "asked");
+    // The feedback is lost for 400 ms (less than the chassis timeout), and meanwhile a person
+    // switches the RC on and off again: the chassis is in standby after it.
+    pair.feedback = false;
+    pair.keep_streaming(TELEOP, 0.5, ms(100));
+    let at = pair.now - pair.epoch;
+    pair.chassis.inject(at, Injection::Rc(true));
+    pair.keep_streaming(TELEOP, 0.5, ms(150));
+    let at = pair.now - pair.epoch;
+    pair.chassis.inject(at, Injection::Rc(false));
+    pair.keep_streaming(TELEOP, 0.5, ms(150));
+    pair.feedback = true;
+    pair.mode_requests = true;
+    pair.keep_streaming(TELEOP, 0.5, Duration::from_secs(2));
+    assert_eq!(
+        mode_requests(&pair).len(),
+        1,
+        "not asked again after the gap"
+    );
+    assert_eq!(pair.chassis.stats().control_mode, "standby");
+    assert_eq!(pair.chassis.actual().linear, 0.0);
+    assert_eq!(
+        pair.stops(),
+        [("gateway".to_owned(), StopCause::ChassisMode)]
+    );
+    let status = pair.statuses().last().expect("status").1;
+    let reason = status.stops()[0].reason.as_str().to_owned();
+    assert!(reason.contains("0x211 lost"), "{reason}");
+}
+
+#[test]
+fn v2_nothing_is_asked_before_the_chassis_reports_its_mode() {
+    // The RC holds the chassis from power-on; a client is taking control as the port opens.
+    let mut pair = Pair::of(Protocol::V2);
+    pair.chassis.inject(Duration::ZERO, Injection::Rc(true));
+    pair.take(TELEOP, Class::Teleop).expect("take at once");
+    pair.keep_streaming(TELEOP, 0.5, Duration::from_secs(1));
+    assert!(
+        mode_requests(&pair).is_empty(),
+        "no 0x421 before a 0x211 said the RC holds it: {:?}",
+        mode_requests(&pair)
+    );
+    assert!(
+        pair.stops()
+            .contains(&("gateway".into(), StopCause::RcOverride))
+    );
+    assert_eq!(pair.chassis.stats().control_mode, "rc");
+}
+
 #[test]
 fn with_auto_a_chassis_that_says_nothing_is_a_stop_that_says_so() {
     let mut pair = Pair::with_firmware(

@@ -88,6 +88,8 @@ pub struct StateTracker {
     /// The protocol whose feedback the sections hold, kept across ports: a chassis of the
     /// other protocol behind a reopened port clears them.
     sections_from: Option<Protocol>,
+    /// The slcan adapter's errors (BEL) since the last said, and when that was.
+    adapter_errors: (u64, Option<Duration>),
 }
 
 impl StateTracker {
@@ -133,6 +135,7 @@ impl StateTracker {
             counted_by_closed_ports: PortCounters::default(),
             yaw_at_odometer: 0.0,
             sections_from: fixed,
+            adapter_errors: (0, None),
         }
     }
 
@@ -262,7 +265,10 @@ impl StateTracker {
                 );
                 self.use_protocol(protocol);
             }
-            (None, None, Detection::Both) => self.set_mismatch(Mismatch {
+            // Whenever it happens: before the protocol is told, or after (fixed, or told and
+            // in use), another chassis or node joining the bus makes it unknown which chassis
+            // the feedback describes.
+            (_, _, Detection::Both) => self.set_mismatch(Mismatch {
                 reason: "feedback of both protocols: see the gateway's log".into(),
                 detail: format!(
                     "feedback of both protocols arrives (v1: {}; v2: {}): two chassis, or \
@@ -320,7 +326,7 @@ impl StateTracker {
         if self.protocol.is_some() {
             self.untold = None;
         }
-        if self.mismatch.is_some() && self.last_feedback.is_none() {
+        if self.mismatch.is_some() {
             return self.set_link_state(LinkState::ProtocolMismatch);
         }
         let silent = self
@@ -368,6 +374,10 @@ impl StateTracker {
     /// Whether feedback of `protocol` is used now; frames of a protocol that is not are
     /// counted as rejected, once the chassis' protocol is known.
     fn accepts(&mut self, protocol: Protocol, id: u16) -> Accept {
+        if self.mismatch.is_some() {
+            // Said once in the log with what was seen; the link state says it since.
+            return Accept::Reject;
+        }
         match self.protocol {
             Some(ours) if ours == protocol => match (protocol, self.fixed) {
                 // Until a 0x151 proves v1, ids v2 shares (0x131, 0x141) may mean something else.
@@ -420,7 +430,21 @@ impl StateTracker {
                 Publish::No
             }
             RxEvent::Slcan(Slcan::Nack) => {
-                warn!("the slcan adapter answered with an error (BEL)");
+                // At most once a second, with how many: a burst of line noise is one line.
+                self.adapter_errors.0 += 1;
+                if self
+                    .adapter_errors
+                    .1
+                    .is_none_or(|at| now.saturating_sub(at) >= Duration::from_secs(1))
+                {
+                    warn!(
+                        "the slcan adapter answered with an error (BEL), {} since the last \
+                         such message: a command it did not take (`scout doctor` checks the \
+                         adapter)",
+                        self.adapter_errors.0
+                    );
+                    self.adapter_errors = (0, Some(now));
+                }
                 Publish::No
             }
             RxEvent::Slcan(_) => Publish::No,

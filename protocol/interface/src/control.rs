@@ -93,7 +93,8 @@ wire_enum! {
         GatewayStart = 2 => "gateway_start",
         /// The port closed or failed.
         LinkLost = 3 => "link_lost",
-        /// No feedback for longer than the chassis' command timeout.
+        /// No feedback for longer than the chassis' command timeout, or none usable (a protocol
+        /// mismatch: the chassis speaks another protocol, or both arrive).
         ChassisSilent = 4 => "chassis_silent",
         /// The chassis reports its e-stop.
         ChassisEstop = 5 => "chassis_estop",
