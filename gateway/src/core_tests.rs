@@ -417,27 +417,24 @@ impl Pair {
 
     /// Feeds the core a system state in the chassis' protocol (the chassis in CAN mode).
     fn inject_system(&mut self, state: u8, count: u8) {
-        let state = scout_protocol::ChassisState::from_raw(state);
-        let event = match self.core.link_protocol() {
-            Some(Protocol::V2) => RxEvent::V2(MessageV2::SystemState(SystemStateV2 {
-                state,
-                control_mode: ControlModeV2::Can,
-                battery_decivolts: 250,
-                errors: ErrorBitsV2(0),
-                reserved: 0,
-                count,
-            })),
-            Some(Protocol::V1) | None => RxEvent::Message(Counted {
-                message: Message::SystemStatus(scout_protocol::SystemStatus {
-                    state,
-                    control_mode: scout_protocol::ControlMode::Can,
-                    battery_decivolts: 250,
-                    faults: scout_protocol::FaultBits::NONE,
-                }),
-                count,
-            }),
-        };
+        let protocol = self.core.link_protocol().unwrap_or(Protocol::V1);
+        let event = system_state(
+            protocol,
+            scout_protocol::ChassisState::from_raw(state),
+            count,
+        );
         self.core.handle_rx(self.now, &event);
+    }
+
+    /// The reason of the stop of `cause` in the last status published.
+    fn stop_reason(&self, cause: StopCause) -> String {
+        let status = self.statuses().last().expect("a status").1;
+        let stop = status
+            .stops()
+            .iter()
+            .find(|stop| stop.cause == cause.raw())
+            .map(|stop| stop.reason.as_str().to_owned());
+        stop.unwrap_or_else(|| panic!("no {} stop in {:?}", cause.name(), status.stops()))
     }
 
     fn states(&self) -> Vec<(Duration, StatePayload)> {
@@ -1223,8 +1220,7 @@ fn v2_a_chassis_that_does_not_take_the_mode_latches_a_stop_that_says_what_to_che
         pair.stops(),
         [("gateway".to_owned(), StopCause::ChassisMode)]
     );
-    let status = pair.statuses().last().expect("status").1;
-    let reason = status.stops()[0].reason.as_str().to_owned();
+    let reason = pair.stop_reason(StopCause::ChassisMode);
     assert!(
         reason.contains("standby") && reason.contains("SWB"),
         "{reason}"
@@ -1450,13 +1446,7 @@ fn a_chassis_of_the_other_protocol_moves_nothing_and_the_stop_says_why() {
         pair.run(ms(400));
         assert_eq!(pair.last_state().link.state(), LinkState::ProtocolMismatch);
         pair.run(ms(400));
-        let status = pair.statuses().last().expect("status").1;
-        let silent = status
-            .stops()
-            .iter()
-            .find(|s| s.cause == StopCause::ChassisSilent.raw())
-            .expect("a stop");
-        let reason = silent.reason.as_str();
+        let reason = pair.stop_reason(StopCause::ChassisSilent);
         assert!(
             reason.contains(&format!("--protocol {firmware}")),
             "{reason}"
@@ -1472,26 +1462,26 @@ fn a_chassis_of_the_other_protocol_moves_nothing_and_the_stop_says_why() {
     }
 }
 
-/// Feedback of `protocol` that proves it (v1's 0x151, v2's 0x211), as another chassis or node
-/// on the bus would send it.
-fn proof_of(protocol: Protocol) -> RxEvent {
+/// A system state in `protocol` (v1's 0x151, v2's 0x211: either proves its protocol), the
+/// chassis in CAN mode.
+fn system_state(protocol: Protocol, state: scout_protocol::ChassisState, count: u8) -> RxEvent {
     match protocol {
         Protocol::V1 => RxEvent::Message(Counted {
             message: Message::SystemStatus(scout_protocol::SystemStatus {
-                state: scout_protocol::ChassisState::Normal,
+                state,
                 control_mode: scout_protocol::ControlMode::Can,
                 battery_decivolts: 250,
                 faults: scout_protocol::FaultBits::NONE,
             }),
-            count: 0,
+            count,
         }),
         Protocol::V2 => RxEvent::V2(MessageV2::SystemState(SystemStateV2 {
-            state: scout_protocol::ChassisState::Normal,
+            state,
             control_mode: ControlModeV2::Can,
             battery_decivolts: 250,
             errors: ErrorBitsV2(0),
             reserved: 0,
-            count: 0,
+            count,
         })),
     }
 }
@@ -1506,7 +1496,7 @@ fn the_other_protocol_joining_the_bus_while_driving_stops_at_once_and_nothing_is
             assert!(pair.chassis.actual().linear > 0.4, "{what}: drives");
             // Another chassis (or a node using its ids) of the other protocol joins.
             let joined = pair.now;
-            let proof = proof_of(firmware.other());
+            let proof = system_state(firmware.other(), scout_protocol::ChassisState::Normal, 0);
             pair.core.handle_rx(joined, &proof);
             let answers = pair.keep_streaming(TELEOP, 0.5, ms(100));
             assert!(answers.iter().any(Result::is_err), "{what}: revoked");
@@ -1526,13 +1516,7 @@ fn the_other_protocol_joining_the_bus_while_driving_stops_at_once_and_nothing_is
                 LinkState::ProtocolMismatch,
                 "{what}"
             );
-            let status = pair.statuses().last().expect("status").1;
-            let stop = status
-                .stops()
-                .iter()
-                .find(|s| s.cause == StopCause::ChassisSilent.raw())
-                .map(|s| s.reason.as_str().to_owned())
-                .expect("a stop");
+            let stop = pair.stop_reason(StopCause::ChassisSilent);
             assert!(stop.contains("both protocols"), "{what}: {stop}");
             // Nothing the bus says is used any more, and nothing moves until the port reopens.
             let rejected = pair.last_state().link.rejected_frames;
@@ -1609,8 +1593,7 @@ fn v2_an_rc_episode_hidden_in_lost_feedback_is_not_followed_by_a_take() {
         pair.stops(),
         [("gateway".to_owned(), StopCause::ChassisMode)]
     );
-    let status = pair.statuses().last().expect("status").1;
-    let reason = status.stops()[0].reason.as_str().to_owned();
+    let reason = pair.stop_reason(StopCause::ChassisMode);
     assert!(reason.contains("0x211 lost"), "{reason}");
 }
 
@@ -1643,17 +1626,8 @@ fn with_auto_a_chassis_that_says_nothing_is_a_stop_that_says_so() {
     );
     pair.feedback = false;
     pair.run(ms(700));
-    let status = pair.statuses().last().expect("status").1;
-    let silent = status
-        .stops()
-        .iter()
-        .find(|s| s.cause == StopCause::ChassisSilent.raw())
-        .expect("a stop");
-    assert!(
-        silent.reason.as_str().contains("nothing received"),
-        "{:?}",
-        silent.reason.as_str()
-    );
+    let reason = pair.stop_reason(StopCause::ChassisSilent);
+    assert!(reason.contains("nothing received"), "{reason}");
     assert!(
         pair.sent.is_empty(),
         "nothing sent while the protocol is not told"
