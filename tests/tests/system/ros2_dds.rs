@@ -212,15 +212,23 @@ impl Drop for DdsBridge {
     }
 }
 
-/// Five /tf samples as a plain Cyclone DDS reader gets them (multicast for discovery only, as
-/// a Cyclone peer beside Fast DDS ones must be set).
-fn cyclone_tf(namespace: &NetNs, python: &str, domain: u32) -> Value {
-    let script =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/system/cyclone_tf_reader.py");
+/// Runs a plain Cyclone DDS script of tests/system in `namespace` on `domain` (multicast for
+/// discovery only, as a Cyclone peer beside Fast DDS ones must be set) and returns the JSON it
+/// prints.
+fn cyclone_script(
+    namespace: &NetNs,
+    python: &str,
+    domain: u32,
+    script: &str,
+    args: &[&str],
+) -> Value {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/system")
+        .join(script);
     let output = namespace
         .command(python)
-        .arg(script)
-        .arg("5")
+        .arg(path)
+        .args(args)
         .env("ROS_DOMAIN_ID", domain.to_string())
         .env(
             "CYCLONEDDS_URI",
@@ -230,9 +238,13 @@ fn cyclone_tf(namespace: &NetNs, python: &str, domain: u32) -> Value {
         .stdin(Stdio::null())
         .stderr(Stdio::inherit())
         .output()
-        .expect("run the Cyclone DDS reader");
-    let answer: Value = serde_json::from_slice(&output.stdout)
-        .unwrap_or_else(|_| panic!("Cyclone DDS reader: {output:?}"));
+        .unwrap_or_else(|e| panic!("run {script}: {e}"));
+    serde_json::from_slice(&output.stdout).unwrap_or_else(|_| panic!("{script}: {output:?}"))
+}
+
+/// Five /tf samples as a plain Cyclone DDS reader gets them.
+fn cyclone_tf(namespace: &NetNs, python: &str, domain: u32) -> Value {
+    let answer = cyclone_script(namespace, python, domain, "cyclone_tf_reader.py", &["5"]);
     assert!(
         answer.get("error").is_none(),
         "Cyclone DDS reader: {answer}"
@@ -538,24 +550,13 @@ fn a_cyclone_dds_call_in_its_own_service_mapping_is_answered_and_stops_the_robot
     let _gateway = Gateway::start(&["--sim", "--name", &name]);
     connect(&name);
     let bridge = DdsBridge::start(&namespace, &name, domain, &[]);
-    let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/system/cyclone_trigger_call.py");
-    let output = namespace
-        .command(&python)
-        .arg(script)
-        .arg("/scout/estop")
-        .env("ROS_DOMAIN_ID", domain.to_string())
-        .env(
-            "CYCLONEDDS_URI",
-            "<CycloneDDS><Domain><General><AllowMulticast>spdp</AllowMulticast></General>\
-             </Domain></CycloneDDS>",
-        )
-        .stdin(Stdio::null())
-        .stderr(Stdio::inherit())
-        .output()
-        .expect("run the Cyclone DDS call");
-    let answer: Value = serde_json::from_slice(&output.stdout)
-        .unwrap_or_else(|_| panic!("Cyclone DDS call: {output:?}"));
+    let answer = cyclone_script(
+        &namespace,
+        &python,
+        domain,
+        "cyclone_trigger_call.py",
+        &["/scout/estop"],
+    );
     assert_eq!(answer["success"], true, "{answer}");
     let (_, status, _) = scout(&["status", "--name", &name, "--json"]);
     assert!(
@@ -578,8 +579,6 @@ fn a_humble_graph_reads_the_nodes_endpoints_in_its_own_gid_layout() {
     let name = robot_name(test);
     let _gateway = Gateway::start(&["--sim", "--name", &name]);
     connect(&name);
-    let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/system/discovery_info_reader.py");
     for (salt, distro, length) in [(13, "humble", 24), (17, "jazzy", 16)] {
         let domain = domain(salt);
         let mut bridge_command = namespace.binary("scout-ros2");
@@ -592,24 +591,16 @@ fn a_humble_graph_reads_the_nodes_endpoints_in_its_own_gid_layout() {
             .stdout(Stdio::null())
             .stderr(Stdio::null());
         let mut bridge = Background::spawn(bridge_command);
-        let output = namespace
-            .command(&python)
-            .arg(&script)
-            .args([length.to_string().as_str(), "scout"])
-            .env("ROS_DOMAIN_ID", domain.to_string())
-            .env(
-                "CYCLONEDDS_URI",
-                "<CycloneDDS><Domain><General><AllowMulticast>spdp</AllowMulticast></General>\
-                 </Domain></CycloneDDS>",
-            )
-            .stdin(Stdio::null())
-            .stderr(Stdio::inherit())
-            .output()
-            .expect("run the discovery reader");
+        let length_arg = length.to_string();
+        let seen = cyclone_script(
+            &namespace,
+            &python,
+            domain,
+            "discovery_info_reader.py",
+            &[&length_arg, "scout"],
+        );
         bridge.signal(Signal::SIGINT);
         assert_eq!(bridge.wait_exit(LIMIT), Some(0), "the bridge exits 0");
-        let seen: Value = serde_json::from_slice(&output.stdout)
-            .unwrap_or_else(|_| panic!("discovery reader ({distro}): {output:?}"));
         assert!(seen.get("error").is_none(), "{distro}: {seen}");
         let writers: Vec<&str> = seen["writers"]
             .as_array()
