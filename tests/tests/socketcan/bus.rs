@@ -1,6 +1,7 @@
 //! The gateway and the simulator on one virtual bus: state end to end, the 0x130 stream as the
 //! chassis saw it, teleop over autonomy, an e-stop to the wire, the interface going down and
-//! away, and frames the gateway must refuse.
+//! away, frames the gateway must refuse, a v2 chassis, and a chassis of the other protocol
+//! joining the bus.
 
 use std::time::{Duration, Instant};
 
@@ -317,4 +318,38 @@ fn a_v2_scout_mini_is_told_taken_driven_stopped_and_left_in_standby() {
     gateway.signal(nix::sys::signal::Signal::SIGTERM);
     assert_eq!(gateway.wait_exit(LIMIT), Some(0));
     assert_eq!(sim.stats()["control_mode"], "standby", "standby on exit");
+}
+
+#[test]
+fn a_chassis_of_the_other_protocol_joining_the_bus_while_driving_stops_the_robot() {
+    let Some(bus) = Bus::create("a_chassis_of_the_other_protocol_joining_the_bus") else {
+        return;
+    };
+    let name = robot_name("can-both");
+    let mut sim = Sim::start(&["--can", bus.name(), "--protocol", "v2"]);
+    let _gateway = Gateway::start(&["--can", bus.name(), "--name", &name]);
+    let robot = connect_within(&name, LIMIT);
+    let state = robot.subscribe().expect("subscribe");
+    let status = robot.status().expect("status");
+    let told = wait_for_state(&state, LIMIT, |s| {
+        s["link"]["state"] == "ok" && !s["system"].is_null()
+    });
+    assert_eq!(told["link"]["protocol"], "v2", "{told}");
+    release_all(&name);
+    let _driver = drive_until_moving(&mut sim, &name, &["--linear", "0.5"], LIMIT);
+    // A v1 chassis is switched on on the same bus.
+    let _other = Sim::start(&["--can", bus.name()]);
+    chassis_commanded(&mut sim, 0.0);
+    let mismatch = wait_for_state(&state, LIMIT, |s| s["link"]["state"] == "protocol_mismatch");
+    assert_eq!(mismatch["link"]["protocol"], "v2", "{mismatch}");
+    let status = wait_for_status(&status, LIMIT, |s| {
+        s["stops"]
+            .as_array()
+            .is_some_and(|stops| stops.iter().any(|stop| stop["cause"] == "chassis_silent"))
+    });
+    assert!(
+        status.to_string().contains("both protocols"),
+        "the stop says why: {status}"
+    );
+    chassis_stays_still_after_braking(&mut sim);
 }
