@@ -19,11 +19,51 @@ pub fn start(bus: &Bus, test: &str) -> (Sim, Gateway, String) {
     let sim = Sim::start(&["--can", bus.name()]);
     let gateway = Gateway::start(&["--can", bus.name(), "--name", &name]);
     let state = connect_within(&name, LIMIT).subscribe().expect("subscribe");
-    wait_for_state(&state, LIMIT, |s| s["link"]["state"] == "ok");
+    let mut sim = sim;
+    link_up_or_explain(&state, &mut sim, &gateway, bus);
     // The emulated CPU can be slow enough at start-up for the gateway to latch a stop of its
     // own (a late tick, a silent chassis): these tests are about what comes after.
     release_all(&name);
     (sim, gateway, name)
+}
+
+/// Waits for the gateway's link to be `ok`; if it never is, fails with what each side saw: the
+/// simulator's counters, the interface's, and the gateway's log (a start that heard nothing for
+/// 30 s was seen once in CI, and a bare "no wanted state" said nothing of where frames stopped).
+fn link_up_or_explain(
+    state: &scout_clients::client::StateSubscriber,
+    sim: &mut Sim,
+    gateway: &Gateway,
+    bus: &Bus,
+) {
+    let deadline = Instant::now() + LIMIT;
+    let mut last = serde_json::Value::Null;
+    while Instant::now() < deadline {
+        if let Some(sample) = state
+            .next_timeout(Duration::from_millis(200))
+            .expect("receive state")
+        {
+            last =
+                scout_clients::interface::json::state_json(&sample, scout_clients::monotonic_ns());
+            if last["link"]["state"] == "ok" {
+                return;
+            }
+        }
+    }
+    let interface = std::process::Command::new("ip")
+        .args(["-s", "-d", "link", "show", "dev", bus.name()])
+        .output()
+        .map(|out| String::from_utf8_lossy(&out.stdout).into_owned())
+        .unwrap_or_else(|error| format!("ip failed: {error}"));
+    panic!(
+        "the gateway's link was not ok within {LIMIT:?}\n\
+         last state: {last}\n\
+         simulator: {}\n\
+         interface: {interface}\n\
+         gateway log:\n{}",
+        sim.stats(),
+        gateway.log()
+    );
 }
 
 /// `scout resume`: arms autonomy.
