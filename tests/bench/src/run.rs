@@ -28,6 +28,8 @@ pub struct Options {
 #[derive(Debug, Clone, Copy)]
 struct Plan {
     window: f64,
+    /// Alternating Rust and Python windows of the Python section.
+    python_pairs: usize,
     commands: usize,
     stops: usize,
 }
@@ -267,12 +269,14 @@ pub fn run(options: &Options) -> anyhow::Result<()> {
     let plan = if options.quick {
         Plan {
             window: 2.0,
+            python_pairs: 1,
             commands: 10,
             stops: 5,
         }
     } else {
         Plan {
             window: 10.0,
+            python_pairs: 3,
             commands: 100,
             stops: 50,
         }
@@ -598,84 +602,69 @@ fn ros2_dds(bench: &mut Bench, report: &mut Report) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// State to a Python subscriber (the `scout` package, from `$SCOUT_PYTHON_CLIENT`) and, in a
-/// window of its own just before under the same load, to a Rust iceoryx2 subscriber (each alone:
-/// two subscribers woken by one state wait for each other on two cores): end to end from the
-/// simulator's write, and the delivery part (published to seen); and the Python process' CPU
-/// (every thread) and memory at 50 Hz. Skipped, saying why, without that Python.
+/// State to a Python subscriber (the `scout` package, from `$SCOUT_PYTHON_CLIENT`) against a
+/// Rust iceoryx2 subscriber under the same load, in alternating windows (Rust, then Python,
+/// `plan.python_pairs` times; each alone: two subscribers woken by one state wait for each other
+/// on two cores), so drift of the shared machine within the run falls on both alike: end to end
+/// from the simulator's write, the delivery part (published to seen), the p50 ratio of every
+/// pair and of the pooled samples; and the Python process' CPU (every thread) and memory at
+/// 50 Hz. Skipped, saying why, without that Python.
 fn python_client(bench: &mut Bench, report: &mut Report) -> anyhow::Result<()> {
-    let Some(python) = std::env::var_os("SCOUT_PYTHON_CLIENT") else {
+    let Some(interpreter) = std::env::var_os("SCOUT_PYTHON_CLIENT") else {
         progress(
             "Python client: skipped (set SCOUT_PYTHON_CLIENT to a venv's python with the scout \
              package: pip install ./clients/python)",
         );
         return Ok(());
     };
-    progress("state latency: a Rust iceoryx2 subscriber, then the Python package, each alone");
-    let window = bench.plan.window.to_string();
-    let mut roles = Roles::default();
-    roles.spawn(&[
-        "subscribe",
-        &bench.name,
-        &bench.scratch.text("iox-beside-python"),
-        &window,
-    ])?;
-    roles.wait()?;
-    let script =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("python_state_subscriber.py");
-    let mut subscriber = std::process::Command::new(&python)
-        .arg(script)
-        .arg(&bench.name)
-        .arg(bench.scratch.path("python"))
-        .arg(&window)
-        .stdin(std::process::Stdio::null())
-        .stdout(std::process::Stdio::piped())
-        .spawn()
-        .context("starting the Python subscriber")?;
-    let mut output = std::io::BufReader::new(subscriber.stdout.take().context("its output")?);
-    let mut first = String::new();
-    std::io::BufRead::read_line(&mut output, &mut first)?;
-    anyhow::ensure!(
-        first.trim() == "receiving",
-        "the Python subscriber did not start"
-    );
-    // Its own CPU (every thread) over its window, and its memory, measured by itself.
-    let mut cost = String::new();
-    std::io::BufRead::read_line(&mut output, &mut cost)?;
-    let status = subscriber.wait()?;
-    anyhow::ensure!(status.success(), "the Python subscriber failed ({status})");
-    let cost: Value = serde_json::from_str(&cost).context("the Python subscriber's cost line")?;
-    let trace = trace(bench)?;
-    let python_rows = read_rows(&bench.scratch.path("python"))?;
-    let python = seen_latencies(&python_rows, &trace);
-    let python_delivery: Vec<f64> = python_rows
-        .iter()
-        .skip(1)
-        .filter_map(|row| match row.as_slice() {
-            &[seen, published] if seen >= published => Some(us(seen - published)),
-            _ => None,
-        })
-        .collect();
-    let rust_rows = read_rows(&bench.scratch.path("iox-beside-python"))?;
-    let rust = seen_latencies(&rust_rows, &trace);
-    let rust_delivery: Vec<f64> = rust_rows
-        .iter()
-        .skip(1)
-        .filter_map(|row| match row.as_slice() {
-            &[seen, _, published] if seen >= published => Some(us(seen - published)),
-            _ => None,
-        })
-        .collect();
-    report.latency(
-        "state_latency_us.python",
-        "state, Python (scout package, next())",
-        &python,
-    );
-    report.latency(
-        "state_latency_us.iceoryx2_beside_python",
-        "state, iceoryx2 (Rust), window before",
-        &rust,
-    );
+    let pairs = bench.plan.python_pairs;
+    progress(&format!(
+        "state latency: a Rust iceoryx2 subscriber and the Python package, each alone, {pairs} \
+         alternating windows each"
+    ));
+    let (mut rust, mut python) = (Vec::new(), Vec::new());
+    let (mut rust_delivery, mut python_delivery) = (Vec::new(), Vec::new());
+    let mut ratios = Vec::new();
+    let mut costs = Vec::new();
+    for pair in 0..pairs {
+        let rust_file = format!("iox-beside-python-{pair}");
+        let python_file = format!("python-{pair}");
+        let mut roles = Roles::default();
+        roles.spawn(&[
+            "subscribe",
+            &bench.name,
+            &bench.scratch.text(&rust_file),
+            &bench.plan.window.to_string(),
+        ])?;
+        roles.wait()?;
+        costs.push(python_window(bench, &interpreter, &python_file)?);
+        let trace = trace(bench)?;
+        let rust_rows = read_rows(&bench.scratch.path(&rust_file))?;
+        let python_rows = read_rows(&bench.scratch.path(&python_file))?;
+        let (rust_seen, python_seen) = (
+            seen_latencies(&rust_rows, &trace),
+            seen_latencies(&python_rows, &trace),
+        );
+        ratios.push(Summary::of(&python_seen).p50 / Summary::of(&rust_seen).p50);
+        rust.extend(rust_seen);
+        python.extend(python_seen);
+        rust_delivery.extend(delivery(&rust_rows, 2));
+        python_delivery.extend(delivery(&python_rows, 1));
+    }
+    let python_p50 = report
+        .latency(
+            "state_latency_us.python",
+            "state, Python (scout package, next())",
+            &python,
+        )
+        .p50;
+    let rust_p50 = report
+        .latency(
+            "state_latency_us.iceoryx2_beside_python",
+            "state, iceoryx2 (Rust), alternating windows",
+            &rust,
+        )
+        .p50;
     report.latency(
         "python_delivery_us",
         "  Python: published to seen",
@@ -687,17 +676,82 @@ fn python_client(bench: &mut Bench, report: &mut Report) -> anyhow::Result<()> {
         &rust_delivery,
     );
     report.value(
+        "python_to_rust_p50_ratio",
+        "Python p50 / Rust p50, pooled windows",
+        python_p50 / rust_p50,
+    );
+    insert(
+        &mut report.json,
+        "python_to_rust_p50_ratio_per_pair",
+        json!(ratios.iter().map(|ratio| round(*ratio)).collect::<Vec<_>>()),
+    );
+    report.rows.push((
+        "Python p50 / Rust p50, each pair of windows".into(),
+        ratios
+            .iter()
+            .map(|ratio| format!("{ratio:.2}"))
+            .collect::<Vec<_>>()
+            .join(", "),
+    ));
+    let mean = |field: &str| {
+        costs
+            .iter()
+            .map(|cost| cost[field].as_f64().unwrap_or(f64::NAN))
+            .sum::<f64>()
+            / costs.len() as f64
+    };
+    report.value(
         "python_client_cpu_percent",
         "Python subscriber, CPU, % of a core, 50 Hz",
-        cost["cpu_percent"].as_f64().unwrap_or(f64::NAN),
+        mean("cpu_percent"),
     );
     report.value(
         "python_client_rss_mb",
         "Python subscriber, resident memory, MB",
-        cost["rss_mb"].as_f64().unwrap_or(f64::NAN),
+        mean("rss_mb"),
     );
     report.paths.push(("Python (scout package)".into(), python));
     Ok(())
+}
+
+/// One window of `python_state_subscriber.py`, its rows in the scratch file `file`; returns its
+/// cost line (its CPU over the window and its memory, measured by itself).
+fn python_window(bench: &Bench, python: &std::ffi::OsStr, file: &str) -> anyhow::Result<Value> {
+    let script =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("python_state_subscriber.py");
+    let mut subscriber = std::process::Command::new(python)
+        .arg(script)
+        .arg(&bench.name)
+        .arg(bench.scratch.path(file))
+        .arg(bench.plan.window.to_string())
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .context("starting the Python subscriber")?;
+    let mut output = std::io::BufReader::new(subscriber.stdout.take().context("its output")?);
+    let mut first = String::new();
+    std::io::BufRead::read_line(&mut output, &mut first)?;
+    anyhow::ensure!(
+        first.trim() == "receiving",
+        "the Python subscriber did not start"
+    );
+    let mut cost = String::new();
+    std::io::BufRead::read_line(&mut output, &mut cost)?;
+    let status = subscriber.wait()?;
+    anyhow::ensure!(status.success(), "the Python subscriber failed ({status})");
+    serde_json::from_str(&cost).context("the Python subscriber's cost line")
+}
+
+/// Published-to-seen latencies (µs) of a subscriber's rows: the first column is when a state was
+/// seen, column `published` when the gateway published it; the first row (the history) skipped.
+fn delivery(rows: &[Vec<u64>], published: usize) -> Vec<f64> {
+    rows.iter()
+        .skip(1)
+        .filter_map(|row| {
+            let (seen, published) = (*row.first()?, *row.get(published)?);
+            (seen >= published).then(|| us(seen - published))
+        })
+        .collect()
 }
 
 /// Waits until the gateway sends `wanted` (by the state's last command), up to 20 s.
