@@ -144,8 +144,12 @@ fn run(args: &Ros2Args) -> anyhow::Result<ExitCode> {
         .with_writer(std::io::stderr)
         .with_target(false)
         .with_env_filter(
-            EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| EnvFilter::new("info,rustdds=warn")),
+            // RustDDS' UDP sender warns of every datagram over 1500 bytes, which /diagnostics (2.2
+            // kB, fragmented by IP where the MTU is smaller) is once a second, for good. Its
+            // errors still show.
+            EnvFilter::try_from_default_env().unwrap_or_else(|_| {
+                EnvFilter::new("info,rustdds=warn,rustdds::network::udp_sender=error")
+            }),
         )
         .init();
     let stop = Arc::new(AtomicBool::new(false));

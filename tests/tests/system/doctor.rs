@@ -396,10 +396,14 @@ fn doctor_after_a_killed_gateway(name: &str) -> Value {
 #[test]
 fn what_a_killed_gateway_left_in_shared_memory_is_removed_and_named() {
     let name = robot_name("doctor-leftovers");
+    // Any iceoryx2 client that connects between the kill and the doctor (the other tests run
+    // beside this one, and CI saw two tries in a row lose) removes what dead processes left:
+    // up to five tries, each saying so.
     let mut leftovers = doctor_after_a_killed_gateway(&name);
-    if leftovers["verdict"] == "pass" {
-        // Any iceoryx2 client that connects meanwhile (the other tests run beside this one)
-        // removes what dead processes left: once more, saying so.
+    for _ in 1..5 {
+        if leftovers["verdict"] != "pass" {
+            break;
+        }
         eprintln!("the killed gateway's resources were removed before the doctor ran; again");
         leftovers = doctor_after_a_killed_gateway(&name);
     }

@@ -115,20 +115,10 @@ impl RclpyNode {
         }
     }
 
-    /// `count` samples of `topic`. On a loaded CI machine a new reliable subscription has gone
-    /// 20 s without a sample (/diagnostics once, with the bridge's log showing a message of its
-    /// size sent every second; /joint_states once); not understood (issue 19 stays open for
-    /// it), so a second
-    /// subscription is tried then, saying so, and two misses fail.
+    /// `count` samples of `topic` from a new subscription.
     fn echo(&mut self, topic: &str, type_name: &str, count: usize, qos: &str) -> Vec<Value> {
-        match self.try_echo(topic, type_name, count, qos) {
-            Ok(samples) => samples,
-            Err(answer) => {
-                eprintln!("no {count} {topic} samples in 20 s ({answer}); subscribing again");
-                self.try_echo(topic, type_name, count, qos)
-                    .unwrap_or_else(|answer| panic!("{topic}, twice: {answer}"))
-            }
-        }
+        self.try_echo(topic, type_name, count, qos)
+            .unwrap_or_else(|answer| panic!("no {count} {topic} samples in 20 s: {answer}"))
     }
 
     /// The bridge's own counters, from its diagnostics (1 Hz).
