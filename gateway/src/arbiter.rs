@@ -22,6 +22,8 @@ use scout_protocol::FaultClear;
 use serde::{Deserialize, Serialize};
 use tracing::info;
 
+use crate::share::TokenBucket;
+
 /// The hard ceiling on any command's age: the chassis' own timeout.
 pub const MAX_COMMAND_AGE: Duration = Duration::from_millis(500);
 /// Motion commands that carry a requested fault-clear code.
@@ -39,6 +41,9 @@ pub const HISTORY: usize = scout_interface::control::STATUS_EVENTS;
 pub const GATEWAY: &str = "gateway";
 /// The owner of merged stops once [`MAX_STOPS`] are kept.
 pub const OTHERS: &str = "(others)";
+/// The name of a person's stops and releases (`scout estop`, `scout release`): only a process
+/// with the operator role goes by it; another is named after its user (`uid-UID`).
+pub use scout_interface::control::OPERATOR;
 /// How far a command's stamp may lie after its arrival: the driver reads the clock once per
 /// iteration, so a request sent while an iteration runs carries a stamp after that reading;
 /// an iteration that runs longer than a command period is a stall.
@@ -312,13 +317,6 @@ struct Heartbeat {
     silent: bool,
 }
 
-/// Requests a client may still send now (a token bucket).
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Budget {
-    tokens: f64,
-    at: Duration,
-}
-
 /// One client the arbiter knows.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Source {
@@ -328,7 +326,7 @@ pub struct Source {
     /// Why its last lease ended.
     revoked: Option<String>,
     heartbeat: Option<Heartbeat>,
-    budget: Budget,
+    budget: TokenBucket,
     /// When it last sent a request.
     pub last_seen: Duration,
     /// Requests it sent.
@@ -915,11 +913,13 @@ impl Arbiter {
             by_operator,
         } = latch;
         let why = format!("{owner} ({cause}): {reason}");
-        // Past MAX_STOPS, a new owner's stop merges into one entry.
+        // Past MAX_STOPS, a new owner's stop merges into one entry. A stop an operator latched
+        // is latched again only by an operator: anyone else under that name gets a stop of
+        // its own, and the operator's keeps its reason.
         let known = |stops: &[Stop], owner: &str| {
-            stops
-                .iter()
-                .position(|stop| stop.owner == owner && stop.cause == cause)
+            stops.iter().position(|stop| {
+                stop.owner == owner && stop.cause == cause && (by_operator || !stop.by_operator)
+            })
         };
         let owner = match known(&self.stops, owner) {
             None if self.stops.len() >= MAX_STOPS => OTHERS,
@@ -950,14 +950,6 @@ impl Arbiter {
         self.revoke(now, None, &format!("stop by {why}"));
         self.disarm_autonomy(now, "the stop");
         id
-    }
-
-    /// Stop `id` was latched by an operator, as found out after it latched: only an operator
-    /// releases it now. Nothing if that stop is gone or was latched again since.
-    pub fn handle_stop_by_operator(&mut self, id: u64) {
-        if let Some(stop) = self.stops.iter_mut().find(|stop| stop.id == id) {
-            stop.by_operator = true;
-        }
     }
 
     /// A gap: the gateway lost control or knowledge of the chassis. Latches a stop owned by the
@@ -1023,10 +1015,7 @@ impl Arbiter {
             lease: None,
             revoked: None,
             heartbeat: None,
-            budget: Budget {
-                tokens: f64::from(self.config.request_burst),
-                at: now,
-            },
+            budget: TokenBucket::full(f64::from(self.config.request_burst), now),
             last_seen: now,
             requests: 0,
         });
@@ -1039,15 +1028,11 @@ impl Arbiter {
             self.config.request_rate_hz,
             f64::from(self.config.request_burst),
         );
-        let budget = &mut self.sources[index].budget;
-        let refill = now.saturating_sub(budget.at).as_secs_f64() * rate;
-        budget.tokens = (budget.tokens + refill).min(burst);
-        budget.at = now;
-        if budget.tokens < 1.0 {
-            return Err(Rejection::RateLimited { rate });
+        if self.sources[index].budget.take(now, rate, burst) {
+            Ok(())
+        } else {
+            Err(Rejection::RateLimited { rate })
         }
-        budget.tokens -= 1.0;
-        Ok(())
     }
 
     /// The client processes of `node` are gone (dead-process detection): their control ends at

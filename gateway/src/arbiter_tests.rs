@@ -87,14 +87,18 @@ impl Bench {
         )
     }
 
-    fn stop(&mut self, who: &Origin, reason: &str) {
+    /// Latches a stop; its id.
+    fn stop(&mut self, who: &Origin, reason: &str) -> u64 {
         let answer = self.request(
             who,
             Request::Stop {
                 reason: reason.into(),
             },
         );
-        assert!(answer.is_ok(), "a stop is never refused: {answer:?}");
+        answer
+            .expect("a stop is never refused")
+            .stop
+            .expect("a stop's id")
     }
 
     /// A release a moment after what came before (a stop at the same instant wins).
@@ -492,6 +496,36 @@ fn an_operators_stop_is_released_only_by_an_operator_whatever_the_name() {
             ReleaseTarget::Owner("operator".into()),
         )
         .expect("another operator may");
+}
+
+#[test]
+fn an_operators_stop_keeps_its_reason_and_owner_against_anyone_of_its_name() {
+    let mut bench = Bench::new();
+    let person = bench.stop(&operator("guard", 3), "person ahead");
+    let impostor = client("guard", 4);
+    let theirs = bench.stop(&impostor, "impostor reason");
+    assert_ne!(theirs, person, "a stop of its own");
+    let stops = bench.arbiter.stops();
+    assert_eq!(stops.len(), 2);
+    let kept = stops.iter().find(|s| s.by_operator).expect("the person's");
+    assert_eq!(
+        (kept.id, kept.owner.as_str(), kept.reason.as_str()),
+        (person, "guard", "person ahead")
+    );
+    // The impostor releases its own stop, never the person's.
+    bench
+        .release(&impostor, ReleaseTarget::Own)
+        .expect("its own stop");
+    let left: Vec<u64> = bench.arbiter.stops().iter().map(|s| s.id).collect();
+    assert_eq!(left, [person]);
+    // An operator latching again under the name refreshes the person's stop.
+    let again = bench.stop(&operator("guard", 5), "still there");
+    let stops = bench.arbiter.stops();
+    assert_eq!(stops.len(), 1);
+    assert_eq!(
+        (stops[0].id, stops[0].reason.as_str()),
+        (again, "still there")
+    );
 }
 
 #[test]
@@ -895,7 +929,7 @@ fn any_act() -> impl Strategy<Value = Act> {
 proptest! {
     /// Whatever names clients take and whenever releases arrive: a release never clears a stop
     /// latched after the view it was decided on, and a non-operator never clears a stop an
-    /// operator latched, nor anyone else's.
+    /// operator latched, nor anyone else's, nor latches over an operator's.
     #[test]
     fn releases_clear_only_what_their_sender_saw_and_may_release(acts in prop::collection::vec(any_act(), 1..60)) {
         let mut bench = Bench::new();
@@ -908,7 +942,16 @@ proptest! {
         for act in acts {
             bench.now += ms(1);
             match act {
-                Act::Stop(w) => bench.stop(&who[w], "p"),
+                Act::Stop(w) => {
+                    let before: Vec<Stop> = bench.arbiter.stops().to_vec();
+                    bench.stop(&who[w], &format!("by {w}"));
+                    if !who[w].operator {
+                        // An operator's stop keeps its id, owner and reason against anyone else.
+                        for stop in before.iter().filter(|s| s.by_operator) {
+                            prop_assert!(bench.arbiter.stops().contains(stop), "{stop} was rewritten");
+                        }
+                    }
+                }
                 Act::Release(w, target, lag) => {
                     let origin = &who[w];
                     let target = match target {

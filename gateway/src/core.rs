@@ -611,15 +611,8 @@ impl Core {
         answer
     }
 
-    /// Stop `id` was latched by an operator (found out after its zero went out): only an
-    /// operator releases it.
-    pub fn handle_stop_by_operator(&mut self, id: u64) {
-        self.arbiter.handle_stop_by_operator(id);
-        self.status_due = true;
-    }
-
     /// Counts a datagram on the stop endpoint that was refused before the arbiter.
-    pub fn count_malformed_datagram(&mut self, rejection: &Rejection) {
+    pub fn count_datagram_rejection(&mut self, rejection: &Rejection) {
         self.arbiter.count_rejection(rejection);
         self.status_due = true;
     }

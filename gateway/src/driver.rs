@@ -16,22 +16,21 @@ use iceoryx2::port::server::Server;
 use iceoryx2::prelude::BackpressureStrategy;
 use iceoryx2::prelude::CallbackProgression;
 use iceoryx2::service::port_factory::PortFactory;
-use scout_interface::control::{
-    Accepted, ControlRequest, ControlResponse, Rejection, StatusPayload,
-};
+use scout_interface::control::{ControlRequest, ControlResponse, Rejection, StatusPayload};
 use scout_interface::services::{self, ControlService, Ipc, Role, Way, monotonic};
 use scout_interface::state::{LinkState, StatePayload};
 use scout_interface::stop_socket::{Ask, ParseError, StopReply};
 use tracing::{debug, error, info, warn};
 
-use crate::arbiter::{ClientKey, GATEWAY, OTHERS, Origin};
+use crate::arbiter::{Answer, ClientKey, GATEWAY, OPERATOR, OTHERS, Origin};
 use crate::config::GatewayConfig;
 use crate::core::{Core, Publication, Start};
 use crate::device::{Device, DeviceSpec, OpenError};
-use crate::identity::Operators;
+use crate::identity::{Operators, ProcessIdentity};
 use crate::monitor::NodeMonitor;
+use crate::share::UserShares;
 use crate::state::PortCounters;
-use crate::stop_endpoint::StopEndpoint;
+use crate::stop_endpoint::{Received, StopEndpoint};
 use crate::wait::Ready;
 use scout_interface::remote::REMOTE_PREFIX;
 
@@ -178,39 +177,82 @@ impl RequestServer {
         let pid = pid.and_then(|pid| u32::try_from(pid).ok());
         let in_this_process = pid == Some(std::process::id());
         let bridge = in_this_process && key.name == REMOTE_PREFIX;
-        key.name = client_name(&key.name, pid, key.node, in_this_process);
+        let identity = pid.filter(|_| !in_this_process).map(ProcessIdentity::of);
+        let operator = identity
+            .as_ref()
+            .is_some_and(|identity| operators.is_operator(identity));
+        let claim = Claim {
+            pid,
+            node: key.node,
+            uid: identity.and_then(|identity| identity.uids.first().copied()),
+            in_this_process,
+            operator,
+        };
+        key.name = client_name(&key.name, &claim);
         Origin {
             key,
-            operator: pid.is_some_and(|pid| !in_this_process && operators.is_operator_pid(pid)),
+            operator,
             bridge,
         }
     }
 }
 
-/// The name a client goes by: the one it chose, unless that is empty or reserved (the
-/// gateway's own, merged stops', or a remote peer's, which only the bridge in this process
-/// speaks for); then `client-PID`, the same for every port of one process, so that such a
-/// client can still release its own stops.
-fn client_name(chosen: &str, pid: Option<u32>, node: u128, in_this_process: bool) -> String {
+/// What the transport and the OS tell of a client, against the name it chose.
+#[derive(Debug, Clone, Copy)]
+struct Claim {
+    /// Its process.
+    pid: Option<u32>,
+    /// Its iceoryx2 node (0: none).
+    node: u128,
+    /// Its user.
+    uid: Option<u32>,
+    /// It is the gateway's own process (the zenoh bridge).
+    in_this_process: bool,
+    /// It has the operator role.
+    operator: bool,
+}
+
+/// The name a client goes by: the one it chose, unless that is reserved. Empty, the gateway's
+/// own, merged stops' or a remote peer's (which only the bridge in this process speaks for):
+/// `client-PID`, the same for every port of one process, so that such a client can still
+/// release its own stops. [`OPERATOR`] without the operator role: `uid-UID`, its user's, so
+/// that another user's `scout estop` is that user's stop, never one that any client calling
+/// itself `operator` may release.
+fn client_name(chosen: &str, claim: &Claim) -> String {
+    if chosen == OPERATOR
+        && !claim.operator
+        && let Some(uid) = claim.uid
+    {
+        return format!("uid-{uid}");
+    }
     let reserved = chosen.is_empty()
         || chosen == GATEWAY
         || chosen == OTHERS
-        || (chosen.starts_with(REMOTE_PREFIX) && !in_this_process);
+        || (chosen == OPERATOR && !claim.operator)
+        || (chosen.starts_with(REMOTE_PREFIX) && !claim.in_this_process);
     if !reserved {
         return chosen.to_owned();
     }
-    match pid {
+    match claim.pid {
         Some(pid) => format!("client-{pid}"),
-        None => format!("client-node-{:x}", (node as u64) ^ ((node >> 64) as u64)),
+        None => format!(
+            "client-node-{:x}",
+            (claim.node as u64) ^ ((claim.node >> 64) as u64)
+        ),
     }
 }
 
 /// Control requests handled per iteration at most: a flood cannot hold up the tick.
 const MAX_REQUESTS_PER_ITERATION: usize = 64;
 
-/// Stop-endpoint datagrams handled per iteration at most (each reads its sender's identity
-/// from `/proc`): a flood cannot hold up the tick, and every one of them is a stop anyway.
+/// Stop-endpoint datagrams handled per iteration at most, and the time they may take: the rest
+/// wait for the next iteration, after the tick. Each costs a few tens of µs (its sender's
+/// identity is read from procfs, bounded: [`crate::identity`]); a flood costs the tick at most
+/// this, and one user's flood is refused at its share ([`UserShares`]) while the others' stops
+/// are read.
 const MAX_DATAGRAMS_PER_ITERATION: usize = 64;
+/// See [`MAX_DATAGRAMS_PER_ITERATION`].
+const DATAGRAM_BUDGET: Duration = Duration::from_millis(2);
 
 /// The client key of a stop-endpoint sender: no iceoryx2 port, so a number of its own.
 const DATAGRAM_PORT: u128 = 1 << 127;
@@ -226,6 +268,7 @@ pub struct Driver {
     publish_errors: u64,
     operators: Operators,
     stop_endpoint: StopEndpoint,
+    shares: UserShares,
     origins: std::collections::HashMap<u128, Origin>,
     backlog: bool,
     realtime_priority: u8,
@@ -264,6 +307,7 @@ impl Driver {
             publish_errors: 0,
             operators: Operators::for_this_gateway(&config.arbiter.operators),
             stop_endpoint,
+            shares: UserShares::new(config.arbiter.request_rate_hz, config.arbiter.request_burst),
             origins: std::collections::HashMap::new(),
             backlog: false,
             realtime_priority: config.timing.realtime_priority,
@@ -392,60 +436,77 @@ impl Driver {
         self.backlog = datagrams_waiting || stops_waiting || requests_waiting;
     }
 
-    /// Answers the datagrams waiting on the stop endpoint (bounded), then sends their zero;
-    /// returns whether more wait.
+    /// Answers the datagrams waiting on the stop endpoint (bounded in number and time), each
+    /// stop's zero on the wire before the next is read; returns whether more may wait.
     fn serve_datagrams(&mut self, now: Duration) -> bool {
-        let mut more = true;
+        let started = monotonic();
         for _ in 0..MAX_DATAGRAMS_PER_ITERATION {
+            if monotonic().saturating_sub(started) > DATAGRAM_BUDGET {
+                return true;
+            }
             let Some(received) = self.stop_endpoint.try_receive() else {
-                more = false;
-                break;
+                return false;
             };
-            let pid = (received.pid != 0).then_some(received.pid);
-            let (seq, answer) = match received.request {
-                Ok(request) => {
-                    let chosen = request.name.as_deref().unwrap_or("");
-                    // A stop goes on the wire before its sender's identity is read (/proc
-                    // reads take hundreds of µs); whether an operator latched it is settled
-                    // right after, before any other request is served. A ping needs none.
-                    let is_stop = matches!(request.ask, Ask::Stop { .. });
-                    let is_release = matches!(request.ask, Ask::Release { .. });
-                    let mut origin = Origin {
-                        key: ClientKey {
-                            port: DATAGRAM_PORT | u128::from(received.pid),
-                            node: 0,
-                            name: client_name(chosen, pid, 0, false),
-                        },
-                        operator: is_release
-                            && pid.is_some_and(|pid| self.operators.is_operator_pid(pid)),
-                        bridge: false,
-                    };
-                    let answer = self.core.handle_stop_datagram(now, &origin, &request.ask);
-                    if let (true, Ok(Accepted { stop: Some(id), .. })) = (is_stop, &answer) {
-                        self.transmit();
-                        origin.operator =
-                            pid.is_some_and(|pid| self.operators.is_operator_pid(pid));
-                        if origin.operator {
-                            self.core.handle_stop_by_operator(*id);
-                        }
-                    }
-                    (request.seq, answer)
-                }
-                Err(error) => {
-                    let seq = match &error {
-                        ParseError::Malformed { seq, .. } => seq.unwrap_or(0),
-                        ParseError::NotOurs(_) => 0,
-                    };
-                    let rejection = Rejection::Malformed(error.to_string());
-                    self.core.count_malformed_datagram(&rejection);
-                    (seq, Err(rejection))
-                }
-            };
+            let (seq, answer) = self.serve_datagram(now, &received);
             let reply = StopReply::new(seq, &answer, std::process::id());
             self.stop_endpoint.reply(received.from.as_ref(), &reply);
         }
-        self.transmit();
-        more
+        true
+    }
+
+    /// One datagram. Within its user's share the sender's identity is read (the operator role,
+    /// and so the name `operator`); past it, a stop still latches, as a non-operator's (named
+    /// `uid-UID` if it claimed `operator`), and anything else is refused as rate limited.
+    fn serve_datagram(&mut self, now: Duration, received: &Received) -> (u64, Answer) {
+        let request = match &received.request {
+            Ok(request) => request,
+            Err(error) => {
+                let seq = match error {
+                    ParseError::Malformed { seq, .. } => seq.unwrap_or(0),
+                    ParseError::NotOurs(_) => 0,
+                };
+                let rejection = Rejection::Malformed(error.to_string());
+                self.core.count_datagram_rejection(&rejection);
+                return (seq, Err(rejection));
+            }
+        };
+        let is_stop = matches!(request.ask, Ask::Stop { .. });
+        let within_share = self.shares.admit(now, received.uid);
+        if !within_share && !is_stop {
+            let rejection = Rejection::RateLimited {
+                rate: self.shares.rate(),
+            };
+            self.core.count_datagram_rejection(&rejection);
+            return (request.seq, Err(rejection));
+        }
+        let pid = (received.pid != 0).then_some(received.pid);
+        let needs_identity = within_share && request.ask.request().is_some();
+        let identity = pid.filter(|_| needs_identity).map(ProcessIdentity::of);
+        let operator = identity
+            .as_ref()
+            .is_some_and(|identity| self.operators.is_operator(identity));
+        let chosen = request.name.as_deref().unwrap_or("");
+        let claim = Claim {
+            pid,
+            node: 0,
+            uid: (received.uid != u32::MAX).then_some(received.uid),
+            in_this_process: false,
+            operator,
+        };
+        let origin = Origin {
+            key: ClientKey {
+                port: DATAGRAM_PORT | u128::from(received.pid),
+                node: 0,
+                name: client_name(chosen, &claim),
+            },
+            operator,
+            bridge: false,
+        };
+        let answer = self.core.handle_stop_datagram(now, &origin, &request.ask);
+        if is_stop {
+            self.transmit();
+        }
+        (request.seq, answer)
     }
 
     /// Answers the waiting stops, bounded (a flood of stops cannot hold up the zero frame), and
@@ -548,5 +609,41 @@ impl Driver {
             std::thread::sleep(deadline.saturating_sub(now).min(Duration::from_millis(1)));
             Ready::default()
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn claim(operator: bool, uid: Option<u32>) -> Claim {
+        Claim {
+            pid: Some(42),
+            node: 0,
+            uid,
+            in_this_process: false,
+            operator,
+        }
+    }
+
+    #[test]
+    fn the_operator_name_is_an_operators_only() {
+        assert_eq!(client_name(OPERATOR, &claim(true, Some(0))), OPERATOR);
+        assert_eq!(client_name(OPERATOR, &claim(false, Some(1001))), "uid-1001");
+        assert_eq!(client_name(OPERATOR, &claim(false, None)), "client-42");
+        assert_eq!(client_name("guard", &claim(false, Some(1001))), "guard");
+    }
+
+    #[test]
+    fn reserved_names_become_the_process() {
+        for reserved in ["", GATEWAY, OTHERS, REMOTE_PREFIX] {
+            assert_eq!(client_name(reserved, &claim(true, Some(0))), "client-42");
+        }
+        let bridge = Claim {
+            in_this_process: true,
+            ..claim(false, None)
+        };
+        let peer = format!("{REMOTE_PREFIX}laptop");
+        assert_eq!(client_name(&peer, &bridge), peer);
     }
 }

@@ -3,15 +3,25 @@
 //! Never from a name the process chose: a client may call itself anything, and a copy or link
 //! of a program under another name is another file (or, a hard link, the very same program).
 //!
-//! Only procfs is read, never the sender's own files: the executable's device and inode come
-//! from its mapping in `/proc/PID/maps` (what the kernel recorded when it mapped it), not from a
-//! `stat` of the file, which a sender could leave hanging on a FUSE or network mount and so
-//! stall the control loop.
+//! The control thread asks this for a stop-endpoint datagram, so the cost is bounded whatever
+//! the sender does: only procfs files whose size the sender cannot choose are read, and at most
+//! [`MAX_PROC_READ`] bytes of each; the executable is `statx` of `/proc/PID/exe` with
+//! `AT_STATX_DONT_SYNC` (the kernel's link to the file it mapped: no path is resolved, and a
+//! file on a FUSE or network mount is not asked for fresh attributes, so a sender cannot stall
+//! the call). Its memory map (`/proc/PID/maps`, read once, is as long as the sender makes it:
+//! a process with 60 000 mappings froze the control loop for over a second) is never read.
 
-use std::os::unix::fs::MetadataExt;
+use std::io::Read;
 use std::path::{Path, PathBuf};
 
+use rustix::fs::{AtFlags, CWD, StatxFlags};
+
 use crate::arbiter::OperatorConfig;
+
+/// The most bytes read of one procfs file: `/proc/PID/status` is about 1.5 KB; only its
+/// `Groups:` line grows (with the supplementary groups, which only root sets), and groups past
+/// this are not seen (not an operator by them).
+pub const MAX_PROC_READ: usize = 16 * 1024;
 
 /// A process's identity as the kernel reports it.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
@@ -28,15 +38,9 @@ pub struct ProcessIdentity {
 impl ProcessIdentity {
     /// Reads process `pid`'s identity; what cannot be read is left empty (never an operator).
     pub fn of(pid: u32) -> Self {
-        // readlink names the file without touching it; the mapping gives device and inode.
-        let executable = std::fs::read_link(format!("/proc/{pid}/exe"))
-            .ok()
-            .and_then(|path| {
-                let maps = std::fs::read(format!("/proc/{pid}/maps")).ok()?;
-                mapped_file(&String::from_utf8_lossy(&maps), &path.to_string_lossy())
-            });
+        let executable = file_id(Path::new(&format!("/proc/{pid}/exe")));
         // The status holds the process's name, which may be any bytes.
-        let status = std::fs::read(format!("/proc/{pid}/status")).unwrap_or_default();
+        let status = read_bounded(&format!("/proc/{pid}/status"));
         let (uids, gids) = ids_of_status(&String::from_utf8_lossy(&status));
         Self {
             executable,
@@ -46,38 +50,23 @@ impl ProcessIdentity {
     }
 }
 
-/// The device (major, minor) and inode of the mapping of file `path` in a `/proc/PID/maps`
-/// text (`address perms offset MAJOR:MINOR INODE PATH`, numbers of the device in hex).
-fn mapped_file(maps: &str, path: &str) -> Option<(u64, u64, u64)> {
-    maps.lines().find_map(|line| {
-        let mut fields = line.splitn(6, ' ');
-        let (_, _, _, device, inode) = (
-            fields.next()?,
-            fields.next()?,
-            fields.next()?,
-            fields.next()?,
-            fields.next()?,
-        );
-        if fields.next()?.trim_start() != path {
-            return None;
-        }
-        let (major, minor) = device.split_once(':')?;
-        Some((
-            u64::from_str_radix(major, 16).ok()?,
-            u64::from_str_radix(minor, 16).ok()?,
-            inode.parse().ok()?,
-        ))
-    })
+/// At most [`MAX_PROC_READ`] bytes of a file (nothing if it cannot be read).
+fn read_bounded(path: &str) -> Vec<u8> {
+    let mut bytes = Vec::new();
+    if let Ok(file) = std::fs::File::open(path) {
+        let _ = file.take(MAX_PROC_READ as u64).read_to_end(&mut bytes);
+    }
+    bytes
 }
 
-/// A file's device (major, minor) and inode, as the maps show them.
+/// A file's device (major, minor) and inode, from the attributes the kernel holds (no FUSE or
+/// NFS round trip). For `/proc/PID/exe`, the file the process runs, whatever its path now.
 fn file_id(path: &Path) -> Option<(u64, u64, u64)> {
-    let meta = std::fs::metadata(path).ok()?;
-    let dev = meta.dev();
+    let stat = rustix::fs::statx(CWD, path, AtFlags::STATX_DONT_SYNC, StatxFlags::INO).ok()?;
     Some((
-        nix::sys::stat::major(dev),
-        nix::sys::stat::minor(dev),
-        meta.ino(),
+        u64::from(stat.stx_dev_major),
+        u64::from(stat.stx_dev_minor),
+        stat.stx_ino,
     ))
 }
 
@@ -188,19 +177,22 @@ mod tests {
     }
 
     #[test]
-    fn the_executable_is_found_in_the_maps() {
-        let maps = "55d0c8a00000-55d0c8a2e000 r--p 00000000 fd:01 1835266                    /usr/bin/scout\n\
-                    7f00-7f01 r--p 00000000 00:00 0 \n";
-        assert_eq!(
-            mapped_file(maps, "/usr/bin/scout"),
-            Some((0xfd, 1, 1835266))
-        );
-        assert_eq!(mapped_file(maps, "/usr/bin/other"), None);
+    fn the_executable_is_the_file_the_process_runs() {
         let me = std::env::current_exe().expect("exe");
-        assert_eq!(
-            ProcessIdentity::of(std::process::id()).executable,
-            file_id(&me)
-        );
+        let mine = ProcessIdentity::of(std::process::id()).executable;
+        assert!(mine.is_some());
+        assert_eq!(mine, file_id(&me));
+        assert_eq!(file_id(Path::new("/nonexistent/scout")), None);
+    }
+
+    #[test]
+    fn a_status_longer_than_the_bound_is_cut() {
+        let dir = temp_dir("long-status");
+        let long = dir.join("status");
+        std::fs::write(&long, vec![b'x'; 4 * MAX_PROC_READ]).expect("write");
+        assert_eq!(read_bounded(&long.to_string_lossy()).len(), MAX_PROC_READ);
+        assert!(read_bounded("/nonexistent/status").is_empty());
+        let _ = std::fs::remove_dir_all(dir);
     }
 
     #[test]

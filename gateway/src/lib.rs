@@ -12,6 +12,7 @@
 //! - [`monitor`]: dead-process detection for clients.
 //! - [`stop_endpoint`]: the stop socket beside iceoryx2, which is also the robot name's lock.
 //! - [`identity`]: who a requesting process is, by the operating system; the operator role.
+//! - [`share`]: request budgets: a token bucket per client, a share of the stop endpoint per user.
 //! - [`config`]: the configuration file and its lookup.
 //! - [`lock`]: one gateway per device.
 //!
@@ -27,6 +28,7 @@ pub mod driver;
 pub mod identity;
 pub mod lock;
 pub mod monitor;
+pub mod share;
 pub mod state;
 pub mod stop_endpoint;
 pub mod wait;

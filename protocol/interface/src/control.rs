@@ -412,6 +412,10 @@ wire_enum! {
     }
 }
 
+/// The client name of a person's one-shot commands (`scout estop`, `scout release`): the
+/// gateway lets only a process with the operator role go by it.
+pub const OPERATOR: &str = "operator";
+
 /// Rejection counters in a status: one per [`RejectionKind`].
 pub const REJECTION_COUNTERS: usize = 15;
 const _: () = assert!(RejectionKind::ALL.len() == REJECTION_COUNTERS);

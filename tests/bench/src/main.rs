@@ -69,6 +69,15 @@ enum Role {
     /// Control requests as fast as `hz`.
     #[command(hide = true)]
     Flood { name: String, hz: f64, seconds: f64 },
+    /// Stop-endpoint datagrams (releases) as fast as they go, from a process of `mappings`
+    /// memory mappings (what makes its `/proc/PID/maps` long).
+    #[command(hide = true)]
+    DatagramFlood {
+        name: String,
+        seconds: f64,
+        #[arg(long, default_value_t = 0)]
+        mappings: usize,
+    },
 }
 
 fn main() -> ExitCode {
@@ -87,6 +96,11 @@ fn main() -> ExitCode {
             Ok(())
         }
         Some(Role::Flood { name, hz, seconds }) => roles::flood(&name, hz, seconds),
+        Some(Role::DatagramFlood {
+            name,
+            seconds,
+            mappings,
+        }) => roles::datagram_flood(&name, seconds, mappings),
         None => run::run(&run::Options {
             quick: cli.quick,
             json: cli.json,

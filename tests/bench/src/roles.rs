@@ -1,5 +1,5 @@
 //! The bench's child processes: subscribers on each path (iceoryx2, zenoh, the port read
-//! directly), a CPU hog and a request flood. Each records what it saw to a file the bench reads.
+//! directly), a CPU hog, a request flood and a stop-endpoint flood. Each records what it saw to a file the bench reads.
 
 use std::io::Write;
 use std::path::Path;
@@ -152,5 +152,68 @@ pub fn flood(name: &str, hz: f64, seconds: f64) -> anyhow::Result<()> {
         next += period;
         std::thread::sleep(next.saturating_duration_since(Instant::now()));
     }
+    Ok(())
+}
+
+/// Makes `count` one-page anonymous mappings that the kernel cannot merge (their protections
+/// alternate), never touched: no memory, but as many lines in `/proc/PID/maps`. Stops early,
+/// saying so, when the kernel's `vm.max_map_count` is reached.
+#[allow(unsafe_code)]
+fn many_mappings(count: usize) -> usize {
+    use nix::sys::mman::{MapFlags, ProtFlags, mmap_anonymous};
+    let page = std::num::NonZeroUsize::new(4096).expect("non-zero");
+    for made in 0..count {
+        let prot = if made % 2 == 0 {
+            ProtFlags::PROT_READ
+        } else {
+            ProtFlags::PROT_READ | ProtFlags::PROT_WRITE
+        };
+        // SAFETY: a fresh private anonymous mapping at an address the kernel chooses touches no
+        // memory this process uses; it is never read, written or unmapped (the process exits).
+        if unsafe { mmap_anonymous(None, page, prot, MapFlags::MAP_PRIVATE) }.is_err() {
+            eprintln!("datagram-flood: {made} mappings made, the kernel refused more");
+            return made;
+        }
+    }
+    count
+}
+
+/// Release datagrams on `name`'s stop endpoint for `seconds`, as fast as its queue takes them,
+/// from an unbound socket (no answers), after making `mappings` memory mappings. Prints
+/// `ready MAPPINGS` once mapped, then `sent N` at the end.
+pub fn datagram_flood(name: &str, seconds: f64, mappings: usize) -> anyhow::Result<()> {
+    use std::os::linux::net::SocketAddrExt;
+    use std::os::unix::net::{SocketAddr, UnixDatagram};
+
+    use scout_clients::ReleaseTarget;
+    use scout_clients::interface::stop_socket::{self, Ask, StopRequest};
+
+    let made = many_mappings(mappings);
+    let gateway = SocketAddr::from_abstract_name(stop_socket::address(name).as_bytes())?;
+    let socket = UnixDatagram::unbound()?;
+    socket.set_nonblocking(true)?;
+    println!("ready {made}");
+    std::io::stdout().flush()?;
+    let end = Instant::now() + Duration::from_secs_f64(seconds);
+    let mut sent = 0u64;
+    while Instant::now() < end {
+        let datagram = StopRequest {
+            seq: sent,
+            name: Some(format!("flood-{}", std::process::id())),
+            ask: Ask::Release {
+                target: ReleaseTarget::Own,
+                through: u64::MAX,
+            },
+        }
+        .emit();
+        match socket.send_to_addr(&datagram, &gateway) {
+            Ok(_) => sent += 1,
+            Err(error) if error.kind() == std::io::ErrorKind::WouldBlock => {
+                std::thread::sleep(Duration::from_micros(50));
+            }
+            Err(error) => return Err(error).context("sending to the stop endpoint"),
+        }
+    }
+    println!("sent {sent}");
     Ok(())
 }

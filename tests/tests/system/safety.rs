@@ -245,17 +245,29 @@ fn the_operator_role_comes_from_the_process_not_from_a_name() {
     std::fs::create_dir_all(&dir).expect("temp dir");
     let copy = dir.join("scout");
     std::fs::copy(&scout_bin, &copy).expect("copy scout");
-    let output = std::process::Command::new(&copy)
-        .args(["release", "--name", &name])
-        .output()
-        .expect("run the copy");
-    let _ = std::fs::remove_dir_all(&dir);
+    let run_copy = |args: &[&str]| {
+        std::process::Command::new(&copy)
+            .args(args)
+            .args(["--name", &name])
+            .output()
+            .expect("run the copy")
+    };
+    let output = run_copy(&["release"]);
     assert_eq!(output.status.code(), Some(4), "{output:?}");
     assert!(
         String::from_utf8_lossy(&output.stdout).contains("only an operator"),
         "{output:?}"
     );
     assert_eq!(wait_for_status(&status, LIMIT, |_| true)["latched"], true);
+    // Its `scout estop` is a stop of its user's, beside the person's, which keeps its reason.
+    let output = run_copy(&["estop", "--reason", "impostor reason"]);
+    let _ = std::fs::remove_dir_all(&dir);
+    assert_eq!(output.status.code(), Some(0), "{output:?}");
+    let uid = nix::unistd::getuid();
+    let both = wait_for_status(&status, LIMIT, |s| s["stop_total"] == 2);
+    assert_eq!(both["stops"][0]["owner"], "operator", "{both}");
+    assert_eq!(both["stops"][0]["reason"], "person ahead", "{both}");
+    assert_eq!(both["stops"][1]["owner"], format!("uid-{uid}"), "{both}");
     // The installed scout, run by this user, is the operator.
     let (code, stdout, stderr) = scout(&["release", "--name", &name]);
     assert_eq!(code, Some(0), "{stdout}{stderr}");
@@ -355,6 +367,67 @@ fn a_request_flood_neither_starves_the_tick_nor_holds_up_a_stop() {
         "{after}"
     );
     println!("flood: {intervals}, tick {}", after["tick"]);
+}
+
+/// Processes whose identity was once expensive to read (tens of thousands of memory mappings:
+/// the gateway read `/proc/PID/maps` on the control thread for each datagram) flood the stop
+/// endpoint with releases while another user of the robot stops it: the tick is never held up
+/// long enough to latch an `overrun` (a stall the chassis could have timed out in), the guard's
+/// stop latches, and the flood is refused at its user's share, counted.
+#[test]
+fn a_stop_endpoint_flood_from_processes_of_many_mappings_stalls_nothing() {
+    let name = robot_name("dgram-flood");
+    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    let robot = connect(&name);
+    let status = robot.status().expect("status");
+    let max_maps: usize = std::fs::read_to_string("/proc/sys/vm/max_map_count")
+        .ok()
+        .and_then(|text| text.trim().parse().ok())
+        .unwrap_or(65_530);
+    let mappings = (max_maps.saturating_sub(5_000)).min(60_000).to_string();
+    let floods: Vec<_> = (0..2)
+        .map(|_| {
+            let mut flood = scout_system_tests::command("scout-bench");
+            flood.args(["datagram-flood", &name, "4", "--mappings", &mappings]);
+            let mut child = flood
+                .stdout(std::process::Stdio::piped())
+                .spawn()
+                .expect("flood");
+            let lines = scout_system_tests::line_reader(child.stdout.take().expect("stdout"));
+            let ready = lines.recv_timeout(LIMIT).expect("the flood is ready");
+            println!("flood {}: {ready}", child.id());
+            (child, lines)
+        })
+        .collect();
+    std::thread::sleep(Duration::from_secs(1));
+    let asked = Instant::now();
+    let (code, _, stderr) = scout(&["estop", "--name", &name, "--client", "guard"]);
+    let answered = asked.elapsed();
+    assert_eq!(code, Some(0), "{stderr}");
+    let latched = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
+    assert_eq!(latched["stops"][0]["owner"], "guard", "{latched}");
+    for (mut flood, lines) in floods {
+        let _ = flood.wait();
+        println!(
+            "flood {}: {:?}",
+            flood.id(),
+            lines.try_iter().collect::<Vec<_>>()
+        );
+    }
+    let after = wait_for_status(&status, LIMIT, |_| true);
+    let stops = after["stops"].as_array().cloned().unwrap_or_default();
+    assert!(
+        stops.iter().all(|stop| stop["cause"] != "overrun"),
+        "the flood stalled the tick past the chassis' timeout: {after}"
+    );
+    assert!(
+        after["rejections"]["rate_limited"].as_u64() > Some(0),
+        "the flood was refused at its share: {after}"
+    );
+    println!(
+        "scout estop answered in {answered:?} during the flood; tick {}",
+        after["tick"]
+    );
 }
 
 /// A client in another network namespace than the gateway (a container sharing its shared

@@ -44,7 +44,7 @@ impl ClientArgs {
 
 /// The client name of the one-shot commands (estop, release, resume...): a person at a
 /// terminal. The stops `scout estop` latches are owned by it.
-pub const OPERATOR: &str = "operator";
+pub use scout_clients::interface::control::OPERATOR;
 
 #[derive(Debug, Args)]
 pub struct DriveArgs {
