@@ -507,7 +507,7 @@ impl Arbiter {
     }
 
     /// Handles one request at `now` from `origin`, sent at `sent` by the sender's clock (the
-    /// same CLOCK_MONOTONIC on one host).
+    /// same CLOCK_BOOTTIME on one host).
     pub fn handle_request(
         &mut self,
         now: Duration,

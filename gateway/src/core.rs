@@ -5,7 +5,7 @@
 //! deadline). The driver ([`crate::driver`]) is the one piece that touches the port, iceoryx2 and
 //! the clock, reading the clock once per iteration; tests drive the core on a virtual clock.
 //!
-//! Time is CLOCK_MONOTONIC as a [`Duration`] (the clock of every `*_ns` field).
+//! Time is CLOCK_BOOTTIME as a [`Duration`] (the clock of every `*_ns` field).
 
 use std::collections::{HashSet, VecDeque};
 use std::time::Duration;

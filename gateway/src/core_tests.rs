@@ -129,7 +129,7 @@ impl Pair {
         config: &GatewayConfig,
         start: Start,
     ) -> Self {
-        // Far from zero, as CLOCK_MONOTONIC is: nothing may assume time starts at zero.
+        // Far from zero, as CLOCK_BOOTTIME is: nothing may assume time starts at zero.
         let start_time = Duration::from_secs(1000);
         let model = config.model.unwrap_or(Model::default_for(firmware));
         let chassis = Chassis::new(SimParams::for_model(model), transport);
@@ -1028,6 +1028,18 @@ fn a_stall_that_may_have_let_the_chassis_time_out_latches_an_overrun(protocol: P
     assert!(!overrun && moved, "{widest:?}");
 }
 
+/// A suspend of the host (a laptop's lid, a robot computer's power saving) as the gateway's
+/// clock (CLOCK_BOOTTIME, which counts it) shows it: the clock skips 2 s between two iterations
+/// while the client, on the same clock, streams on at once after it. The chassis stopped by its
+/// own timeout meanwhile: a stop latches and nothing moves until a release and a new take.
+fn a_suspend_of_the_host_is_a_gap_and_moves_nothing(protocol: Protocol) {
+    for phase in [ms(0), ms(7), ms(19)] {
+        let (overrun, widest, moved) = stall_and_stream_on(protocol, ms(2000), phase);
+        assert!(overrun, "a suspend (a {widest:?} wire gap) latches");
+        assert!(!moved, "nothing moves after a suspend");
+    }
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(64))]
     /// Any stall at any phase: a wire gap the chassis could have timed out on (over
@@ -1674,6 +1686,7 @@ both_protocols!(
     a_failed_port_is_reopened_with_a_doubling_backoff,
     after_an_unclean_exit_the_gateway_starts_stopped,
     a_stall_that_may_have_let_the_chassis_time_out_latches_an_overrun,
+    a_suspend_of_the_host_is_a_gap_and_moves_nothing,
     a_chassis_faster_than_commanded_is_a_runaway,
     a_chassis_exception_state_is_a_gap,
 );

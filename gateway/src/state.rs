@@ -1,5 +1,5 @@
 //! The one chassis state: received feedback in either protocol, link statistics and state, the
-//! protocol the chassis speaks, odometry. Sans-IO: events and CLOCK_MONOTONIC times in, the
+//! protocol the chassis speaks, odometry. Sans-IO: events and CLOCK_BOOTTIME times in, the
 //! payload to publish out.
 
 use std::time::Duration;

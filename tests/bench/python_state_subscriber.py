@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """scout-bench's Python subscriber (the `scout` package): records, for each state `next()`
-returns, when it was seen (with its `motion` read) and when the gateway published it (CLOCK_MONOTONIC ns, one line
+returns, when it was seen (with its `motion` read) and when the gateway published it (CLOCK_BOOTTIME ns, one line
 each), for SECONDS after the first (saying `receiving` on standard output when it came), then
 its CPU (every thread, user + system) over that window and its resident memory, as a JSON line.
 
@@ -30,7 +30,7 @@ def main() -> None:
         # Seen once a field is in hand, as a controller would use it (sections are made when
         # first read).
         motion = state.motion
-        seen = time.monotonic_ns()
+        seen = time.clock_gettime_ns(time.CLOCK_BOOTTIME)
         assert motion is not None
         rows.append((seen, state.published_ns))
     elapsed = time.monotonic() - started

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """scout-bench's rclpy subscriber (run inside the bench's network namespace): records when each
-/odom arrived in its callback, CLOCK_MONOTONIC ns, one line each, for SECONDS after the first
+/odom arrived in its callback, CLOCK_BOOTTIME ns, one line each, for SECONDS after the first
 (saying `receiving` on standard output when the first came).
 
     ros2_odom_subscriber.py OUT SECONDS
@@ -20,7 +20,7 @@ def main():
     rclpy.init()
     node = Node("bench_odom")
     seen = []
-    node.create_subscription(Odometry, "/odom", lambda _m: seen.append(time.monotonic_ns()), QoSProfile(depth=10))
+    node.create_subscription(Odometry, "/odom", lambda _m: seen.append(time.clock_gettime_ns(time.CLOCK_BOOTTIME)), QoSProfile(depth=10))
     deadline = time.monotonic() + 30
     while not seen and time.monotonic() < deadline:
         rclpy.spin_once(node, timeout_sec=0.1)

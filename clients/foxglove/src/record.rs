@@ -166,7 +166,7 @@ pub fn record(options: &RecordOptions, stop: &AtomicBool) -> Result<Summary, Rec
         ),
         (
             "log_time".to_owned(),
-            "the gateway's CLOCK_MONOTONIC receive (state) or send (command) time, shifted to \
+            "the gateway's CLOCK_BOOTTIME receive (state) or send (command) time, shifted to \
              Unix time when the recording started"
                 .to_owned(),
         ),

@@ -34,7 +34,7 @@ pub enum Update {
     Failed(ClientError),
 }
 
-/// CLOCK_REALTIME minus CLOCK_MONOTONIC now, ns.
+/// CLOCK_REALTIME minus CLOCK_BOOTTIME now, ns.
 pub fn realtime_offset_ns() -> i128 {
     let monotonic = i128::from(monotonic_ns());
     let realtime = SystemTime::now()

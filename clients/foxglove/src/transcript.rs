@@ -46,7 +46,7 @@ pub enum Entry {
     Event(String),
 }
 
-/// An entry and when it happened: ns since the Unix epoch (the gateway's CLOCK_MONOTONIC time,
+/// An entry and when it happened: ns since the Unix epoch (the gateway's CLOCK_BOOTTIME time,
 /// shifted by the offset the transcript was made with).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Timed {
@@ -59,22 +59,22 @@ pub struct Timed {
 /// Turns states and statuses into channel messages.
 #[derive(Debug, Clone)]
 pub struct Transcript {
-    /// CLOCK_REALTIME minus CLOCK_MONOTONIC, ns (signed: a clock set before 1970 is absurd but
+    /// CLOCK_REALTIME minus CLOCK_BOOTTIME, ns (signed: a clock set before 1970 is absurd but
     /// must not panic).
     realtime_offset_ns: i128,
-    /// Events before this CLOCK_MONOTONIC time are history the recording did not see happen.
+    /// Events before this CLOCK_BOOTTIME time are history the recording did not see happen.
     start_ns: u64,
     last_motion_ns: Option<u64>,
     last_link: Option<u8>,
     last_state_ns: Option<u64>,
     last_command_ns: Option<u64>,
-    /// Events already written: CLOCK_MONOTONIC time and text.
+    /// Events already written: CLOCK_BOOTTIME time and text.
     events: VecDeque<(u64, String)>,
 }
 
 impl Transcript {
-    /// A transcript starting at CLOCK_MONOTONIC time `start_ns`, when CLOCK_REALTIME minus
-    /// CLOCK_MONOTONIC was `realtime_offset_ns`.
+    /// A transcript starting at CLOCK_BOOTTIME time `start_ns`, when CLOCK_REALTIME minus
+    /// CLOCK_BOOTTIME was `realtime_offset_ns`.
     pub fn new(start_ns: u64, realtime_offset_ns: i128) -> Self {
         Self {
             realtime_offset_ns,
@@ -87,7 +87,7 @@ impl Transcript {
         }
     }
 
-    /// CLOCK_MONOTONIC `monotonic_ns` as ns since the Unix epoch (0 at the least).
+    /// CLOCK_BOOTTIME `monotonic_ns` as ns since the Unix epoch (0 at the least).
     pub fn unix_ns(&self, monotonic_ns: u64) -> u64 {
         u64::try_from((i128::from(monotonic_ns) + self.realtime_offset_ns).max(0))
             .unwrap_or(u64::MAX)

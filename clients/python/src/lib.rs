@@ -253,7 +253,7 @@ struct NativeRobot {
 #[derive(Debug)]
 struct StateView {
     state: StatePayload,
-    /// When this process read it (CLOCK_MONOTONIC): the ages are as of then.
+    /// When this process read it (CLOCK_BOOTTIME): the ages are as of then.
     read_ns: u64,
 }
 
@@ -268,7 +268,7 @@ impl StateView {
 
 #[pymethods]
 impl StateView {
-    /// When the gateway published it: CLOCK_MONOTONIC ns, as `time.monotonic_ns()`.
+    /// When the gateway published it: CLOCK_BOOTTIME ns, as `time.clock_gettime_ns(time.CLOCK_BOOTTIME)`.
     #[getter]
     fn published_ns(&self) -> u64 {
         self.state.published_ns

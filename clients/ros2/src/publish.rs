@@ -57,7 +57,7 @@ impl Topic {
     }
 }
 
-/// Both clocks read at one instant: the gateway's times are CLOCK_MONOTONIC, ROS stamps are
+/// Both clocks read at one instant: the gateway's times are CLOCK_BOOTTIME, ROS stamps are
 /// wall-clock time since the Unix epoch.
 #[derive(Debug, Clone, Copy)]
 pub struct Clocks {
@@ -66,7 +66,7 @@ pub struct Clocks {
 }
 
 impl Clocks {
-    /// The wall-clock time of a CLOCK_MONOTONIC instant.
+    /// The wall-clock time of a CLOCK_BOOTTIME instant.
     pub fn stamp(&self, at_ns: u64) -> Duration {
         self.unix.saturating_sub(Duration::from_nanos(
             self.monotonic_ns.saturating_sub(at_ns),

@@ -36,14 +36,14 @@ pub struct SimOptions {
     pub params: SimParams,
     /// Seed of the garbage generator.
     pub seed: u64,
-    /// A file to record the wire in, with CLOCK_MONOTONIC times (see [`Trace`]).
+    /// A file to record the wire in, with CLOCK_BOOTTIME times (see [`Trace`]).
     pub trace: Option<PathBuf>,
     /// SCHED_FIFO priority of the simulator's loop (0: normal), so that what it measures is
     /// the gateway's timing, not its own scheduling.
     pub realtime_priority: u8,
 }
 
-/// The wire as the chassis saw it, one line an event, times in CLOCK_MONOTONIC ns (shared by
+/// The wire as the chassis saw it, one line an event, times in CLOCK_BOOTTIME ns (shared by
 /// every process on the host), flushed every feedback period, for benchmarks: `F NS` a feedback batch written, `C NS LINEAR
 /// ANGULAR` a motion command read (m/s, rad/s), `A NS LINEAR` the chassis' actual speed when it
 /// changes.
@@ -63,7 +63,7 @@ impl Trace {
     }
 
     fn now_ns() -> u64 {
-        nix::time::clock_gettime(nix::time::ClockId::CLOCK_MONOTONIC)
+        nix::time::clock_gettime(nix::time::ClockId::CLOCK_BOOTTIME)
             .map_or(0, |time| std::time::Duration::from(time).as_nanos() as u64)
     }
 

@@ -536,7 +536,7 @@ impl std::fmt::Display for Rejection {
             Self::CausePersists { stops } => write!(f, "cannot release yet: {stops}"),
             Self::Future { ahead } => write!(
                 f,
-                "command stamped {} ms after its arrival: stamp it with this host's CLOCK_MONOTONIC",
+                "command stamped {} ms after its arrival: stamp it with this host's CLOCK_BOOTTIME",
                 ahead.as_millis()
             ),
         }
@@ -661,7 +661,7 @@ pub struct ControlRequest {
     pub seq: u64,
     /// The lease a drive command belongs to.
     pub lease: u64,
-    /// CLOCK_MONOTONIC time the client sent it, ns (a command older than its life on arrival is
+    /// CLOCK_BOOTTIME time the client sent it, ns (a command older than its life on arrival is
     /// refused).
     pub sent_ns: u64,
     /// m/s, for drive.
@@ -780,7 +780,7 @@ pub struct SourcePayload {
 pub struct StatusPayload {
     /// Rises by one with every publication.
     pub seq: u64,
-    /// CLOCK_MONOTONIC time of publication, ns.
+    /// CLOCK_BOOTTIME time of publication, ns.
     pub published_ns: u64,
     /// The robot's name.
     pub robot: FixedText<32>,

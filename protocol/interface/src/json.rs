@@ -199,7 +199,7 @@ pub const STATE_KEYS: [&str; 15] = [
 ];
 
 /// One top-level field of the state JSON ([`STATE_KEYS`]), or `None` for a key the schema does
-/// not have. `now_ns` (CLOCK_MONOTONIC) sets the ages. A client that reads a few fields makes
+/// not have. `now_ns` (CLOCK_BOOTTIME) sets the ages. A client that reads a few fields makes
 /// only those; [`state_json`] is all of them. The same keys in both protocols: a field a
 /// protocol does not have is `null`.
 pub fn state_field(state: &StatePayload, key: &str, now_ns: u64) -> Option<Value> {
@@ -339,7 +339,7 @@ pub fn state_field(state: &StatePayload, key: &str, now_ns: u64) -> Option<Value
     })
 }
 
-/// The state as the README documents it. `now_ns` (CLOCK_MONOTONIC) sets the ages.
+/// The state as the README documents it. `now_ns` (CLOCK_BOOTTIME) sets the ages.
 pub fn state_json(state: &StatePayload, now_ns: u64) -> Value {
     let fields: Map<String, Value> = STATE_KEYS
         .iter()

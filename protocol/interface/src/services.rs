@@ -178,15 +178,18 @@ pub fn remove_dead_nodes() -> Result<Vec<String>, iceoryx2::node::NodeListFailur
     Ok(removed)
 }
 
-/// CLOCK_MONOTONIC now: the clock of every `*_ns` field, comparable across processes, and the
-/// gateway's one time base.
+/// The host's monotonic clock that counts suspend (CLOCK_BOOTTIME) now: the clock of every
+/// `*_ns` field and of every command's stamp, comparable across processes, and the gateway's
+/// one time base. CLOCK_MONOTONIC stands still while the host is suspended, so a suspend would
+/// look like no time at all: the gateway would resume the command it sent before, to a chassis
+/// that stopped by its own timeout meanwhile. On this clock a suspend is a gap like any stall.
 pub fn monotonic() -> Duration {
-    // CLOCK_MONOTONIC cannot fail on Linux with a valid clock id.
-    nix::time::clock_gettime(nix::time::ClockId::CLOCK_MONOTONIC)
+    // CLOCK_BOOTTIME cannot fail on Linux (since 2.6.39) with a valid clock id.
+    nix::time::clock_gettime(nix::time::ClockId::CLOCK_BOOTTIME)
         .map_or(Duration::ZERO, Duration::from)
 }
 
-/// CLOCK_MONOTONIC now, ns.
+/// [`monotonic`] now, ns.
 pub fn monotonic_ns() -> u64 {
     monotonic().as_nanos() as u64
 }

@@ -126,7 +126,7 @@ pub struct Received {
     pub valid: bool,
     /// The rolling count of the last frame (0 for v2 frames that carry none).
     pub count: u8,
-    /// CLOCK_MONOTONIC time of the last frame, ns.
+    /// CLOCK_BOOTTIME time of the last frame, ns.
     pub at_ns: u64,
 }
 
@@ -313,7 +313,7 @@ pub struct CommandPayload {
     pub linear: f64,
     /// rad/s, as sent.
     pub angular: f64,
-    /// CLOCK_MONOTONIC time it was sent, ns.
+    /// CLOCK_BOOTTIME time it was sent, ns.
     pub at_ns: u64,
 }
 
@@ -324,7 +324,7 @@ pub struct CommandPayload {
 pub struct StatePayload {
     /// Increases by one with every publication.
     pub seq: u64,
-    /// CLOCK_MONOTONIC time of publication, ns.
+    /// CLOCK_BOOTTIME time of publication, ns.
     pub published_ns: u64,
     /// The robot's name.
     pub robot: FixedText<32>,

@@ -369,6 +369,70 @@ fn a_request_flood_neither_starves_the_tick_nor_holds_up_a_stop() {
     println!("flood: {intervals}, tick {}", after["tick"]);
 }
 
+/// A host suspend while a teleop drives: the gateway and the client are stopped for 2 s (the
+/// chassis times out meanwhile) and go on with their CLOCK_MONOTONIC showing no gap, as after a
+/// real suspend (`suspend_shim.c`, preloaded). The gateway's clock counts the suspend: the gap
+/// latches a stop, and the client streaming on moves nothing.
+#[test]
+fn a_host_suspend_latches_a_stop_and_moves_nothing() {
+    let test = "a_host_suspend_latches_a_stop_and_moves_nothing";
+    let dir = scout_system_tests::TempDir::new(&robot_name("suspend"));
+    let shim = dir.path().join("suspend_shim.so");
+    let source = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/system/suspend_shim.c");
+    let built = std::process::Command::new("cc")
+        .args(["-shared", "-fPIC", "-O2", "-o"])
+        .arg(&shim)
+        .arg(source)
+        .arg("-ldl")
+        .output();
+    if !built.as_ref().is_ok_and(|o| o.status.success()) {
+        return scout_system_tests::skip(test, &format!("no C compiler for the shim: {built:?}"));
+    }
+    let offset = dir.path().join("suspended_ns");
+    std::fs::write(&offset, "0").expect("offset file");
+    let (shim, offset) = (shim.to_string_lossy(), offset.to_string_lossy());
+    let env = [
+        ("LD_PRELOAD", shim.as_ref()),
+        ("SCOUT_SUSPEND_SHIM_FILE", offset.as_ref()),
+    ];
+    let name = robot_name("suspend");
+    let mut sim = Sim::start(&["--serial"]);
+    let port = sim.port().to_owned();
+    let gateway = Gateway::start_with_env(&["--serial", &port, "--name", &name], &env);
+    let robot = connect(&name);
+    let status = robot.status().expect("status");
+    let mut drive = scout_system_tests::command("scout");
+    drive
+        .args(["drive", "--name", &name, "--linear", "0.3"])
+        .envs(env)
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null());
+    let driver = scout_system_tests::Background::spawn(drive);
+    moving(&mut sim, LIMIT);
+    // The suspend: both processes stand still; the chassis stops by its own timeout.
+    gateway.signal(Signal::SIGSTOP);
+    driver.signal(Signal::SIGSTOP);
+    let suspended = Instant::now();
+    scout_system_tests::comes_to_rest(&mut sim, LIMIT);
+    std::thread::sleep(Duration::from_secs(2).saturating_sub(suspended.elapsed()));
+    std::fs::write(&*offset, suspended.elapsed().as_nanos().to_string()).expect("offset");
+    gateway.signal(Signal::SIGCONT);
+    driver.signal(Signal::SIGCONT);
+    // The resumed client streams on; nothing moves.
+    chassis_stays_still(&mut sim, Duration::from_secs(2));
+    let after = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
+    let causes: Vec<&serde_json::Value> = after["stops"]
+        .as_array()
+        .map(|stops| stops.iter().map(|stop| &stop["cause"]).collect())
+        .unwrap_or_default();
+    assert!(
+        causes.iter().any(|cause| *cause == "overrun"),
+        "{after}\n{}",
+        gateway.log()
+    );
+}
+
 /// Processes whose identity was once expensive to read (tens of thousands of memory mappings:
 /// the gateway read `/proc/PID/maps` on the control thread for each datagram) flood the stop
 /// endpoint with releases while another user of the robot stops it: the tick is never held up

@@ -191,7 +191,7 @@ class State:
 
     @property
     def published_ns(self) -> int:
-        """When the gateway published it: CLOCK_MONOTONIC ns, as `time.monotonic_ns()`."""
+        """When the gateway published it: CLOCK_BOOTTIME ns, as `time.clock_gettime_ns(time.CLOCK_BOOTTIME)`."""
         return self._view.published_ns
 
     @property

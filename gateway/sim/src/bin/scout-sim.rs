@@ -41,7 +41,7 @@ struct Cli {
     /// Keep a symbolic link at PATH pointing at the pseudo-terminal (stable across `unplug`).
     #[arg(long, value_name = "PATH")]
     link: Option<PathBuf>,
-    /// Record the wire in FILE with CLOCK_MONOTONIC times, for benchmarks (`F NS` feedback
+    /// Record the wire in FILE with CLOCK_BOOTTIME times, for benchmarks (`F NS` feedback
     /// written, `C NS LINEAR ANGULAR` motion command read, `A NS LINEAR` actual speed changed).
     #[arg(long, value_name = "FILE")]
     trace: Option<PathBuf>,
