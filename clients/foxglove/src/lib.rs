@@ -10,9 +10,11 @@
 //! - [`record`]: `scout record`, the MCAP file.
 //! - [`live`]: `scout foxglove`, the WebSocket server, stops as problems, an optional e-stop.
 //! - [`subprotocol`]: the protocol under its old name too, in front of the SDK's server.
+//! - [`origin`]: which web pages may connect to the live view.
 
 pub mod channels;
 pub mod live;
+pub mod origin;
 pub mod record;
 pub mod schema;
 pub mod source;

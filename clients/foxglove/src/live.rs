@@ -22,6 +22,7 @@ use scout_clients::control::ControlError;
 use scout_clients::control::Stopper;
 
 use crate::channels::{ChannelError, Channels};
+use crate::origin::OriginPolicy;
 use crate::source::{Source, SourceError, Update};
 use crate::subprotocol::Front;
 use crate::transcript::Entry;
@@ -44,6 +45,8 @@ pub struct LiveOptions {
     pub allow_release: bool,
     /// The owner of the stops the service latches.
     pub owner: String,
+    /// Which web pages may connect.
+    pub origins: OriginPolicy,
 }
 
 /// Why the live view failed.
@@ -122,11 +125,16 @@ pub fn through_of(payload: &[u8]) -> Option<u64> {
     value.get("through")?.as_u64()
 }
 
-/// The release a caller asks for, through the newest stop it saw (`through`), never past the
-/// newest this view has seen: a stop latched after either survives.
+/// The release a caller asks for, through the newest stop it saw (`through`): a stop latched
+/// after it survives. A `through` past the newest stop this view has shown names stops no
+/// caller of this view can have seen, and is refused.
 fn release_through(payload: &[u8], newest_seen: u64) -> Result<u64, String> {
     match through_of(payload) {
-        Some(through) => Ok(through.min(newest_seen)),
+        Some(through) if through <= newest_seen => Ok(through),
+        Some(through) => Err(format!(
+            "stop #{through} was never shown here (the newest in the Problems list is \
+             #{newest_seen}): name the newest stop you saw"
+        )),
         None => Err(format!(
             "say which stops you saw: {{\"through\": N}}, N the newest stop number in the \
              Problems list (now #{newest_seen}); stops latched after it are kept"
@@ -274,10 +282,13 @@ impl Live {
             .start_blocking()
             .map_err(LiveError::Serve)?;
         let backend = SocketAddr::from(([127, 0, 0, 1], server.port()));
-        let front = Front::start(options.listen, backend).map_err(|source| LiveError::Listen {
-            listen: options.listen,
-            source,
-        })?;
+        let front =
+            Front::start(options.listen, backend, options.origins.clone()).map_err(|source| {
+                LiveError::Listen {
+                    listen: options.listen,
+                    source,
+                }
+            })?;
         Ok(Self {
             front,
             server,
@@ -363,7 +374,17 @@ mod tests {
     #[test]
     fn a_release_names_the_stops_its_sender_saw_and_never_more_than_the_view_saw() {
         assert_eq!(release_through(br#"{"through": 4}"#, 7), Ok(4));
-        assert_eq!(release_through(br#"{"through": 9}"#, 7), Ok(7));
+        assert_eq!(release_through(br#"{"through": 7}"#, 7), Ok(7));
+        for beyond in [
+            &br#"{"through": 8}"#[..],
+            br#"{"through": 18446744073709551615}"#,
+        ] {
+            let refused = release_through(beyond, 7).expect_err("never shown");
+            assert!(
+                refused.contains("never shown") && refused.contains("#7"),
+                "{refused}"
+            );
+        }
         for payload in [&b"{}"[..], b"", b"not json", br#"{"through": -1}"#] {
             let refused = release_through(payload, 7).expect_err("no through");
             assert!(

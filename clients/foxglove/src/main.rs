@@ -19,6 +19,7 @@ use scout_clients::client::ClientError;
 use scout_clients::interface::services::ServiceError;
 use scout_foxglove::channels::TOPICS;
 use scout_foxglove::live::{Live, LiveError, LiveOptions};
+use scout_foxglove::origin::OriginPolicy;
 use scout_foxglove::record::{RecordError, RecordOptions, record};
 use scout_foxglove::source::SourceError;
 use tracing_subscriber::EnvFilter;
@@ -77,6 +78,12 @@ struct ServeArgs {
     /// The owner of the stops /scout/estop latches.
     #[arg(long, default_value = "foxglove", value_name = "NAME")]
     owner: String,
+    /// Let web pages of ORIGIN connect (repeatable; exactly as the browser sends it, e.g.
+    /// https://app.foxglove.dev; `null` for pages loaded from files or sandboxed; `*` for any).
+    /// Without it only clients that send no Origin (desktop apps, libraries) and this
+    /// machine's pages (localhost, 127.x.x.x, [::1], file://) may connect.
+    #[arg(long = "allow-origin", value_name = "ORIGIN")]
+    allow_origins: Vec<String>,
 }
 
 fn main() -> ExitCode {
@@ -150,6 +157,7 @@ fn serve(args: &ServeArgs, stop: &AtomicBool) -> anyhow::Result<()> {
         estop: args.estop,
         allow_release: args.allow_release,
         owner: args.owner.clone(),
+        origins: OriginPolicy::new(&args.allow_origins),
     };
     let live = Live::start(&options)?;
     let url = format!("ws://{}", live.address());

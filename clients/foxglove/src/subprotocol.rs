@@ -4,7 +4,8 @@
 //! for the old one, would be refused. The live view's address is this front: it lets the handshake of a client
 //! that asks for `foxglove.websocket.v1` through as `foxglove.sdk.v1`, answers with the name the
 //! client asked for, and then copies bytes both ways untouched. The SDK's server listens on a
-//! loopback port of its own behind it.
+//! loopback port of its own behind it. A handshake from a web page of another origin than the
+//! policy lets in ([`crate::origin`]) is answered 403 here and never reaches the server.
 
 use std::io::{self, Read, Write};
 use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
@@ -14,6 +15,8 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use tracing::{debug, warn};
+
+use crate::origin::OriginPolicy;
 
 /// The protocol's first name, which Lichtblick and the ws-protocol libraries ask for.
 pub const LEGACY: &str = "foxglove.websocket.v1";
@@ -29,12 +32,34 @@ const WRITE_TIMEOUT: Duration = Duration::from_secs(10);
 /// The most clients served at once (each costs two threads); more are refused.
 pub const MAX_CLIENTS: usize = 16;
 
-/// The header's name, compared without case.
+/// The protocol header's name, compared without case.
 const HEADER: &str = "sec-websocket-protocol";
 
-fn is_protocol_header(line: &str) -> Option<&str> {
+/// The value of a head's line if it is header `header` (compared without case).
+fn header_value<'a>(line: &'a str, header: &str) -> Option<&'a str> {
     let (name, value) = line.split_once(':')?;
-    name.trim().eq_ignore_ascii_case(HEADER).then_some(value)
+    name.trim().eq_ignore_ascii_case(header).then_some(value)
+}
+
+fn is_protocol_header(line: &str) -> Option<&str> {
+    header_value(line, HEADER)
+}
+
+/// The `Origin` a handshake's head carries (the first, if several), trimmed.
+pub fn origin_of(head: &str) -> Option<&str> {
+    head.split("\r\n")
+        .skip(1)
+        .find_map(|line| header_value(line, "origin"))
+        .map(str::trim)
+}
+
+/// The answer to a handshake refused for `why`.
+fn forbidden(why: &str) -> String {
+    format!(
+        "HTTP/1.1 403 Forbidden\r\nContent-Type: text/plain; charset=utf-8\r\n\
+         Content-Length: {}\r\nConnection: close\r\n\r\n{why}",
+        why.len()
+    )
 }
 
 /// The request head to send on, and whether the client asked for the old name only.
@@ -119,8 +144,13 @@ fn pipe(mut from: TcpStream, mut to: TcpStream) {
     let _ = from.shutdown(Shutdown::Both);
 }
 
-fn serve(mut client: TcpStream, backend: SocketAddr) -> io::Result<()> {
+fn serve(mut client: TcpStream, backend: SocketAddr, origins: &OriginPolicy) -> io::Result<()> {
     let (head, early) = read_head(&mut client, HANDSHAKE_TIMEOUT)?;
+    if let Err(why) = origins.check(origin_of(&head)) {
+        let _ = client.write_all(forbidden(&why).as_bytes());
+        let _ = client.shutdown(Shutdown::Both);
+        return Err(io::Error::new(io::ErrorKind::PermissionDenied, why));
+    }
     let (head, legacy) = rewrite_request(&head);
     let mut server = TcpStream::connect(backend)?;
     server.set_nodelay(true)?;
@@ -152,8 +182,14 @@ pub struct Front {
 }
 
 impl Front {
-    /// Listens on `listen` and hands every connection to the server at `backend`.
-    pub fn start(listen: SocketAddr, backend: SocketAddr) -> io::Result<Self> {
+    /// Listens on `listen` and hands every connection whose origin `origins` lets in to the
+    /// server at `backend`.
+    pub fn start(
+        listen: SocketAddr,
+        backend: SocketAddr,
+        origins: OriginPolicy,
+    ) -> io::Result<Self> {
+        let origins = Arc::new(origins);
         let listener = TcpListener::bind(listen)?;
         let address = listener.local_addr()?;
         listener.set_nonblocking(true)?;
@@ -177,10 +213,11 @@ impl Front {
                             debug!("Foxglove client {peer} connected");
                             let _ = client.set_nonblocking(false);
                             let served = Arc::clone(&clients);
+                            let origins = Arc::clone(&origins);
                             let spawned = std::thread::Builder::new()
                                 .name("foxglove-down".into())
                                 .spawn(move || {
-                                    if let Err(error) = serve(client, backend) {
+                                    if let Err(error) = serve(client, backend, &origins) {
                                         warn!("Foxglove client {peer}: {error}");
                                     }
                                     served.fetch_sub(1, Ordering::Relaxed);
@@ -264,6 +301,18 @@ mod tests {
         }
         let none = format!("{REQUEST}\r\n");
         assert_eq!(rewrite_request(&none), (none.clone(), false));
+    }
+
+    #[test]
+    fn the_origin_is_read_from_the_head_and_a_refusal_is_a_whole_answer() {
+        assert_eq!(origin_of(REQUEST), None);
+        let with = REQUEST.replace("Host:", "ORIGIN:  http://evil.example \r\nHost:");
+        assert_eq!(origin_of(&with), Some("http://evil.example"));
+        // The request line is no header, whatever it says.
+        assert_eq!(origin_of("GET /origin: x HTTP/1.1\r\n\r\n"), None);
+        let answer = forbidden("not you");
+        assert!(answer.starts_with("HTTP/1.1 403 Forbidden\r\n"), "{answer}");
+        assert!(answer.ends_with("Content-Length: 7\r\nConnection: close\r\n\r\nnot you"));
     }
 
     #[test]

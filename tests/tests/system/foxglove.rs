@@ -511,3 +511,58 @@ fn the_live_views_estop_is_a_stop_of_its_owner_shown_with_its_cause_and_released
     wait_for_status(&status, Duration::from_secs(5), |s| s["latched"] == false);
     chassis_stays_still(&mut sim, Duration::from_millis(500));
 }
+
+/// The status line a WebSocket handshake to `url` gets, with `origin` as its Origin header.
+fn handshake_status(url: &str, origin: Option<&str>) -> String {
+    use std::io::{Read, Write};
+    let address = url.trim_start_matches("ws://");
+    let mut stream = std::net::TcpStream::connect(address).expect("connect");
+    stream
+        .set_read_timeout(Some(Duration::from_secs(10)))
+        .expect("timeout");
+    let origin = origin.map_or(String::new(), |origin| format!("Origin: {origin}\r\n"));
+    let head = format!(
+        "GET / HTTP/1.1\r\nHost: {address}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\
+         Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\
+         Sec-WebSocket-Protocol: foxglove.websocket.v1\r\n{origin}\r\n"
+    );
+    stream.write_all(head.as_bytes()).expect("send the head");
+    let mut answer = Vec::new();
+    let mut chunk = [0u8; 1024];
+    while !answer.windows(4).any(|w| w == b"\r\n\r\n") {
+        match stream.read(&mut chunk) {
+            Ok(0) | Err(_) => break,
+            Ok(n) => answer.extend_from_slice(&chunk[..n]),
+        }
+    }
+    let answer = String::from_utf8_lossy(&answer).into_owned();
+    answer.lines().next().unwrap_or_default().to_owned()
+}
+
+/// A web page of another origin cannot open the live view (a page at `http://evil.example`
+/// open in a browser on the robot got the channels and, with `--estop`, latched stops);
+/// clients without an Origin and this machine's pages can, and `--allow-origin` lets one in.
+#[test]
+fn the_live_view_refuses_web_pages_of_other_origins() {
+    let name = robot_name("foxglove-origin");
+    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    let _robot = connect(&name);
+    let (_server, url) = live_view(&name, &["--estop"]);
+    for origin in ["http://evil.example", "null", "https://app.foxglove.dev"] {
+        let status = handshake_status(&url, Some(origin));
+        assert!(status.contains(" 403 "), "{origin}: {status}");
+    }
+    for origin in [
+        None,
+        Some("http://localhost:8080"),
+        Some("http://127.0.0.1:3000"),
+    ] {
+        let status = handshake_status(&url, origin);
+        assert!(status.contains(" 101 "), "{origin:?}: {status}");
+    }
+    let (_allowing, url) = live_view(&name, &["--allow-origin", "https://app.foxglove.dev"]);
+    let status = handshake_status(&url, Some("https://app.foxglove.dev"));
+    assert!(status.contains(" 101 "), "{status}");
+    let status = handshake_status(&url, Some("http://evil.example"));
+    assert!(status.contains(" 403 "), "{status}");
+}
