@@ -1,5 +1,6 @@
 //! The client API: connect to a robot's gateway by name and read its state.
 
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 use iceoryx2::node::{Node, NodeCreationFailure};
@@ -40,7 +41,7 @@ pub enum ClientError {
     ControlPort(#[from] services::ControlPortError),
     /// Shared memory is (nearly) full: iceoryx2 would die of SIGBUS writing into it.
     #[error(
-        "{path} has {free} bytes free, less than the {needed} a client needs: free some (a full /dev/shm kills iceoryx2 programs with SIGBUS); `scout estop` still works, it needs no shared memory"
+        "{path} has {free} bytes free, less than the {needed} a client needs: free some (a full /dev/shm kills iceoryx2 programs with SIGBUS){largest}; `scout estop` and `scout release` still work, they need no shared memory"
     )]
     SharedMemoryFull {
         /// The shared-memory file system.
@@ -49,6 +50,8 @@ pub enum ClientError {
         free: u64,
         /// Bytes a client needs at least.
         needed: u64,
+        /// What fills it most, in words (empty: nothing could be listed).
+        largest: String,
     },
     /// The stop endpoint's socket could not be made.
     #[error(transparent)]
@@ -70,12 +73,40 @@ fn check_shared_memory() -> Result<(), ClientError> {
                     path: SHARED_MEMORY,
                     free,
                     needed: SHARED_MEMORY_NEEDED,
+                    largest: largest_files(Path::new(SHARED_MEMORY)),
                 });
             }
             Ok(())
         }
         // No such file system to look at: iceoryx2 says what is wrong when it tries.
         Err(_) => Ok(()),
+    }
+}
+
+/// The files that fill `dir` most (the three largest of its first 10 000 entries), as
+/// "; the largest there: NAME (SIZE), ..." (empty when none can be listed).
+fn largest_files(dir: &Path) -> String {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return String::new();
+    };
+    let mut sizes: Vec<(u64, String)> = entries
+        .take(10_000)
+        .filter_map(|entry| {
+            let entry = entry.ok()?;
+            let size = entry.metadata().ok()?.len();
+            Some((size, entry.file_name().to_string_lossy().into_owned()))
+        })
+        .collect();
+    sizes.sort_unstable_by(|a, b| b.cmp(a));
+    let named: Vec<String> = sizes
+        .iter()
+        .take(3)
+        .map(|(size, name)| format!("{name} ({:.1} MiB)", *size as f64 / f64::from(1 << 20)))
+        .collect();
+    if named.is_empty() {
+        String::new()
+    } else {
+        format!("; the largest there: {}", named.join(", "))
     }
 }
 

@@ -182,6 +182,17 @@ impl Stopper {
         self.ask(Ask::Release { target, through })
     }
 
+    /// The newest stop the gateway latched (held or released since; `None`: none yet), asked
+    /// through the stop endpoint alone: what a release names as `through` when no status can
+    /// be read (a full `/dev/shm`).
+    pub fn newest_stop(&mut self) -> Result<Option<u64>, ControlError> {
+        let reply = self
+            .client
+            .request(Ask::Ping, ANSWER_TIMEOUT)
+            .map_err(ControlError::from)?;
+        Ok(reply.answer.map_err(ControlError::Rejected)?.stop)
+    }
+
     fn ask(&mut self, ask: Ask) -> Result<Accepted, ControlError> {
         let request = ask.request();
         match (

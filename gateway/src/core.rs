@@ -599,8 +599,13 @@ impl Core {
         origin: &Origin,
         ask: &stop_socket::Ask,
     ) -> Answer {
+        // A ping changes nothing; its answer names the newest stop, so that a client without
+        // shared memory (no status to read) can still release what it saw.
         let Some(request) = ask.request() else {
-            return Ok(Accepted::default());
+            return Ok(Accepted {
+                stop: Some(self.arbiter.newest_stop()).filter(|id| *id != 0),
+                ..Accepted::default()
+            });
         };
         self.stats.requests += 1;
         self.status_due = true;

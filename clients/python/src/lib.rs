@@ -40,6 +40,11 @@ enum Failure {
         reason: String,
         cause: String,
     },
+    /// Used in a child of `os.fork()`: the process that made it, and this one.
+    Forked {
+        made_in: u32,
+        here: u32,
+    },
     Other(String),
 }
 
@@ -93,6 +98,12 @@ impl Failure {
                     reason,
                     cause,
                 } => errors.getattr("Rejected")?.call1((message, reason, cause)),
+                Failure::Forked { made_in, here } => errors.getattr("ForkError")?.call1((format!(
+                    "this robot was connected in process {made_in}, and this is process {here}, \
+                     a child of os.fork(): the connection's worker thread does not exist here. \
+                     Connect again in the child (scout.Robot.connect), or start children with \
+                     multiprocessing's 'spawn' or 'forkserver' method"
+                ),)),
                 Failure::Other(message) => errors.getattr("ScoutError")?.call1((message,)),
             }
         })();
@@ -200,12 +211,38 @@ fn act(name: String, jobs: Receiver<Job>, connected: SyncSender<Result<(), Failu
     }
 }
 
+/// The robot's actor thread, in the process that started it.
+#[derive(Debug, Clone)]
+struct ActorHandle {
+    jobs: Sender<Job>,
+    /// The process that connected: after `os.fork()` a child has the handle but not the thread
+    /// (only the forking thread lives on in a child), and a job sent would wait forever.
+    pid: u32,
+}
+
+impl ActorHandle {
+    /// Raises `ForkError` in a child of the process that connected.
+    fn check_process(&self, py: Python<'_>) -> PyResult<()> {
+        let here = std::process::id();
+        if here == self.pid {
+            return Ok(());
+        }
+        Err(Failure::Forked {
+            made_in: self.pid,
+            here,
+        }
+        .into_py(py))
+    }
+}
+
 /// Runs `work` on the actor thread and waits for its result.
 fn on_actor<T: Send + 'static>(
     py: Python<'_>,
-    jobs: &Sender<Job>,
+    actor: &ActorHandle,
     work: impl FnOnce(&mut Actor) -> Result<T, Failure> + Send + 'static,
 ) -> PyResult<T> {
+    actor.check_process(py)?;
+    let jobs = &actor.jobs;
     let (reply, replied) = mpsc::sync_channel(1);
     jobs.send(Box::new(move |actor| {
         let _ = reply.send(work(actor));
@@ -240,11 +277,38 @@ fn parse_light(light: &str) -> PyResult<Light> {
 #[derive(Debug)]
 struct NativeRobot {
     name: String,
+    /// `None` only once dropped in a child of `os.fork()` (see [`Drop`]).
+    connection: Option<Connection>,
+    actor: ActorHandle,
+    last: Option<StatePayload>,
+}
+
+/// What a robot reads its states with.
+#[derive(Debug)]
+struct Connection {
     states: StateSubscriber,
     /// The connection the subscriber belongs to, dropped after it.
     _robot: Robot,
-    jobs: Sender<Job>,
-    last: Option<StatePayload>,
+}
+
+impl Drop for NativeRobot {
+    /// In a child of `os.fork()` the connection is the parent's (its iceoryx2 node and ports):
+    /// dropping it there would take them from the parent, so it is left alone.
+    fn drop(&mut self) {
+        if std::process::id() != self.actor.pid {
+            std::mem::forget(self.connection.take());
+        }
+    }
+}
+
+impl NativeRobot {
+    /// The connection, in the process that made it.
+    fn connection(&self, py: Python<'_>) -> PyResult<&Connection> {
+        self.actor.check_process(py)?;
+        self.connection
+            .as_ref()
+            .ok_or_else(|| Failure::Other("this robot was closed".into()).into_py(py))
+    }
 }
 
 /// One state as read from shared memory: a copy of the gateway's payload, turned into the
@@ -315,9 +379,14 @@ impl NativeRobot {
         wait_reply(py, actor_connected)?.map_err(|failure| failure.into_py(py))?;
         Ok(NativeRobot {
             name,
-            states,
-            _robot: robot,
-            jobs,
+            connection: Some(Connection {
+                states,
+                _robot: robot,
+            }),
+            actor: ActorHandle {
+                jobs,
+                pid: std::process::id(),
+            },
             last: None,
         })
     }
@@ -332,6 +401,7 @@ impl NativeRobot {
     /// or None before the first. Skips the ones not read.
     fn latest<'py>(&mut self, py: Python<'py>) -> PyResult<Option<Bound<'py, StateView>>> {
         if let Some(newest) = self
+            .connection(py)?
             .states
             .try_latest()
             .map_err(|error| Failure::from(error).into_py(py))?
@@ -349,12 +419,13 @@ impl NativeRobot {
         py: Python<'py>,
         timeout: f64,
     ) -> PyResult<Option<Bound<'py, StateView>>> {
+        self.connection(py)?;
         let timeout = Duration::try_from_secs_f64(timeout)
             .map_err(|_| PyValueError::new_err("timeout: a number of seconds, 0 or more"))?;
         let deadline = Instant::now() + timeout;
         loop {
             let left = deadline.saturating_duration_since(Instant::now());
-            let states = &self.states;
+            let states = &self.connection(py)?.states;
             let next = match py.detach(|| states.next_timeout(left.min(SLICE))) {
                 Ok(next) => next,
                 // A signal (Ctrl-C) woke the wait: Python's handler runs below.
@@ -378,7 +449,7 @@ impl NativeRobot {
         let timeout = Duration::try_from_secs_f64(timeout)
             .map_err(|_| PyValueError::new_err("timeout: a number of seconds, 0 or more"))?;
         let name = self.name.clone();
-        let status = on_actor(py, &self.jobs, move |actor| {
+        let status = on_actor(py, &self.actor, move |actor| {
             let wait = if actor.last_status.is_some() {
                 Duration::ZERO
             } else {
@@ -406,7 +477,7 @@ impl NativeRobot {
         class_: Option<&str>,
     ) -> PyResult<NativeController> {
         let class = class_.map(parse_class).transpose()?;
-        let id = on_actor(py, &self.jobs, move |actor| {
+        let id = on_actor(py, &self.actor, move |actor| {
             let controller = actor
                 .robot
                 .controller(&name, class)
@@ -416,21 +487,21 @@ impl NativeRobot {
             Ok(actor.next_id)
         })?;
         Ok(NativeController {
-            jobs: self.jobs.clone(),
+            actor: self.actor.clone(),
             id,
         })
     }
 
     /// A client named `name` that only stops and releases.
     fn stopper(&self, py: Python<'_>, name: String) -> PyResult<NativeStopper> {
-        let id = on_actor(py, &self.jobs, move |actor| {
+        let id = on_actor(py, &self.actor, move |actor| {
             let stopper = actor.robot.stopper(&name).map_err(Failure::from)?;
             actor.next_id += 1;
             actor.stoppers.insert(actor.next_id, stopper);
             Ok(actor.next_id)
         })?;
         Ok(NativeStopper {
-            jobs: self.jobs.clone(),
+            actor: self.actor.clone(),
             id,
         })
     }
@@ -440,7 +511,7 @@ impl NativeRobot {
 #[pyclass(module = "scout._scout")]
 #[derive(Debug)]
 struct NativeController {
-    jobs: Sender<Job>,
+    actor: ActorHandle,
     id: u64,
 }
 
@@ -451,7 +522,7 @@ impl NativeController {
         request: impl FnOnce(&mut Controller) -> Result<Accepted, ControlError> + Send + 'static,
     ) -> PyResult<Bound<'py, PyDict>> {
         let id = self.id;
-        let accepted = on_actor(py, &self.jobs, move |actor| {
+        let accepted = on_actor(py, &self.actor, move |actor| {
             let controller = actor
                 .controllers
                 .get_mut(&id)
@@ -559,7 +630,7 @@ impl NativeController {
     #[getter]
     fn lease(&self, py: Python<'_>) -> PyResult<Option<u64>> {
         let id = self.id;
-        on_actor(py, &self.jobs, move |actor| {
+        on_actor(py, &self.actor, move |actor| {
             Ok(actor.controllers.get(&id).and_then(Controller::lease))
         })
     }
@@ -567,7 +638,7 @@ impl NativeController {
     /// Forgets the controller (its client slot frees when the gateway sees it gone).
     fn close(&self, py: Python<'_>) -> PyResult<()> {
         let id = self.id;
-        on_actor(py, &self.jobs, move |actor| {
+        on_actor(py, &self.actor, move |actor| {
             actor.controllers.remove(&id);
             Ok(())
         })
@@ -578,7 +649,7 @@ impl NativeController {
 #[pyclass(module = "scout._scout")]
 #[derive(Debug)]
 struct NativeStopper {
-    jobs: Sender<Job>,
+    actor: ActorHandle,
     id: u64,
 }
 
@@ -589,7 +660,7 @@ impl NativeStopper {
         request: impl FnOnce(&mut Stopper) -> Result<Accepted, ControlError> + Send + 'static,
     ) -> PyResult<Bound<'py, PyDict>> {
         let id = self.id;
-        let accepted = on_actor(py, &self.jobs, move |actor| {
+        let accepted = on_actor(py, &self.actor, move |actor| {
             let stopper = actor
                 .stoppers
                 .get_mut(&id)

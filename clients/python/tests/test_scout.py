@@ -155,6 +155,49 @@ def test_a_stop_latches_is_shown_and_released_by_its_owner(robot: scout.Robot) -
     until(lambda: robot.status()["stops"] == [], 2.0, "the stop released")
 
 
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="no os.fork on this platform")
+def test_a_forked_child_gets_an_error_and_the_parent_drives_on(robot: scout.Robot) -> None:
+    controller = robot.controller("pytest-fork", "teleop")
+    stopper = robot.stopper("pytest-fork-guard")
+    controller.take_control()
+    controller.drive(0.1, 0.0)
+    read, write = os.pipe()
+    child = os.fork()
+    if child == 0:  # The child: every call raises at once, none waits (a hang dies of SIGALRM).
+        signal.alarm(10)
+        os.close(read)
+        outcomes = []
+        for call in (
+            lambda: controller.drive(0.2, 0.0),
+            lambda: controller.take_control(),
+            lambda: stopper.stop("from the child"),
+            lambda: robot.status(),
+            lambda: robot.latest(),
+            lambda: robot.next(timeout=0.1),
+        ):
+            try:
+                call()
+                outcomes.append("returned")
+            except scout.ForkError as error:
+                outcomes.append("ForkError" if "os.fork()" in str(error) else str(error))
+            except BaseException as error:  # noqa: BLE001 - reported to the parent
+                outcomes.append(repr(error))
+        os.write(write, json.dumps(outcomes).encode())
+        os._exit(0)
+    os.close(write)
+    # The parent drives on while the child tries.
+    for _ in range(10):
+        controller.drive(0.1, 0.0)
+        time.sleep(0.02)
+    _, status = os.waitpid(child, 0)
+    with os.fdopen(read) as pipe:
+        outcomes = json.loads(pipe.read() or "[]")
+    assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0
+    assert outcomes == ["ForkError"] * 6
+    assert controller.drive(0.1, 0.0).accepted
+    controller.close()
+
+
 def test_heartbeat_missed_latches_a_stop(robot: scout.Robot) -> None:
     with robot.controller("pytest-beat") as controller:
         controller.heartbeat(0.3)

@@ -98,16 +98,27 @@ pub fn listen(spec: &DeviceSpec, window: Duration, checks: &mut Vec<Check>) -> O
             return Opened::Failed;
         }
         Err(OpenError::Io(error)) => {
-            let fix = match error.kind() {
-                ErrorKind::PermissionDenied => {
-                    "this user may not open it: add it to the device's group (dialout), or run as \
-                     the gateway's user"
+            // A gateway of another run directory holds the tty without holding this lock: its
+            // exclusive open refuses ours, whatever the error's kind says.
+            let holders = match spec {
+                DeviceSpec::Serial(path) | DeviceSpec::Slcan(path) => holders_of(path),
+                DeviceSpec::Can(_) | DeviceSpec::Sim { .. } => Vec::new(),
+            };
+            let fix = match (holders.is_empty(), error.kind()) {
+                (false, _) => format!(
+                    "held by {} (a gateway of another run directory or user takes no lock \
+                     here): stop it, or check its robot with `scout doctor --name ROBOT`",
+                    holders.join(", ")
+                ),
+                (true, ErrorKind::PermissionDenied) => "this user may not open it: add it to the \
+                     device's group (dialout), or run as the gateway's user"
+                    .into(),
+                (true, ErrorKind::NotFound) if !Path::new(&spec.name()).exists() => {
+                    "the device or interface is gone: plug it in".into()
                 }
-                ErrorKind::NotFound => "the device or interface is gone: plug it in",
-                _ => {
-                    "another program may hold it (`fuser -v DEVICE` tells which: a ModemManager or \
-                     a terminal program)"
-                }
+                (true, _) => "another program may hold it (`fuser -v DEVICE` tells which: a \
+                     ModemManager or a terminal program)"
+                    .into(),
             };
             checks.push(Check::fail(
                 "port",
@@ -140,4 +151,92 @@ pub fn listen(spec: &DeviceSpec, window: Duration, checks: &mut Vec<Check>) -> O
     }
     traffic.discarded_bytes = device.discarded_bytes();
     Opened::Listened(Box::new(traffic))
+}
+
+/// The processes that have `device` open, as "NAME (pid N, robot R)" (the robot from a
+/// gateway's `--name`), gateways first: what `fuser` would say, read from `/proc/PID/fd` (only
+/// the processes this user may look at).
+pub fn holders_of(device: &Path) -> Vec<String> {
+    let Ok(device) = std::fs::canonicalize(device) else {
+        return Vec::new();
+    };
+    let Ok(processes) = std::fs::read_dir("/proc") else {
+        return Vec::new();
+    };
+    let mut holders = Vec::new();
+    for process in processes.flatten() {
+        let Some(pid) = process
+            .file_name()
+            .to_str()
+            .and_then(|pid| pid.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        if pid == std::process::id() {
+            continue;
+        }
+        let Ok(fds) = std::fs::read_dir(process.path().join("fd")) else {
+            continue;
+        };
+        let holds = fds
+            .flatten()
+            .any(|fd| std::fs::read_link(fd.path()).is_ok_and(|target| target == device));
+        if holds {
+            holders.push(describe_process(pid));
+        }
+    }
+    holders.sort_by_key(|holder| !holder.starts_with("scout-gateway"));
+    holders
+}
+
+/// "NAME (pid N)", with ", robot R" for a process given `--name R` (a gateway).
+fn describe_process(pid: u32) -> String {
+    let name = std::fs::read_to_string(format!("/proc/{pid}/comm"))
+        .map(|comm| comm.trim().to_owned())
+        .unwrap_or_else(|_| "a process".into());
+    let cmdline = std::fs::read(format!("/proc/{pid}/cmdline")).unwrap_or_default();
+    let args: Vec<String> = cmdline
+        .split(|byte| *byte == 0)
+        .map(|arg| String::from_utf8_lossy(arg).into_owned())
+        .collect();
+    let robot = args
+        .iter()
+        .enumerate()
+        .find_map(|(at, arg)| match arg.as_str() {
+            "--name" => args.get(at + 1).cloned(),
+            _ => arg.strip_prefix("--name=").map(str::to_owned),
+        });
+    match robot {
+        Some(robot) => format!("{name} (pid {pid}, robot {robot})"),
+        None => format!("{name} (pid {pid})"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_process_holding_a_device_is_named_with_its_robot() {
+        let file = std::env::temp_dir().join(format!("scout-doctor-held-{}", std::process::id()));
+        std::fs::write(&file, b"").expect("file");
+        let held = std::fs::File::open(&file).expect("open");
+        let mut holder = std::process::Command::new("sh")
+            .args(["-c", "exec sleep 30", "--name", "ignored"])
+            .stdin(held)
+            .spawn()
+            .expect("sh");
+        let deadline = Instant::now() + Duration::from_secs(5);
+        let expected = format!("sleep (pid {})", holder.id());
+        let mut seen = holders_of(&file);
+        while !seen.contains(&expected) && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(20));
+            seen = holders_of(&file);
+        }
+        let _ = holder.kill();
+        let _ = holder.wait();
+        let _ = std::fs::remove_file(&file);
+        assert!(seen.contains(&expected), "{seen:?}");
+        assert!(holders_of(Path::new("/nonexistent/tty")).is_empty());
+    }
 }

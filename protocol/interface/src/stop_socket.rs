@@ -83,7 +83,8 @@ pub mod reply {
     pub const CODE: usize = 6;
     /// The request's number (u64).
     pub const SEQ: Range<usize> = 8..16;
-    /// For an accepted stop: its id (u64, 0: none).
+    /// For an accepted stop: its id; for a ping: the newest stop latched, held or released
+    /// (the status' `newest_stop`) (u64, 0: none).
     pub const STOP: Range<usize> = 16..24;
     /// The gateway's pid (u32).
     pub const PID: Range<usize> = 24..28;
@@ -101,7 +102,8 @@ const REPLY_MAGIC: &[u8; 4] = b"SCSA";
 wire_enum! {
     /// What a stop datagram asks for.
     Kind {
-        /// Who holds this robot's name? Answered with the gateway's pid; changes nothing.
+        /// Who holds this robot's name? Answered with the gateway's pid and the newest stop's
+        /// id; changes nothing.
         Ping = 0 => "ping",
         /// Latch a stop owned by the sender's name.
         Stop = 2 => "stop",

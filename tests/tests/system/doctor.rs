@@ -339,6 +339,27 @@ fn a_port_another_robots_gateway_holds_is_named_with_its_pid() {
     );
 }
 
+/// A gateway of another run directory takes no lock the doctor sees: the port's exclusive open
+/// is refused, and the doctor names the gateway holding it (it said "gone: plug it in").
+#[test]
+fn a_port_a_gateway_of_another_run_directory_holds_is_named_with_its_robot() {
+    let name = robot_name("doctor-rundir");
+    let sim = Sim::start(&["--serial"]);
+    let device = sim.port().to_owned();
+    let run_dir = scout_system_tests::TempDir::new(&name);
+    let gateway = Gateway::start_in(run_dir.path(), &["--serial", &device, "--name", &name]);
+    connect(&name);
+    let other = robot_name("doctor-rundir-other");
+    let (code, checks) = doctor(&["--name", &other, "--serial", &device]);
+    assert_eq!(code, Some(1), "{checks:#?}");
+    assert_eq!(verdict(&checks, "port"), "fail", "{checks:#?}");
+    let fix = fix(&checks, "port");
+    assert!(
+        fix.contains(&format!("pid {}, robot {name}", gateway.pid())) && !fix.contains("plug"),
+        "{fix}"
+    );
+}
+
 #[test]
 fn usage_errors_exit_2() {
     let mut doctor = command("scout");

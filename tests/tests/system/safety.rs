@@ -274,11 +274,11 @@ fn the_operator_role_comes_from_the_process_not_from_a_name() {
     wait_for_status(&status, LIMIT, |s| s["latched"] == false);
 }
 
-/// `scout estop` latches with `/dev/shm` full: run inside a mount namespace whose `/dev/shm` is
-/// a small tmpfs filled to the last byte. Needs root (or user namespaces) and `unshare`.
+/// `scout estop` latches and `scout release` releases with `/dev/shm` full: run inside a mount
+/// namespace whose `/dev/shm` is a small tmpfs filled to the last byte. Needs root (or user namespaces) and `unshare`.
 #[test]
-fn scout_estop_latches_with_dev_shm_full() {
-    let test = "scout_estop_latches_with_dev_shm_full";
+fn scout_estop_and_release_work_with_dev_shm_full() {
+    let test = "scout_estop_and_release_work_with_dev_shm_full";
     let probe = std::process::Command::new("unshare")
         .args(["-m", "true"])
         .output();
@@ -304,6 +304,26 @@ fn scout_estop_latches_with_dev_shm_full() {
     assert_eq!(output.status.code(), Some(0), "{output:?}");
     let latched = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
     assert_eq!(latched["stops"][0]["reason"], "dev/shm full");
+    // A person can recover too: `scout release` goes through the stop endpoint, up to the
+    // newest stop the gateway names, and says what fills /dev/shm.
+    let script = format!(
+        "mount -t tmpfs -o size=64k tmpfs /dev/shm && \
+         (dd if=/dev/zero of=/dev/shm/fill bs=4096 2>/dev/null; true) && \
+         exec {} release --name {name}",
+        scout_bin.display()
+    );
+    let output = std::process::Command::new("unshare")
+        .args(["-m", "--propagation", "private", "sh", "-c", &script])
+        .output()
+        .expect("unshare");
+    assert_eq!(output.status.code(), Some(0), "{output:?}");
+    let said = String::from_utf8_lossy(&output.stderr);
+    assert!(said.contains("the largest there: fill"), "{said}");
+    assert!(
+        String::from_utf8_lossy(&output.stdout).contains("through the stop endpoint"),
+        "{output:?}"
+    );
+    wait_for_status(&status, LIMIT, |s| s["latched"] == false);
     // Whatever fails there is an error with an exit code, never a signal.
     let script = format!(
         "mount -t tmpfs -o size=64k tmpfs /dev/shm && \

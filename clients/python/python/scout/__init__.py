@@ -27,7 +27,14 @@ from types import TracebackType
 from typing import Any, AsyncIterator, Dict, Iterator, Optional, Type, Union
 
 from . import _scout
-from ._errors import NoAnswerError, NoGatewayError, Rejected, ScoutError, VersionError
+from ._errors import (
+    ForkError,
+    NoAnswerError,
+    NoGatewayError,
+    Rejected,
+    ScoutError,
+    VersionError,
+)
 from ._state import (
     Bms,
     Chassis,
@@ -54,6 +61,7 @@ __all__ = [
     "Command",
     "Controller",
     "Firmware",
+    "ForkError",
     "Light",
     "Lights",
     "Link",

@@ -15,6 +15,11 @@ class VersionError(ScoutError):
     """The gateway speaks another interface version: use a package and a gateway of one release."""
 
 
+class ForkError(ScoutError):
+    """Used in a child of `os.fork()`: connect again in the child (the parent's connection and
+    its worker thread stay with the parent)."""
+
+
 class NoAnswerError(ScoutError):
     """The gateway did not answer in time: it is stopped, stuck or gone."""
 

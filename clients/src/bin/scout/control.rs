@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use clap::Args;
-use scout_clients::client::Robot;
+use scout_clients::client::{ClientError, Robot};
 use scout_clients::control::{ControlError, Controller, Lights, Stopper};
 use scout_clients::interface::control::{parse_fault_clear, parse_light};
 use scout_clients::interface::stop_socket::StopSocketError;
@@ -174,11 +174,19 @@ pub fn release(args: &ReleaseArgs) -> anyhow::Result<ExitCode> {
         (None, true) => ReleaseTarget::Own,
         (None, false) => ReleaseTarget::All,
     };
-    let robot = Robot::connect(&args.client.robot.name)?;
-    let statuses = robot.status()?;
+    let name = args.client.name(OPERATOR);
+    let robot_name = &args.client.robot.name;
+    let connected = Robot::connect(robot_name).and_then(|robot| Ok((robot.status()?, robot)));
+    let (statuses, robot) = match connected {
+        Ok(connected) => connected,
+        Err(error @ ClientError::SharedMemoryFull { .. }) => {
+            return release_without_shared_memory(args, target, &name, &error);
+        }
+        Err(error) => return Err(error.into()),
+    };
     let status = statuses
         .latest(Duration::from_secs(2))?
-        .ok_or_else(|| crate::status::Silent(args.client.robot.name.clone()))?;
+        .ok_or_else(|| crate::status::Silent(robot_name.clone()))?;
     let through = args.through.unwrap_or(status.newest_stop);
     if !status.stopped() {
         println!("nothing to release: no stop holds the robot");
@@ -197,8 +205,38 @@ pub fn release(args: &ReleaseArgs) -> anyhow::Result<ExitCode> {
             stop.reason.as_str()
         );
     }
-    let name = args.client.name(OPERATOR);
     let answer = robot.stopper(&name)?.release(target, through);
+    println!("{}", describe(&answer));
+    answer?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// A release with no shared memory to read the status from (a full `/dev/shm`): through the
+/// stop endpoint alone, up to `--through` or the newest stop the gateway names (its ping's
+/// answer). The stops cannot be listed first, so this says so.
+fn release_without_shared_memory(
+    args: &ReleaseArgs,
+    target: ReleaseTarget,
+    name: &str,
+    why: &ClientError,
+) -> anyhow::Result<ExitCode> {
+    eprintln!("scout: {why}");
+    let mut stopper = Stopper::new(&args.client.robot.name, name)?;
+    let through = match args.through {
+        Some(through) => through,
+        None => match stopper.newest_stop()? {
+            Some(newest) => newest,
+            None => {
+                println!("nothing to release: no stop was ever latched");
+                return Ok(ExitCode::SUCCESS);
+            }
+        },
+    };
+    println!(
+        "releasing through the stop endpoint, without listing the stops (that needs shared \
+         memory): every stop up to #{through} that this release names"
+    );
+    let answer = stopper.release(target, through);
     println!("{}", describe(&answer));
     answer?;
     Ok(ExitCode::SUCCESS)
