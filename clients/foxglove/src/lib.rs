@@ -11,7 +11,9 @@
 //! - [`live`]: `scout foxglove`, the WebSocket server, stops as problems, an optional e-stop.
 //! - [`subprotocol`]: the protocol under its old name too, in front of the SDK's server.
 //! - [`origin`]: which web pages may connect to the live view.
+//! - [`backend`]: the SDK's server behind the front, reachable from the front alone.
 
+pub mod backend;
 pub mod channels;
 pub mod live;
 pub mod origin;

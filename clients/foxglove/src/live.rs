@@ -21,6 +21,7 @@ use scout_clients::ReleaseTarget;
 use scout_clients::control::ControlError;
 use scout_clients::control::Stopper;
 
+use crate::backend::Backend;
 use crate::channels::{ChannelError, Channels};
 use crate::origin::OriginPolicy;
 use crate::source::{Source, SourceError, Update};
@@ -282,12 +283,20 @@ impl Live {
             .start_blocking()
             .map_err(LiveError::Serve)?;
         let backend = SocketAddr::from(([127, 0, 0, 1], server.port()));
-        let front =
-            Front::start(options.listen, backend, options.origins.clone()).map_err(|source| {
-                LiveError::Listen {
-                    listen: options.listen,
-                    source,
-                }
+        let backend = match Backend::guard(backend) {
+            Ok(guarded) => guarded,
+            Err(error) => {
+                warn!(
+                    "the Foxglove server behind the front at {backend} stays reachable by any \
+                     local process, past the front's origin check and client limit: {error}"
+                );
+                Backend::unguarded(backend)
+            }
+        };
+        let front = Front::start(options.listen, Arc::new(backend), options.origins.clone())
+            .map_err(|source| LiveError::Listen {
+                listen: options.listen,
+                source,
             })?;
         Ok(Self {
             front,

@@ -4,7 +4,7 @@
 //! for the old one, would be refused. The live view's address is this front: it lets the handshake of a client
 //! that asks for `foxglove.websocket.v1` through as `foxglove.sdk.v1`, answers with the name the
 //! client asked for, and then copies bytes both ways untouched. The SDK's server listens on a
-//! loopback port of its own behind it. A handshake from a web page of another origin than the
+//! loopback port of its own behind it, reachable from the front alone ([`crate::backend`]). A handshake from a web page of another origin than the
 //! policy lets in ([`crate::origin`]) is answered 403 here and never reaches the server.
 
 use std::io::{self, Read, Write};
@@ -16,6 +16,7 @@ use std::time::{Duration, Instant};
 
 use tracing::{debug, warn};
 
+use crate::backend::Backend;
 use crate::origin::OriginPolicy;
 
 /// The protocol's first name, which Lichtblick and the ws-protocol libraries ask for.
@@ -144,7 +145,7 @@ fn pipe(mut from: TcpStream, mut to: TcpStream) {
     let _ = from.shutdown(Shutdown::Both);
 }
 
-fn serve(mut client: TcpStream, backend: SocketAddr, origins: &OriginPolicy) -> io::Result<()> {
+fn serve(mut client: TcpStream, backend: &Arc<Backend>, origins: &OriginPolicy) -> io::Result<()> {
     let (head, early) = read_head(&mut client, HANDSHAKE_TIMEOUT)?;
     if let Err(why) = origins.check(origin_of(&head)) {
         let _ = client.write_all(forbidden(&why).as_bytes());
@@ -152,7 +153,8 @@ fn serve(mut client: TcpStream, backend: SocketAddr, origins: &OriginPolicy) -> 
         return Err(io::Error::new(io::ErrorKind::PermissionDenied, why));
     }
     let (head, legacy) = rewrite_request(&head);
-    let mut server = TcpStream::connect(backend)?;
+    // The permit lets this connection's port through the server's guard until it ends.
+    let (mut server, _permit) = backend.connect(HANDSHAKE_TIMEOUT)?;
     server.set_nodelay(true)?;
     client.set_nodelay(true)?;
     server.write_all(head.as_bytes())?;
@@ -186,7 +188,7 @@ impl Front {
     /// server at `backend`.
     pub fn start(
         listen: SocketAddr,
-        backend: SocketAddr,
+        backend: Arc<Backend>,
         origins: OriginPolicy,
     ) -> io::Result<Self> {
         let origins = Arc::new(origins);
@@ -214,10 +216,11 @@ impl Front {
                             let _ = client.set_nonblocking(false);
                             let served = Arc::clone(&clients);
                             let origins = Arc::clone(&origins);
+                            let backend = Arc::clone(&backend);
                             let spawned = std::thread::Builder::new()
                                 .name("foxglove-down".into())
                                 .spawn(move || {
-                                    if let Err(error) = serve(client, backend, &origins) {
+                                    if let Err(error) = serve(client, &backend, &origins) {
                                         warn!("Foxglove client {peer}: {error}");
                                     }
                                     served.fetch_sub(1, Ordering::Relaxed);

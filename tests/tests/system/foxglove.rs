@@ -566,3 +566,62 @@ fn the_live_view_refuses_web_pages_of_other_origins() {
     let status = handshake_status(&url, Some("http://evil.example"));
     assert!(status.contains(" 403 "), "{status}");
 }
+
+/// The TCP ports process `pid` listens on, from `/proc/net/tcp` and its descriptors.
+fn listening_ports(pid: u32) -> Vec<u16> {
+    let inodes: Vec<String> = std::fs::read_dir(format!("/proc/{pid}/fd"))
+        .map(|fds| {
+            fds.flatten()
+                .filter_map(|fd| std::fs::read_link(fd.path()).ok())
+                .filter_map(|target| {
+                    let target = target.to_string_lossy().into_owned();
+                    Some(
+                        target
+                            .strip_prefix("socket:[")?
+                            .strip_suffix(']')?
+                            .to_owned(),
+                    )
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    let table = std::fs::read_to_string("/proc/net/tcp").unwrap_or_default();
+    table
+        .lines()
+        .skip(1)
+        .filter_map(|line| {
+            let fields: Vec<&str> = line.split_whitespace().collect();
+            let (local, state, inode) = (fields.get(1)?, fields.get(3)?, fields.get(9)?);
+            let port = u16::from_str_radix(local.split(':').nth(1)?, 16).ok()?;
+            (*state == "0A" && inodes.iter().any(|i| i == inode)).then_some(port)
+        })
+        .collect()
+}
+
+/// The Foxglove SDK's server listens on a loopback port of its own behind the front: no local
+/// process reaches it directly (30 connections made there bypassed the front's client limit and
+/// origin check), while the front's connections do.
+#[test]
+fn the_server_behind_the_live_views_front_is_reachable_from_the_front_alone() {
+    let name = robot_name("foxglove-backend");
+    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    let _robot = connect(&name);
+    let (server, url) = live_view(&name, &["--estop"]);
+    let front: u16 = url
+        .rsplit(':')
+        .next()
+        .and_then(|port| port.parse().ok())
+        .expect("the front's port");
+    let behind: Vec<u16> = listening_ports(server.pid())
+        .into_iter()
+        .filter(|port| *port != front)
+        .collect();
+    assert_eq!(behind.len(), 1, "one server behind the front: {behind:?}");
+    let direct = std::net::TcpStream::connect_timeout(
+        &std::net::SocketAddr::from(([127, 0, 0, 1], behind[0])),
+        Duration::from_millis(500),
+    );
+    assert!(direct.is_err(), "reached the server directly: {direct:?}");
+    let status = handshake_status(&url, None);
+    assert!(status.contains(" 101 "), "through the front: {status}");
+}
