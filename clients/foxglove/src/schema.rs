@@ -1,6 +1,6 @@
 //! The JSON schemas of the JSON channels (the state, the status, the command): what Foxglove
 //! shows and completes in its message paths. They describe the schemas `scout echo --json` and
-//! `scout status --json` print (the README's tables); tests walk real messages against them.
+//! `scout status --json` print (the tables of docs/operating.md and docs/safety.md); tests walk real messages against them.
 
 use serde_json::{Value, json};
 

@@ -1,6 +1,7 @@
 //! The public JSON forms of the chassis state (`scout echo --json`, zenoh `scout/ROBOT/state`)
 //! and of the arbiter's status (`scout status --json`, zenoh `scout/ROBOT/status`), and of one
-//! decoded message (`scout decode --json`): the schema the README documents, in one place.
+//! decoded message (`scout decode --json`): the schemas the guides document (docs/operating.md,
+//! docs/safety.md, docs/chassis.md), in one place.
 
 use scout_protocol::units::MAX_LINEAR_SPEED;
 use scout_protocol::v2::{LightsV2, MessageV2, MotionV2, VersionRequestForm};
@@ -19,7 +20,7 @@ fn light_json(light: &Light) -> Value {
     json!({ "mode": light.mode.name(), "brightness": light.brightness })
 }
 
-/// The message's fields, named as the README documents, in physical units.
+/// The message's fields, named as docs/chassis.md documents them, in physical units.
 pub fn message_fields(message: &Message, max_angular: f64) -> Value {
     match message {
         Message::MotionCommand(command) => json!({
@@ -192,7 +193,7 @@ fn motor_json(state: &StatePayload, index: usize, now_ns: u64) -> Value {
     })
 }
 
-/// The state JSON's top-level keys, in the order the README documents them.
+/// The state JSON's top-level keys, in the order docs/operating.md documents them.
 pub const STATE_KEYS: [&str; 15] = [
     "robot", "seq", "age_ms", "link", "chassis", "system", "motion", "lights", "motors",
     "odometer", "rc", "bms", "firmware", "odometry", "command",
@@ -339,7 +340,7 @@ pub fn state_field(state: &StatePayload, key: &str, now_ns: u64) -> Option<Value
     })
 }
 
-/// The state as the README documents it. `now_ns` (CLOCK_BOOTTIME) sets the ages.
+/// The state as docs/operating.md documents it. `now_ns` (CLOCK_BOOTTIME) sets the ages.
 pub fn state_json(state: &StatePayload, now_ns: u64) -> Value {
     let fields: Map<String, Value> = STATE_KEYS
         .iter()
@@ -352,7 +353,7 @@ fn class_name(raw: u8) -> Value {
     Class::from_raw(raw).map_or(Value::Null, |class| class.name().into())
 }
 
-/// The arbiter's status as the README documents it.
+/// The arbiter's status as docs/safety.md documents it.
 pub fn status_json(status: &StatusPayload, now_ns: u64) -> Value {
     let stops: Vec<Value> = status
         .stops()

@@ -4,7 +4,7 @@
 //! Each test needs to create network interfaces (root, the `vcan` and `sch_netem` modules).
 //! Where it cannot, it prints why and skips, and `socketcan_tests_in_a_vm` runs this whole
 //! binary inside a micro-VM whose kernel can (`tests/vm/run`). `SCOUT_TEST_CAN=can0` runs them
-//! on a real interface instead (`--test-threads 1`; see the README).
+//! on a real interface instead (`--test-threads 1`; see docs/development.md).
 
 mod bus;
 mod can_utils;
