@@ -4,8 +4,8 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use scout_bridge::ZenohConfig;
 use scout_interface::Transport;
+use scout_interface::remote::ZenohConfig;
 use scout_protocol::model::Model;
 use scout_protocol::version::Protocol;
 use scout_sim::SimParams;
@@ -45,8 +45,13 @@ pub struct GatewayConfig {
     pub sim: toml::Table,
 }
 
+/// A `--protocol` or `protocol` that is none of [`ProtocolSetting::ALL`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("not a protocol setting: give auto, v1 or v2")]
+pub struct UnknownProtocolSetting;
+
 /// Which protocol the gateway speaks to the chassis.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ProtocolSetting {
     /// Listen first and pick the protocol the chassis' feedback proves (nothing is sent until
@@ -60,6 +65,19 @@ pub enum ProtocolSetting {
 }
 
 impl ProtocolSetting {
+    /// Every setting, by its name in the file and on the command line.
+    pub const ALL: [(Self, &'static str); 3] =
+        [(Self::Auto, "auto"), (Self::V1, "v1"), (Self::V2, "v2")];
+
+    /// The setting called `name` (`auto`, `v1`, `v2`).
+    pub fn parse(name: &str) -> Result<Self, UnknownProtocolSetting> {
+        Self::ALL
+            .into_iter()
+            .find(|(_, known)| *known == name)
+            .map(|(setting, _)| setting)
+            .ok_or(UnknownProtocolSetting)
+    }
+
     /// The protocol it fixes, if it fixes one.
     pub const fn fixed(self) -> Option<Protocol> {
         match self {

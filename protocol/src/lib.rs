@@ -16,9 +16,13 @@
 //! - [`version`]: protocol v1 / v2 detection.
 //! - [`link`]: the transports and their framing, shared by the gateway and the simulator.
 //! - [`kinematics`]: the skid-steer pose step (with `std`).
+//! - [`listed!`]: an enum and the list of its variants, declared once.
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
+
+#[macro_use]
+mod listed;
 
 pub mod can;
 pub mod candump;

@@ -8,6 +8,7 @@ use crate::v2::{self, MessageV2};
 use crate::version::Protocol;
 use crate::{CanFrame, ControlMode, Counted, MessageKind, can};
 
+listed! {
 /// How the chassis is reached: the one transport enum of the project (configuration, state,
 /// framing, control mode).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -24,11 +25,9 @@ pub enum Transport {
     /// control mode.
     Sim,
 }
+}
 
 impl Transport {
-    /// Every transport, in raw-value order.
-    pub const ALL: [Transport; 4] = [Self::Serial, Self::Slcan, Self::Can, Self::Sim];
-
     /// The control mode every motion command on this transport must carry.
     pub const fn control_mode(self) -> ControlMode {
         match self {

@@ -1,6 +1,7 @@
 //! The SCOUT models: their speed limits and geometry, as the public sources give them
 //! (protocol-v2-notes 6). One table for the simulator and the gateway.
 
+listed! {
 /// A SCOUT model.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
@@ -14,6 +15,7 @@ pub enum Model {
     ScoutMini,
     /// SCOUT MINI OMNI, mecanum wheels (also commands a lateral speed).
     ScoutMiniOmni,
+}
 }
 
 /// How fast a model may be commanded.
@@ -39,14 +41,6 @@ pub struct Geometry {
 }
 
 impl Model {
-    /// Every model.
-    pub const ALL: [Model; 4] = [
-        Self::Scout,
-        Self::Scout2,
-        Self::ScoutMini,
-        Self::ScoutMiniOmni,
-    ];
-
     /// The name on the command line and in logs.
     pub const fn name(self) -> &'static str {
         match self {
@@ -60,6 +54,12 @@ impl Model {
     /// The model called `name` ([`Model::name`]).
     pub fn from_name(name: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|model| model.name() == name)
+    }
+
+    /// The model called `name`, or an error that lists every name: the one parser of
+    /// `--model` and the configuration's `model`.
+    pub fn parse(name: &str) -> Result<Self, UnknownModel> {
+        Self::from_name(name).ok_or(UnknownModel)
     }
 
     /// The byte that stands for it in shared memory.
@@ -135,6 +135,24 @@ impl Model {
     }
 }
 
+/// A name that is no model's ([`Model::parse`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct UnknownModel;
+
+impl core::fmt::Display for UnknownModel {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str("not a model: give one of")?;
+        for (i, model) in Model::ALL.into_iter().enumerate() {
+            f.write_str(if i == 0 { " " } else { ", " })?;
+            f.write_str(model.name())?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for UnknownModel {}
+
 impl core::fmt::Display for Model {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         f.write_str(self.name())
@@ -161,6 +179,14 @@ mod tests {
             );
         }
         assert_eq!(Model::from_name("scout3"), None);
+        assert_eq!(Model::parse("scout-mini"), Ok(Model::ScoutMini));
+        let refused = Model::parse("scout3")
+            .expect_err("no such model")
+            .to_string();
+        assert_eq!(
+            refused,
+            "not a model: give one of scout, scout2, scout-mini, scout-mini-omni"
+        );
         assert_eq!(Model::Scout2.limits().linear, 1.5);
         assert_eq!(Model::ScoutMini.limits().angular, 2.5235);
         assert_eq!(Model::ScoutMiniOmni.limits().lateral, 2.0);

@@ -7,6 +7,7 @@ use core::time::Duration;
 /// detector calls the bus (a v1 chassis sends 0x151 every 20 ms, a v2 one 0x221 every 20 ms).
 pub const DETECTION_WINDOW: Duration = Duration::from_millis(300);
 
+listed! {
 /// The chassis protocols this project speaks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
@@ -17,11 +18,9 @@ pub enum Protocol {
     /// Protocol v2: SCOUT 2.0, SCOUT MINI and MINI OMNI firmware since 2020 (CAN only).
     V2,
 }
+}
 
 impl Protocol {
-    /// Both, v1 first.
-    pub const ALL: [Protocol; 2] = [Self::V1, Self::V2];
-
     /// `v1` or `v2`.
     pub const fn name(self) -> &'static str {
         match self {

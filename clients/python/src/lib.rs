@@ -19,12 +19,13 @@ use serde_json::Value;
 use scout_clients::client::{ClientError, Robot, StateSubscriber};
 use scout_clients::control::{ControlError, Controller, Lights, StatusReader, Stopper};
 use scout_clients::interface::LAYOUT_VERSION;
+use scout_clients::interface::control::parse_light_text;
 use scout_clients::interface::json::{STATE_KEYS, state_field, state_json, status_json};
 use scout_clients::interface::services::ServiceError;
 use scout_clients::interface::stop_socket::StopSocketError;
 use scout_clients::{Accepted, Class, ReleaseTarget, StatePayload, StatusPayload, monotonic_ns};
 use scout_protocol::FaultClear;
-use scout_protocol::message::{Light, LightCommand, LightMode};
+use scout_protocol::message::{Light, LightCommand};
 
 /// How long a wait holds off Ctrl-C at most.
 const SLICE: Duration = Duration::from_millis(50);
@@ -252,24 +253,13 @@ fn on_actor<T: Send + 'static>(
 }
 
 fn parse_class(class: &str) -> PyResult<Class> {
-    Class::ALL
-        .iter()
-        .copied()
-        .find(|known| known.name() == class)
-        .ok_or_else(|| PyValueError::new_err(format!("no class {class:?}: teleop or autonomy")))
+    class
+        .parse::<Class>()
+        .map_err(|error| PyValueError::new_err(error.to_string()))
 }
 
 fn parse_light(light: &str) -> PyResult<Light> {
-    let (mode, brightness) = light.split_once(':').unwrap_or((light, "100"));
-    let mode = LightMode::from_name(mode).ok_or_else(|| {
-        PyValueError::new_err(format!("no light mode {mode:?}: off, on, breath or custom"))
-    })?;
-    let brightness = brightness
-        .parse::<u8>()
-        .ok()
-        .filter(|value| *value <= 100)
-        .ok_or_else(|| PyValueError::new_err(format!("brightness {brightness:?}: 0 to 100")))?;
-    Ok(Light { mode, brightness })
+    parse_light_text(light).map_err(PyValueError::new_err)
 }
 
 /// One robot: its state subscriber (read on the caller's thread) and its actor thread.

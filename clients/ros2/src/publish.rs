@@ -15,25 +15,19 @@ use serde_json::Value;
 use crate::config::Ros2Config;
 use crate::msgs::{self, Battery, Header, Joints, Odometry, Status, Transform};
 
-/// The topics the bridge publishes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum Topic {
-    Odom,
-    Tf,
-    BatteryState,
-    JointStates,
-    Diagnostics,
+scout_protocol::listed! {
+    /// The topics the bridge publishes.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+    pub enum Topic {
+        Odom,
+        Tf,
+        BatteryState,
+        JointStates,
+        Diagnostics,
+    }
 }
 
 impl Topic {
-    pub const ALL: [Topic; 5] = [
-        Topic::Odom,
-        Topic::Tf,
-        Topic::BatteryState,
-        Topic::JointStates,
-        Topic::Diagnostics,
-    ];
-
     pub fn message(self) -> msgs::MessageType {
         match self {
             Topic::Odom => msgs::ODOMETRY,

@@ -339,6 +339,16 @@ pub fn parse_light(mode: &str, brightness: u8) -> Result<Light, String> {
     Ok(Light { mode, brightness })
 }
 
+/// A light as `scout lights`, the Python package and remote peers write it: `MODE[:BRIGHTNESS]`
+/// (`off`, `on`, `breath`, `custom`; brightness 0..100, 100 when left out).
+pub fn parse_light_text(text: &str) -> Result<Light, String> {
+    let (mode, brightness) = text.split_once(':').unwrap_or((text, "100"));
+    let brightness = brightness
+        .parse::<u8>()
+        .map_err(|_| format!("brightness `{brightness}` is not 0..100"))?;
+    parse_light(mode, brightness)
+}
+
 /// A fault-clear request from a name: a fault-clear code's name (`driver_overtemp`, `-` or `_`)
 /// or `all` (`None`).
 pub fn parse_fault_clear(name: &str) -> Result<Option<FaultClear>, String> {

@@ -308,6 +308,100 @@ impl RemoteAnswer {
     }
 }
 
+/// The `[zenoh]` table of the gateway configuration.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ZenohConfig {
+    /// Publish to remote peers at all.
+    pub enabled: bool,
+    /// A zenoh configuration file (JSON5) for LAN, router, TLS and access control set-ups;
+    /// `$ZENOH_CONFIG` when unset. Without one: peer mode, multicast scouting off.
+    pub config_file: Option<String>,
+    /// Listen endpoints; default `tcp/127.0.0.1:7448` when there is no configuration file.
+    pub listen: Vec<String>,
+    /// Endpoints to connect to (a zenoh router, for a fleet).
+    pub connect: Vec<String>,
+    /// State publications per second.
+    pub state_rate_hz: f64,
+    /// Remote commands.
+    pub remote_commands: RemoteCommands,
+}
+
+/// Remote commands: off by default; when on, only the listed kinds.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RemoteCommands {
+    /// Accept commands from remote peers.
+    pub enabled: bool,
+    /// What remote peers may do: `estop`, `teleop`, `autonomy` (drive as that class),
+    /// `release`, `resume`, `lights`, `clear_fault`.
+    pub allowed: Vec<Permission>,
+}
+
+impl Default for RemoteCommands {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            allowed: vec![Permission::Estop],
+        }
+    }
+}
+
+impl Default for ZenohConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            config_file: None,
+            listen: Vec::new(),
+            connect: Vec::new(),
+            state_rate_hz: 50.0,
+            remote_commands: RemoteCommands::default(),
+        }
+    }
+}
+
+/// A `[zenoh]` value out of range.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("zenoh.state_rate_hz must be 0.1..1000, found {0}")]
+pub struct BadStateRate(pub f64);
+
+impl ZenohConfig {
+    /// Checks the values.
+    pub fn validate(&self) -> Result<(), BadStateRate> {
+        if self.state_rate_hz.is_finite() && (0.1..=1000.0).contains(&self.state_rate_hz) {
+            Ok(())
+        } else {
+            Err(BadStateRate(self.state_rate_hz))
+        }
+    }
+
+    /// The session settings, with the gateway's default listen endpoint.
+    pub fn session(&self) -> SessionSettings {
+        let no_file = self.config_file.is_none() && std::env::var_os("ZENOH_CONFIG").is_none();
+        let listen = if self.listen.is_empty() && no_file {
+            vec![DEFAULT_LISTEN.to_owned()]
+        } else {
+            self.listen.clone()
+        };
+        SessionSettings {
+            config_file: self.config_file.clone(),
+            listen,
+            connect: self.connect.clone(),
+        }
+    }
+
+    /// The remote commands allowed, by name, comma-separated.
+    pub fn allowed_names(&self) -> String {
+        let names: Vec<&str> = self
+            .remote_commands
+            .allowed
+            .iter()
+            .map(|p| p.name())
+            .collect();
+        names.join(", ")
+    }
+}
+
 /// Where a zenoh session comes from.
 #[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]

@@ -29,7 +29,7 @@ pub fn ensure_built() -> anyhow::Result<()> {
             "build",
             "--quiet",
             "-p",
-            "scout-gateway",
+            "scout-gateway-daemon",
             "-p",
             "scout-sim",
             "-p",

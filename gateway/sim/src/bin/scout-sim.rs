@@ -63,8 +63,8 @@ struct Cli {
     protocol: ProtocolArg,
     /// The model: its speed limits (v2 firmware clamps commands to them) and geometry [default:
     /// scout with v1, scout2 with v2]. A parameter file overrides what it sets.
-    #[arg(long, value_enum)]
-    model: Option<ModelArg>,
+    #[arg(long, value_name = "MODEL", value_parser = Model::parse)]
+    model: Option<Model>,
     /// Seed for `garbage`.
     #[arg(long, default_value_t = 0x5C07)]
     seed: u64,
@@ -77,30 +77,6 @@ enum ProtocolArg {
     V1,
     /// Protocol v2.
     V2,
-}
-
-/// `--model`.
-#[derive(Debug, Clone, Copy, ValueEnum)]
-enum ModelArg {
-    /// The 2019 SCOUT.
-    Scout,
-    /// SCOUT 2.0.
-    Scout2,
-    /// SCOUT MINI.
-    ScoutMini,
-    /// SCOUT MINI OMNI.
-    ScoutMiniOmni,
-}
-
-impl ModelArg {
-    fn model(self) -> Model {
-        match self {
-            Self::Scout => Model::Scout,
-            Self::Scout2 => Model::Scout2,
-            Self::ScoutMini => Model::ScoutMini,
-            Self::ScoutMiniOmni => Model::ScoutMiniOmni,
-        }
-    }
 }
 
 fn main() -> ExitCode {
@@ -132,9 +108,7 @@ fn simulate(cli: Cli) -> anyhow::Result<()> {
         ProtocolArg::V1 => Protocol::V1,
         ProtocolArg::V2 => Protocol::V2,
     };
-    let model = cli
-        .model
-        .map_or(Model::default_for(protocol), ModelArg::model);
+    let model = cli.model.unwrap_or(Model::default_for(protocol));
     let base = SimParams::for_model(model);
     let mut params = match &cli.params {
         Some(path) => {

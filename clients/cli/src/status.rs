@@ -1,4 +1,4 @@
-//! `scout status`: the arbiter's status, as text or as one JSON object (the README's schema).
+//! `scout status`: the arbiter's status, as text or as one JSON object (the schema in docs/safety.md).
 //!
 //! The text is rendered from the very JSON object `--json` prints, so the two cannot disagree,
 //! and the rendering tolerates any JSON: missing fields show as `?`, unknown ones are ignored.
@@ -23,7 +23,7 @@ pub struct Silent(pub String);
 pub struct StatusArgs {
     #[command(flatten)]
     robot: RobotArgs,
-    /// The status as one JSON object (the schema in the README).
+    /// The status as one JSON object (the schema in docs/safety.md).
     #[arg(long)]
     json: bool,
 }

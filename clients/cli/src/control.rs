@@ -9,7 +9,7 @@ use anyhow::Context;
 use clap::Args;
 use scout_clients::client::{ClientError, Robot};
 use scout_clients::control::{ControlError, Controller, Lights, Stopper};
-use scout_clients::interface::control::{parse_fault_clear, parse_light};
+use scout_clients::interface::control::{parse_fault_clear, parse_light_text};
 use scout_clients::interface::stop_socket::StopSocketError;
 use scout_clients::{Accepted, Class, ReleaseTarget, StopCause};
 use scout_protocol::{Light, LightCommand};
@@ -259,22 +259,14 @@ pub struct LightsArgs {
     #[command(flatten)]
     client: ClientArgs,
     /// Front light: off, on, breath or custom, with `:BRIGHTNESS` 0..100 (default 100).
-    #[arg(long, value_name = "MODE[:BRIGHTNESS]", value_parser = parse_light_arg)]
+    #[arg(long, value_name = "MODE[:BRIGHTNESS]", value_parser = parse_light_text)]
     front: Option<Light>,
     /// Rear light, as --front.
-    #[arg(long, value_name = "MODE[:BRIGHTNESS]", value_parser = parse_light_arg)]
+    #[arg(long, value_name = "MODE[:BRIGHTNESS]", value_parser = parse_light_text)]
     rear: Option<Light>,
     /// `auto`: hand the lights back to the chassis.
     #[arg(value_parser = ["auto"])]
     auto: Option<String>,
-}
-
-fn parse_light_arg(text: &str) -> Result<Light, String> {
-    let (mode, brightness) = text.split_once(':').unwrap_or((text, "100"));
-    let brightness = brightness
-        .parse::<u8>()
-        .map_err(|_| format!("brightness `{brightness}` is not 0..100"))?;
-    parse_light(mode, brightness)
 }
 
 pub fn lights(args: &LightsArgs) -> anyhow::Result<ExitCode> {

@@ -1,7 +1,7 @@
 //! `scout ros2`, `scout record`, `scout foxglove` and `scout doctor`: run a companion program
 //! (`scout-ros2`, `scout-foxglove`, `scout-doctor`) with the same arguments. The ROS 2 bridge, the
 //! Foxglove SDK and the gateway's device code live in crates of their own (`clients/ros2`,
-//! `clients/foxglove`, `gateway/doctor`), so `scout` carries none of them.
+//! `clients/foxglove`, `clients/doctor`), so `scout` carries none of them.
 
 use std::ffi::OsString;
 use std::os::unix::process::CommandExt;
@@ -46,7 +46,7 @@ pub const FOXGLOVE: Companion = Companion {
 /// `scout doctor`.
 pub const DOCTOR: Companion = Companion {
     program: "scout-doctor",
-    crate_path: "gateway/doctor",
+    crate_path: "clients/doctor",
 };
 
 /// The program beside this executable (an install or a cargo build puts them together), else
@@ -71,7 +71,7 @@ pub fn run(
     let error = Command::new(&program).args(leading).args(&args.args).exec();
     Err(anyhow::anyhow!(
         "cannot run {}: {error}; this command needs the {} program beside scout or on PATH \
-         (`cargo install --path {}`)",
+         (`cargo install --locked --path {}`, or `cargo build --release --locked` for every program)",
         program.display(),
         companion.program,
         companion.crate_path,

@@ -52,11 +52,11 @@ struct Cli {
     config: Option<PathBuf>,
     /// The chassis' protocol: auto tells it from the chassis' feedback before sending anything
     /// (CAN and slcan; RS232 is v1) [default: auto].
-    #[arg(long, value_enum, value_name = "PROTOCOL")]
+    #[arg(long, value_name = "PROTOCOL", value_parser = ProtocolSetting::parse)]
     protocol: Option<ProtocolSetting>,
     /// The model, for its speed limits and geometry: scout, scout2, scout-mini,
     /// scout-mini-omni [default: scout on v1, scout2 on v2].
-    #[arg(long, value_name = "MODEL", value_parser = parse_model)]
+    #[arg(long, value_name = "MODEL", value_parser = Model::parse)]
     model: Option<Model>,
     /// The fastest the chassis may turn, rad/s; on v1 also the rate at 100 % angular command
     /// [default: the model's, 0.5235 for the SCOUT].
@@ -79,14 +79,6 @@ struct Cli {
     /// release, resume, lights, clear_fault).
     #[arg(long, value_name = "LIST", value_delimiter = ',')]
     remote_commands: Option<Vec<Permission>>,
-}
-
-/// A model by its name.
-fn parse_model(name: &str) -> Result<Model, String> {
-    Model::from_name(name).ok_or_else(|| {
-        let names: Vec<&str> = Model::ALL.iter().map(|model| model.name()).collect();
-        format!("unknown model '{name}': one of {}", names.join(", "))
-    })
 }
 
 /// The exit code for usage, configuration and ownership errors.

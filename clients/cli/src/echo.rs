@@ -18,7 +18,7 @@ use crate::RobotArgs;
 pub struct EchoArgs {
     #[command(flatten)]
     robot: RobotArgs,
-    /// One JSON object per state update (the schema in the README).
+    /// One JSON object per state update (the schema in docs/operating.md).
     #[arg(long)]
     json: bool,
     /// Exit after N updates.
@@ -48,14 +48,21 @@ pub fn run(args: &EchoArgs) -> anyhow::Result<ExitCode> {
     let subscriber = robot.subscribe()?;
     let stdout = std::io::stdout();
     let mut out = stdout.lock();
-    if args.json || !std::io::IsTerminal::is_terminal(&std::io::stdout()) {
-        echo_json(&subscriber, args.count, timeout, &mut out)?;
-        return Ok(ExitCode::SUCCESS);
-    }
+    // Ctrl-C and SIGTERM end it normally (exit 0), after the line or view being written.
     let stop = Arc::new(AtomicBool::new(false));
     let on_signal = Arc::clone(&stop);
     ctrlc::set_handler(move || on_signal.store(true, Ordering::Relaxed))
         .context("installing the Ctrl-C handler")?;
+    if args.json || !std::io::IsTerminal::is_terminal(&std::io::stdout()) {
+        echo_json(
+            &subscriber,
+            args.count,
+            timeout,
+            &|| stop.load(Ordering::Relaxed),
+            &mut out,
+        )?;
+        return Ok(ExitCode::SUCCESS);
+    }
     // Hide the cursor while drawing; show it again on every way out.
     write!(out, "\x1b[?25l")?;
     let result = echo_live(
