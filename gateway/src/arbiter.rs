@@ -516,50 +516,48 @@ impl Arbiter {
         sent: Duration,
     ) -> Answer {
         self.expire(now);
-        let answer = match request {
-            // Never refused, never limited, never needs a client slot.
-            Request::Stop { reason } => self.client_stop(now, origin, &reason),
-            // Never needs a client slot either: with every slot taken, stops can still go.
-            Request::Release { target, through } => self.release(now, origin, &target, through),
-            other => self.decide(now, origin, other, sent),
-        };
+        let answer = self.answer(now, origin, request, sent);
         if let Err(rejection) = &answer {
             self.count_rejection(rejection);
         }
         answer
     }
 
-    fn decide(
+    /// The one match over the request kinds: stops and releases as they come, everything else
+    /// once its sender has a client slot and budget ([`Arbiter::admit`]).
+    fn answer(
         &mut self,
         now: Duration,
         origin: &Origin,
         request: Request,
         sent: Duration,
     ) -> Answer {
-        let index = self.source_index(&origin.key, now)?;
-        self.spend(index, now)?;
-        let source = &mut self.sources[index];
-        source.last_seen = now;
-        source.requests += 1;
-        if let Some(heartbeat) = source.heartbeat.as_mut() {
-            heartbeat.silent = false;
-        }
         let accepted = Ok(Accepted::default());
         match request {
+            // Never refused, never limited, never needs a client slot.
             Request::Stop { reason } => self.client_stop(now, origin, &reason),
+            // Never needs a client slot either: with every slot taken, stops can still go.
             Request::Release { target, through } => self.release(now, origin, &target, through),
-            Request::TakeControl { class } => self.take_control(now, index, class),
+            Request::TakeControl { class } => {
+                let index = self.admit(now, origin)?;
+                self.take_control(now, index, class)
+            }
             Request::Drive {
                 lease,
                 linear,
                 angular,
                 ttl,
-            } => self.drive(now, index, lease, (linear, angular), ttl, sent),
+            } => {
+                let index = self.admit(now, origin)?;
+                self.drive(now, index, lease, (linear, angular), ttl, sent)
+            }
             Request::Relinquish => {
+                let index = self.admit(now, origin)?;
                 self.end_lease(now, index, "relinquished");
                 accepted
             }
             Request::Resume => {
+                self.admit(now, origin)?;
                 if !self.stops.is_empty() {
                     return Err(self.latched());
                 }
@@ -570,10 +568,12 @@ impl Arbiter {
                 accepted
             }
             Request::Lights(setting) => {
+                self.admit(now, origin)?;
                 self.lights = Some(setting);
                 accepted
             }
             Request::ClearFault(code) => {
+                self.admit(now, origin)?;
                 let codes = match code {
                     None => FaultClear::ALL.to_vec(),
                     Some(FaultClear::None) => {
@@ -589,34 +589,53 @@ impl Arbiter {
                 accepted
             }
             Request::Heartbeat { period } => {
-                if period.is_zero() {
-                    self.sources[index].heartbeat = None;
-                } else if !HEARTBEAT_PERIODS.contains(&period) {
-                    return Err(Rejection::Malformed(format!(
-                        "heartbeat period must be {:?} to {:?}",
-                        HEARTBEAT_PERIODS.start(),
-                        HEARTBEAT_PERIODS.end()
-                    )));
-                } else {
-                    if self.sources[index].heartbeat.is_none() {
-                        self.audit(
-                            now,
-                            format!(
-                                "{} is a heartbeat stop source ({period:?})",
-                                origin.key.name
-                            ),
-                        );
-                    }
-                    self.sources[index].heartbeat = Some(Heartbeat {
-                        period,
-                        silent: false,
-                    });
-                }
-                accepted
+                let index = self.admit(now, origin)?;
+                self.heartbeat(now, index, period)
             }
             // The state tracker resets the odometry; to the arbiter it is a beat.
-            Request::ResetOdometry => accepted,
+            Request::ResetOdometry => {
+                self.admit(now, origin)?;
+                accepted
+            }
         }
+    }
+
+    /// A request from a client that needs a slot: its slot (made if new), one request taken
+    /// from its budget, and a beat of its heartbeat. Returns its index.
+    fn admit(&mut self, now: Duration, origin: &Origin) -> Result<usize, Rejection> {
+        let index = self.source_index(&origin.key, now)?;
+        self.spend(index, now)?;
+        let source = &mut self.sources[index];
+        source.last_seen = now;
+        source.requests += 1;
+        if let Some(heartbeat) = source.heartbeat.as_mut() {
+            heartbeat.silent = false;
+        }
+        Ok(index)
+    }
+
+    /// Registers (or, with a zero period, deregisters) client `index` as a heartbeat stop source.
+    fn heartbeat(&mut self, now: Duration, index: usize, period: Duration) -> Answer {
+        if period.is_zero() {
+            self.sources[index].heartbeat = None;
+        } else if !HEARTBEAT_PERIODS.contains(&period) {
+            return Err(Rejection::Malformed(format!(
+                "heartbeat period must be {:?} to {:?}",
+                HEARTBEAT_PERIODS.start(),
+                HEARTBEAT_PERIODS.end()
+            )));
+        } else {
+            if self.sources[index].heartbeat.is_none() {
+                let name = &self.sources[index].key.name;
+                let event = format!("{name} is a heartbeat stop source ({period:?})");
+                self.audit(now, event);
+            }
+            self.sources[index].heartbeat = Some(Heartbeat {
+                period,
+                silent: false,
+            });
+        }
+        Ok(Accepted::default())
     }
 
     /// A client's stop, owned by its name: never refused. The answer carries its id.
