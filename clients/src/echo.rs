@@ -9,21 +9,27 @@ use scout_interface::StatePayload;
 use scout_interface::json::state_json;
 use scout_interface::services::monotonic_ns;
 
+use iceoryx2::port::listener::ListenerWaitError;
+
 use crate::client::{ClientError, StateSubscriber};
 
 /// How often the live view redraws.
 const REDRAW: Duration = Duration::from_millis(100);
 
-/// Prints `count` updates (or forever) as JSON lines; returns how many were printed.
+/// Prints `count` updates (or forever, until `stop` returns true) as JSON lines; returns how
+/// many were printed.
 pub fn echo_json(
     subscriber: &StateSubscriber,
     count: Option<u64>,
     idle_timeout: Duration,
+    stop: &dyn Fn() -> bool,
     out: &mut dyn Write,
 ) -> Result<u64, EchoError> {
     let mut printed = 0;
-    while count.is_none_or(|count| printed < count) {
-        let state = next(subscriber, idle_timeout)?;
+    while !stop() && count.is_none_or(|count| printed < count) {
+        let Some(state) = next(subscriber, idle_timeout, stop)? else {
+            break;
+        };
         writeln!(out, "{}", state_json(&state, monotonic_ns()))?;
         out.flush()?;
         printed += 1;
@@ -43,7 +49,10 @@ pub fn echo_live(
     let mut last_draw = Instant::now() - REDRAW;
     let mut latest = None;
     while !stop() && count.is_none_or(|count| seen < count) {
-        latest = Some(next(subscriber, idle_timeout)?);
+        let Some(state) = next(subscriber, idle_timeout, stop)? else {
+            break;
+        };
+        latest = Some(state);
         seen += 1;
         if last_draw.elapsed() >= REDRAW {
             if let Some(state) = &latest {
@@ -78,10 +87,25 @@ impl From<std::io::Error> for EchoError {
     }
 }
 
-fn next(subscriber: &StateSubscriber, idle_timeout: Duration) -> Result<StatePayload, EchoError> {
-    subscriber
-        .next_timeout(idle_timeout)?
-        .ok_or(EchoError::Idle(idle_timeout))
+/// The next state, or `None` once `stop` says so: a signal (Ctrl-C) wakes the wait, and a
+/// stop asked for is no error, even when the gateway fell silent meanwhile.
+fn next(
+    subscriber: &StateSubscriber,
+    idle_timeout: Duration,
+    stop: &dyn Fn() -> bool,
+) -> Result<Option<StatePayload>, EchoError> {
+    let deadline = Instant::now() + idle_timeout;
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        match subscriber.next_timeout(left) {
+            Ok(Some(state)) => return Ok(Some(state)),
+            _ if stop() => return Ok(None),
+            Ok(None) => return Err(EchoError::Idle(idle_timeout)),
+            // Woken by a signal whose handler has not said stop (yet): wait on.
+            Err(ClientError::Wait(ListenerWaitError::InterruptSignal)) => {}
+            Err(error) => return Err(error.into()),
+        }
+    }
 }
 
 fn number(value: &Value, decimals: usize) -> String {

@@ -226,6 +226,15 @@ pub enum Ros2ConfigError {
     },
     #[error("ROS domain {0} is out of range: ROS 2 domains are 0 to {MAX_DOMAIN}")]
     BadDomain(u32),
+    #[error(
+        "{setting} is a zenoh setting, but the middleware is {middleware} ({why}): give \
+         --middleware zenoh (or RMW_IMPLEMENTATION=rmw_zenoh_cpp), or leave {setting} out"
+    )]
+    OtherMiddlewares {
+        setting: &'static str,
+        middleware: &'static str,
+        why: String,
+    },
     #[error("topic {0} is used twice: give each publisher and cmd_vel topic a name of its own")]
     Duplicate(String),
     #[error("gear_ratio must be a positive number, found {0}")]

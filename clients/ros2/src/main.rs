@@ -96,6 +96,26 @@ impl Ros2Args {
     }
 }
 
+impl Ros2Args {
+    /// A zenoh-only setting given on the command line while the middleware is DDS is a usage
+    /// error, not a setting silently ignored (`--connect` with DDS started DDS and never
+    /// connected).
+    fn check_middleware(&self, middleware: Middleware, why: &str) -> Result<(), Ros2ConfigError> {
+        let zenoh_only = [
+            ("--connect", !self.connect.is_empty()),
+            ("--zenoh-config", self.zenoh_config.is_some()),
+        ];
+        match (middleware, zenoh_only.iter().find(|(_, given)| *given)) {
+            (Middleware::Dds, Some((setting, _))) => Err(Ros2ConfigError::OtherMiddlewares {
+                setting,
+                middleware: middleware.name(),
+                why: why.to_owned(),
+            }),
+            (Middleware::Dds | Middleware::Zenoh, _) => Ok(()),
+        }
+    }
+}
+
 fn main() -> ExitCode {
     let args = Ros2Args::parse();
     match run(&args) {
@@ -140,8 +160,19 @@ fn run(args: &Ros2Args) -> anyhow::Result<ExitCode> {
         );
         return Ok(ExitCode::SUCCESS);
     }
+    let (middleware, why) = match config.middleware {
+        Some(middleware) => (
+            middleware,
+            "chosen in the settings or with --middleware".into(),
+        ),
+        None => {
+            Middleware::from_rmw_implementation(std::env::var("RMW_IMPLEMENTATION").ok().as_deref())
+        }
+    };
+    args.check_middleware(middleware, &why)?;
     tracing_subscriber::fmt()
         .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .with_target(false)
         .with_env_filter(
             // RustDDS' UDP sender warns of every datagram over 1500 bytes, which /diagnostics (2.2
@@ -156,15 +187,6 @@ fn run(args: &Ros2Args) -> anyhow::Result<ExitCode> {
     let on_signal = Arc::clone(&stop);
     ctrlc::set_handler(move || on_signal.store(true, Ordering::Relaxed))
         .context("installing the Ctrl-C handler")?;
-    let (middleware, why) = match config.middleware {
-        Some(middleware) => (
-            middleware,
-            "chosen in the settings or with --middleware".into(),
-        ),
-        None => {
-            Middleware::from_rmw_implementation(std::env::var("RMW_IMPLEMENTATION").ok().as_deref())
-        }
-    };
     info!("scout ros2: speaking {} ({why})", middleware.name());
     let mut config = config;
     let (distro, why) = match config.distro {

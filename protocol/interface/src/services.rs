@@ -161,6 +161,8 @@ pub fn node(name: &str) -> Result<Node<Ipc>, NodeCreationFailure> {
 /// their nodes (`scout-gateway-ROBOT`, `scout-client-ROBOT`...; empty for an unnamed one).
 pub fn remove_dead_nodes() -> Result<Vec<String>, iceoryx2::node::NodeListFailure> {
     use iceoryx2::node::NodeView;
+    // Its global configuration is loaded here first: quietly (no "No config file was loaded").
+    quiet_iceoryx2_logs();
     let mut removed = Vec::new();
     Node::<Ipc>::list(Config::global_config(), |state| {
         if let NodeState::Dead(view) = state {

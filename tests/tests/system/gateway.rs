@@ -260,6 +260,36 @@ fn echo_json_prints_n_updates_then_exits() {
     }
 }
 
+/// Ctrl-C (and SIGTERM) end `scout echo` as a person expects: exit 0, no error (it said
+/// "waiting for the state: InterruptSignal" and exited 1).
+#[test]
+fn echo_ends_on_ctrl_c_with_exit_0() {
+    use std::io::{BufRead, BufReader};
+    let name = robot_name("echo-sigint");
+    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    connect(&name);
+    for signal in [Signal::SIGINT, Signal::SIGTERM] {
+        let mut echo = scout_system_tests::command("scout");
+        echo.args(["echo", "--json", "--name", &name])
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped());
+        let mut child = echo.spawn().expect("scout echo");
+        let mut lines = BufReader::new(child.stdout.take().expect("stdout")).lines();
+        lines.next().expect("a first state").expect("a line");
+        let pid = nix::unistd::Pid::from_raw(child.id() as i32);
+        nix::sys::signal::kill(pid, signal).expect("signal");
+        // Read on, so it never blocks on a full pipe.
+        std::thread::spawn(move || for _ in lines {});
+        let output = scout_system_tests::wait_output(child, Duration::from_secs(10));
+        assert_eq!(
+            output.status.code(),
+            Some(0),
+            "{signal}: {}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+    }
+}
+
 #[test]
 fn echo_into_a_closed_pipe_ends_quietly_with_exit_0() {
     use std::io::{BufRead, BufReader};

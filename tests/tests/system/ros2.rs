@@ -443,6 +443,21 @@ fn scout_ros2_says_what_is_missing() {
     ]);
     assert_eq!(code, Some(1), "{stderr}");
     assert!(stderr.contains("rmw_zenohd"), "{stderr}");
+    // A zenoh setting with DDS is a usage error before anything starts (DDS never runs here).
+    let (code, _, stderr) = scout(&[
+        "ros2",
+        "--middleware",
+        "dds",
+        "--name",
+        &name,
+        "--connect",
+        &tcp(free_port()),
+    ]);
+    assert_eq!(code, Some(2), "{stderr}");
+    assert!(
+        stderr.contains("--connect is a zenoh setting, but the middleware is dds"),
+        "{stderr}"
+    );
     let (code, _, stderr) = scout(&[
         "ros2",
         "--middleware",
