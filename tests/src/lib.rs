@@ -242,6 +242,35 @@ impl Sim {
         self.stdin.flush().expect("flush scout-sim stdin");
     }
 
+    /// The statistics, or, when the simulator does not answer in time, what its process is
+    /// doing (its state and where in the kernel it waits), for a failure message.
+    pub fn stats_or_state(&mut self) -> String {
+        self.send("stats");
+        let deadline = Instant::now() + LINE_TIMEOUT;
+        while let Ok(line) = self
+            .lines
+            .recv_timeout(deadline.saturating_duration_since(Instant::now()))
+        {
+            if line.starts_with('{') {
+                return line;
+            }
+        }
+        let pid = self.child.id();
+        let read = |file: &str| {
+            std::fs::read_to_string(format!("/proc/{pid}/{file}"))
+                .unwrap_or_else(|error| format!("({error})"))
+        };
+        let state = read("status")
+            .lines()
+            .filter(|line| line.starts_with("State:"))
+            .collect::<String>();
+        format!(
+            "no answer to `stats` within {LINE_TIMEOUT:?}: {state}, waiting in {}, kernel stack:\n{}",
+            read("wchan"),
+            read("stack")
+        )
+    }
+
     /// Asks for the statistics and returns them.
     pub fn stats(&mut self) -> serde_json::Value {
         self.send("stats");

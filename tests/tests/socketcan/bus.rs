@@ -13,29 +13,37 @@ use scout_system_tests::{
 
 use crate::{Bus, LIMIT};
 
-/// The simulator and the gateway on `bus`, the link up, with the gateway's robot name.
+/// The simulator and the gateway on `bus`, the link up, with the gateway's robot name. A start
+/// whose link never comes up is reported (what each side saw) and made once more: inside the VM
+/// the simulator has now and then heard nothing and answered nothing for 30 s at start (CI saw
+/// it three times in two runs of this file, not in the runs around them); these tests are about
+/// what comes after, and a second silent start fails.
 pub fn start(bus: &Bus, test: &str) -> (Sim, Gateway, String) {
     let name = robot_name(test);
-    let sim = Sim::start(&["--can", bus.name()]);
-    let gateway = Gateway::start(&["--can", bus.name(), "--name", &name]);
-    let state = connect_within(&name, LIMIT).subscribe().expect("subscribe");
-    let mut sim = sim;
-    link_up_or_explain(&state, &mut sim, &gateway, bus);
-    // The emulated CPU can be slow enough at start-up for the gateway to latch a stop of its
-    // own (a late tick, a silent chassis): these tests are about what comes after.
-    release_all(&name);
-    (sim, gateway, name)
+    let mut attempt = 1;
+    loop {
+        let mut sim = Sim::start(&["--can", bus.name()]);
+        let gateway = Gateway::start(&["--can", bus.name(), "--name", &name]);
+        let state = connect_within(&name, LIMIT).subscribe().expect("subscribe");
+        match link_up(&state) {
+            Ok(()) => {
+                // The emulated CPU can be slow enough at start-up for the gateway to latch a
+                // stop of its own (a late tick, a silent chassis).
+                release_all(&name);
+                return (sim, gateway, name);
+            }
+            Err(last) => {
+                let why = explain(&last, &mut sim, &gateway, bus);
+                assert!(attempt < 2, "{why}");
+                eprintln!("{test}: starting the simulator and the gateway again, after:\n{why}");
+                attempt += 1;
+            }
+        }
+    }
 }
 
-/// Waits for the gateway's link to be `ok`; if it never is, fails with what each side saw: the
-/// simulator's counters, the interface's, and the gateway's log (a start that heard nothing for
-/// 30 s was seen once in CI, and a bare "no wanted state" said nothing of where frames stopped).
-fn link_up_or_explain(
-    state: &scout_clients::client::StateSubscriber,
-    sim: &mut Sim,
-    gateway: &Gateway,
-    bus: &Bus,
-) {
+/// Waits for the gateway's link to be `ok`; the last state seen if it never is.
+fn link_up(state: &scout_clients::client::StateSubscriber) -> Result<(), serde_json::Value> {
     let deadline = Instant::now() + LIMIT;
     let mut last = serde_json::Value::Null;
     while Instant::now() < deadline {
@@ -46,24 +54,30 @@ fn link_up_or_explain(
             last =
                 scout_clients::interface::json::state_json(&sample, scout_clients::monotonic_ns());
             if last["link"]["state"] == "ok" {
-                return;
+                return Ok(());
             }
         }
     }
+    Err(last)
+}
+
+/// What each side saw when the link did not come up: the simulator's counters (or what its
+/// process waits in), the interface's, and the gateway's log.
+fn explain(last: &serde_json::Value, sim: &mut Sim, gateway: &Gateway, bus: &Bus) -> String {
     let interface = std::process::Command::new("ip")
         .args(["-s", "-d", "link", "show", "dev", bus.name()])
         .output()
         .map(|out| String::from_utf8_lossy(&out.stdout).into_owned())
         .unwrap_or_else(|error| format!("ip failed: {error}"));
-    panic!(
+    format!(
         "the gateway's link was not ok within {LIMIT:?}\n\
          last state: {last}\n\
          simulator: {}\n\
          interface: {interface}\n\
          gateway log:\n{}",
-        sim.stats(),
+        sim.stats_or_state(),
         gateway.log()
-    );
+    )
 }
 
 /// `scout resume`: arms autonomy.
@@ -215,8 +229,14 @@ fn lose_the_interface(
     chassis_stays_still_after_braking(&mut sim);
     release_all(&name);
     chassis_stays_still(&mut sim, Duration::from_secs(1));
-    let _again = Driver::start(&name, &["--linear", "0.4", "--client", "streamer-2"]);
-    chassis_commanded(&mut sim, 0.4);
+    // A new take drives again (and a stall of the emulated CPU that latches an overrun here
+    // is released and the drive started again: the release rule is what was checked above).
+    let _again = drive_until_moving(
+        &mut sim,
+        &name,
+        &["--linear", "0.4", "--client", "streamer-2"],
+        LIMIT,
+    );
 }
 
 #[test]

@@ -55,7 +55,17 @@ fn the_simulator_behind_a_gateway_passes_and_its_port_is_checked_through_the_gat
     ] {
         assert_eq!(verdict(&checks, name), "pass", "{name}: {checks:#?}");
     }
-    assert_eq!(verdict(&checks, "stops"), "pass", "{checks:#?}");
+    // A host stall the gateway really had (an `overrun` it latched, on a loaded machine) makes
+    // the stops check warn, and says so: that is the gateway doing its job.
+    let stops = check(&checks, "stops");
+    assert!(
+        stops["verdict"] == "pass"
+            || (stops["verdict"] == "warn"
+                && stops["detail"]
+                    .as_str()
+                    .is_some_and(|d| d.contains("overrun"))),
+        "{checks:#?}"
+    );
     let gateway_pid = format!("(pid {})", gateway.pid());
     assert!(
         check(&checks, "gateway")["detail"]

@@ -377,11 +377,18 @@ fn a_request_flood_neither_starves_the_tick_nor_holds_up_a_stop() {
         intervals["count"].as_u64().unwrap_or(0) > before + 50,
         "{stats}"
     );
-    assert!(
-        intervals["max_ms"].as_f64() < Some(500.0),
-        "the chassis never timed out: {stats}"
-    );
     let after = wait_for_status(&status, LIMIT, |_| true);
+    // The safety rule, not the machine's speed: no gap the chassis could have timed out in, or
+    // the gateway saw it and latched an overrun (a loaded host stalls it now and then), and the
+    // chassis stands still since the guard's stop either way.
+    let overrun = after["stops"]
+        .as_array()
+        .is_some_and(|stops| stops.iter().any(|stop| stop["cause"] == "overrun"));
+    assert!(
+        intervals["max_ms"].as_f64() < Some(500.0) || overrun,
+        "a gap the gateway did not latch: {stats}\n{after}"
+    );
+    chassis_stays_still(&mut sim, Duration::from_millis(500));
     assert!(
         after["rejections"]["rate_limited"].as_u64() > Some(0),
         "{after}"
