@@ -28,7 +28,8 @@ pub mod state;
 pub mod stop_socket;
 pub mod text;
 
-/// The layout version in every payload's iceoryx2 type name (`scout::StatePayload.v6`).
+/// The layout version in every payload's iceoryx2 type name (`scout::StatePayload.v6`). Raise it
+/// when a payload changes: the sizes pinned below stop the build until it is raised.
 pub const LAYOUT_VERSION: u32 = 6;
 
 pub use control::{
@@ -39,3 +40,24 @@ pub use scout_protocol::Transport;
 pub use services::{Ipc, Role, ServiceError};
 pub use state::{LinkState, StatePayload};
 pub use text::FixedText;
+
+
+/// Pins a shared-memory payload's size and alignment at compile time: a change to either is a new
+/// layout, which a client or gateway of the old one would misread.
+macro_rules! pin_layout {
+    ($payload:ty, $size:literal, $align:literal) => {
+        const _: () = assert!(
+            core::mem::size_of::<$payload>() == $size && core::mem::align_of::<$payload>() == $align,
+            concat!(
+                stringify!($payload),
+                "'s size or alignment changed: raise LAYOUT_VERSION (the `.vN` of every type \
+                 name follows it), then pin the new size and alignment here"
+            )
+        );
+    };
+}
+
+pin_layout!(state::StatePayload, 896, 8);
+pin_layout!(control::StatusPayload, 6424, 8);
+pin_layout!(control::ControlRequest, 208, 8);
+pin_layout!(control::ControlResponse, 200, 8);
