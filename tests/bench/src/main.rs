@@ -8,6 +8,7 @@ mod plot;
 mod procs;
 mod roles;
 mod run;
+mod soak;
 mod watchers;
 
 use std::path::PathBuf;
@@ -66,6 +67,15 @@ enum Role {
     /// Burns a core.
     #[command(hide = true)]
     Hog { seconds: f64 },
+    /// Churns clients against a gateway on the simulator for MINUTES (controllers taking and
+    /// giving up control, stops and releases, clients killed and stopped, a request flood) and
+    /// prints the slopes of the gateway's memory, open files, threads and /dev/shm files.
+    Soak {
+        minutes: f64,
+        /// Write the figures as JSON to FILE.
+        #[arg(long, value_name = "FILE")]
+        json: Option<PathBuf>,
+    },
     /// Control requests as fast as `hz`.
     #[command(hide = true)]
     Flood { name: String, hz: f64, seconds: f64 },
@@ -96,6 +106,7 @@ fn main() -> ExitCode {
             Ok(())
         }
         Some(Role::Flood { name, hz, seconds }) => roles::flood(&name, hz, seconds),
+        Some(Role::Soak { minutes, json }) => soak::soak(minutes, json.as_deref()),
         Some(Role::DatagramFlood {
             name,
             seconds,

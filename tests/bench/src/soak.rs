@@ -1,0 +1,194 @@
+//! `scout-bench soak MINUTES`: churns clients against a gateway on the simulator for a given time
+//! (controllers that take, drive and give up control, stops and releases, clients killed by
+//! SIGKILL and stopped by SIGSTOP, a request flood) and samples the gateway's resident memory,
+//! open files and threads, and the shared-memory files, every 10 s. It prints each one's first
+//! and last value and its slope per hour over the run after the first fifth (the warm-up), so
+//! that a long run says "flat" with a number.
+
+use std::path::Path;
+use std::process::{Child, Stdio};
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use serde_json::json;
+
+use crate::procs::{self, Gateway, Sim};
+
+/// A figure of a sample, and its label.
+type Metric = (&'static str, fn(&Sample) -> f64);
+
+/// One sample of the gateway's resources.
+#[derive(Debug, Clone, Copy)]
+struct Sample {
+    /// Since the start, s.
+    at: f64,
+    rss_mb: f64,
+    open_files: f64,
+    threads: f64,
+    shm_files: f64,
+}
+
+fn sample(pid: i32, at: f64) -> anyhow::Result<Sample> {
+    let (_, rss_mb) = procs::usage(pid)?;
+    let open_files = std::fs::read_dir(format!("/proc/{pid}/fd"))?.count() as f64;
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status"))?;
+    let threads = status
+        .lines()
+        .find_map(|line| line.strip_prefix("Threads:"))
+        .and_then(|value| value.trim().parse().ok())
+        .unwrap_or(0.0);
+    let shm_files = std::fs::read_dir("/dev/shm").map_or(0, |dir| dir.count()) as f64;
+    Ok(Sample {
+        at,
+        rss_mb,
+        open_files,
+        threads,
+        shm_files,
+    })
+}
+
+/// The least-squares slope of `points` (x in s), per hour.
+fn slope_per_hour(points: &[(f64, f64)]) -> f64 {
+    let n = points.len() as f64;
+    if n < 2.0 {
+        return 0.0;
+    }
+    let mean_x = points.iter().map(|(x, _)| x).sum::<f64>() / n;
+    let mean_y = points.iter().map(|(_, y)| y).sum::<f64>() / n;
+    let cov: f64 = points
+        .iter()
+        .map(|(x, y)| (x - mean_x) * (y - mean_y))
+        .sum();
+    let var: f64 = points.iter().map(|(x, _)| (x - mean_x).powi(2)).sum();
+    if var == 0.0 { 0.0 } else { cov / var * 3600.0 }
+}
+
+/// `scout ARGS` in the background, quiet.
+fn scout(args: &[&str]) -> anyhow::Result<Child> {
+    procs::command("scout")?
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .context("starting scout")
+}
+
+/// One round of churn, about two seconds long.
+fn churn(name: &str, round: u64) -> anyhow::Result<()> {
+    let client = format!("soak-{}", round % 50);
+    // A controller that takes control, drives and gives it up.
+    let mut drive = scout(&[
+        "drive",
+        "--name",
+        name,
+        "--linear",
+        "0.2",
+        "--duration",
+        "1",
+        "--client",
+        &client,
+    ])?;
+    // One killed while it drives (a dead client), one stopped (a stalled client).
+    let mut killed = scout(&["drive", "--name", name, "--linear", "0.1"])?;
+    let mut stopped = scout(&["status", "--name", name, "--json"])?;
+    let stopped_pid = nix::unistd::Pid::from_raw(stopped.id() as i32);
+    let _ = nix::sys::signal::kill(stopped_pid, nix::sys::signal::Signal::SIGSTOP);
+    // A burst of requests from a client of its own.
+    let exe = std::env::current_exe()?;
+    let mut flood = std::process::Command::new(exe)
+        .args(["flood", name, "200", "1"])
+        .stdout(Stdio::null())
+        .spawn()?;
+    std::thread::sleep(Duration::from_millis(600));
+    let _ = killed.kill();
+    let _ = killed.wait();
+    let _ = nix::sys::signal::kill(stopped_pid, nix::sys::signal::Signal::SIGKILL);
+    let _ = stopped.wait();
+    let _ = drive.wait();
+    let _ = flood.wait();
+    // A person's stop and release.
+    scout(&["estop", "--name", name, "--reason", "soak"])?.wait()?;
+    scout(&["release", "--name", name])?.wait()?;
+    Ok(())
+}
+
+/// Runs the soak for `minutes`, writing the figures as JSON to `json` if given.
+pub fn soak(minutes: f64, json_out: Option<&Path>) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        minutes.is_finite() && minutes > 0.0,
+        "give a positive number of minutes"
+    );
+    procs::ensure_built()?;
+    let scratch = std::env::temp_dir().join(format!("scout-soak-{}", std::process::id()));
+    std::fs::create_dir_all(&scratch)?;
+    let name = format!("soak-{}", std::process::id());
+    let sim = Sim::start(&["--serial"])?;
+    let gateway = Gateway::start(
+        &["--serial", &sim.port, "--name", &name, "--no-zenoh"],
+        &scratch.join("gateway.log"),
+    )?;
+    crate::roles::connect(&name)?;
+    let started = Instant::now();
+    let end = started + Duration::from_secs_f64(minutes * 60.0);
+    let mut samples = vec![sample(gateway.pid(), 0.0)?];
+    let mut next_sample = started + Duration::from_secs(10);
+    let mut round = 0;
+    eprintln!("soak: {minutes} min of churn against robot {name}, a sample every 10 s");
+    while Instant::now() < end {
+        churn(&name, round)?;
+        round += 1;
+        if Instant::now() >= next_sample {
+            next_sample += Duration::from_secs(10);
+            samples.push(sample(gateway.pid(), started.elapsed().as_secs_f64())?);
+        }
+    }
+    samples.push(sample(gateway.pid(), started.elapsed().as_secs_f64())?);
+    let warm = samples.len() / 5;
+    let metrics: [Metric; 4] = [
+        ("resident memory, MB", |s| s.rss_mb),
+        ("open files", |s| s.open_files),
+        ("threads", |s| s.threads),
+        ("files in /dev/shm", |s| s.shm_files),
+    ];
+    println!(
+        "| after {minutes} min, {round} rounds | first | last | slope per hour (after the first fifth) |"
+    );
+    println!("|---|---|---|---|");
+    let mut figures = serde_json::Map::new();
+    for (label, value) in metrics {
+        let points: Vec<(f64, f64)> = samples[warm..].iter().map(|s| (s.at, value(s))).collect();
+        let (first, last) = (value(&samples[0]), value(&samples[samples.len() - 1]));
+        let slope = slope_per_hour(&points);
+        println!("| {label} | {first:.2} | {last:.2} | {slope:+.3} |");
+        figures.insert(
+            label.to_owned(),
+            json!({ "first": first, "last": last, "slope_per_hour": slope }),
+        );
+    }
+    if let Some(path) = json_out {
+        let report = json!({ "minutes": minutes, "rounds": round, "figures": figures });
+        std::fs::write(path, serde_json::to_string_pretty(&report)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    drop(gateway);
+    drop(sim);
+    let _ = std::fs::remove_dir_all(&scratch);
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_slope_is_per_hour_and_flat_for_a_constant() {
+        let rising: Vec<(f64, f64)> = (0..10)
+            .map(|i| (f64::from(i) * 60.0, f64::from(i)))
+            .collect();
+        assert!((slope_per_hour(&rising) - 60.0).abs() < 1e-9);
+        let flat: Vec<(f64, f64)> = (0..10).map(|i| (f64::from(i), 5.0)).collect();
+        assert_eq!(slope_per_hour(&flat), 0.0);
+        assert_eq!(slope_per_hour(&[(1.0, 1.0)]), 0.0);
+    }
+}
