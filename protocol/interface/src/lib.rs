@@ -41,13 +41,13 @@ pub use services::{Ipc, Role, ServiceError};
 pub use state::{LinkState, StatePayload};
 pub use text::FixedText;
 
-
 /// Pins a shared-memory payload's size and alignment at compile time: a change to either is a new
 /// layout, which a client or gateway of the old one would misread.
 macro_rules! pin_layout {
     ($payload:ty, $size:literal, $align:literal) => {
         const _: () = assert!(
-            core::mem::size_of::<$payload>() == $size && core::mem::align_of::<$payload>() == $align,
+            core::mem::size_of::<$payload>() == $size
+                && core::mem::align_of::<$payload>() == $align,
             concat!(
                 stringify!($payload),
                 "'s size or alignment changed: raise LAYOUT_VERSION (the `.vN` of every type \
