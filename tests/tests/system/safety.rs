@@ -290,32 +290,28 @@ fn scout_estop_and_release_work_with_dev_shm_full() {
     let robot = connect(&name);
     let status = robot.status().expect("status");
     let scout_bin = scout_system_tests::bin("scout");
-    let script = format!(
-        "mount -t tmpfs -o size=64k tmpfs /dev/shm && \
-         (dd if=/dev/zero of=/dev/shm/fill bs=4096 2>/dev/null; true) && \
-         test \"$(df --output=avail /dev/shm | tail -1 | tr -d ' ')\" = 0 && \
-         exec {} estop --name {name} --reason 'dev/shm full'",
-        scout_bin.display()
-    );
-    let output = std::process::Command::new("unshare")
-        .args(["-m", "--propagation", "private", "sh", "-c", &script])
-        .output()
-        .expect("unshare");
+    // `scout ARGS --name NAME` in a mount namespace whose /dev/shm is a 64 KiB tmpfs filled to
+    // the last byte.
+    let in_full_shm = |args: &str| {
+        let script = format!(
+            "mount -t tmpfs -o size=64k tmpfs /dev/shm && \
+             (dd if=/dev/zero of=/dev/shm/fill bs=4096 2>/dev/null; true) && \
+             test \"$(df --output=avail /dev/shm | tail -1 | tr -d ' ')\" = 0 && \
+             exec {} {args} --name {name}",
+            scout_bin.display()
+        );
+        std::process::Command::new("unshare")
+            .args(["-m", "--propagation", "private", "sh", "-c", &script])
+            .output()
+            .expect("unshare")
+    };
+    let output = in_full_shm("estop --reason 'dev/shm full'");
     assert_eq!(output.status.code(), Some(0), "{output:?}");
     let latched = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
     assert_eq!(latched["stops"][0]["reason"], "dev/shm full");
     // A person can recover too: `scout release` goes through the stop endpoint, up to the
     // newest stop the gateway names, and says what fills /dev/shm.
-    let script = format!(
-        "mount -t tmpfs -o size=64k tmpfs /dev/shm && \
-         (dd if=/dev/zero of=/dev/shm/fill bs=4096 2>/dev/null; true) && \
-         exec {} release --name {name}",
-        scout_bin.display()
-    );
-    let output = std::process::Command::new("unshare")
-        .args(["-m", "--propagation", "private", "sh", "-c", &script])
-        .output()
-        .expect("unshare");
+    let output = in_full_shm("release");
     assert_eq!(output.status.code(), Some(0), "{output:?}");
     let said = String::from_utf8_lossy(&output.stderr);
     assert!(said.contains("the largest there: fill"), "{said}");
@@ -325,16 +321,7 @@ fn scout_estop_and_release_work_with_dev_shm_full() {
     );
     wait_for_status(&status, LIMIT, |s| s["latched"] == false);
     // Whatever fails there is an error with an exit code, never a signal.
-    let script = format!(
-        "mount -t tmpfs -o size=64k tmpfs /dev/shm && \
-         (dd if=/dev/zero of=/dev/shm/fill bs=4096 2>/dev/null; true) && \
-         exec {} status --name {name}",
-        scout_bin.display()
-    );
-    let output = std::process::Command::new("unshare")
-        .args(["-m", "--propagation", "private", "sh", "-c", &script])
-        .output()
-        .expect("unshare");
+    let output = in_full_shm("status");
     assert!(
         output.status.code().is_some(),
         "killed by a signal: {output:?}"
