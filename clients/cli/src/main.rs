@@ -1,12 +1,9 @@
 //! `scout`: the command-line tool for a SCOUT chassis behind scout-gateway.
 //!
-//! Exit codes: 0 success; 1 something failed (a line `scout decode` could not decode, an I/O
-//! error, no ROS 2 router to connect to, `scout-ros2` not installed); 2 usage error (also a bad
-//! `scout ros2` setting, or another `scout ros2` bridge serves the robot on that ROS domain); 3 no
-//! gateway with that name runs, or it stopped answering; 4 the gateway rejected the request (the
-//! reason is printed). `scout ros2` runs the `scout-ros2` program, `scout record` and `scout
-//! foxglove` the `scout-foxglove` program, `scout doctor` the `scout-doctor` program; each exits
-//! with that program's code.
+//! Exit codes: README.md's "Exit codes" lists them, once; `exit_code` maps errors to them.
+//! `scout ros2` runs the `scout-ros2` program, `scout record` and `scout foxglove` the
+//! `scout-foxglove` program, `scout doctor` the `scout-doctor` program; each exits with that
+//! program's code.
 
 mod companion;
 mod control;
