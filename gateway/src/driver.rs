@@ -480,7 +480,7 @@ impl Driver {
             return (request.seq, Err(rejection));
         }
         let pid = (received.pid != 0).then_some(received.pid);
-        let needs_identity = within_share && request.ask.request().is_some();
+        let needs_identity = within_share && !matches!(request.ask, Ask::Ping);
         let identity = pid.filter(|_| needs_identity).map(ProcessIdentity::of);
         let operator = identity
             .as_ref()
