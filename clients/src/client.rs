@@ -7,6 +7,7 @@ use iceoryx2::node::{Node, NodeCreationFailure};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::subscriber::Subscriber;
 use scout_interface::StatePayload;
+use scout_interface::failure::Failure;
 use scout_interface::services::{self, BadRobotName, Ipc, Role, ServiceError};
 
 /// What can go wrong talking to a gateway.
@@ -23,19 +24,19 @@ pub enum ClientError {
     Service(#[from] ServiceError),
     /// This process's iceoryx2 node could not be created.
     #[error("creating this process's iceoryx2 node: {0:?} (is /dev/shm a writable tmpfs?)")]
-    Node(#[source] NodeCreationFailure),
+    Node(NodeCreationFailure),
     /// A subscriber could not be created.
     #[error("subscribing: {0:?}")]
-    Subscribe(#[source] iceoryx2::port::subscriber::SubscriberCreateError),
+    Subscribe(iceoryx2::port::subscriber::SubscriberCreateError),
     /// A listener could not be created.
     #[error("listening for state events: {0:?}")]
-    Listen(#[source] iceoryx2::port::listener::ListenerCreateError),
+    Listen(iceoryx2::port::listener::ListenerCreateError),
     /// Receiving failed.
     #[error("receiving: {0:?}")]
-    Receive(#[source] iceoryx2::port::ReceiveError),
+    Receive(iceoryx2::port::ReceiveError),
     /// Waiting for a state event failed.
     #[error("waiting for the state: {0:?}")]
-    Wait(#[source] iceoryx2::port::listener::ListenerWaitError),
+    Wait(iceoryx2::port::listener::ListenerWaitError),
     /// A control port could not be created.
     #[error(transparent)]
     ControlPort(#[from] services::ControlPortError),
@@ -56,6 +57,24 @@ pub enum ClientError {
     /// The stop endpoint's socket could not be made.
     #[error(transparent)]
     StopSocket(scout_interface::stop_socket::StopSocketError),
+}
+
+impl ClientError {
+    /// What kind of failure this is.
+    pub fn kind(&self) -> Failure {
+        match self {
+            Self::BadName(_) | Self::BadClientName(_) => Failure::Usage,
+            Self::Service(error) => error.kind(),
+            Self::ControlPort(error) => error.kind(),
+            Self::StopSocket(error) => error.kind(),
+            Self::Node(_)
+            | Self::Subscribe(_)
+            | Self::Listen(_)
+            | Self::Receive(_)
+            | Self::Wait(_)
+            | Self::SharedMemoryFull { .. } => Failure::Failed,
+        }
+    }
 }
 
 /// Where iceoryx2 keeps its shared memory, and the least free space a client needs there.

@@ -13,6 +13,7 @@ use scout_interface::stop_socket::{Ask, StopClient, StopSocketError};
 use scout_protocol::FaultClear;
 
 use crate::client::{ClientError, Robot};
+use crate::failure::Failure;
 
 pub use scout_interface::services::ANSWER_TIMEOUT;
 
@@ -51,6 +52,17 @@ impl From<StopSocketError> for ControlError {
 }
 
 impl ControlError {
+    /// What kind of failure this is.
+    pub fn kind(&self) -> Failure {
+        match self {
+            Self::Rejected(_) => Failure::Refused,
+            Self::NoAnswer { .. } => Failure::NoGateway,
+            Self::Request(error) => error.kind(),
+            Self::Client(error) => error.kind(),
+            Self::Stop(error) => error.kind(),
+        }
+    }
+
     /// The kind of rejection, if the arbiter refused the request.
     pub fn rejection(&self) -> Option<RejectionKind> {
         match self {

@@ -65,19 +65,19 @@ pub struct DecodedFrame {
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum LineError {
     /// Not a candump line.
-    #[error("{0}")]
+    #[error(transparent)]
     Candump(#[from] candump::CandumpError),
     /// A CAN frame that is not a valid SCOUT v1 frame.
-    #[error("{0}")]
+    #[error(transparent)]
     Can(#[from] can::CanError),
     /// A CAN frame that is not a valid SCOUT v2 frame.
-    #[error("{0}")]
+    #[error(transparent)]
     V2(#[from] v2::V2Error),
     /// An id of neither protocol.
     #[error("unknown CAN id 0x{0:03X} (neither SCOUT v1 nor v2)")]
     UnknownId(u16),
     /// Serial hex with a rejected frame.
-    #[error("{0}")]
+    #[error(transparent)]
     Serial(#[from] scout_protocol::serial::SerialError),
     /// Serial hex that does not end on a frame boundary.
     #[error("{0} trailing byte(s) are not a whole serial frame")]

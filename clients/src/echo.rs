@@ -5,6 +5,8 @@ use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
+use crate::failure::Failure;
+
 use scout_interface::StatePayload;
 use scout_interface::json::state_json;
 use scout_interface::services::monotonic_ns;
@@ -77,8 +79,19 @@ pub enum EchoError {
     #[error("no state from the gateway for {0:?}: is it stopped (SIGSTOP) or overloaded?")]
     Idle(Duration),
     /// Writing the output failed (a closed pipe is the reader's normal end, not an error).
-    #[error("writing the output: {0}")]
+    #[error("writing the output")]
     Io(#[source] std::io::Error),
+}
+
+impl EchoError {
+    /// What kind of failure this is: a gateway fallen silent is as good as gone.
+    pub fn kind(&self) -> Failure {
+        match self {
+            Self::Client(error) => error.kind(),
+            Self::Idle(_) => Failure::NoGateway,
+            Self::Io(_) => Failure::Failed,
+        }
+    }
 }
 
 impl From<std::io::Error> for EchoError {

@@ -5,6 +5,7 @@
 //! - [`remote`]: reading gateways through zenoh (feature `remote`, on by default).
 //! - [`echo`]: `scout echo`, the state on a terminal or as JSON lines.
 //! - [`decode`]: candump text and serial hex to decoded frames (`scout decode`).
+//! - [`failure`]: the kind of a client error, and every program's exit code from it.
 //!
 //! The contract with the gateway (payloads, requests, JSON schemas, zenoh keys) is
 //! [`scout_interface`], re-exported here as [`interface`].
@@ -13,6 +14,7 @@ pub mod client;
 pub mod control;
 pub mod decode;
 pub mod echo;
+pub mod failure;
 #[cfg(feature = "remote")]
 pub mod remote;
 

@@ -152,18 +152,37 @@ impl Default for ArbiterConfig {
     }
 }
 
+/// An arbiter setting out of range.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ArbiterConfigError {
+    /// A command age limit beyond what the chassis waits.
+    #[error("arbiter.{name} must be 1..={max} (the chassis stops after {max} ms), found {ms}")]
+    CommandAge {
+        /// The setting.
+        name: &'static str,
+        /// Its value, ms.
+        ms: u64,
+        /// The largest allowed, ms.
+        max: u64,
+    },
+    /// A cap, limit or rate that is not positive.
+    #[error("arbiter caps, limits, request_rate_hz and request_burst must be positive")]
+    NotPositive,
+}
+
 impl ArbiterConfig {
     /// Checks the values; the error says which and why.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ArbiterConfigError> {
         for (name, ms) in [
             ("teleop_max_age_ms", self.teleop_max_age_ms),
             ("autonomy_max_age_ms", self.autonomy_max_age_ms),
         ] {
             if ms == 0 || ms > MAX_COMMAND_AGE.as_millis() as u64 {
-                return Err(format!(
-                    "arbiter.{name} must be 1..={max} (the chassis stops after {max} ms), found {ms}",
-                    max = MAX_COMMAND_AGE.as_millis()
-                ));
+                return Err(ArbiterConfigError::CommandAge {
+                    name,
+                    ms,
+                    max: MAX_COMMAND_AGE.as_millis() as u64,
+                });
             }
         }
         let positive = |v: f64| v.is_finite() && v > 0.0;
@@ -181,9 +200,7 @@ impl ArbiterConfig {
                 self.request_rate_hz,
             ]);
         if !all.into_iter().all(positive) || self.request_burst == 0 {
-            return Err(
-                "arbiter caps, limits, request_rate_hz and request_burst must be positive".into(),
-            );
+            return Err(ArbiterConfigError::NotPositive);
         }
         Ok(())
     }

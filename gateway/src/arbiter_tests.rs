@@ -765,7 +765,13 @@ fn config_is_checked() {
         teleop_max_age_ms: 600,
         ..ArbiterConfig::default()
     };
-    assert!(too_old.validate().expect_err("600 ms").contains("1..=500"));
+    assert!(
+        too_old
+            .validate()
+            .expect_err("600 ms")
+            .to_string()
+            .contains("1..=500")
+    );
     let no_rate = ArbiterConfig {
         request_rate_hz: 0.0,
         ..ArbiterConfig::default()

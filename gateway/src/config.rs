@@ -171,21 +171,24 @@ impl Default for GatewayConfig {
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
     /// The file could not be read.
-    #[error("reading {path}: {source}")]
+    #[error("reading {path}: {error}")]
     Read {
         /// The file.
         path: PathBuf,
         /// Why.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The file is not valid TOML for this struct.
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Parse {
         /// The file.
         path: PathBuf,
         /// Why.
-        source: Box<toml::de::Error>,
+        error: Box<toml::de::Error>,
     },
+    /// An arbiter setting is out of range.
+    #[error(transparent)]
+    Arbiter(#[from] crate::arbiter::ArbiterConfigError),
     /// A value is out of range or missing.
     #[error("{0}")]
     Invalid(String),
@@ -198,13 +201,13 @@ impl GatewayConfig {
         let Some(path) = path.map(Path::to_path_buf).or(from_env) else {
             return Ok(Self::default());
         };
-        let text = std::fs::read_to_string(&path).map_err(|source| ConfigError::Read {
+        let text = std::fs::read_to_string(&path).map_err(|error| ConfigError::Read {
             path: path.clone(),
-            source,
+            error,
         })?;
-        toml::from_str(&text).map_err(|source| ConfigError::Parse {
+        toml::from_str(&text).map_err(|error| ConfigError::Parse {
             path,
-            source: Box::new(source),
+            error: Box::new(error),
         })
     }
 
@@ -238,7 +241,7 @@ impl GatewayConfig {
                 self.timing.realtime_priority
             )));
         }
-        self.arbiter.validate().map_err(ConfigError::Invalid)?;
+        self.arbiter.validate()?;
         let safety = &self.safety;
         let positive = |v: f64| v.is_finite() && v > 0.0;
         if !([

@@ -293,6 +293,6 @@ pub struct ClearFaultArgs {
 }
 
 pub fn clear_fault(args: &ClearFaultArgs) -> anyhow::Result<ExitCode> {
-    let code = parse_fault_clear(&args.kind).map_err(anyhow::Error::msg)?;
+    let code = parse_fault_clear(&args.kind)?;
     one_shot(&args.client, |controller| controller.clear_fault(code))
 }

@@ -17,11 +17,7 @@ use std::io::ErrorKind;
 use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand};
-use scout_clients::client::ClientError;
-use scout_clients::control::ControlError;
-use scout_clients::echo::EchoError;
-use scout_clients::interface::services::ServiceError;
-use scout_clients::interface::stop_socket::StopSocketError;
+use scout_clients::failure::{self, Failure};
 
 /// Command-line tool for an AgileX SCOUT chassis.
 #[derive(Debug, Parser)]
@@ -138,28 +134,12 @@ fn is_broken_pipe(error: &anyhow::Error) -> bool {
     })
 }
 
-/// The exit code for `error` (see the module documentation).
+/// The exit code for `error`: its kind's (`scout_clients::failure`), knowing this program's
+/// own errors.
 fn exit_code(error: &anyhow::Error) -> u8 {
-    for cause in error.chain() {
-        let no_gateway = matches!(cause.downcast_ref(), Some(ServiceError::NoGateway { .. }))
-            || matches!(
-                cause.downcast_ref(),
-                Some(ClientError::Service(ServiceError::NoGateway { .. }))
-            )
-            || matches!(cause.downcast_ref(), Some(EchoError::Idle(_)))
-            || matches!(cause.downcast_ref(), Some(ControlError::NoAnswer { .. }))
-            || matches!(
-                cause.downcast_ref(),
-                Some(ControlError::Stop(StopSocketError::NoGateway { .. }))
-            )
-            || matches!(cause.downcast_ref(), Some(status::Silent(_)))
-            || matches!(cause.downcast_ref(), Some(echo::RemoteSilent { .. }));
-        if no_gateway {
-            return 3;
-        }
-        if matches!(cause.downcast_ref(), Some(ControlError::Rejected(_))) {
-            return 4;
-        }
-    }
-    1
+    failure::exit_code(error.chain(), |cause| {
+        let silent = cause.downcast_ref::<status::Silent>().is_some()
+            || cause.downcast_ref::<echo::RemoteSilent>().is_some();
+        silent.then_some(Failure::NoGateway)
+    })
 }

@@ -1,6 +1,7 @@
 //! One check's result: its name, its verdict, what was found and, when it did not pass, the fix;
 //! printed as a line for people or as one JSON object.
 
+use scout_interface::failure::Failure;
 use serde_json::{Value, json};
 
 /// How a check came out.
@@ -103,9 +104,13 @@ impl Check {
     }
 }
 
-/// The exit code for these checks: 1 when one failed, else 0.
+/// The exit code for these checks: [`Failure::Failed`]'s when one failed, else 0.
 pub fn exit_code(checks: &[Check]) -> u8 {
-    u8::from(checks.iter().any(|check| check.verdict == Verdict::Fail))
+    if checks.iter().any(|check| check.verdict == Verdict::Fail) {
+        Failure::Failed.exit_code()
+    } else {
+        0
+    }
 }
 
 #[cfg(test)]

@@ -12,6 +12,7 @@ use clap::{ArgGroup, Parser};
 use scout_doctor::check::{self, Check};
 use scout_doctor::doctor::{self, Options};
 use scout_gateway::device::DeviceSpec;
+use scout_interface::failure::Failure;
 
 /// Check a SCOUT set-up: the device, the CAN interface, the traffic and protocol, the chassis'
 /// state (e-stop, RC, faults, battery), the gateway and its stops, zenoh when asked.
@@ -53,7 +54,7 @@ fn main() -> ExitCode {
             "scout doctor: --listen {}: give 0.1 to 60 seconds",
             args.listen
         );
-        return ExitCode::from(2);
+        return ExitCode::from(Failure::Usage.exit_code());
     }
     let port = match (&args.serial, &args.slcan, &args.can) {
         (Some(path), _, _) => Some(DeviceSpec::Serial(path.clone())),

@@ -49,7 +49,7 @@ pub enum GuardError {
     #[error("no listening socket of {0} among this process's descriptors")]
     NotFound(SocketAddrV4),
     /// A system call failed.
-    #[error("{what}: {source}")]
+    #[error("{what}")]
     Io {
         /// Which.
         what: &'static str,

@@ -40,11 +40,10 @@ pub const BASE_FRAME: &str = "base_link";
 
 /// What could not be set up.
 #[derive(Debug, thiserror::Error)]
-#[error("creating the Foxglove channel {topic}: {source}")]
+#[error("creating the Foxglove channel {topic}: {error}")]
 pub struct ChannelError {
     topic: &'static str,
-    #[source]
-    source: foxglove::FoxgloveError,
+    error: foxglove::FoxgloveError,
 }
 
 /// The channels, made on one context (a recording's or the live server's).
@@ -76,7 +75,7 @@ fn json_channel(
             schema.to_string().into_bytes(),
         ))
         .build_raw()
-        .map_err(|source| ChannelError { topic, source })
+        .map_err(|error| ChannelError { topic, error })
 }
 
 fn timestamp(unix_ns: u64) -> Timestamp {

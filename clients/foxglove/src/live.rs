@@ -20,6 +20,7 @@ use tracing::{info, warn};
 use scout_clients::ReleaseTarget;
 use scout_clients::control::ControlError;
 use scout_clients::control::Stopper;
+use scout_clients::failure::Failure;
 
 use crate::backend::Backend;
 use crate::channels::{ChannelError, Channels};
@@ -60,13 +61,13 @@ pub enum LiveError {
     #[error(transparent)]
     Channel(#[from] ChannelError),
     /// The stop client could not be made (a bad owner name).
-    #[error("the stop service's owner: {0}")]
+    #[error("the stop service's owner")]
     Owner(#[source] scout_clients::client::ClientError),
     /// The server could not start.
     #[error("starting the Foxglove WebSocket server: {0}")]
-    Serve(#[source] foxglove::FoxgloveError),
+    Serve(foxglove::FoxgloveError),
     /// The address cannot be listened on.
-    #[error("listening on {listen}: {source} (is the port in use?)")]
+    #[error("listening on {listen} (is the port in use?)")]
     Listen {
         /// The address.
         listen: SocketAddr,
@@ -75,8 +76,20 @@ pub enum LiveError {
         source: std::io::Error,
     },
     /// Reading the gateway failed.
-    #[error("reading the gateway: {0}")]
+    #[error("reading the gateway")]
     Read(#[source] scout_clients::client::ClientError),
+}
+
+impl LiveError {
+    /// What kind of failure this is: an address that cannot be listened on is a usage error.
+    pub fn kind(&self) -> Failure {
+        match self {
+            Self::Listen { .. } => Failure::Usage,
+            Self::Source(error) => error.kind(),
+            Self::Owner(error) | Self::Read(error) => error.kind(),
+            Self::Channel(_) | Self::Serve(_) => Failure::Failed,
+        }
+    }
 }
 
 fn trigger_schema(name: &str, properties: Value) -> Schema {
@@ -129,18 +142,32 @@ pub fn through_of(payload: &[u8]) -> Option<u64> {
 /// The release a caller asks for, through the newest stop it saw (`through`): a stop latched
 /// after it survives. A `through` past the newest stop this view has shown names stops no
 /// caller of this view can have seen, and is refused.
-fn release_through(payload: &[u8], newest_seen: u64) -> Result<u64, String> {
+fn release_through(payload: &[u8], newest_seen: u64) -> Result<u64, ReleaseRefused> {
     match through_of(payload) {
         Some(through) if through <= newest_seen => Ok(through),
-        Some(through) => Err(format!(
-            "stop #{through} was never shown here (the newest in the Problems list is \
-             #{newest_seen}): name the newest stop you saw"
-        )),
-        None => Err(format!(
-            "say which stops you saw: {{\"through\": N}}, N the newest stop number in the \
-             Problems list (now #{newest_seen}); stops latched after it are kept"
-        )),
+        Some(through) => Err(ReleaseRefused::NeverShown {
+            through,
+            newest_seen,
+        }),
+        None => Err(ReleaseRefused::NoThrough { newest_seen }),
     }
+}
+
+/// Why a release through this view was refused before it reached the gateway.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+enum ReleaseRefused {
+    /// It names a stop newer than the view has shown.
+    #[error(
+        "stop #{through} was never shown here (the newest in the Problems list is \
+         #{newest_seen}): name the newest stop you saw"
+    )]
+    NeverShown { through: u64, newest_seen: u64 },
+    /// It names no stop.
+    #[error(
+        "say which stops you saw: {{\"through\": N}}, N the newest stop number in the \
+         Problems list (now #{newest_seen}); stops latched after it are kept"
+    )]
+    NoThrough { newest_seen: u64 },
 }
 
 fn services(
@@ -205,7 +232,7 @@ fn services(
                     }
                     Err(why) => {
                         return Ok::<_, String>(
-                            json!({ "success": false, "message": why })
+                            json!({ "success": false, "message": why.to_string() })
                                 .to_string()
                                 .into_bytes(),
                         );
@@ -388,14 +415,18 @@ mod tests {
             &br#"{"through": 8}"#[..],
             br#"{"through": 18446744073709551615}"#,
         ] {
-            let refused = release_through(beyond, 7).expect_err("never shown");
+            let refused = release_through(beyond, 7)
+                .expect_err("never shown")
+                .to_string();
             assert!(
                 refused.contains("never shown") && refused.contains("#7"),
                 "{refused}"
             );
         }
         for payload in [&b"{}"[..], b"", b"not json", br#"{"through": -1}"#] {
-            let refused = release_through(payload, 7).expect_err("no through");
+            let refused = release_through(payload, 7)
+                .expect_err("no through")
+                .to_string();
             assert!(
                 refused.contains("\"through\"") && refused.contains("#7"),
                 "{refused}"

@@ -15,8 +15,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use clap::{Args, Parser, Subcommand};
-use scout_clients::client::ClientError;
-use scout_clients::interface::services::ServiceError;
+use scout_clients::failure::{self, Failure};
 use scout_foxglove::channels::TOPICS;
 use scout_foxglove::live::{Live, LiveError, LiveOptions};
 use scout_foxglove::origin::OriginPolicy;
@@ -188,30 +187,15 @@ fn serve(args: &ServeArgs, stop: &AtomicBool) -> anyhow::Result<()> {
 #[error("{0}")]
 struct Usage(String);
 
-/// Whether the gateway was not there: no gateway of that name runs.
-fn no_gateway(cause: &(dyn std::error::Error + 'static)) -> bool {
-    let client =
-        |error: &ClientError| matches!(error, ClientError::Service(ServiceError::NoGateway { .. }));
-    let source = |error: &SourceError| matches!(error, SourceError::Client(error) if client(error));
-    matches!(cause.downcast_ref(), Some(ServiceError::NoGateway { .. }))
-        || cause.downcast_ref().is_some_and(client)
-        || cause.downcast_ref().is_some_and(source)
-        || matches!(cause.downcast_ref(), Some(RecordError::Source(error)) if source(error))
-        || matches!(cause.downcast_ref(), Some(LiveError::Source(error)) if source(error))
-}
-
-/// The exit code for `error` (see the module documentation).
+/// The exit code for `error`: its kind's (`scout_clients::failure`), knowing this program's
+/// own errors.
 fn exit_code(error: &anyhow::Error) -> u8 {
-    for cause in error.chain() {
-        if no_gateway(cause) {
-            return 3;
+    failure::exit_code(error.chain(), |cause| {
+        if cause.downcast_ref::<Usage>().is_some() {
+            return Some(Failure::Usage);
         }
-        if matches!(cause.downcast_ref(), Some(RecordError::Exists(_)))
-            || matches!(cause.downcast_ref(), Some(LiveError::Listen { .. }))
-            || cause.downcast_ref::<Usage>().is_some()
-        {
-            return 2;
-        }
-    }
-    1
+        let kind = cause.downcast_ref::<RecordError>().map(RecordError::kind);
+        kind.or_else(|| cause.downcast_ref::<LiveError>().map(LiveError::kind))
+            .or_else(|| cause.downcast_ref::<SourceError>().map(SourceError::kind))
+    })
 }

@@ -29,7 +29,7 @@ impl OriginPolicy {
 
     /// Whether a handshake with `origin` (`None`: no such header) is let in; if not, why, in
     /// words that say what to do.
-    pub fn check(&self, origin: Option<&str>) -> Result<(), String> {
+    pub fn check(&self, origin: Option<&str>) -> Result<(), ForeignOrigin> {
         let Some(origin) = origin else {
             return Ok(());
         };
@@ -37,12 +37,17 @@ impl OriginPolicy {
         if self.any || is_local(&origin) || self.allowed.contains(&origin) {
             return Ok(());
         }
-        Err(format!(
-            "a WebSocket from the web page at {origin} is refused: only this machine's pages \
-             and apps may connect unless `scout foxglove --allow-origin {origin}` lets it in"
-        ))
+        Err(ForeignOrigin(origin))
     }
 }
+
+/// A handshake from a web page this policy does not let in (its origin, normalized).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "a WebSocket from the web page at {0} is refused: only this machine's pages and apps may \
+     connect unless `scout foxglove --allow-origin {0}` lets it in"
+)]
+pub struct ForeignOrigin(pub String);
 
 fn normalize(origin: &str) -> String {
     origin.trim().trim_end_matches('/').to_ascii_lowercase()
@@ -112,7 +117,7 @@ mod tests {
             "chrome-extension://abc",
             "",
         ] {
-            let refused = policy.check(Some(origin)).expect_err(origin);
+            let refused = policy.check(Some(origin)).expect_err(origin).to_string();
             assert!(refused.contains("--allow-origin"), "{refused}");
         }
     }

@@ -9,6 +9,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use foxglove::{Context, McapCompression, McapWriteOptions};
+use scout_clients::failure::Failure;
 use tracing::{info, warn};
 
 use crate::channels::{ChannelError, Channels};
@@ -43,7 +44,7 @@ pub enum RecordError {
     #[error("{0} exists: choose another name, or --force to replace it")]
     Exists(PathBuf),
     /// The output could not be created.
-    #[error("creating {path}: {source}")]
+    #[error("creating {path}")]
     Create {
         /// The file.
         path: PathBuf,
@@ -58,19 +59,18 @@ pub enum RecordError {
     #[error(transparent)]
     Channel(#[from] ChannelError),
     /// Writing the file failed.
-    #[error("writing {path}: {source}")]
+    #[error("writing {path}: {error}")]
     Write {
         /// The file.
         path: PathBuf,
         /// Why.
-        #[source]
-        source: foxglove::FoxgloveError,
+        error: foxglove::FoxgloveError,
     },
     /// Reading the gateway failed during the recording.
-    #[error("reading the gateway: {0}")]
+    #[error("reading the gateway")]
     Read(#[source] scout_clients::client::ClientError),
     /// The closed file could not be synced to disk.
-    #[error("syncing {path} to disk: {source}")]
+    #[error("syncing {path} to disk")]
     Sync {
         /// The file.
         path: PathBuf,
@@ -78,6 +78,20 @@ pub enum RecordError {
         #[source]
         source: std::io::Error,
     },
+}
+
+impl RecordError {
+    /// What kind of failure this is: an existing file is a usage error.
+    pub fn kind(&self) -> Failure {
+        match self {
+            Self::Exists(_) => Failure::Usage,
+            Self::Source(error) => error.kind(),
+            Self::Read(error) => error.kind(),
+            Self::Create { .. } | Self::Channel(_) | Self::Write { .. } | Self::Sync { .. } => {
+                Failure::Failed
+            }
+        }
+    }
 }
 
 /// What was recorded.
@@ -144,9 +158,9 @@ pub fn record(options: &RecordOptions, stop: &AtomicBool) -> Result<Summary, Rec
                 source,
             },
         })?;
-    let write_error = |source| RecordError::Write {
+    let write_error = |error| RecordError::Write {
         path: path.clone(),
-        source,
+        error,
     };
     let context = Context::new();
     let writer = context

@@ -9,6 +9,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use scout_clients::client::{ClientError, Robot};
+use scout_clients::failure::Failure;
 use scout_clients::monotonic_ns;
 use tracing::warn;
 
@@ -50,8 +51,18 @@ pub enum SourceError {
     #[error(transparent)]
     Client(#[from] ClientError),
     /// The reader thread could not be started.
-    #[error("starting the reader thread: {0}")]
+    #[error("starting the reader thread")]
     Thread(#[source] std::io::Error),
+}
+
+impl SourceError {
+    /// What kind of failure this is.
+    pub fn kind(&self) -> Failure {
+        match self {
+            Self::Client(error) => error.kind(),
+            Self::Thread(_) => Failure::Failed,
+        }
+    }
 }
 
 /// A reader thread for one robot.

@@ -148,7 +148,7 @@ fn pipe(mut from: TcpStream, mut to: TcpStream) {
 fn serve(mut client: TcpStream, backend: &Arc<Backend>, origins: &OriginPolicy) -> io::Result<()> {
     let (head, early) = read_head(&mut client, HANDSHAKE_TIMEOUT)?;
     if let Err(why) = origins.check(origin_of(&head)) {
-        let _ = client.write_all(forbidden(&why).as_bytes());
+        let _ = client.write_all(forbidden(&why.to_string()).as_bytes());
         let _ = client.shutdown(Shutdown::Both);
         return Err(io::Error::new(io::ErrorKind::PermissionDenied, why));
     }

@@ -259,7 +259,7 @@ fn parse_class(class: &str) -> PyResult<Class> {
 }
 
 fn parse_light(light: &str) -> PyResult<Light> {
-    parse_light_text(light).map_err(PyValueError::new_err)
+    parse_light_text(light).map_err(|error| PyValueError::new_err(error.to_string()))
 }
 
 /// One robot: its state subscriber (read on the caller's thread) and its actor thread.

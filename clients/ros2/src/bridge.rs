@@ -26,6 +26,7 @@ use crate::publish::{Clocks, Messages, Topic};
 use crate::stream::{Action, CmdVelStream, Ignored, Origin, Outcome};
 use scout_clients::client::{ClientError, Robot};
 use scout_clients::control::ControlError;
+use scout_clients::failure::Failure;
 use scout_interface::control::ReleaseTarget;
 
 /// Why the bridge stopped.
@@ -47,7 +48,7 @@ pub enum BridgeError {
     #[error("the middleware stopped delivering messages and calls: {0}")]
     Middleware(String),
     /// A thread of the bridge could not start.
-    #[error("starting a thread: {0}")]
+    #[error("starting a thread")]
     Thread(#[from] std::io::Error),
     /// The zenoh configuration file puts the session in another mode than client.
     #[error(
@@ -71,6 +72,20 @@ pub enum BridgeError {
         /// The ROS domain.
         domain: u32,
     },
+}
+
+impl BridgeError {
+    /// What kind of failure this is: a setting that cannot work is a usage error.
+    pub fn kind(&self) -> Failure {
+        match self {
+            Self::Client(error) => error.kind(),
+            Self::Control(error) => error.kind(),
+            Self::NotClient { .. } | Self::AlreadyRunning { .. } => Failure::Usage,
+            Self::Zenoh(_) | Self::Dds(_) | Self::Middleware(_) | Self::Thread(_) => {
+                Failure::Failed
+            }
+        }
+    }
 }
 
 /// The abstract socket address that one bridge per robot and ROS domain holds.
@@ -267,7 +282,7 @@ pub fn queues(counters: Arc<Counters>) -> (Senders, Inboxes) {
 /// encapsulation header) goes out on its topic.
 pub trait Publishers {
     /// Publishes `payload` on `topic` (a topic not published is ignored).
-    fn publish(&mut self, topic: Topic, payload: Vec<u8>) -> Result<(), String>;
+    fn publish(&mut self, topic: Topic, payload: Vec<u8>) -> Result<(), BridgeError>;
 }
 
 /// The wall clock, for ROS stamps and source times.

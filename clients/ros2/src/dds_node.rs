@@ -454,13 +454,13 @@ fn describe<D>(error: &rustdds::dds::WriteError<D>) -> String {
 }
 
 impl Publishers for DdsPublishers {
-    fn publish(&mut self, topic: Topic, payload: Vec<u8>) -> Result<(), String> {
+    fn publish(&mut self, topic: Topic, payload: Vec<u8>) -> Result<(), BridgeError> {
         let Some(writer) = self.writers.iter_mut().find(|w| w.topic == topic) else {
             return Ok(());
         };
-        let body = payload
-            .strip_prefix(&ENCAPSULATION[..])
-            .ok_or("a payload without the CDR little-endian header")?;
+        let body = payload.strip_prefix(&ENCAPSULATION[..]).ok_or_else(|| {
+            BridgeError::Dds("a payload without the CDR little-endian header".into())
+        })?;
         let result = writer
             .writer
             .write(EncodedCdr(body.to_vec()), Some(Timestamp::now()));
@@ -484,7 +484,7 @@ impl Publishers for DdsPublishers {
                 Err(error) => warn!("ros2: making a new writer of {topic:?}: {error:?}"),
             }
         }
-        result.map_err(|error| describe(&error))
+        result.map_err(|error| BridgeError::Dds(describe(&error)))
     }
 }
 

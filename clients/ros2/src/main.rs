@@ -11,9 +11,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::Context;
 use clap::Parser;
-use scout_clients::client::ClientError;
-use scout_clients::control::ControlError;
-use scout_clients::interface::services::ServiceError;
+use scout_clients::failure::{self, Failure};
 use scout_ros2::bridge::{self, BridgeError};
 use scout_ros2::config::{Middleware, Ros2Config, Ros2ConfigError};
 use scout_ros2::rmw::Distro;
@@ -127,28 +125,15 @@ fn main() -> ExitCode {
     }
 }
 
-/// The exit code for `error` (see the module documentation).
+/// The exit code for `error`: its kind's (`scout_clients::failure`), knowing this program's
+/// own errors.
 fn exit_code(error: &anyhow::Error) -> u8 {
-    for cause in error.chain() {
-        let no_gateway = matches!(cause.downcast_ref(), Some(ServiceError::NoGateway { .. }))
-            || matches!(
-                cause.downcast_ref(),
-                Some(ClientError::Service(ServiceError::NoGateway { .. }))
-            )
-            || matches!(cause.downcast_ref(), Some(ControlError::NoAnswer { .. }));
-        if no_gateway {
-            return 3;
+    failure::exit_code(error.chain(), |cause| {
+        if cause.downcast_ref::<Ros2ConfigError>().is_some() {
+            return Some(Failure::Usage);
         }
-        if cause.downcast_ref::<Ros2ConfigError>().is_some()
-            || matches!(
-                cause.downcast_ref(),
-                Some(BridgeError::AlreadyRunning { .. } | BridgeError::NotClient { .. })
-            )
-        {
-            return 2;
-        }
-    }
-    1
+        cause.downcast_ref::<BridgeError>().map(BridgeError::kind)
+    })
 }
 
 fn run(args: &Ros2Args) -> anyhow::Result<ExitCode> {

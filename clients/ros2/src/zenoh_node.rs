@@ -39,7 +39,7 @@ pub struct ZenohPublishers {
 }
 
 impl Publishers for ZenohPublishers {
-    fn publish(&mut self, topic: Topic, payload: Vec<u8>) -> Result<(), String> {
+    fn publish(&mut self, topic: Topic, payload: Vec<u8>) -> Result<(), BridgeError> {
         let Some((_, publisher)) = self.publishers.iter_mut().find(|(t, _)| *t == topic) else {
             return Ok(());
         };
@@ -51,7 +51,7 @@ impl Publishers for ZenohPublishers {
             .put(payload)
             .attachment(attachment.to_vec())
             .wait()
-            .map_err(|error| error.to_string())
+            .map_err(|error| BridgeError::Zenoh(error.to_string()))
     }
 }
 

@@ -11,8 +11,8 @@ use std::time::{Duration, Instant};
 use scout_interface::control::{Accepted, Class, Request, StatusPayload};
 use scout_interface::json::{state_json, status_json};
 use scout_interface::remote::{
-    self, MAX_COMMAND_BYTES, Permission, REMOTE_PREFIX, RemoteAnswer, RemoteCommand, RemoteKind,
-    peer_client_name,
+    self, CommandError, MAX_COMMAND_BYTES, Permission, REMOTE_PREFIX, RemoteAnswer, RemoteCommand,
+    RemoteKind, peer_client_name,
 };
 pub use scout_interface::remote::{BadStateRate, RemoteCommands, ZenohConfig};
 use scout_interface::services::{self, ControlPort, RequestError, Role, Way, monotonic_ns};
@@ -393,7 +393,7 @@ fn serve_estops(
                 }
                 Err(reason) => {
                     counters.rejected.fetch_add(1, Ordering::Relaxed);
-                    RemoteAnswer::rejected(reason)
+                    RemoteAnswer::rejected(reason.to_string())
                 }
             }
         };
@@ -404,7 +404,11 @@ fn serve_estops(
 
 /// One remote e-stop: never refused for its payload (a missing, oversized or malformed one
 /// only loses its reason); it needs the permission and the stop service, nothing else.
-fn estop(config: &ZenohConfig, port: &mut ControlPort, query: &Query) -> Result<Accepted, String> {
+fn estop(
+    config: &ZenohConfig,
+    port: &mut ControlPort,
+    query: &Query,
+) -> Result<Accepted, CommandError> {
     allowed(config, Permission::Estop)?;
     let (_, peer) = remote::parse_command_key(query.key_expr().as_str())?;
     let reason = query
@@ -417,21 +421,20 @@ fn estop(config: &ZenohConfig, port: &mut ControlPort, query: &Query) -> Result<
                 .map(str::to_owned)
         })
         .unwrap_or_else(|| "remote estop".into());
-    port.request_for_peer(&Request::Stop { reason }, &peer_client_name(peer))
-        .map_err(|error| error.to_string())
+    Ok(port.request_for_peer(&Request::Stop { reason }, &peer_client_name(peer))?)
 }
 
 const DISABLED: &str =
     "remote commands are disabled on this gateway (zenoh.remote_commands.enabled)";
 
-fn allowed(config: &ZenohConfig, permission: Permission) -> Result<(), String> {
+fn allowed(config: &ZenohConfig, permission: Permission) -> Result<(), CommandError> {
     if config.remote_commands.allowed.contains(&permission) {
         Ok(())
     } else {
-        Err(format!(
-            "remote `{permission}` is not allowed on this gateway (zenoh.remote_commands.allowed: {})",
-            config.allowed_names()
-        ))
+        Err(CommandError::NotAllowed {
+            permission,
+            allowed: config.allowed_names(),
+        })
     }
 }
 
@@ -516,7 +519,7 @@ impl<'a> RemoteControl<'a> {
         }
         let answer = match self.decide(query) {
             Ok(Accepted { clamped, .. }) => RemoteAnswer::accepted(clamped),
-            Err(reason) => RemoteAnswer::rejected(reason),
+            Err(reason) => RemoteAnswer::rejected(reason.to_string()),
         };
         if answer.accepted {
             counters.commands_accepted += 1;
@@ -526,30 +529,25 @@ impl<'a> RemoteControl<'a> {
         answer
     }
 
-    fn decide(&mut self, query: &Query) -> Result<Accepted, String> {
+    fn decide(&mut self, query: &Query) -> Result<Accepted, CommandError> {
         let (kind, peer) = remote::parse_command_key(query.key_expr().as_str())?;
         let name = peer_client_name(peer);
-        let payload = query
-            .payload()
-            .ok_or("no payload: send the command as JSON")?;
+        let payload = query.payload().ok_or(CommandError::NoPayload)?;
         if payload.len() > MAX_COMMAND_BYTES {
-            return Err(format!(
-                "payload of {} bytes exceeds {MAX_COMMAND_BYTES}",
-                payload.len()
-            ));
+            return Err(CommandError::TooLarge {
+                size: payload.len(),
+                max: MAX_COMMAND_BYTES,
+            });
         }
         let command: RemoteCommand = serde_json::from_slice(&payload.to_bytes())
-            .map_err(|error| format!("invalid JSON: {error}"))?;
+            .map_err(|error| CommandError::Json(error.to_string()))?;
         let known = self.peers.iter().position(|p| p.name == name);
         let lease = known.and_then(|index| self.peers[index].lease);
         let (permission, request) = command.request(kind, lease)?;
         // The permission before anything is kept or opened for this peer.
         allowed(self.config, permission)?;
         if let Request::Release { .. } = request {
-            return self
-                .safety
-                .request_for_peer(&request, &name)
-                .map_err(|error| error.to_string());
+            return Ok(self.safety.request_for_peer(&request, &name)?);
         }
         let (node, robot) = (self.node, self.robot);
         let peer = self.peer(&name);
@@ -576,7 +574,7 @@ impl<'a> RemoteControl<'a> {
             _ if lost_control => peer.lease = None,
             _ => {}
         }
-        answer.map_err(|error| error.to_string())
+        Ok(answer?)
     }
 
     /// The peer named `name` (a client name), kept from now on; past [`MAX_REMOTE_PEERS`] the
@@ -614,15 +612,12 @@ impl Peer {
         &mut self,
         node: &iceoryx2::node::Node<services::Ipc>,
         robot: &str,
-    ) -> Result<&mut ControlPort, String> {
-        if self.control.is_none() {
-            let port = ControlPort::open(node, robot, Way::Control, &self.name)
-                .map_err(|error| error.to_string())?;
-            self.control = Some(port);
-        }
-        self.control
-            .as_mut()
-            .ok_or_else(|| "no control port".into())
+    ) -> Result<&mut ControlPort, CommandError> {
+        let port = match self.control.take() {
+            Some(port) => port,
+            None => ControlPort::open(node, robot, Way::Control, &self.name)?,
+        };
+        Ok(self.control.insert(port))
     }
 
     /// Checks a take-control's or drive command's age (and a drive's order); returns when it
@@ -630,27 +625,29 @@ impl Peer {
     /// command the network held up for longer than its life, measured against the fastest
     /// delivery seen from this peer (so no common clock is needed). A take-control carries
     /// `sent_ms` too: it seeds that measure, so the first drive is aged like every later one.
-    fn on_time(&mut self, kind: RemoteKind, command: &RemoteCommand) -> Result<Duration, String> {
+    fn on_time(
+        &mut self,
+        kind: RemoteKind,
+        command: &RemoteCommand,
+    ) -> Result<Duration, CommandError> {
         let (Some(sent_ms), Some(seq)) = (
             command.sent_ms,
             command.seq.or((kind != RemoteKind::Drive).then_some(0)),
         ) else {
-            return Err(match kind {
+            return Err(CommandError::Missing(match kind {
                 RemoteKind::Drive => {
-                    "drive needs `seq` (rising) and `sent_ms` (the sender's clock, ms)".into()
+                    "drive needs `seq` (rising) and `sent_ms` (the sender's clock, ms)"
                 }
-                other => format!(
-                    "{other} needs `sent_ms` (the sender's clock, ms): it seeds the age check of the drives that follow"
-                ),
-            });
+                _ => {
+                    "take-control needs `sent_ms` (the sender's clock, ms): it seeds the age check of the drives that follow"
+                }
+            }));
         };
         if kind == RemoteKind::Drive {
             if let Some(last) = self.seq
                 && seq <= last
             {
-                return Err(format!(
-                    "out of order: seq {seq} after {last} (duplicated or reordered)"
-                ));
+                return Err(CommandError::OutOfOrder { seq, last });
             }
             self.seq = Some(seq);
         }
@@ -664,11 +661,10 @@ impl Peer {
             Duration::from_millis(u64::from(ms)).min(MAX_REMOTE_LIFE)
         });
         if late > life {
-            return Err(format!(
-                "held up {} ms on the way, past its life of {} ms",
-                late.as_millis(),
-                life.as_millis()
-            ));
+            return Err(CommandError::Late {
+                late_ms: late.as_millis(),
+                life_ms: life.as_millis(),
+            });
         }
         Ok(now.saturating_sub(late))
     }

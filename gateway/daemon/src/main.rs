@@ -21,6 +21,7 @@ use scout_gateway::driver::Driver;
 use scout_gateway::lock::LockError;
 use scout_gateway::stop_endpoint::StopEndpoint;
 use scout_interface::Transport;
+use scout_interface::failure::Failure;
 use scout_interface::remote::Permission;
 use scout_interface::services;
 use scout_io::notify::ServiceManager;
@@ -82,7 +83,7 @@ struct Cli {
 }
 
 /// The exit code for usage, configuration and ownership errors.
-const USAGE: u8 = 2;
+const USAGE: u8 = Failure::Usage.exit_code();
 
 fn main() -> ExitCode {
     let cli = Cli::parse();

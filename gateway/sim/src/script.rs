@@ -54,7 +54,33 @@ pub enum SimCommand {
 #[error("{reason} in `{line}` (type `help` for the commands)")]
 pub struct ParseError {
     line: String,
-    reason: String,
+    reason: Reason,
+}
+
+/// Why a line is not a command.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum Reason {
+    /// No command word.
+    #[error("empty command")]
+    Empty,
+    /// A command word, or its arguments, the language does not have.
+    #[error("unknown command or arguments for `{0}`")]
+    Command(String),
+    /// A motor value the language does not have.
+    #[error("unknown motor value `{0}`")]
+    MotorValue(String),
+    /// Neither `on` nor `off`.
+    #[error("expected on or off, found `{0}`")]
+    OnOff(String),
+    /// Not a motor number.
+    #[error("motor must be 1..4, found `{0}`")]
+    Motor(String),
+    /// Not a whole number.
+    #[error("expected a whole number, found `{0}`")]
+    Whole(String),
+    /// Not a finite number.
+    #[error("expected a number, found `{0}`")]
+    Number(String),
 }
 
 /// Parses one line; `Ok(None)` for blank lines and comments.
@@ -70,7 +96,7 @@ pub fn parse(line: &str) -> Result<Option<SimCommand>, ParseError> {
     })
 }
 
-fn parse_words(words: &[&str]) -> Result<SimCommand, String> {
+fn parse_words(words: &[&str]) -> Result<SimCommand, Reason> {
     use SimCommand::*;
     Ok(match words {
         ["estop", state] => Inject(Injection::EStop(on_off(state)?)),
@@ -93,7 +119,7 @@ fn parse_words(words: &[&str]) -> Result<SimCommand, String> {
                 "rpm" => MotorValue::Rpm,
                 "driver-temp" => MotorValue::DriverTemperature,
                 "motor-temp" => MotorValue::MotorTemperature,
-                other => return Err(format!("unknown motor value `{other}`")),
+                other => return Err(Reason::MotorValue(other.into())),
             };
             Inject(Injection::PinMotor(motor(n)?, field, finite(value)?))
         }
@@ -105,39 +131,38 @@ fn parse_words(words: &[&str]) -> Result<SimCommand, String> {
         ["stats"] => Stats,
         ["quit" | "exit"] => Quit,
         ["help"] => Help,
-        [command, ..] => return Err(format!("unknown command or arguments for `{command}`")),
-        [] => return Err("empty command".into()),
+        [command, ..] => return Err(Reason::Command((*command).into())),
+        [] => return Err(Reason::Empty),
     })
 }
 
-fn on_off(word: &str) -> Result<bool, String> {
+fn on_off(word: &str) -> Result<bool, Reason> {
     match word {
         "on" => Ok(true),
         "off" => Ok(false),
-        other => Err(format!("expected on or off, found `{other}`")),
+        other => Err(Reason::OnOff(other.into())),
     }
 }
 
-fn motor(word: &str) -> Result<Motor, String> {
+fn motor(word: &str) -> Result<Motor, Reason> {
     word.parse()
         .ok()
         .and_then(Motor::new)
-        .ok_or_else(|| format!("motor must be 1..4, found `{word}`"))
+        .ok_or_else(|| Reason::Motor(word.into()))
 }
 
-fn number<T: std::str::FromStr>(word: &str) -> Result<T, String> {
-    word.parse()
-        .map_err(|_| format!("expected a whole number, found `{word}`"))
+fn number<T: std::str::FromStr>(word: &str) -> Result<T, Reason> {
+    word.parse().map_err(|_| Reason::Whole(word.into()))
 }
 
-fn finite(word: &str) -> Result<f64, String> {
+fn finite(word: &str) -> Result<f64, Reason> {
     match word.parse::<f64>() {
         Ok(value) if value.is_finite() => Ok(value),
-        _ => Err(format!("expected a number, found `{word}`")),
+        _ => Err(Reason::Number(word.into())),
     }
 }
 
-fn millis(word: &str) -> Result<Duration, String> {
+fn millis(word: &str) -> Result<Duration, Reason> {
     number(word).map(Duration::from_millis)
 }
 

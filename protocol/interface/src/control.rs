@@ -328,30 +328,39 @@ pub fn check_light(which: &str, mode: LightMode, brightness: u8) -> Result<(), R
     Ok(())
 }
 
+/// A light a client wrote that is not one.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum BadLight {
+    /// Not a mode's name.
+    #[error("light mode `{0}`: off, on, breath or custom")]
+    Mode(String),
+    /// Not 0..100.
+    #[error("brightness `{0}` is not 0..100")]
+    Brightness(String),
+}
+
 /// A light from its mode's name (`off`, `on`, `breath`, `custom`) and brightness 0..100.
-pub fn parse_light(mode: &str, brightness: u8) -> Result<Light, String> {
-    let mode = LightMode::from_name(mode)
-        .ok_or_else(|| format!("light mode `{mode}`: off, on, breath or custom"))?;
-    check_light("the", mode, brightness).map_err(|rejection| match rejection {
-        Rejection::Malformed(why) => why,
-        other => other.to_string(),
-    })?;
+pub fn parse_light(mode: &str, brightness: u8) -> Result<Light, BadLight> {
+    let mode = LightMode::from_name(mode).ok_or_else(|| BadLight::Mode(mode.to_owned()))?;
+    if brightness > 100 {
+        return Err(BadLight::Brightness(brightness.to_string()));
+    }
     Ok(Light { mode, brightness })
 }
 
 /// A light as `scout lights`, the Python package and remote peers write it: `MODE[:BRIGHTNESS]`
 /// (`off`, `on`, `breath`, `custom`; brightness 0..100, 100 when left out).
-pub fn parse_light_text(text: &str) -> Result<Light, String> {
+pub fn parse_light_text(text: &str) -> Result<Light, BadLight> {
     let (mode, brightness) = text.split_once(':').unwrap_or((text, "100"));
     let brightness = brightness
         .parse::<u8>()
-        .map_err(|_| format!("brightness `{brightness}` is not 0..100"))?;
+        .map_err(|_| BadLight::Brightness(brightness.to_owned()))?;
     parse_light(mode, brightness)
 }
 
 /// A fault-clear request from a name: a fault-clear code's name (`driver_overtemp`, `-` or `_`)
 /// or `all` (`None`).
-pub fn parse_fault_clear(name: &str) -> Result<Option<FaultClear>, String> {
+pub fn parse_fault_clear(name: &str) -> Result<Option<FaultClear>, UnknownName> {
     let name = name.replace('-', "_");
     if name == "all" {
         return Ok(None);
@@ -359,9 +368,13 @@ pub fn parse_fault_clear(name: &str) -> Result<Option<FaultClear>, String> {
     FaultClear::from_name(&name)
         .filter(|code| *code != FaultClear::None)
         .map(Some)
-        .ok_or_else(|| {
-            let names: Vec<_> = FaultClear::ALL.iter().map(|c| c.name()).collect();
-            format!("unknown fault `{name}`: {} or all", names.join(", "))
+        .ok_or_else(|| UnknownName {
+            what: "fault",
+            found: name,
+            expected: (FaultClear::ALL.iter().map(|c| c.name()))
+                .filter(|n| *n != FaultClear::None.name())
+                .chain(["all"])
+                .collect(),
         })
 }
 
@@ -1091,7 +1104,7 @@ mod tests {
         );
         assert_eq!(
             parse_light("on", 101),
-            Err("the brightness 101 is above 100".into())
+            Err(BadLight::Brightness("101".into()))
         );
         assert!(parse_light("disco", 1).is_err());
         assert_eq!(parse_fault_clear("all"), Ok(None));

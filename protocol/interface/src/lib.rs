@@ -11,6 +11,7 @@
 //! - [`stop_socket`]: the stop endpoint beside iceoryx2 (a Unix datagram socket): stops and
 //!   releases that need no shared memory and no client slot.
 //! - [`text`]: fixed-capacity text for shared-memory payloads.
+//! - [`failure`]: what kind of failure an error is, and the exit code of each kind.
 //!
 //! Every iceoryx2 payload's type name carries [`LAYOUT_VERSION`]: a client built against another
 //! layout is refused when it opens a service ("the gateway speaks another interface version")
@@ -21,6 +22,7 @@
 mod macros;
 
 pub mod control;
+pub mod failure;
 pub mod json;
 pub mod remote;
 pub mod services;

@@ -5,9 +5,11 @@
 use serde::{Deserialize, Serialize};
 
 use crate::control::{
-    Class, LightsSetting, ReleaseTarget, Request, parse_fault_clear, parse_light,
+    BadLight, Class, LightsSetting, ReleaseTarget, Request, UnknownName, parse_fault_clear,
+    parse_light,
 };
 use crate::services::prefix;
+use crate::services::{ControlPortError, RequestError};
 use scout_protocol::{Light, LightCommand};
 use std::time::Duration;
 
@@ -85,24 +87,92 @@ pub fn command_key(robot: &str, kind: RemoteKind, peer: &str) -> String {
     format!("{}/cmd/{kind}/{peer}", prefix(robot))
 }
 
+/// Why a remote command was refused: its key, its payload, the gateway's permissions, its
+/// timing, or the arbiter. The text is what the peer reads in the answer's `reason`.
+#[derive(Debug, thiserror::Error)]
+pub enum CommandError {
+    /// The key is not `scout/ROBOT/cmd/KIND/PEER`.
+    #[error("`{0}` is not scout/ROBOT/cmd/KIND/PEER: name yourself in the key")]
+    Key(String),
+    /// The key names no command this gateway knows.
+    #[error(transparent)]
+    Kind(UnknownName),
+    /// The key's peer name is empty.
+    #[error("the peer name in the key is empty: scout/ROBOT/cmd/KIND/PEER")]
+    NoPeer,
+    /// The query carries no payload.
+    #[error("no payload: send the command as JSON")]
+    NoPayload,
+    /// The payload is longer than a command may be.
+    #[error("payload of {size} bytes exceeds {max}")]
+    TooLarge {
+        /// Its size.
+        size: usize,
+        /// The most allowed.
+        max: usize,
+    },
+    /// The payload is not a command's JSON.
+    #[error("invalid JSON: {0}")]
+    Json(String),
+    /// A field the command needs is missing (the text says which and how to give it).
+    #[error("{0}")]
+    Missing(&'static str),
+    /// `class` is not a class's name.
+    #[error(transparent)]
+    Class(UnknownName),
+    /// The command needs control the peer does not hold (the text says what to do).
+    #[error("{0}")]
+    NoControl(&'static str),
+    /// A light that is not one.
+    #[error(transparent)]
+    Light(#[from] BadLight),
+    /// `fault` is not a fault's name.
+    #[error(transparent)]
+    Fault(UnknownName),
+    /// The gateway does not grant this permission.
+    #[error(
+        "remote `{permission}` is not allowed on this gateway (zenoh.remote_commands.allowed: {allowed})"
+    )]
+    NotAllowed {
+        /// What the command needs.
+        permission: Permission,
+        /// What the gateway grants, in words.
+        allowed: String,
+    },
+    /// A drive whose `seq` is not above the last one's.
+    #[error("out of order: seq {seq} after {last} (duplicated or reordered)")]
+    OutOfOrder {
+        /// Its seq.
+        seq: u64,
+        /// The last seq accepted.
+        last: u64,
+    },
+    /// A command the network held up past its life.
+    #[error("held up {late_ms} ms on the way, past its life of {life_ms} ms")]
+    Late {
+        /// How much longer than the fastest delivery it took, ms.
+        late_ms: u128,
+        /// Its life, ms.
+        life_ms: u128,
+    },
+    /// The peer's control port could not be opened.
+    #[error(transparent)]
+    Port(#[from] ControlPortError),
+    /// The arbiter refused it, or the gateway did not answer.
+    #[error(transparent)]
+    Request(#[from] RequestError),
+}
+
 /// A command key's kind and peer, or why it is not one.
-pub fn parse_command_key(key: &str) -> Result<(RemoteKind, &str), String> {
+pub fn parse_command_key(key: &str) -> Result<(RemoteKind, &str), CommandError> {
     // Exactly five chunks: a longer key (`scout/R/cmd/a/b/cmd/release/x`) names no peer.
     let chunks: Vec<&str> = key.split('/').collect();
     let [_, _, "cmd", kind, peer] = chunks[..] else {
-        return Err(format!(
-            "`{key}` is not scout/ROBOT/cmd/KIND/PEER: name yourself in the key"
-        ));
+        return Err(CommandError::Key(key.to_owned()));
     };
-    let kind = kind.parse().map_err(|e: crate::control::UnknownName| {
-        format!(
-            "unknown command `{}`: one of {}",
-            e.found,
-            e.expected.join(", ")
-        )
-    })?;
+    let kind = kind.parse().map_err(CommandError::Kind)?;
     if peer.is_empty() {
-        return Err("the peer name in the key is empty: scout/ROBOT/cmd/KIND/PEER".into());
+        return Err(CommandError::NoPeer);
     }
     Ok((kind, peer))
 }
@@ -200,7 +270,7 @@ impl RemoteCommand {
         &self,
         kind: RemoteKind,
         control: Option<(u64, Class)>,
-    ) -> Result<(Permission, Request), String> {
+    ) -> Result<(Permission, Request), CommandError> {
         let permission = |class: Class| match class {
             Class::Teleop => Permission::Teleop,
             Class::Autonomy => Permission::Autonomy,
@@ -210,16 +280,21 @@ impl RemoteCommand {
                 let class: Class = self
                     .class
                     .as_deref()
-                    .ok_or("take-control needs `class`: teleop or autonomy")?
+                    .ok_or(CommandError::Missing(
+                        "take-control needs `class`: teleop or autonomy",
+                    ))?
                     .parse()
-                    .map_err(|e: crate::control::UnknownName| e.to_string())?;
+                    .map_err(CommandError::Class)?;
                 (permission(class), Request::TakeControl { class })
             }
             RemoteKind::Drive => {
-                let (lease, class) =
-                    control.ok_or("no control: send take-control first (cmd/take-control/PEER)")?;
+                let (lease, class) = control.ok_or(CommandError::NoControl(
+                    "no control: send take-control first (cmd/take-control/PEER)",
+                ))?;
                 let (Some(linear), Some(angular)) = (self.linear, self.angular) else {
-                    return Err("drive needs `linear` and `angular` numbers".into());
+                    return Err(CommandError::Missing(
+                        "drive needs `linear` and `angular` numbers",
+                    ));
                 };
                 let ttl = self.ttl_ms.map(|ms| Duration::from_millis(u64::from(ms)));
                 (
@@ -233,7 +308,7 @@ impl RemoteCommand {
                 )
             }
             RemoteKind::Relinquish => {
-                let (_, class) = control.ok_or("no control to give up")?;
+                let (_, class) = control.ok_or(CommandError::NoControl("no control to give up"))?;
                 (permission(class), Request::Relinquish)
             }
             RemoteKind::Estop => {
@@ -250,16 +325,15 @@ impl RemoteCommand {
             RemoteKind::Resume => (Permission::Resume, Request::Resume),
             RemoteKind::Lights => (Permission::Lights, Request::Lights(self.lights()?)),
             RemoteKind::ClearFault => {
-                let fault = self.fault.as_deref().ok_or("clear-fault needs `fault`")?;
-                (
-                    Permission::ClearFault,
-                    Request::ClearFault(parse_fault_clear(fault)?),
-                )
+                let fault = (self.fault.as_deref())
+                    .ok_or(CommandError::Missing("clear-fault needs `fault`"))?;
+                let fault = parse_fault_clear(fault).map_err(CommandError::Fault)?;
+                (Permission::ClearFault, Request::ClearFault(fault))
             }
         })
     }
 
-    fn lights(&self) -> Result<LightsSetting, String> {
+    fn lights(&self) -> Result<LightsSetting, BadLight> {
         if self.auto == Some(true) {
             return Ok(LightsSetting::Auto);
         }
@@ -493,8 +567,8 @@ mod tests {
     fn commands_map_to_requests_and_permissions() {
         let take = command(r#"{"class":"teleop"}"#).request(RemoteKind::TakeControl, None);
         assert_eq!(
-            take,
-            Ok((
+            take.ok(),
+            Some((
                 Permission::Teleop,
                 Request::TakeControl {
                     class: Class::Teleop
@@ -503,8 +577,10 @@ mod tests {
         );
         let drive = command(r#"{"linear":0.5,"angular":0}"#);
         assert_eq!(
-            drive.request(RemoteKind::Drive, Some((9, Class::Autonomy))),
-            Ok((
+            drive
+                .request(RemoteKind::Drive, Some((9, Class::Autonomy)))
+                .ok(),
+            Some((
                 Permission::Autonomy,
                 Request::Drive {
                     lease: 9,
@@ -516,8 +592,8 @@ mod tests {
         );
         let stop = command("{}").request(RemoteKind::Estop, None);
         assert_eq!(
-            stop,
-            Ok((
+            stop.ok(),
+            Some((
                 Permission::Estop,
                 Request::Stop {
                     reason: "remote estop".into()
@@ -526,8 +602,8 @@ mod tests {
         );
         let release = command("{}").request(RemoteKind::Release, None);
         assert_eq!(
-            release,
-            Ok((
+            release.ok(),
+            Some((
                 Permission::Release,
                 Request::Release {
                     target: ReleaseTarget::Own,
@@ -538,8 +614,8 @@ mod tests {
         );
         let clear = command(r#"{"fault":"all"}"#).request(RemoteKind::ClearFault, None);
         assert_eq!(
-            clear,
-            Ok((Permission::ClearFault, Request::ClearFault(None)))
+            clear.ok(),
+            Some((Permission::ClearFault, Request::ClearFault(None)))
         );
     }
 
@@ -550,6 +626,7 @@ mod tests {
             uncontrolled
                 .request(RemoteKind::Drive, None)
                 .unwrap_err()
+                .to_string()
                 .contains("take-control")
         );
         let classless = command("{}");
@@ -557,13 +634,15 @@ mod tests {
             classless
                 .request(RemoteKind::TakeControl, None)
                 .unwrap_err()
+                .to_string()
                 .contains("class")
         );
         let dim = command(r#"{"front":{"mode":"on","brightness":101}}"#);
         assert!(
             dim.request(RemoteKind::Lights, None)
                 .unwrap_err()
-                .contains("above 100")
+                .to_string()
+                .contains("not 0..100")
         );
         assert!(
             serde_json::from_str::<RemoteCommand>(r#"{"client":"someone"}"#).is_err(),
@@ -619,8 +698,8 @@ mod tests {
     #[test]
     fn the_peer_comes_from_the_key() {
         assert_eq!(
-            parse_command_key("scout/alpha/cmd/estop/laptop"),
-            Ok((RemoteKind::Estop, "laptop"))
+            parse_command_key("scout/alpha/cmd/estop/laptop").ok(),
+            Some((RemoteKind::Estop, "laptop"))
         );
         assert!(parse_command_key("scout/alpha/cmd/estop").is_err());
         assert!(parse_command_key("scout/alpha/cmd/a/b/cmd/release/nested").is_err());

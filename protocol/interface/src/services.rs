@@ -222,31 +222,28 @@ pub enum ServiceError {
         service: String,
     },
     /// Creating or opening a publish-subscribe service failed.
-    #[error("iceoryx2 service {service}: {source:?}")]
+    #[error("iceoryx2 service {service}: {error:?}")]
     PublishSubscribe {
         /// The service.
         service: String,
         /// iceoryx2's error.
-        #[source]
-        source: PublishSubscribeOpenOrCreateError,
+        error: PublishSubscribeOpenOrCreateError,
     },
     /// Creating or opening an event service failed.
-    #[error("iceoryx2 service {service}: {source:?}")]
+    #[error("iceoryx2 service {service}: {error:?}")]
     Event {
         /// The service.
         service: String,
         /// iceoryx2's error.
-        #[source]
-        source: EventOpenOrCreateError,
+        error: EventOpenOrCreateError,
     },
     /// Creating or opening a request-response service failed.
-    #[error("iceoryx2 service {service}: {source:?}")]
+    #[error("iceoryx2 service {service}: {error:?}")]
     RequestResponse {
         /// The service.
         service: String,
         /// iceoryx2's error.
-        #[source]
-        source: RequestResponseOpenOrCreateError,
+        error: RequestResponseOpenOrCreateError,
     },
 }
 
@@ -296,9 +293,9 @@ fn event_service(
     role: Role,
     (notifiers, listeners): (usize, usize),
 ) -> Result<Events, ServiceError> {
-    let error = |source| ServiceError::Event {
+    let error = |error| ServiceError::Event {
         service: name.to_owned(),
-        source,
+        error,
     };
     let builder = node.service_builder(&service_name(name)?).event();
     match role {
@@ -330,9 +327,9 @@ fn latest_value_service<Payload: std::fmt::Debug + ZeroCopySend>(
     name: &str,
     role: Role,
 ) -> Result<publish_subscribe::PortFactory<Ipc, Payload, ()>, ServiceError> {
-    let error = |source| ServiceError::PublishSubscribe {
+    let error = |error| ServiceError::PublishSubscribe {
         service: name.to_owned(),
-        source,
+        error,
     };
     let builder = node
         .service_builder(&service_name(name)?)
@@ -389,9 +386,9 @@ pub fn request_services(
     role: Role,
 ) -> Result<(ControlService, Events), ServiceError> {
     let name = way.service(robot);
-    let error = |source| ServiceError::RequestResponse {
+    let error = |error| ServiceError::RequestResponse {
         service: name.clone(),
-        source,
+        error,
     };
     let builder = node
         .service_builder(&service_name(&name)?)
@@ -439,7 +436,7 @@ pub fn request_services(
 pub enum RequestError {
     /// The arbiter refused it, with the reason.
     #[error("rejected: {0}")]
-    Rejected(#[from] Rejected),
+    Rejected(Rejected),
     /// No answer within [`ANSWER_TIMEOUT`]: the gateway is stopped, stuck or gone.
     #[error("no answer from gateway '{robot}' within {timeout:?}: is it running (not stopped)?")]
     NoAnswer {
@@ -450,13 +447,19 @@ pub enum RequestError {
     },
     /// Sending the request failed.
     #[error("sending the request: {0:?}")]
-    Send(#[source] iceoryx2::port::client::RequestSendError),
+    Send(iceoryx2::port::client::RequestSendError),
     /// Waking the gateway failed.
     #[error("waking the gateway: {0:?}")]
-    Wake(#[source] iceoryx2::port::notifier::NotifierNotifyError),
+    Wake(iceoryx2::port::notifier::NotifierNotifyError),
     /// Receiving the answer failed.
     #[error("receiving the answer: {0:?}")]
-    Receive(#[source] iceoryx2::port::ReceiveError),
+    Receive(iceoryx2::port::ReceiveError),
+}
+
+impl From<Rejected> for RequestError {
+    fn from(rejected: Rejected) -> Self {
+        Self::Rejected(rejected)
+    }
 }
 
 /// Why a control port could not be made.
@@ -467,20 +470,19 @@ pub enum ControlPortError {
     Service(#[from] ServiceError),
     /// The client port could not be created (the gateway serves [`MAX_CONTROLLERS`] control
     /// and [`MAX_STOPPERS`] stop ports at once).
-    #[error("creating a {way:?} port (all taken?): {source:?}")]
+    #[error("creating a {way:?} port (all taken?): {error:?}")]
     Client {
         /// Which service.
         way: Way,
         /// iceoryx2's error.
-        #[source]
-        source: iceoryx2::service::port_factory::client::ClientCreateError,
+        error: iceoryx2::service::port_factory::client::ClientCreateError,
     },
     /// The name cannot name an iceoryx2 port.
     #[error("client name `{0}` must be 1 to 32 bytes")]
     Name(String),
     /// The wake-up notifier could not be created.
     #[error("creating the wake-up notifier: {0:?}")]
-    Notifier(#[source] iceoryx2::port::notifier::NotifierCreateError),
+    Notifier(iceoryx2::port::notifier::NotifierCreateError),
 }
 
 /// A client's way to the arbiter: sends one request at a time and waits for its answer. The
@@ -513,7 +515,7 @@ impl ControlPort {
                 .client_builder()
                 .name(&port_name)
                 .create()
-                .map_err(|source| ControlPortError::Client { way, source })?,
+                .map_err(|error| ControlPortError::Client { way, error })?,
             wake: events
                 .notifier_builder()
                 .create()

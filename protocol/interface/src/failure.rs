@@ -1,0 +1,168 @@
+//! What kind of failure an error is: the one vocabulary every program's exit code comes from.
+//!
+//! Each error type says its kind (`kind()`); [`Failure::exit_code`] maps kinds to exit codes,
+//! once for every program; [`Failure::of_chain`] finds the kind of an error and its causes.
+
+use std::error::Error;
+
+#[cfg(feature = "zenoh")]
+use crate::remote::RemoteError;
+use crate::services::{BadRobotName, ControlPortError, RequestError, ServiceError};
+use crate::stop_socket::StopSocketError;
+
+/// The kinds of failure, each with its exit code (README.md's "Exit codes").
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Failure {
+    /// Something failed: I/O, a decode, a gateway of another interface version. Exit 1.
+    Failed,
+    /// The command line or a setting is wrong. Exit 2.
+    Usage,
+    /// No gateway with that name runs, or it stopped answering. Exit 3.
+    NoGateway,
+    /// The gateway refused the request, or ended the control a client held. Exit 4.
+    Refused,
+}
+
+impl Failure {
+    /// The process exit code of this kind.
+    pub const fn exit_code(self) -> u8 {
+        match self {
+            Self::Failed => 1,
+            Self::Usage => 2,
+            Self::NoGateway => 3,
+            Self::Refused => 4,
+        }
+    }
+
+    /// The kind of an error given as its chain of causes (`anyhow::Error::chain`, or
+    /// `error` then its `source()`s): the first cause with a kind other than `Failed`, as
+    /// `kind_of` tells it (which knows the program's own error types, then calls
+    /// [`kind_of`]); `Failed` if none has one.
+    pub fn of_chain<'a>(
+        chain: impl IntoIterator<Item = &'a (dyn Error + 'static)>,
+        kind_of: impl Fn(&(dyn Error + 'static)) -> Option<Failure>,
+    ) -> Failure {
+        chain
+            .into_iter()
+            .filter_map(kind_of)
+            .find(|kind| *kind != Self::Failed)
+            .unwrap_or(Self::Failed)
+    }
+}
+
+/// The kind of `cause` if it is one of this crate's errors.
+pub fn kind_of(cause: &(dyn Error + 'static)) -> Option<Failure> {
+    if let Some(error) = cause.downcast_ref::<ServiceError>() {
+        return Some(error.kind());
+    }
+    if let Some(error) = cause.downcast_ref::<RequestError>() {
+        return Some(error.kind());
+    }
+    if let Some(error) = cause.downcast_ref::<ControlPortError>() {
+        return Some(error.kind());
+    }
+    if let Some(error) = cause.downcast_ref::<StopSocketError>() {
+        return Some(error.kind());
+    }
+    if cause.downcast_ref::<BadRobotName>().is_some() {
+        return Some(Failure::Usage);
+    }
+    #[cfg(feature = "zenoh")]
+    if let Some(error) = cause.downcast_ref::<RemoteError>() {
+        return Some(error.kind());
+    }
+    None
+}
+
+impl ServiceError {
+    /// What kind of failure this is.
+    pub fn kind(&self) -> Failure {
+        match self {
+            Self::NoGateway { .. } => Failure::NoGateway,
+            Self::Name(_)
+            | Self::Incompatible { .. }
+            | Self::PublishSubscribe { .. }
+            | Self::Event { .. }
+            | Self::RequestResponse { .. } => Failure::Failed,
+        }
+    }
+}
+
+impl RequestError {
+    /// What kind of failure this is.
+    pub fn kind(&self) -> Failure {
+        match self {
+            Self::Rejected(_) => Failure::Refused,
+            Self::NoAnswer { .. } => Failure::NoGateway,
+            Self::Send(_) | Self::Wake(_) | Self::Receive(_) => Failure::Failed,
+        }
+    }
+}
+
+impl ControlPortError {
+    /// What kind of failure this is.
+    pub fn kind(&self) -> Failure {
+        match self {
+            Self::Service(error) => error.kind(),
+            Self::Name(_) => Failure::Usage,
+            Self::Client { .. } | Self::Notifier(_) => Failure::Failed,
+        }
+    }
+}
+
+impl StopSocketError {
+    /// What kind of failure this is.
+    pub fn kind(&self) -> Failure {
+        match self {
+            Self::NoGateway { .. } | Self::NoAnswer { .. } => Failure::NoGateway,
+            Self::Reply { .. } | Self::Io { .. } => Failure::Failed,
+        }
+    }
+}
+
+#[cfg(feature = "zenoh")]
+impl RemoteError {
+    /// What kind of failure this is: a bad configuration is a usage error.
+    pub fn kind(&self) -> Failure {
+        match self {
+            Self::Config(_) => Failure::Usage,
+            Self::Open(_) | Self::Zenoh(_) => Failure::Failed,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::Duration;
+
+    #[test]
+    fn exit_codes_are_distinct_and_documented() {
+        let all = [
+            Failure::Failed,
+            Failure::Usage,
+            Failure::NoGateway,
+            Failure::Refused,
+        ];
+        let codes: Vec<u8> = all.iter().map(|kind| kind.exit_code()).collect();
+        assert_eq!(codes, [1, 2, 3, 4]);
+    }
+
+    #[test]
+    fn the_first_cause_with_a_kind_decides() {
+        #[derive(Debug, thiserror::Error)]
+        #[error("wrapped")]
+        struct Wrapper(#[source] StopSocketError);
+        let error = Wrapper(StopSocketError::NoAnswer {
+            robot: "r".into(),
+            timeout: Duration::from_secs(1),
+        });
+        let chain: [&(dyn Error + 'static); 2] = [&error, &error.0];
+        assert_eq!(Failure::of_chain(chain, kind_of), Failure::NoGateway);
+        let plain = std::io::Error::other("x");
+        assert_eq!(
+            Failure::of_chain([&plain as &(dyn Error + 'static)], kind_of),
+            Failure::Failed
+        );
+    }
+}
