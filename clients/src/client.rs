@@ -8,7 +8,8 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::subscriber::Subscriber;
 use scout_interface::StatePayload;
 use scout_interface::failure::Failure;
-use scout_interface::services::{self, BadRobotName, Ipc, Role, ServiceError};
+use scout_interface::robot::{BadRobotName, Program, RobotName};
+use scout_interface::services::{self, Ipc, Role, ServiceError};
 
 /// What can go wrong talking to a gateway.
 #[derive(Debug, thiserror::Error)]
@@ -141,12 +142,12 @@ impl Robot {
     /// when none runs, and with [`ServiceError::Incompatible`] when it was built from another
     /// version of the interface.
     pub fn connect(name: &str) -> Result<Self, ClientError> {
-        services::check_robot_name(name)?;
+        let robot = RobotName::new(name)?;
         check_shared_memory()?;
         services::quiet_iceoryx2_logs();
         // Best effort: a failed clean-up of dead processes' leftovers does not stop a client.
         let _ = services::remove_dead_nodes();
-        let node = services::node(&format!("scout-client-{name}")).map_err(ClientError::Node)?;
+        let node = services::node(&robot.node(Program::Client)).map_err(ClientError::Node)?;
         services::state_services(&node, name, Role::Client)?;
         Ok(Self {
             name: name.to_owned(),

@@ -14,6 +14,7 @@ use scout_protocol::FaultClear;
 
 use crate::client::{ClientError, Robot};
 use crate::failure::Failure;
+use scout_interface::robot::{Program, RobotName};
 
 pub use scout_interface::services::ANSWER_TIMEOUT;
 
@@ -121,7 +122,7 @@ pub struct Stopper {
 /// `/tmp/iceoryx2` but not its network), where the abstract stop socket cannot be reached.
 #[derive(Debug)]
 struct StopService {
-    robot: String,
+    robot: RobotName,
     name: String,
     port: Option<ControlPort>,
     /// The port's node, dropped after it.
@@ -133,7 +134,7 @@ impl StopService {
         let port = match self.port.take() {
             Some(port) => port,
             None => {
-                let node = services::node(&format!("scout-client-{}", self.robot))
+                let node = services::node(&self.robot.node(Program::Client))
                     .map_err(|error| ControlError::Client(ClientError::Node(error)))?;
                 let port = ControlPort::open(&node, &self.robot, Way::Stop, &self.name)
                     .map_err(|error| ControlError::Client(error.into()))?;
@@ -149,7 +150,7 @@ impl Stopper {
     /// A stopper named `name` (1 to 32 bytes; the owner of its stops) for robot `robot`. It
     /// opens no iceoryx2 service: it works wherever the gateway's stop socket can be reached.
     pub fn new(robot: &str, name: &str) -> Result<Self, ClientError> {
-        services::check_robot_name(robot)?;
+        RobotName::new(robot)?;
         if name.is_empty() || name.len() > MAX_CLIENT_NAME {
             return Err(ClientError::BadClientName(name.to_owned()));
         }
@@ -166,7 +167,7 @@ impl Stopper {
     pub fn with_fallback(robot: &str, name: &str) -> Result<Self, ClientError> {
         let mut stopper = Self::new(robot, name)?;
         stopper.fallback = Some(StopService {
-            robot: robot.to_owned(),
+            robot: RobotName::new(robot)?,
             name: name.to_owned(),
             port: None,
             node: None,

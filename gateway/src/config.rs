@@ -1,6 +1,7 @@
 //! The gateway's configuration: one serde struct, read from TOML. Lookup: `--config FILE`, else
 //! `$SCOUT_GATEWAY_CONFIG`, else the defaults; command-line flags override the file.
 
+use scout_interface::robot::RobotName;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -19,8 +20,9 @@ use crate::device::DeviceSpec;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct GatewayConfig {
-    /// The robot's name: every iceoryx2 service and zenoh key carries it.
-    pub name: String,
+    /// The robot's name: every iceoryx2 service and zenoh key carries it (checked as the
+    /// configuration is read).
+    pub name: RobotName,
     /// How the chassis is reached.
     pub transport: Option<Transport>,
     /// The tty or CAN interface.
@@ -152,7 +154,7 @@ impl Default for SafetyConfig {
 impl Default for GatewayConfig {
     fn default() -> Self {
         Self {
-            name: "scout".into(),
+            name: RobotName::new("scout").expect("a valid robot name"),
             transport: None,
             device: None,
             protocol: ProtocolSetting::Auto,
@@ -213,8 +215,6 @@ impl GatewayConfig {
 
     /// Checks every value; returns the device to open.
     pub fn validate(&self) -> Result<DeviceSpec, ConfigError> {
-        scout_interface::services::check_robot_name(&self.name)
-            .map_err(|error| ConfigError::Invalid(error.to_string()))?;
         if let Some(max_angular) = self.max_angular
             && !(max_angular.is_finite() && max_angular > 0.0)
         {

@@ -15,6 +15,7 @@ use scout_interface::control::{
     Request, RequestKind, SourcePayload, StatusPayload, StopCause, StopPayload,
 };
 use scout_interface::remote::REMOTE_PREFIX;
+use scout_interface::robot::RobotName;
 use scout_interface::services::Way;
 use scout_interface::state::{ChassisPayload, LinkState, StatePayload};
 use scout_interface::stop_socket;
@@ -110,7 +111,7 @@ pub struct CoreStats {
 /// The gateway's decisions.
 #[derive(Debug)]
 pub struct Core {
-    robot: String,
+    robot: RobotName,
     transport: Transport,
     max_linear: f64,
     max_angular: f64,

@@ -17,6 +17,7 @@ use iceoryx2::prelude::BackpressureStrategy;
 use iceoryx2::prelude::CallbackProgression;
 use iceoryx2::service::port_factory::PortFactory;
 use scout_interface::control::{ControlRequest, ControlResponse, Rejection, StatusPayload};
+use scout_interface::robot::{Program, RobotName};
 use scout_interface::services::{self, ControlService, Ipc, Role, Way, monotonic};
 use scout_interface::state::{LinkState, StatePayload};
 use scout_interface::stop_socket::{Ask, ParseError, StopReply};
@@ -47,7 +48,7 @@ struct Endpoints {
 }
 
 impl Endpoints {
-    fn create(robot: &str) -> anyhow::Result<Self> {
+    fn create(robot: &RobotName) -> anyhow::Result<Self> {
         match services::remove_dead_nodes() {
             Ok(removed) if removed.is_empty() => {}
             Ok(removed) => info!(
@@ -57,8 +58,8 @@ impl Endpoints {
             ),
             Err(error) => warn!("listing iceoryx2 nodes to clean up failed: {error:?}"),
         }
-        let node = services::node(&format!("scout-gateway-{robot}"))
-            .context("creating the iceoryx2 node")?;
+        let node =
+            services::node(&robot.node(Program::Gateway)).context("creating the iceoryx2 node")?;
         // The state service last: once it exists, clients find every service.
         let status = services::status_services(&node, robot, Role::Gateway)?
             .publisher_builder()

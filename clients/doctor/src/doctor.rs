@@ -7,6 +7,7 @@ use std::path::Path;
 use std::time::Duration;
 
 use scout_gateway::device::DeviceSpec;
+use scout_interface::robot::{Program, RobotName};
 use scout_interface::services;
 
 use crate::check::{Check, Verdict};
@@ -55,9 +56,10 @@ pub fn run(options: &Options, report: &mut dyn FnMut(&Check)) -> Vec<Check> {
             Check::pass("iceoryx2", "no resources left by dead processes")
         }
         Ok(removed) => {
-            let gateways: Vec<&str> = removed
+            let gateways: Vec<String> = removed
                 .iter()
-                .filter_map(|name| name.strip_prefix("scout-gateway-"))
+                .filter_map(|node| RobotName::of_node(node, Program::Gateway))
+                .map(String::from)
                 .collect();
             let what = if gateways.is_empty() {
                 String::new()

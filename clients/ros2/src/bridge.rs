@@ -28,6 +28,7 @@ use scout_clients::client::{ClientError, Robot};
 use scout_clients::control::ControlError;
 use scout_clients::failure::Failure;
 use scout_interface::control::ReleaseTarget;
+use scout_interface::robot::RobotName;
 
 /// Why the bridge stopped.
 #[derive(Debug, thiserror::Error)]
@@ -86,11 +87,6 @@ impl BridgeError {
             }
         }
     }
-}
-
-/// The abstract socket address that one bridge per robot and ROS domain holds.
-fn bridge_claim(robot: &str, domain: u32) -> String {
-    format!("{}/ros2/{domain}", scout_interface::services::prefix(robot))
 }
 
 /// What the bridge counted, shown in its diagnostics and logged when it stops.
@@ -294,20 +290,21 @@ pub fn unix_now() -> Duration {
 
 /// Runs the bridge for robot `robot` on `middleware` until `stop` is set or something fails.
 pub fn run(
-    robot: &str,
+    robot: &RobotName,
     config: &Ros2Config,
     middleware: Middleware,
     stop: &AtomicBool,
 ) -> Result<(), BridgeError> {
-    let _claim = scout_interface::stop_socket::claim(&bridge_claim(robot, config.domain)).map_err(
-        |errno| match errno {
-            nix::errno::Errno::EADDRINUSE => BridgeError::AlreadyRunning {
-                robot: robot.to_owned(),
-                domain: config.domain,
-            },
-            other => BridgeError::Thread(other.into()),
-        },
-    )?;
+    let _claim =
+        scout_interface::stop_socket::claim(&robot.ros2_claim(config.domain)).map_err(|errno| {
+            match errno {
+                nix::errno::Errno::EADDRINUSE => BridgeError::AlreadyRunning {
+                    robot: robot.to_string(),
+                    domain: config.domain,
+                },
+                other => BridgeError::Thread(other.into()),
+            }
+        })?;
     let gateway = Robot::connect(robot)?;
     let counters = Arc::new(Counters::default());
     let (senders, inboxes) = queues(Arc::clone(&counters));

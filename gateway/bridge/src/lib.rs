@@ -15,6 +15,7 @@ use scout_interface::remote::{
     RemoteKind, peer_client_name,
 };
 pub use scout_interface::remote::{BadStateRate, RemoteCommands, ZenohConfig};
+use scout_interface::robot::{Program, RobotName};
 use scout_interface::services::{self, ControlPort, RequestError, Role, Way, monotonic_ns};
 use serde::Serialize;
 use serde_json::Value;
@@ -54,7 +55,7 @@ pub struct Bridge {
 
 impl Bridge {
     /// Starts the bridge for `robot`; `info` is the static part of the information queryable.
-    pub fn start(robot: String, config: ZenohConfig, info: Value) -> std::io::Result<Self> {
+    pub fn start(robot: RobotName, config: ZenohConfig, info: Value) -> std::io::Result<Self> {
         let stop = Arc::new(AtomicBool::new(false));
         let flag = Arc::clone(&stop);
         let thread = std::thread::Builder::new()
@@ -87,7 +88,7 @@ fn zenoh_error(error: impl std::fmt::Display) -> anyhow::Error {
 }
 
 fn run(
-    robot_name: &str,
+    robot_name: &RobotName,
     config: &ZenohConfig,
     info: Value,
     stop: &AtomicBool,
@@ -154,13 +155,13 @@ fn run(
 /// Publishes each new state (at most about `state_rate_hz`) and each new status, woken by the
 /// gateway's notification.
 fn forward_state(
-    robot_name: &str,
+    robot_name: &RobotName,
     config: &ZenohConfig,
     session: &zenoh::Session,
     latest_state: &std::sync::Mutex<Option<String>>,
     halt: &dyn Fn() -> bool,
 ) -> anyhow::Result<()> {
-    let node = services::node(&format!("scout-bridge-{robot_name}"))
+    let node = services::node(&robot_name.node(Program::Bridge))
         .map_err(|e| anyhow::anyhow!("creating the bridge's iceoryx2 node: {e:?}"))?;
     let (state_service, state_events) = services::state_services(&node, robot_name, Role::Client)?;
     let states = state_service
@@ -235,7 +236,7 @@ fn forward_state(
 /// Answers queries as they arrive: remote e-stops in a lane of their own, on a thread of their
 /// own; remote commands, the latest state and the information on this one.
 fn serve_queries(
-    robot_name: &str,
+    robot_name: &RobotName,
     config: &ZenohConfig,
     mut info: Value,
     session: &zenoh::Session,
@@ -285,7 +286,7 @@ fn serve_queries(
                 let estop_counters = &estop_counters;
                 move || serve_estops(robot_name, config, &estops, estop_counters, halt)
             })?;
-        let node = services::node(&format!("scout-bridge-commands-{robot_name}"))
+        let node = services::node(&robot_name.node(Program::BridgeCommands))
             .map_err(|e| anyhow::anyhow!("creating the bridge's iceoryx2 node: {e:?}"))?;
         let mut commands = RemoteControl::new(&node, robot_name, config)?;
         let mut counters = Counters::default();
@@ -368,13 +369,13 @@ impl EstopCounters {
 /// bridge's own stop port as the stop of `remote:PEER`. Per query: the permission check and one
 /// stop request, nothing allocated per peer.
 fn serve_estops(
-    robot_name: &str,
+    robot_name: &RobotName,
     config: &ZenohConfig,
     estops: &std::sync::mpsc::Receiver<Query>,
     counters: &EstopCounters,
     halt: &(dyn Fn() -> bool + Sync),
 ) -> anyhow::Result<()> {
-    let node = services::node(&format!("scout-bridge-estops-{robot_name}"))
+    let node = services::node(&robot_name.node(Program::BridgeEstops))
         .map_err(|e| anyhow::anyhow!("creating the bridge's iceoryx2 node: {e:?}"))?;
     let mut port = ControlPort::open(&node, robot_name, Way::Stop, REMOTE_PREFIX)
         .map_err(|e| anyhow::anyhow!("opening the bridge's stop port: {e}"))?;

@@ -23,6 +23,7 @@ use scout_gateway::stop_endpoint::StopEndpoint;
 use scout_interface::Transport;
 use scout_interface::failure::Failure;
 use scout_interface::remote::Permission;
+use scout_interface::robot::RobotName;
 use scout_interface::services;
 use scout_io::notify::ServiceManager;
 use scout_protocol::model::Model;
@@ -47,7 +48,7 @@ struct Cli {
     can: Option<String>,
     /// The robot's name: every iceoryx2 service and zenoh key carries it [default: scout].
     #[arg(long, value_name = "ROBOT")]
-    name: Option<String>,
+    name: Option<RobotName>,
     /// Configuration file (TOML); see config/scout-gateway.toml. Default: $SCOUT_GATEWAY_CONFIG.
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
@@ -230,9 +231,9 @@ struct RunningMarker {
 }
 
 impl RunningMarker {
-    fn new(robot: &str) -> Self {
+    fn new(robot: &RobotName) -> Self {
         Self {
-            path: scout_gateway::lock::lock_dir().join(format!("robot-{robot}.running")),
+            path: scout_gateway::lock::lock_dir().join(robot.running_marker()),
         }
     }
 

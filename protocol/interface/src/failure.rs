@@ -7,7 +7,8 @@ use std::error::Error;
 
 #[cfg(feature = "zenoh")]
 use crate::remote::RemoteError;
-use crate::services::{BadRobotName, ControlPortError, RequestError, ServiceError};
+use crate::robot::BadRobotName;
+use crate::services::{ControlPortError, RequestError, ServiceError};
 use crate::stop_socket::StopSocketError;
 
 /// The kinds of failure, each with its exit code (README.md's "Exit codes").

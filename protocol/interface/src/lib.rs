@@ -11,6 +11,7 @@
 //! - [`stop_socket`]: the stop endpoint beside iceoryx2 (a Unix datagram socket): stops and
 //!   releases that need no shared memory and no client slot.
 //! - [`text`]: fixed-capacity text for shared-memory payloads.
+//! - [`robot`]: a robot's name, checked once, and the node and file names made from it.
 //! - [`failure`]: what kind of failure an error is, and the exit code of each kind.
 //!
 //! Every iceoryx2 payload's type name carries [`LAYOUT_VERSION`]: a client built against another
@@ -25,6 +26,7 @@ pub mod control;
 pub mod failure;
 pub mod json;
 pub mod remote;
+pub mod robot;
 pub mod services;
 pub mod state;
 pub mod stop_socket;

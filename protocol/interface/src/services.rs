@@ -68,9 +68,6 @@ pub const MAX_REQUESTS_IN_FLIGHT: usize = 4;
 /// How long a request waits for the gateway's answer.
 pub const ANSWER_TIMEOUT: Duration = Duration::from_secs(1);
 
-/// The longest robot name: it names every service and key.
-pub const MAX_ROBOT_NAME: usize = 32;
-
 /// The prefix of every service and key of a robot.
 pub fn prefix(robot: &str) -> String {
     format!("scout/{robot}")
@@ -118,27 +115,6 @@ impl Way {
             Self::Control => MAX_CONTROLLERS,
             Self::Stop => MAX_STOPPERS,
         }
-    }
-}
-
-/// A robot name that cannot name services and keys.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error(
-    "robot name `{0}` must be 1 to {MAX_ROBOT_NAME} letters, digits, `-` or `_` (it names iceoryx2 services and zenoh keys)"
-)]
-pub struct BadRobotName(pub String);
-
-/// Checks a robot name: letters, digits, `-` and `_`, 1..=32 characters.
-pub fn check_robot_name(name: &str) -> Result<(), BadRobotName> {
-    let valid = !name.is_empty()
-        && name.len() <= MAX_ROBOT_NAME
-        && name
-            .bytes()
-            .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_');
-    if valid {
-        Ok(())
-    } else {
-        Err(BadRobotName(name.to_owned()))
     }
 }
 
@@ -592,14 +568,6 @@ pub fn latest<Payload: std::fmt::Debug + ZeroCopySend + Copy>(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn robot_names_are_checked() {
-        assert!(check_robot_name("scout-1_b").is_ok());
-        for bad in ["", "a/b", "with space", "*", &"x".repeat(33)] {
-            assert!(check_robot_name(bad).is_err(), "{bad:?}");
-        }
-    }
 
     #[test]
     #[allow(unsafe_code)]

@@ -12,6 +12,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use anyhow::Context;
 use clap::Parser;
 use scout_clients::failure::{self, Failure};
+use scout_clients::interface::robot::RobotName;
 use scout_ros2::bridge::{self, BridgeError};
 use scout_ros2::config::{Middleware, Ros2Config, Ros2ConfigError};
 use scout_ros2::rmw::Distro;
@@ -25,7 +26,7 @@ use tracing_subscriber::EnvFilter;
 pub struct Ros2Args {
     /// The robot (gateway) name.
     #[arg(long, default_value = "scout", value_name = "ROBOT")]
-    name: String,
+    name: RobotName,
     /// The ROS 2 middleware: `dds` (Fast DDS, Cyclone DDS: ROS 2's default) or `zenoh`
     /// (rmw_zenoh) [default: the file's, else as $RMW_IMPLEMENTATION says].
     #[arg(long, value_name = "MIDDLEWARE", value_parser = ["dds", "zenoh"])]
