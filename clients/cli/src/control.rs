@@ -186,7 +186,7 @@ pub fn release(args: &ReleaseArgs) -> anyhow::Result<ExitCode> {
     };
     let status = statuses
         .latest(Duration::from_secs(2))?
-        .ok_or_else(|| crate::status::Silent(robot_name.to_string()))?;
+        .ok_or_else(|| crate::status::Silent(robot_name.clone()))?;
     let through = args.through.unwrap_or(status.newest_stop);
     if !status.stopped() {
         println!("nothing to release: no stop holds the robot");

@@ -104,7 +104,7 @@ fn remote(args: &EchoArgs, endpoint: &str, timeout: Duration) -> anyhow::Result<
     while args.count.is_none_or(|count| printed < count) {
         let Some(state) = states.next_timeout(timeout)? else {
             return Err(RemoteSilent {
-                robot: args.robot.name.to_string(),
+                robot: args.robot.name.clone(),
                 endpoint: endpoint.to_owned(),
                 timeout,
             }

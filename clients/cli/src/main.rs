@@ -18,7 +18,6 @@ use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand};
 use scout_clients::failure::{self, Failure};
-use scout_clients::interface::robot::RobotName;
 
 /// Command-line tool for an AgileX SCOUT chassis.
 #[derive(Debug, Parser)]
@@ -93,7 +92,7 @@ enum Command {
 struct RobotArgs {
     /// The robot (gateway) name.
     #[arg(long, default_value = "scout", value_name = "ROBOT")]
-    name: RobotName,
+    name: String,
 }
 
 fn main() -> ExitCode {

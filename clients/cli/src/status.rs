@@ -33,7 +33,7 @@ pub fn run(args: &StatusArgs) -> anyhow::Result<ExitCode> {
     let status = robot
         .status()?
         .latest(Duration::from_secs(2))?
-        .ok_or_else(|| Silent(args.robot.name.to_string()))?;
+        .ok_or_else(|| Silent(args.robot.name.clone()))?;
     let json = status_json(&status, monotonic_ns());
     if args.json {
         println!("{json}");

@@ -95,7 +95,7 @@ pub enum CommandError {
     #[error("`{0}` is not scout/ROBOT/cmd/KIND/PEER: name yourself in the key")]
     Key(String),
     /// The key names no command this gateway knows.
-    #[error(transparent)]
+    #[error("unknown command `{}`: one of {}", .0.found, .0.expected.join(", "))]
     Kind(UnknownName),
     /// The key's peer name is empty.
     #[error("the peer name in the key is empty: scout/ROBOT/cmd/KIND/PEER")]
