@@ -357,6 +357,21 @@ mod tests {
     use super::*;
 
     #[test]
+    fn protocol_setting_names_are_the_ones_serde_reads_and_writes() {
+        #[derive(Debug, Serialize, Deserialize)]
+        struct File {
+            protocol: ProtocolSetting,
+        }
+        for (setting, name) in ProtocolSetting::ALL {
+            let text = toml::to_string(&File { protocol: setting }).expect("serializes");
+            assert_eq!(text.trim(), format!("protocol = \"{name}\""));
+            let read: File = toml::from_str(&text).expect("parses");
+            assert_eq!(read.protocol, setting);
+            assert_eq!(ProtocolSetting::parse(name), Ok(setting));
+        }
+    }
+
+    #[test]
     fn the_example_config_parses() {
         let text = include_str!("../../config/scout-gateway.toml");
         let config: GatewayConfig = toml::from_str(text).expect("example config");

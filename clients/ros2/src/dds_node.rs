@@ -574,7 +574,57 @@ pub fn start(
     let subscriber = participant
         .create_subscriber(&qos(policy::Reliability::BestEffort, 1))
         .map_err(dds_error("making the DDS subscriber"))?;
-    let discovery_topic = participant
+    let discovery_writer = discovery_writer(&participant, &publisher)?;
+    let writers = make_writers(config, &participant, &publisher)?;
+    let mut readers = make_cmd_vel_readers(config, &participant, &subscriber)?;
+    let mut services = make_services(config, &participant, &publisher, &subscriber)?;
+    let graph = Graph {
+        node: node_entities(config, &readers, &writers, &services, &discovery_writer),
+        writer: discovery_writer,
+        participant: participant.guid().to_bytes(),
+        distro,
+    };
+    graph.announce(std::slice::from_ref(&graph.node));
+
+    let poll = register(&mut readers, &mut services).map_err(BridgeError::Thread)?;
+    let halt = Arc::new(AtomicBool::new(false));
+    let receiver = {
+        let halt = Arc::clone(&halt);
+        let participant = participant.clone();
+        std::thread::Builder::new()
+            .name("ros2-dds".into())
+            .spawn(move || {
+                if let Err(error) = receive(poll, &readers, &services, &senders, &halt) {
+                    senders.fail(format!("waiting for DDS input: {error}"));
+                }
+                // The readers and the services' endpoints go before the participant (this may
+                // be its last handle): dropped after it, each would log an ERROR that it
+                // cannot be removed from a participant already gone.
+                drop(services);
+                drop(readers);
+                drop(participant);
+            })?
+    };
+    Ok((
+        DdsPublishers {
+            publisher,
+            writers,
+            graph,
+            _participant: participant,
+        },
+        DdsNode {
+            halt,
+            receiver: Some(receiver),
+        },
+    ))
+}
+
+/// The writer of the node's entry in `ros_discovery_info`.
+fn discovery_writer(
+    participant: &DomainParticipant,
+    publisher: &rustdds::Publisher,
+) -> Result<DataWriterCdr<EncodedCdr>, BridgeError> {
+    let topic = participant
         .create_topic(
             ros_discovery::TOPIC.into(),
             ros_discovery::TYPE.into(),
@@ -582,10 +632,17 @@ pub fn start(
             TopicKind::NoKey,
         )
         .map_err(dds_error("making ros_discovery_info"))?;
-    let discovery_writer: DataWriterCdr<EncodedCdr> = publisher
-        .create_datawriter_no_key(&discovery_topic, None)
-        .map_err(dds_error("writing ros_discovery_info"))?;
+    publisher
+        .create_datawriter_no_key(&topic, None)
+        .map_err(dds_error("writing ros_discovery_info"))
+}
 
+/// A writer for each topic the settings publish.
+fn make_writers(
+    config: &Ros2Config,
+    participant: &DomainParticipant,
+    publisher: &rustdds::Publisher,
+) -> Result<Vec<Writer>, BridgeError> {
     let mut writers = Vec::new();
     for topic in Topic::ALL {
         let Some(name) = topic.name(config) else {
@@ -609,6 +666,15 @@ pub fn start(
             streak: FailureStreak::default(),
         });
     }
+    Ok(writers)
+}
+
+/// A reader for each cmd_vel stream of the settings, of its message type.
+fn make_cmd_vel_readers(
+    config: &Ros2Config,
+    participant: &DomainParticipant,
+    subscriber: &rustdds::Subscriber,
+) -> Result<Vec<CmdVelReader>, BridgeError> {
     let mut readers = Vec::new();
     for cmd_vel in &config.cmd_vel {
         let message = if cmd_vel.stamped {
@@ -638,6 +704,16 @@ pub fn start(
             )
         });
     }
+    Ok(readers)
+}
+
+/// The request reader and reply writer of each Trigger service the settings serve.
+fn make_services(
+    config: &Ros2Config,
+    participant: &DomainParticipant,
+    publisher: &rustdds::Publisher,
+    subscriber: &rustdds::Subscriber,
+) -> Result<Vec<TriggerService>, BridgeError> {
     let mut services = Vec::new();
     for &kind in ServiceKind::served(config) {
         let name = config.resolve(kind.name(config));
@@ -667,9 +743,18 @@ pub fn start(
             replies: Arc::new(replies),
         });
     }
+    Ok(services)
+}
 
-    // The node in the graph: its readers and writers, the discovery writer last (as
-    // ros2-client and rmw list it).
+/// The node as `ros_discovery_info` lists it: its readers and writers, the discovery writer
+/// last (as ros2-client and rmw list it).
+fn node_entities(
+    config: &Ros2Config,
+    readers: &[CmdVelReader],
+    writers: &[Writer],
+    services: &[TriggerService],
+    discovery_writer: &DataWriterCdr<EncodedCdr>,
+) -> NodeEntities {
     let namespace = if config.namespace.is_empty() {
         "/".to_owned()
     } else {
@@ -681,46 +766,12 @@ pub fn start(
         readers: readers.iter().map(|r| r.guid().to_bytes()).collect(),
         writers: writers.iter().map(|w| w.writer.guid().to_bytes()).collect(),
     };
-    for service in &services {
+    for service in services {
         node.readers.push(service.requests.guid().to_bytes());
         node.writers.push(service.replies.guid().to_bytes());
     }
     node.writers.push(discovery_writer.guid().to_bytes());
-    let graph = Graph {
-        writer: discovery_writer,
-        participant: participant.guid().to_bytes(),
-        node,
-        distro,
-    };
-    graph.announce(std::slice::from_ref(&graph.node));
-
-    let poll = register(&mut readers, &mut services).map_err(BridgeError::Thread)?;
-    let halt = Arc::new(AtomicBool::new(false));
-    let receiver = {
-        let halt = Arc::clone(&halt);
-        let participant = participant.clone();
-        std::thread::Builder::new()
-            .name("ros2-dds".into())
-            .spawn(move || {
-                // The participant lives as long as this thread serves its readers.
-                let _participant = participant;
-                if let Err(error) = receive(poll, &readers, &services, &senders, &halt) {
-                    senders.fail(format!("waiting for DDS input: {error}"));
-                }
-            })?
-    };
-    Ok((
-        DdsPublishers {
-            publisher,
-            writers,
-            graph,
-            _participant: participant,
-        },
-        DdsNode {
-            halt,
-            receiver: Some(receiver),
-        },
-    ))
+    node
 }
 
 /// A poll that wakes when a cmd_vel reader or a service has input: reader `i` is token `i`, the
