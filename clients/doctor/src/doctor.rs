@@ -42,16 +42,48 @@ fn same_device(spec: &DeviceSpec, device: &str) -> bool {
 
 /// Runs the checks, handing each to `report` as soon as it is made.
 pub fn run(options: &Options, report: &mut dyn FnMut(&Check)) -> Vec<Check> {
-    let mut checks: Vec<Check> = Vec::new();
-    let mut emit = |new: Vec<Check>, checks: &mut Vec<Check>| {
-        for check in new {
-            report(&check);
-            checks.push(check);
-        }
+    let mut out = Report {
+        report,
+        checks: Vec::new(),
     };
     // First: connecting to a gateway cleans up after dead processes, and this check says what
     // they left.
-    let leftovers = match services::remove_dead_nodes() {
+    out.emit(vec![leftovers()]);
+    let gateway_checked = match &options.port {
+        Some(spec) => check_port(spec, options, &mut out),
+        None => false,
+    };
+    if !gateway_checked {
+        check_gateway(options, &mut out);
+    }
+    if let Some(endpoint) = &options.zenoh {
+        out.emit(vec![remote::inspect(
+            &options.robot,
+            endpoint,
+            options.window,
+        )]);
+    }
+    out.checks
+}
+
+/// The checks made so far, each reported as it is made.
+struct Report<'a> {
+    report: &'a mut dyn FnMut(&Check),
+    checks: Vec<Check>,
+}
+
+impl Report<'_> {
+    fn emit(&mut self, new: Vec<Check>) {
+        for check in new {
+            (self.report)(&check);
+            self.checks.push(check);
+        }
+    }
+}
+
+/// What dead processes left in shared memory (removed by this check).
+fn leftovers() -> Check {
+    match services::remove_dead_nodes() {
         Ok(removed) if removed.is_empty() => {
             Check::pass("iceoryx2", "no resources left by dead processes")
         }
@@ -93,113 +125,99 @@ pub fn run(options: &Options, report: &mut dyn FnMut(&Check)) -> Vec<Check> {
             format!("cannot list iceoryx2 nodes: {error:?}"),
             "check that /dev/shm and /tmp/iceoryx2 are writable",
         ),
-    };
-    emit(vec![leftovers], &mut checks);
-    let robot = &options.robot;
-    let mut gateway_checked = false;
-    if let Some(spec) = &options.port {
-        let device = match spec {
-            DeviceSpec::Serial(path) | DeviceSpec::Slcan(path) => port::tty_checks(path),
-            DeviceSpec::Can(interface) => can::inspect(interface),
-            DeviceSpec::Sim { .. } => Vec::new(),
-        };
-        let usable = !device.iter().any(|check| {
-            check.verdict == Verdict::Fail
-                && matches!(check.name, "device" | "can.interface" | "can.up")
-        });
-        emit(device, &mut checks);
-        if usable {
-            let mut opened = Vec::new();
-            match port::listen(spec, options.window, &mut opened) {
-                Opened::Listened(tally) => {
-                    emit(opened, &mut checks);
-                    emit(
-                        tally.checks(spec.transport(), options.window, options.window),
-                        &mut checks,
-                    );
-                }
-                Opened::Failed => emit(opened, &mut checks),
-                Opened::Held(holder) => {
-                    let pid =
-                        holder.map_or_else(|| "pid unknown".to_owned(), |pid| format!("pid {pid}"));
-                    match gateway::inspect(robot, options.window) {
-                        Ok(found) if same_device(spec, &found.device) => {
-                            emit(
-                                vec![Check::pass(
-                                    "port",
-                                    format!(
-                                        "held by the gateway of robot {robot} ({pid}): checked \
-                                         through it"
-                                    ),
-                                )],
-                                &mut checks,
-                            );
-                            emit(found.checks, &mut checks);
-                            gateway_checked = true;
-                        }
-                        Ok(_) | Err(_) => emit(
-                            vec![Check::fail(
-                                "port",
-                                format!(
-                                    "{} is held by another scout-gateway ({pid}), not robot \
-                                     {robot}'s",
-                                    spec.name()
-                                ),
-                                "stop that gateway (`systemctl stop scout-gateway` or kill the \
-                                 pid), or run `scout doctor --name` with its robot name",
-                            )],
-                            &mut checks,
-                        ),
-                    }
-                }
-            }
-        }
     }
-    if !gateway_checked {
-        match gateway::inspect(robot, options.window) {
-            Ok(found) => emit(found.checks, &mut checks),
-            Err(error) if is_no_gateway(&error) => {
-                let check = match &options.port {
-                    Some(spec) => Check::warn(
-                        "gateway",
-                        format!("no gateway serves robot {robot}: the port was checked directly"),
+}
+
+/// The port itself: the device, then what it carries, or, when a gateway holds it, the
+/// gateway through which it is checked. Whether the gateway was checked so.
+fn check_port(spec: &DeviceSpec, options: &Options, out: &mut Report<'_>) -> bool {
+    let robot = &options.robot;
+    let device = match spec {
+        DeviceSpec::Serial(path) | DeviceSpec::Slcan(path) => port::tty_checks(path),
+        DeviceSpec::Can(interface) => can::inspect(interface),
+        DeviceSpec::Sim { .. } => Vec::new(),
+    };
+    let usable = !device.iter().any(|check| {
+        check.verdict == Verdict::Fail
+            && matches!(check.name, "device" | "can.interface" | "can.up")
+    });
+    out.emit(device);
+    if usable {
+        let mut opened = Vec::new();
+        match port::listen(spec, options.window, &mut opened) {
+            Opened::Listened(tally) => {
+                out.emit(opened);
+                out.emit(tally.checks(spec.transport(), options.window, options.window));
+            }
+            Opened::Failed => out.emit(opened),
+            Opened::Held(holder) => {
+                let pid =
+                    holder.map_or_else(|| "pid unknown".to_owned(), |pid| format!("pid {pid}"));
+                match gateway::inspect(robot, options.window) {
+                    Ok(found) if same_device(spec, &found.device) => {
+                        out.emit(vec![Check::pass(
+                            "port",
+                            format!(
+                                "held by the gateway of robot {robot} ({pid}): checked \
+                                     through it"
+                            ),
+                        )]);
+                        out.emit(found.checks);
+                        return true;
+                    }
+                    Ok(_) | Err(_) => out.emit(vec![Check::fail(
+                        "port",
                         format!(
-                            "when the checks pass: scout-gateway --{} {} --name {robot}",
-                            match spec {
-                                DeviceSpec::Serial(_) => "serial",
-                                DeviceSpec::Slcan(_) => "slcan",
-                                DeviceSpec::Can(_) => "can",
-                                DeviceSpec::Sim { .. } => "sim",
-                            },
+                            "{} is held by another scout-gateway ({pid}), not robot \
+                                 {robot}'s",
                             spec.name()
                         ),
-                    ),
-                    None => Check::fail(
-                        "gateway",
-                        format!("no gateway serves robot {robot}"),
-                        format!(
-                            "start one (scout-gateway --serial DEV --name {robot}, or --sim), or \
-                             give the port (--serial, --slcan, --can) to check it directly"
-                        ),
-                    ),
-                };
-                emit(vec![check], &mut checks);
+                        "stop that gateway (`systemctl stop scout-gateway` or kill the \
+                             pid), or run `scout doctor --name` with its robot name",
+                    )]),
+                }
             }
-            Err(error) => emit(
-                vec![Check::fail(
-                    "gateway",
-                    format!("reading the gateway of robot {robot}: {error}"),
-                    "see the error; `scout status` says more",
-                )],
-                &mut checks,
-            ),
         }
     }
-    if let Some(endpoint) = &options.zenoh {
-        emit(
-            vec![remote::inspect(robot, endpoint, options.window)],
-            &mut checks,
-        );
+    false
+}
+
+/// The gateway of the robot, or why there is none.
+fn check_gateway(options: &Options, out: &mut Report<'_>) {
+    let robot = &options.robot;
+    match gateway::inspect(robot, options.window) {
+        Ok(found) => out.emit(found.checks),
+        Err(error) if is_no_gateway(&error) => {
+            let check = match &options.port {
+                Some(spec) => Check::warn(
+                    "gateway",
+                    format!("no gateway serves robot {robot}: the port was checked directly"),
+                    format!(
+                        "when the checks pass: scout-gateway --{} {} --name {robot}",
+                        match spec {
+                            DeviceSpec::Serial(_) => "serial",
+                            DeviceSpec::Slcan(_) => "slcan",
+                            DeviceSpec::Can(_) => "can",
+                            DeviceSpec::Sim { .. } => "sim",
+                        },
+                        spec.name()
+                    ),
+                ),
+                None => Check::fail(
+                    "gateway",
+                    format!("no gateway serves robot {robot}"),
+                    format!(
+                        "start one (scout-gateway --serial DEV --name {robot}, or --sim), or \
+                         give the port (--serial, --slcan, --can) to check it directly"
+                    ),
+                ),
+            };
+            out.emit(vec![check]);
+        }
+        Err(error) => out.emit(vec![Check::fail(
+            "gateway",
+            format!("reading the gateway of robot {robot}: {error}"),
+            "see the error; `scout status` says more",
+        )]),
     }
-    checks
 }

@@ -107,20 +107,37 @@ impl Traffic {
 
     /// The verdicts after listening for `window` on `transport`, at `now`.
     pub fn checks(&self, transport: Transport, window: Duration, now: Duration) -> Vec<Check> {
-        let mut checks = Vec::new();
-        let mut v2_ids: BTreeMap<u16, u64> = self
-            .rejected_ids
-            .iter()
-            .filter(|(id, _)| protocol_of_feedback_id(**id) == Some(Protocol::V2))
-            .map(|(id, count)| (*id, *count))
-            .collect();
-        for (id, count) in &self.frames_v2 {
-            *v2_ids.entry(*id).or_default() += count;
+        let anything = self.valid_frames()
+            + self.checksum_errors
+            + self.rejected
+            + self.foreign
+            + self.discarded_bytes;
+        if anything == 0 {
+            return vec![Check::fail(
+                "traffic",
+                format!("nothing received in {window:.1?}"),
+                format!("nothing arrives: {}", Self::what_to_check(transport)),
+            )];
         }
-        let valid = self.valid_frames();
-        let anything =
-            valid + self.checksum_errors + self.rejected + self.foreign + self.discarded_bytes;
-        let how = match transport {
+        let v2_ids = self.v2_ids();
+        let mut checks = vec![
+            self.traffic_check(transport, window, &v2_ids),
+            self.protocol_check(now, &v2_ids),
+            self.errors_check(),
+            self.other_host_check(),
+        ];
+        match (&self.last_status, &self.last_system_v2) {
+            (None, Some(state)) => {
+                checks.extend(chassis_checks_v2(state, self.last_rc_v2.as_ref()));
+            }
+            (status, _) => checks.extend(chassis_checks(status.as_ref())),
+        }
+        checks
+    }
+
+    /// What to check on `transport` when nothing arrives.
+    fn what_to_check(transport: Transport) -> &'static str {
+        match transport {
             Transport::Serial => {
                 "is the chassis on, the cable on its RS232 port (TX/RX crossed, GND), and the port \
                  at 115200 8N1?"
@@ -130,15 +147,31 @@ impl Traffic {
                  bus at 500 kbit/s?"
             }
             Transport::Sim => "is the simulator running?",
-        };
-        if anything == 0 {
-            checks.push(Check::fail(
-                "traffic",
-                format!("nothing received in {window:.1?}"),
-                format!("nothing arrives: {how}"),
-            ));
-            return checks;
         }
+    }
+
+    /// The ids of protocol v2 seen, rejected (by v1) or decoded.
+    fn v2_ids(&self) -> BTreeMap<u16, u64> {
+        let mut v2_ids: BTreeMap<u16, u64> = self
+            .rejected_ids
+            .iter()
+            .filter(|(id, _)| protocol_of_feedback_id(**id) == Some(Protocol::V2))
+            .map(|(id, count)| (*id, *count))
+            .collect();
+        for (id, count) in &self.frames_v2 {
+            *v2_ids.entry(*id).or_default() += count;
+        }
+        v2_ids
+    }
+
+    /// Whether valid frames arrive, and at what rate.
+    fn traffic_check(
+        &self,
+        transport: Transport,
+        window: Duration,
+        v2_ids: &BTreeMap<u16, u64>,
+    ) -> Check {
+        let valid = self.valid_frames();
         if valid == 0 && v2_ids.is_empty() {
             let what = format!(
                 "no valid frame in {window:.1?}: {} rejected, {} checksum errors, {} bytes \
@@ -167,20 +200,24 @@ impl Traffic {
                      wrong bitrate"
                 }
             };
-            checks.push(Check::fail("traffic", what, fix));
+            Check::fail("traffic", what, fix)
         } else {
             let rate = valid as f64 / window.as_secs_f64().max(1e-3);
             let mut ids = self.frames.clone();
             ids.extend(self.frames_v2.iter().map(|(id, count)| (*id, *count)));
-            checks.push(Check::pass(
+            Check::pass(
                 "traffic",
                 format!(
                     "{valid} frames in {window:.1?} ({rate:.0}/s): {}",
                     Self::ids(&ids)
                 ),
-            ));
+            )
         }
-        checks.push(match self.version.detection(now) {
+    }
+
+    /// Which protocol the feedback proves.
+    fn protocol_check(&self, now: Duration, v2_ids: &BTreeMap<u16, u64>) -> Check {
+        match self.version.detection(now) {
             Detection::Found(Protocol::V1) => Check::pass(
                 "protocol",
                 format!(
@@ -208,7 +245,7 @@ impl Traffic {
             ),
             Detection::Listening if !v2_ids.is_empty() => Check::fail(
                 "protocol",
-                format!("protocol v2 ids ({}) only briefly", Self::ids(&v2_ids)),
+                format!("protocol v2 ids ({}) only briefly", Self::ids(v2_ids)),
                 "listen longer (--window), the chassis' feedback comes every 20 ms",
             ),
             Detection::Listening => Check::fail(
@@ -217,36 +254,41 @@ impl Traffic {
                 "a chassis sends its feedback every 20 ms: check the ids above, the wiring and \
                  the bitrate",
             ),
-        });
+        }
+    }
+
+    /// Checksum errors, rejected and foreign frames.
+    fn errors_check(&self) -> Check {
+        let valid = self.valid_frames();
         let bad = self.checksum_errors + self.rejected + self.foreign;
         let total = valid + bad;
         if bad == 0 {
-            checks.push(Check::pass(
-                "errors",
-                "no checksum errors or rejected frames",
-            ));
-        } else {
-            let detail = format!(
-                "{} checksum errors, {} rejected, {} foreign of {total} frames{}",
-                self.checksum_errors,
-                self.rejected,
-                self.foreign,
-                if self.rejected_ids.is_empty() {
-                    String::new()
-                } else {
-                    format!("; rejected ids {}", Self::ids(&self.rejected_ids))
-                }
-            );
-            let fix = "noise or another device: check the wiring and its shield, the \
-                       termination (CAN), and what else is on the bus";
-            checks.push(if bad * 20 > total {
-                Check::fail("errors", detail, fix)
-            } else {
-                Check::warn("errors", detail, fix)
-            });
+            return Check::pass("errors", "no checksum errors or rejected frames");
         }
+        let detail = format!(
+            "{} checksum errors, {} rejected, {} foreign of {total} frames{}",
+            self.checksum_errors,
+            self.rejected,
+            self.foreign,
+            if self.rejected_ids.is_empty() {
+                String::new()
+            } else {
+                format!("; rejected ids {}", Self::ids(&self.rejected_ids))
+            }
+        );
+        let fix = "noise or another device: check the wiring and its shield, the \
+                       termination (CAN), and what else is on the bus";
+        if bad * 20 > total {
+            Check::fail("errors", detail, fix)
+        } else {
+            Check::warn("errors", detail, fix)
+        }
+    }
+
+    /// Commands from another host on the link.
+    fn other_host_check(&self) -> Check {
         if self.other_host_commands > 0 {
-            checks.push(Check::fail(
+            Check::fail(
                 "other-host",
                 format!(
                     "{} motion or light commands from another host (0x130/0x140)",
@@ -254,17 +296,10 @@ impl Traffic {
                 ),
                 "another program commands this chassis: stop it (two commanders fight, and \
                  the gateway cannot arbitrate what it does not send)",
-            ));
+            )
         } else {
-            checks.push(Check::pass("other-host", "no other host sends commands"));
+            Check::pass("other-host", "no other host sends commands")
         }
-        match (&self.last_status, &self.last_system_v2) {
-            (None, Some(state)) => {
-                checks.extend(chassis_checks_v2(state, self.last_rc_v2.as_ref()));
-            }
-            (status, _) => checks.extend(chassis_checks(status.as_ref())),
-        }
-        checks
     }
 }
 

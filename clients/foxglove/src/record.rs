@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use foxglove::{Context, McapCompression, McapWriteOptions};
+use foxglove::{Context, McapCompression, McapWriteOptions, McapWriterHandle};
 use scout_clients::failure::Failure;
 use tracing::{info, warn};
 
@@ -144,52 +144,12 @@ pub fn record(options: &RecordOptions, stop: &AtomicBool) -> Result<Summary, Rec
     }
     // Connect before creating the file: no gateway leaves no empty file behind.
     let source = Source::start(&options.robot)?;
-    // Without --force, a file made in the meantime is not replaced either.
-    let file = OpenOptions::new()
-        .write(true)
-        .create_new(!options.force)
-        .create(options.force)
-        .truncate(options.force)
-        .open(path)
-        .map_err(|source| match source.kind() {
-            std::io::ErrorKind::AlreadyExists => RecordError::Exists(path.clone()),
-            _ => RecordError::Create {
-                path: path.clone(),
-                source,
-            },
-        })?;
+    let context = Context::new();
+    let writer = start_writer(&context, create_output(options)?, options)?;
     let write_error = |error| RecordError::Write {
         path: path.clone(),
         error,
     };
-    let context = Context::new();
-    let writer = context
-        .mcap_writer_with_options(
-            McapWriteOptions::new()
-                .compression(Some(McapCompression::Zstd))
-                .chunk_size(Some(CHUNK_SIZE))
-                .profile(""),
-        )
-        .create(SyncedFile(file))
-        .map_err(write_error)?;
-    let metadata = [
-        ("robot".to_owned(), options.robot.clone()),
-        (
-            "recorder".to_owned(),
-            format!("scout-foxglove {}", env!("CARGO_PKG_VERSION")),
-        ),
-        (
-            "log_time".to_owned(),
-            "the gateway's CLOCK_BOOTTIME receive (state) or send (command) time, shifted to \
-             Unix time when the recording started"
-                .to_owned(),
-        ),
-    ]
-    .into_iter()
-    .collect();
-    writer
-        .write_metadata("scout", metadata)
-        .map_err(write_error)?;
     let mut channels = Channels::new(&context, &options.robot)?;
     info!("recording robot {} to {}", options.robot, path.display());
 
@@ -282,4 +242,63 @@ pub fn record(options: &RecordOptions, stop: &AtomicBool) -> Result<Summary, Rec
         megabytes(summary.bytes)
     );
     Ok(summary)
+}
+
+/// The output file: created, or replaced with `--force`; an existing file (even one made since
+/// the check) is not replaced without it.
+fn create_output(options: &RecordOptions) -> Result<File, RecordError> {
+    // Without --force, a file made in the meantime is not replaced either.
+    OpenOptions::new()
+        .write(true)
+        .create_new(!options.force)
+        .create(options.force)
+        .truncate(options.force)
+        .open(&options.output)
+        .map_err(|source| match source.kind() {
+            std::io::ErrorKind::AlreadyExists => RecordError::Exists(options.output.clone()),
+            _ => RecordError::Create {
+                path: options.output.clone(),
+                source,
+            },
+        })
+}
+
+/// The MCAP writer on `file`, with the recording's metadata written.
+fn start_writer(
+    context: &std::sync::Arc<Context>,
+    file: File,
+    options: &RecordOptions,
+) -> Result<McapWriterHandle<SyncedFile>, RecordError> {
+    let write_error = |error| RecordError::Write {
+        path: options.output.clone(),
+        error,
+    };
+    let writer = context
+        .mcap_writer_with_options(
+            McapWriteOptions::new()
+                .compression(Some(McapCompression::Zstd))
+                .chunk_size(Some(CHUNK_SIZE))
+                .profile(""),
+        )
+        .create(SyncedFile(file))
+        .map_err(write_error)?;
+    let metadata = [
+        ("robot".to_owned(), options.robot.clone()),
+        (
+            "recorder".to_owned(),
+            format!("scout-foxglove {}", env!("CARGO_PKG_VERSION")),
+        ),
+        (
+            "log_time".to_owned(),
+            "the gateway's CLOCK_BOOTTIME receive (state) or send (command) time, shifted to \
+             Unix time when the recording started"
+                .to_owned(),
+        ),
+    ]
+    .into_iter()
+    .collect();
+    writer
+        .write_metadata("scout", metadata)
+        .map_err(write_error)?;
+    Ok(writer)
 }
