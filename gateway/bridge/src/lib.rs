@@ -4,19 +4,20 @@
 //! on the network can slow the control thread: it reads the latest state when it publishes, and
 //! older states are dropped.
 
+use std::collections::HashMap;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use scout_interface::control::{Accepted, Class, Request, StatusPayload};
+use scout_interface::control::{Accepted, Request, StatusPayload};
 use scout_interface::json::{state_json, status_json};
 use scout_interface::remote::{
-    self, CommandError, MAX_COMMAND_BYTES, Permission, REMOTE_PREFIX, RemoteAnswer, RemoteCommand,
-    RemoteKind, peer_client_name,
+    self, CommandError, MAX_COMMAND_BYTES, Permission, REMOTE_PREFIX, RemoteAnswer, RemoteKind,
+    peer_client_name,
 };
 pub use scout_interface::remote::{BadStateRate, RemoteCommands, ZenohConfig};
 use scout_interface::robot::{Program, RobotName};
-use scout_interface::services::{self, ControlPort, RequestError, Role, Way, monotonic_ns};
+use scout_interface::services::{self, ControlPort, Role, Way, monotonic_ns};
 use serde::Serialize;
 use serde_json::Value;
 use tracing::{debug, error, info, warn};
@@ -25,13 +26,27 @@ use zenoh::bytes::Encoding;
 use zenoh::qos::CongestionControl;
 use zenoh::query::Query;
 
+mod rules;
+
+use rules::{Rules, Via};
+
 /// Counts of what remote peers sent.
 #[derive(Debug, Clone, Copy, Default, Serialize)]
 struct Counters {
     commands_accepted: u64,
     commands_rejected: u64,
     commands_ignored_disabled: u64,
+    /// Puts other than drives (or any put while remote commands are off): commands that
+    /// change who drives or whether the robot may move are queries, answered.
     puts_ignored: u64,
+    /// Drives put on the fast lane that the rules and the arbiter let through.
+    drives_put_accepted: u64,
+    /// Drives put on the fast lane refused (their reasons are the queries'; a put has no
+    /// answer to carry them).
+    drives_put_rejected: u64,
+    /// Drives put on the fast lane that a newer one from the same peer replaced before the
+    /// bridge got to them.
+    drives_superseded: u64,
     state_queries: u64,
     info_queries: u64,
     /// Queries dropped unanswered because the query thread was [`MAX_QUEUED_QUERIES`] behind.
@@ -247,8 +262,9 @@ fn serve_queries(
     // (no allocation per peer, no I/O): an e-stop never waits behind other queries. A query
     // that finds its lane full is dropped unanswered and counted.
     let (estop_sender, estops) = std::sync::mpsc::sync_channel::<Query>(MAX_QUEUED_ESTOPS);
-    let (sender, inbox) = std::sync::mpsc::sync_channel::<(Asked, Query)>(MAX_QUEUED_QUERIES);
+    let (sender, inbox) = std::sync::mpsc::sync_channel::<Work>(MAX_QUEUED_QUERIES);
     let dropped = Arc::new(Dropped::default());
+    let drives = Arc::new(DriveSlots::default());
     let queryable = |key: String, asked: Asked| {
         let (sender, estop_sender, dropped) =
             (sender.clone(), estop_sender.clone(), Arc::clone(&dropped));
@@ -264,7 +280,7 @@ fn serve_queries(
                     if estop_sender.try_send(query).is_err() {
                         dropped.estops.fetch_add(1, Ordering::Relaxed);
                     }
-                } else if sender.try_send((asked, query)).is_err() {
+                } else if sender.try_send(Work::Query(asked, query)).is_err() {
                     dropped.queries.fetch_add(1, Ordering::Relaxed);
                 }
             })
@@ -274,10 +290,38 @@ fn serve_queries(
     let _state_queries = queryable(remote::state_key(robot_name), Asked::State)?;
     let _info_queries = queryable(remote::info_key(robot_name), Asked::Info)?;
     let _command_queries = queryable(remote::command_keys(robot_name), Asked::Command)?;
-    let command_puts = session
-        .declare_subscriber(remote::command_keys(robot_name))
-        .wait()
-        .map_err(zenoh_error)?;
+    // The fast lane: drives put (not queried) keep only the newest per peer, stamped with
+    // their arrival; the command thread is woken once for however many arrive meanwhile.
+    let _command_puts = {
+        let (sender, drives, enabled) = (
+            sender.clone(),
+            Arc::clone(&drives),
+            config.remote_commands.enabled,
+        );
+        session
+            .declare_subscriber(remote::command_keys(robot_name))
+            .callback(move |sample| {
+                let key = sample.key_expr().as_str();
+                let drive = matches!(remote::parse_command_key(key), Ok((RemoteKind::Drive, _)));
+                if !(enabled && drive && sample.kind() == zenoh::sample::SampleKind::Put) {
+                    drives.ignored.fetch_add(1, Ordering::Relaxed);
+                    return;
+                }
+                let payload = sample.payload();
+                // Oversized: kept as its size only, and refused for it by the rules.
+                let payload = if payload.len() > MAX_COMMAND_BYTES {
+                    vec![b' '; MAX_COMMAND_BYTES + 1]
+                } else {
+                    payload.to_bytes().into_owned()
+                };
+                if drives.put(key, services::monotonic(), payload) {
+                    // The first waiting drive wakes the thread; a full inbox wakes it anyway.
+                    let _ = sender.try_send(Work::Drives);
+                }
+            })
+            .wait()
+            .map_err(zenoh_error)?
+    };
     let estop_counters = Arc::new(EstopCounters::default());
     std::thread::scope(|scope| {
         let estop_lane = std::thread::Builder::new()
@@ -291,13 +335,19 @@ fn serve_queries(
         let mut commands = RemoteControl::new(&node, robot_name, config)?;
         let mut counters = Counters::default();
         while !halt() {
-            while let Ok(Some(_)) = command_puts.try_recv() {
-                counters.puts_ignored += 1;
-            }
+            counters.puts_ignored = drives.ignored.load(Ordering::Relaxed);
+            counters.drives_superseded = drives.superseded.load(Ordering::Relaxed);
             counters.queries_dropped = dropped.queries.load(Ordering::Relaxed);
             counters.estops_dropped = dropped.estops.load(Ordering::Relaxed);
-            let Ok((asked, query)) = inbox.recv_timeout(Duration::from_millis(100)) else {
-                continue;
+            let (asked, query) = match inbox.recv_timeout(Duration::from_millis(100)) {
+                Ok(Work::Query(asked, query)) => (asked, query),
+                Ok(Work::Drives) => {
+                    for (key, (arrived, payload)) in drives.take() {
+                        commands.handle_put(arrived, &key, &payload, &mut counters);
+                    }
+                    continue;
+                }
+                Err(_) => continue,
             };
             match asked {
                 Asked::State => {
@@ -328,6 +378,57 @@ fn serve_queries(
             .join()
             .map_err(|_| anyhow::anyhow!("the e-stop thread panicked"))?
     })
+}
+
+/// What the command thread is woken for.
+enum Work {
+    /// A query to answer.
+    Query(Asked, Query),
+    /// Drives put on the fast lane wait in [`DriveSlots`].
+    Drives,
+}
+
+/// Drives put on the fast lane, the newest per key (so per peer) only, with their arrival on
+/// this host's clock; and what the lane counted.
+#[derive(Debug, Default)]
+struct DriveSlots {
+    waiting: std::sync::Mutex<HashMap<String, (Duration, Vec<u8>)>>,
+    superseded: std::sync::atomic::AtomicU64,
+    ignored: std::sync::atomic::AtomicU64,
+}
+
+/// Keys waiting at once; a drive from yet another key is dropped (and counted as superseded):
+/// that many peers at once is a flood, not a teleop.
+const MAX_WAITING_DRIVES: usize = 64;
+
+impl DriveSlots {
+    /// Keeps `payload` as the newest drive on `key`; whether the thread must be woken (no
+    /// drive was waiting).
+    fn put(&self, key: &str, arrived: Duration, payload: Vec<u8>) -> bool {
+        let Ok(mut waiting) = self.waiting.lock() else {
+            return false;
+        };
+        let wake = waiting.is_empty();
+        if waiting.len() >= MAX_WAITING_DRIVES && !waiting.contains_key(key) {
+            self.superseded.fetch_add(1, Ordering::Relaxed);
+            return wake;
+        }
+        if waiting.insert(key.to_owned(), (arrived, payload)).is_some() {
+            self.superseded.fetch_add(1, Ordering::Relaxed);
+        }
+        wake
+    }
+
+    /// The drives waiting, oldest arrival first.
+    fn take(&self) -> Vec<(String, (Duration, Vec<u8>))> {
+        let mut taken: Vec<_> = self
+            .waiting
+            .lock()
+            .map(|mut waiting| waiting.drain().collect())
+            .unwrap_or_default();
+        taken.sort_by_key(|(_, (arrived, _))| *arrived);
+        taken
+    }
 }
 
 /// Queries dropped unanswered because their lane was full.
@@ -410,7 +511,7 @@ fn estop(
     port: &mut ControlPort,
     query: &Query,
 ) -> Result<Accepted, CommandError> {
-    allowed(config, Permission::Estop)?;
+    rules::allowed(&config.remote_commands, Permission::Estop)?;
     let (_, peer) = remote::parse_command_key(query.key_expr().as_str())?;
     let reason = query
         .payload()
@@ -427,17 +528,6 @@ fn estop(
 
 const DISABLED: &str =
     "remote commands are disabled on this gateway (zenoh.remote_commands.enabled)";
-
-fn allowed(config: &ZenohConfig, permission: Permission) -> Result<(), CommandError> {
-    if config.remote_commands.allowed.contains(&permission) {
-        Ok(())
-    } else {
-        Err(CommandError::NotAllowed {
-            permission,
-            allowed: config.allowed_names(),
-        })
-    }
-}
 
 /// What a query asks for.
 #[derive(Debug, Clone, Copy)]
@@ -464,37 +554,22 @@ fn reply(query: &Query, payload: String) {
     }
 }
 
-/// Remote commands other than e-stops. A peer that takes control gets a control port of its
-/// own, named `remote:PEER`, so the arbiter treats it like a local client (leases, freshness,
-/// limits, priority); releases go through the bridge's stop port, naming the peer. The peer is
-/// named by the command's key, which zenoh's access control binds to the peer's certificate.
-/// Nothing is kept or opened for a peer before its command passed the permission check.
+/// Remote commands other than e-stops, the driver of [`Rules`]: a peer that takes control gets
+/// a control port of its own, named `remote:PEER`, so the arbiter treats it like a local client
+/// (leases, freshness, limits, priority); releases go through the bridge's stop port, naming
+/// the peer. The peer is named by the command's key, which zenoh's access control binds to the
+/// peer's certificate. Nothing is kept or opened for a peer before its command passed the
+/// permission check.
 struct RemoteControl<'a> {
     node: &'a iceoryx2::node::Node<services::Ipc>,
     robot: &'a str,
     config: &'a ZenohConfig,
+    rules: Rules,
     /// The bridge's stop-service port, for releases.
     safety: ControlPort,
-    peers: Vec<Peer>,
-    used: u64,
+    /// The control ports of the peers the rules keep, by client name.
+    ports: HashMap<String, ControlPort>,
 }
-
-/// What the bridge keeps of one remote peer.
-struct Peer {
-    /// Its client name (`remote:...`).
-    name: String,
-    control: Option<ControlPort>,
-    /// The lease it took and its class.
-    lease: Option<(u64, Class)>,
-    /// Its last command number.
-    seq: Option<u64>,
-    /// The least (arrival - sent) seen, ms: its clock's offset plus the fastest delivery.
-    offset: Option<i128>,
-    used: u64,
-}
-
-/// Remote peers kept at once; the least recently used is forgotten past this.
-const MAX_REMOTE_PEERS: usize = 16;
 
 impl<'a> RemoteControl<'a> {
     fn new(
@@ -506,10 +581,10 @@ impl<'a> RemoteControl<'a> {
             node,
             robot,
             config,
+            rules: Rules::new(config.remote_commands.clone()),
             safety: ControlPort::open(node, robot, Way::Stop, REMOTE_PREFIX)
                 .map_err(|e| anyhow::anyhow!("opening the bridge's stop port: {e}"))?,
-            peers: Vec::new(),
-            used: 0,
+            ports: HashMap::new(),
         })
     }
 
@@ -530,149 +605,59 @@ impl<'a> RemoteControl<'a> {
         answer
     }
 
-    fn decide(&mut self, query: &Query) -> Result<Accepted, CommandError> {
-        let (kind, peer) = remote::parse_command_key(query.key_expr().as_str())?;
-        let name = peer_client_name(peer);
-        let payload = query.payload().ok_or(CommandError::NoPayload)?;
-        if payload.len() > MAX_COMMAND_BYTES {
-            return Err(CommandError::TooLarge {
-                size: payload.len(),
-                max: MAX_COMMAND_BYTES,
-            });
-        }
-        let command: RemoteCommand = serde_json::from_slice(&payload.to_bytes())
-            .map_err(|error| CommandError::Json(error.to_string()))?;
-        let known = self.peers.iter().position(|p| p.name == name);
-        let lease = known.and_then(|index| self.peers[index].lease);
-        let (permission, request) = command.request(kind, lease)?;
-        // The permission before anything is kept or opened for this peer.
-        allowed(self.config, permission)?;
-        if let Request::Release { .. } = request {
-            return Ok(self.safety.request_for_peer(&request, &name)?);
-        }
-        let (node, robot) = (self.node, self.robot);
-        let peer = self.peer(&name);
-        let sent = match kind {
-            RemoteKind::TakeControl | RemoteKind::Drive => peer.on_time(kind, &command)?,
-            RemoteKind::Relinquish
-            | RemoteKind::Estop
-            | RemoteKind::Release
-            | RemoteKind::Resume
-            | RemoteKind::Lights
-            | RemoteKind::ClearFault => services::monotonic(),
-        };
-        let answer = peer
-            .control_port(node, robot)?
-            .request_sent_at(&request, sent);
-        let lost_control =
-            matches!(&answer, Err(RequestError::Rejected(rejected)) if rejected.lost_control());
-        match (&request, &answer) {
-            (Request::TakeControl { class }, Ok(accepted)) => {
-                peer.lease = accepted.lease.map(|lease| (lease, *class));
+    /// A drive put on the fast lane, arrived at `arrived`: no answer goes back, the counters
+    /// say what became of it.
+    fn handle_put(
+        &mut self,
+        arrived: Duration,
+        key: &str,
+        payload: &[u8],
+        counters: &mut Counters,
+    ) {
+        match self.send(arrived, key, Some(payload)) {
+            Ok(_) => counters.drives_put_accepted += 1,
+            Err(error) => {
+                counters.drives_put_rejected += 1;
+                debug!("zenoh: drive put on {key} refused: {error}");
             }
-            (Request::Relinquish, Ok(_)) => peer.lease = None,
-            // Revoked or not held: the peer must take control again.
-            _ if lost_control => peer.lease = None,
-            _ => {}
         }
+    }
+
+    fn decide(&mut self, query: &Query) -> Result<Accepted, CommandError> {
+        let payload = query.payload().map(|payload| payload.to_bytes());
+        self.send(
+            services::monotonic(),
+            query.key_expr().as_str(),
+            payload.as_deref(),
+        )
+    }
+
+    /// A command through the rules, then to the arbiter.
+    fn send(
+        &mut self,
+        now: Duration,
+        key: &str,
+        payload: Option<&[u8]>,
+    ) -> Result<Accepted, CommandError> {
+        let send = self.rules.handle_command(now, key, payload)?;
+        if let Some(evicted) = &send.evicted {
+            self.ports.remove(evicted);
+        }
+        let answer = match send.via {
+            Via::Safety => self.safety.request_for_peer(&send.request, &send.peer),
+            Via::Control { sent } => {
+                let port = match self.ports.remove(&send.peer) {
+                    Some(port) => port,
+                    None => ControlPort::open(self.node, self.robot, Way::Control, &send.peer)?,
+                };
+                let port = self.ports.entry(send.peer.clone()).or_insert(port);
+                port.request_sent_at(&send.request, sent)
+            }
+        };
+        self.rules.handle_answer(&send.peer, &send.request, &answer);
         Ok(answer?)
     }
-
-    /// The peer named `name` (a client name), kept from now on; past [`MAX_REMOTE_PEERS`] the
-    /// least recently used is forgotten.
-    fn peer(&mut self, name: &str) -> &mut Peer {
-        self.used += 1;
-        let used = self.used;
-        let index = match self.peers.iter().position(|peer| peer.name == name) {
-            Some(index) => index,
-            None => {
-                if self.peers.len() >= MAX_REMOTE_PEERS
-                    && let Some(oldest) = (0..self.peers.len()).min_by_key(|&i| self.peers[i].used)
-                {
-                    self.peers.swap_remove(oldest);
-                }
-                self.peers.push(Peer {
-                    name: name.to_owned(),
-                    control: None,
-                    lease: None,
-                    seq: None,
-                    offset: None,
-                    used,
-                });
-                self.peers.len() - 1
-            }
-        };
-        let peer = &mut self.peers[index];
-        peer.used = used;
-        peer
-    }
 }
-
-impl Peer {
-    fn control_port(
-        &mut self,
-        node: &iceoryx2::node::Node<services::Ipc>,
-        robot: &str,
-    ) -> Result<&mut ControlPort, CommandError> {
-        let port = match self.control.take() {
-            Some(port) => port,
-            None => ControlPort::open(node, robot, Way::Control, &self.name)?,
-        };
-        Ok(self.control.insert(port))
-    }
-
-    /// Checks a take-control's or drive command's age (and a drive's order); returns when it
-    /// was sent, on this host's clock. A repeated or older drive `seq` is refused; so is a
-    /// command the network held up for longer than its life, measured against the fastest
-    /// delivery seen from this peer (so no common clock is needed). A take-control carries
-    /// `sent_ms` too: it seeds that measure, so the first drive is aged like every later one.
-    fn on_time(
-        &mut self,
-        kind: RemoteKind,
-        command: &RemoteCommand,
-    ) -> Result<Duration, CommandError> {
-        let (Some(sent_ms), Some(seq)) = (
-            command.sent_ms,
-            command.seq.or((kind != RemoteKind::Drive).then_some(0)),
-        ) else {
-            return Err(CommandError::Missing(match kind {
-                RemoteKind::Drive => {
-                    "drive needs `seq` (rising) and `sent_ms` (the sender's clock, ms)"
-                }
-                _ => {
-                    "take-control needs `sent_ms` (the sender's clock, ms): it seeds the age check of the drives that follow"
-                }
-            }));
-        };
-        if kind == RemoteKind::Drive {
-            if let Some(last) = self.seq
-                && seq <= last
-            {
-                return Err(CommandError::OutOfOrder { seq, last });
-            }
-            self.seq = Some(seq);
-        }
-        let now = services::monotonic();
-        let delay = now.as_millis() as i128 - i128::from(sent_ms);
-        let offset = *self
-            .offset
-            .insert(self.offset.map_or(delay, |offset| offset.min(delay)));
-        let late = Duration::from_millis((delay - offset).max(0) as u64);
-        let life = command.ttl_ms.map_or(MAX_REMOTE_LIFE, |ms| {
-            Duration::from_millis(u64::from(ms)).min(MAX_REMOTE_LIFE)
-        });
-        if late > life {
-            return Err(CommandError::Late {
-                late_ms: late.as_millis(),
-                life_ms: life.as_millis(),
-            });
-        }
-        Ok(now.saturating_sub(late))
-    }
-}
-
-/// The longest a remote drive command may live: the chassis' own timeout.
-const MAX_REMOTE_LIFE: Duration = Duration::from_millis(500);
 
 #[cfg(test)]
 mod tests {

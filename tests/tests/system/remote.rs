@@ -5,9 +5,11 @@
 use std::time::{Duration, Instant};
 
 use nix::sys::signal::Signal;
+use scout_clients::interface::json::state_json;
+use scout_clients::monotonic_ns;
 use scout_system_tests::{
-    Background, Gateway, Sim, connect, free_port, robot_name, scout, tcp, wait_for_status,
-    zenoh_query, zenoh_session,
+    Background, Gateway, Sim, connect, free_port, robot_name, scout, tcp, wait_for_state,
+    wait_for_status, zenoh_query, zenoh_session,
 };
 use serde_json::Value;
 use zenoh::Wait;
@@ -307,6 +309,104 @@ fn enabled_remote_commands_go_through_the_arbiter_and_bad_input_is_rejected() {
             .is_some_and(|r| r.contains("take-control")),
         "{again}"
     );
+}
+
+/// The counters of the gateway's information queryable once `wanted` holds (polled).
+fn counters_when(session: &zenoh::Session, name: &str, wanted: impl Fn(&Value) -> bool) -> Value {
+    let deadline = Instant::now() + LIMIT;
+    loop {
+        let info = query_until_answered(session, &format!("scout/{name}/info"));
+        if wanted(&info["counters"]) {
+            return info["counters"].clone();
+        }
+        assert!(Instant::now() < deadline, "{info}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+#[test]
+fn drives_put_on_the_fast_lane_drive_and_stop_when_they_stop() {
+    let name = robot_name("remote-put");
+    let port = free_port();
+    let _gateway = Gateway::start(&[
+        "--sim",
+        "--name",
+        &name,
+        "--zenoh-listen",
+        &tcp(port),
+        "--remote-commands",
+        "estop,teleop",
+    ]);
+    let robot = connect(&name);
+    let status = robot.status().expect("status");
+    let state = robot.subscribe().expect("subscribe");
+    let session = zenoh_session("client", &[], &[tcp(port)]);
+    query_until_answered(&session, &format!("scout/{name}/info"));
+    let key = format!("scout/{name}/cmd/drive/laptop");
+    let started = Instant::now();
+    let sent_ms = || 1_000 + started.elapsed().as_millis() as u64;
+    let put = |seq: u64| {
+        let drive = format!(
+            r#"{{"seq":{seq},"sent_ms":{},"linear":0.4,"angular":0.0,"ttl_ms":300}}"#,
+            sent_ms()
+        );
+        session.put(&key, drive).wait().expect("put");
+    };
+    // Without control a put drives nothing: refused and counted (a put has no answer).
+    put(1);
+    counters_when(&session, &name, |c| c["drives_put_rejected"] == 1);
+    let taken = zenoh_query(
+        &session,
+        &format!("scout/{name}/cmd/take-control/laptop"),
+        Some(&format!(r#"{{"class":"teleop","sent_ms":{}}}"#, sent_ms())),
+        QUERY,
+    );
+    assert_eq!(taken[0]["accepted"], true, "{taken:?}");
+    // Puts at 50 Hz drive the chassis.
+    let mut seq = 1;
+    let deadline = Instant::now() + LIMIT;
+    loop {
+        seq += 1;
+        put(seq);
+        let driving = state
+            .next_timeout(Duration::from_millis(20))
+            .expect("state")
+            .map(|s| state_json(&s, monotonic_ns()))
+            .is_some_and(|s| s["motion"]["linear"].as_f64() > Some(0.3));
+        if driving {
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the puts never drove the chassis"
+        );
+    }
+    let driving = wait_for_status(&status, LIMIT, |s| {
+        s["selected"]["client"] == "remote:laptop"
+    });
+    assert_eq!(driving["selected"]["class"], "teleop");
+    // A replayed put (an old seq) is refused, not applied. (A put the host held up past its
+    // life may be refused too: counts are compared, not equated.)
+    let rejected = |c: &Value| c["drives_put_rejected"].as_u64().unwrap_or(0);
+    let before = rejected(&counters_when(&session, &name, |c| {
+        c["drives_put_accepted"].as_u64() >= Some(1)
+    }));
+    put(1);
+    counters_when(&session, &name, |c| rejected(c) > before);
+    // The puts stop (a lost link): the command ramps to zero within its life, and control
+    // ends; a later put is refused until the peer takes control again.
+    wait_for_state(&state, LIMIT, |s| s["command"]["linear"] == 0.0);
+    wait_for_status(&status, LIMIT, |s| s["selected"].is_null());
+    let before = rejected(&counters_when(&session, &name, |_| true));
+    put(seq + 1);
+    counters_when(&session, &name, |c| rejected(c) > before);
+    // Anything but a drive is a query: a put of another kind is ignored and counted.
+    session
+        .put(format!("scout/{name}/cmd/estop/laptop"), "{}")
+        .wait()
+        .expect("put");
+    counters_when(&session, &name, |c| c["puts_ignored"] == 1);
+    assert_eq!(wait_for_status(&status, LIMIT, |_| true)["latched"], false);
 }
 
 #[test]

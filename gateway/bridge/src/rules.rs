@@ -1,0 +1,467 @@
+//! The remote-command rules without I/O: who a command is from (its key), whether the gateway
+//! grants it, its order and age on the peer's own clock, and the lease it holds. Time and
+//! commands in ([`Rules::handle_command`]), what to send to the arbiter out; the arbiter's answer
+//! back in ([`Rules::handle_answer`]). The bridge's thread is the driver that touches zenoh,
+//! iceoryx2 and the clock.
+
+use std::time::Duration;
+
+use scout_interface::control::{Accepted, Class, Request};
+use scout_interface::remote::{
+    self, CommandError, MAX_COMMAND_BYTES, Permission, RemoteCommand, RemoteCommands, RemoteKind,
+    peer_client_name,
+};
+use scout_interface::services::RequestError;
+
+/// Remote peers kept at once; the least recently used is forgotten past this.
+pub const MAX_REMOTE_PEERS: usize = 16;
+
+/// The longest a remote drive command may live: the chassis' own timeout.
+pub const MAX_REMOTE_LIFE: Duration = Duration::from_millis(500);
+
+/// What the rules keep of remote peers.
+#[derive(Debug)]
+pub struct Rules {
+    commands: RemoteCommands,
+    peers: Vec<Peer>,
+    used: u64,
+}
+
+/// What the rules keep of one remote peer.
+#[derive(Debug)]
+struct Peer {
+    /// Its client name (`remote:...`).
+    name: String,
+    /// The lease it took and its class.
+    lease: Option<(u64, Class)>,
+    /// Its last drive's number.
+    seq: Option<u64>,
+    /// The least (arrival - sent) seen, ms: its clock's offset plus the fastest delivery.
+    offset: Option<i128>,
+    used: u64,
+}
+
+/// A command the rules let through: the request and where it goes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Send {
+    /// The peer's client name (`remote:...`): the owner of what the request does.
+    pub peer: String,
+    /// The arbiter request.
+    pub request: Request,
+    /// Which port carries it.
+    pub via: Via,
+    /// A peer forgotten to make room for this one: the driver closes its port.
+    pub evicted: Option<String>,
+}
+
+/// The port a request goes through.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Via {
+    /// The bridge's stop port, naming the peer (releases: they need no control).
+    Safety,
+    /// The peer's own control port, stamped `sent` on this host's clock (when the peer sent
+    /// it, as far as its age tells).
+    Control {
+        /// The send time the arbiter ages the request by.
+        sent: Duration,
+    },
+}
+
+impl Rules {
+    /// Rules granting what `commands` allows (`commands.enabled` is the driver's to check: a
+    /// disabled gateway never asks the rules).
+    pub fn new(commands: RemoteCommands) -> Self {
+        Self {
+            commands,
+            peers: Vec::new(),
+            used: 0,
+        }
+    }
+
+    /// A command that arrived at `now` (this host's clock) on `key` with `payload`: the request
+    /// to send, or why it is refused. Nothing is kept for a peer before its command passed the
+    /// permission check.
+    pub fn handle_command(
+        &mut self,
+        now: Duration,
+        key: &str,
+        payload: Option<&[u8]>,
+    ) -> Result<Send, CommandError> {
+        let (kind, peer) = remote::parse_command_key(key)?;
+        let name = peer_client_name(peer);
+        let payload = payload.ok_or(CommandError::NoPayload)?;
+        if payload.len() > MAX_COMMAND_BYTES {
+            return Err(CommandError::TooLarge {
+                size: payload.len(),
+                max: MAX_COMMAND_BYTES,
+            });
+        }
+        let command: RemoteCommand = serde_json::from_slice(payload)
+            .map_err(|error| CommandError::Json(error.to_string()))?;
+        let lease = (self.peers.iter())
+            .find(|known| known.name == name)
+            .and_then(|known| known.lease);
+        let (permission, request) = command.request(kind, lease)?;
+        // The permission before anything is kept for this peer.
+        self.allowed(permission)?;
+        if let Request::Release { .. } = request {
+            return Ok(Send {
+                peer: name,
+                request,
+                via: Via::Safety,
+                evicted: None,
+            });
+        }
+        let (peer, evicted) = self.peer(&name);
+        let sent = match kind {
+            RemoteKind::TakeControl | RemoteKind::Drive => peer.on_time(now, kind, &command)?,
+            RemoteKind::Relinquish
+            | RemoteKind::Estop
+            | RemoteKind::Release
+            | RemoteKind::Resume
+            | RemoteKind::Lights
+            | RemoteKind::ClearFault => now,
+        };
+        Ok(Send {
+            peer: name,
+            request,
+            via: Via::Control { sent },
+            evicted,
+        })
+    }
+
+    /// The arbiter's answer to `request`, sent for `peer`: a lease taken, given up or lost.
+    pub fn handle_answer(
+        &mut self,
+        peer: &str,
+        request: &Request,
+        answer: &Result<Accepted, RequestError>,
+    ) {
+        let Some(peer) = self.peers.iter_mut().find(|known| known.name == peer) else {
+            return;
+        };
+        let lost_control =
+            matches!(answer, Err(RequestError::Rejected(rejected)) if rejected.lost_control());
+        match (request, answer) {
+            (Request::TakeControl { class }, Ok(accepted)) => {
+                peer.lease = accepted.lease.map(|lease| (lease, *class));
+            }
+            (Request::Relinquish, Ok(_)) => peer.lease = None,
+            // Revoked or not held: the peer must take control again.
+            _ if lost_control => peer.lease = None,
+            _ => {}
+        }
+    }
+
+    /// Whether the gateway grants `permission` to remote peers.
+    pub fn allowed(&self, permission: Permission) -> Result<(), CommandError> {
+        allowed(&self.commands, permission)
+    }
+
+    /// The peer named `name` (a client name), kept from now on; past [`MAX_REMOTE_PEERS`] the
+    /// least recently used is forgotten (its name returned).
+    fn peer(&mut self, name: &str) -> (&mut Peer, Option<String>) {
+        self.used += 1;
+        let used = self.used;
+        let mut evicted = None;
+        let index = match self.peers.iter().position(|peer| peer.name == name) {
+            Some(index) => index,
+            None => {
+                if self.peers.len() >= MAX_REMOTE_PEERS
+                    && let Some(oldest) = (0..self.peers.len()).min_by_key(|&i| self.peers[i].used)
+                {
+                    evicted = Some(self.peers.swap_remove(oldest).name);
+                }
+                self.peers.push(Peer {
+                    name: name.to_owned(),
+                    lease: None,
+                    seq: None,
+                    offset: None,
+                    used,
+                });
+                self.peers.len() - 1
+            }
+        };
+        let peer = &mut self.peers[index];
+        peer.used = used;
+        (peer, evicted)
+    }
+}
+
+/// Whether `commands` grant `permission` to remote peers (the e-stop lane asks too).
+pub fn allowed(commands: &RemoteCommands, permission: Permission) -> Result<(), CommandError> {
+    if commands.allowed.contains(&permission) {
+        return Ok(());
+    }
+    let names: Vec<&str> = commands.allowed.iter().map(|p| p.name()).collect();
+    Err(CommandError::NotAllowed {
+        permission,
+        allowed: names.join(", "),
+    })
+}
+
+impl Peer {
+    /// Checks a take-control's or drive command's age (and a drive's order) at `now`; returns
+    /// when it was sent, on this host's clock. A repeated or older drive `seq` is refused; so
+    /// is a command the network held up for longer than its life, measured against the fastest
+    /// delivery seen from this peer (so no common clock is needed). A take-control carries
+    /// `sent_ms` too: it seeds that measure, so the first drive is aged like every later one.
+    fn on_time(
+        &mut self,
+        now: Duration,
+        kind: RemoteKind,
+        command: &RemoteCommand,
+    ) -> Result<Duration, CommandError> {
+        let (Some(sent_ms), Some(seq)) = (
+            command.sent_ms,
+            command.seq.or((kind != RemoteKind::Drive).then_some(0)),
+        ) else {
+            return Err(CommandError::Missing(match kind {
+                RemoteKind::Drive => {
+                    "drive needs `seq` (rising) and `sent_ms` (the sender's clock, ms)"
+                }
+                _ => {
+                    "take-control needs `sent_ms` (the sender's clock, ms): it seeds the age check of the drives that follow"
+                }
+            }));
+        };
+        if kind == RemoteKind::Drive {
+            if let Some(last) = self.seq
+                && seq <= last
+            {
+                return Err(CommandError::OutOfOrder { seq, last });
+            }
+            self.seq = Some(seq);
+        }
+        let delay = now.as_millis() as i128 - i128::from(sent_ms);
+        let offset = *self
+            .offset
+            .insert(self.offset.map_or(delay, |offset| offset.min(delay)));
+        let late = Duration::from_millis((delay - offset).max(0) as u64);
+        let life = command.ttl_ms.map_or(MAX_REMOTE_LIFE, |ms| {
+            Duration::from_millis(u64::from(ms)).min(MAX_REMOTE_LIFE)
+        });
+        if late > life {
+            return Err(CommandError::Late {
+                late_ms: late.as_millis(),
+                life_ms: life.as_millis(),
+            });
+        }
+        Ok(now.saturating_sub(late))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+    use scout_interface::control::{Rejected, RejectionKind};
+
+    const MS: Duration = Duration::from_millis(1);
+
+    fn rules(allowed: &[Permission]) -> Rules {
+        Rules::new(RemoteCommands {
+            enabled: true,
+            allowed: allowed.to_vec(),
+        })
+    }
+
+    fn teleop() -> Rules {
+        rules(&[Permission::Estop, Permission::Teleop, Permission::Release])
+    }
+
+    fn key(kind: &str, peer: &str) -> String {
+        format!("scout/r/cmd/{kind}/{peer}")
+    }
+
+    fn take(rules: &mut Rules, now: Duration, peer: &str, sent_ms: u64) -> Send {
+        let payload = format!(r#"{{"class":"teleop","sent_ms":{sent_ms}}}"#);
+        let send =
+            (rules.handle_command(now, &key("take-control", peer), Some(payload.as_bytes())))
+                .expect("take-control passes");
+        rules.handle_answer(
+            &send.peer,
+            &send.request,
+            &Ok(Accepted {
+                lease: Some(7),
+                ..Accepted::default()
+            }),
+        );
+        send
+    }
+
+    fn drive(
+        rules: &mut Rules,
+        now: Duration,
+        peer: &str,
+        seq: u64,
+        sent_ms: u64,
+    ) -> Result<Send, CommandError> {
+        let payload = format!(r#"{{"seq":{seq},"sent_ms":{sent_ms},"linear":0.5,"angular":0.0}}"#);
+        rules.handle_command(now, &key("drive", peer), Some(payload.as_bytes()))
+    }
+
+    #[test]
+    fn a_drive_needs_a_lease_and_goes_on_the_peer_s_control_port() {
+        let mut rules = teleop();
+        let refused = drive(&mut rules, 1000 * MS, "op", 1, 50).expect_err("no lease yet");
+        assert!(matches!(refused, CommandError::NoControl(_)), "{refused}");
+        take(&mut rules, 1000 * MS, "op", 50);
+        let send = drive(&mut rules, 1020 * MS, "op", 1, 70).expect("leased");
+        assert_eq!(send.peer, "remote:op");
+        assert_eq!(send.via, Via::Control { sent: 1020 * MS });
+        assert!(matches!(send.request, Request::Drive { lease: 7, .. }));
+    }
+
+    #[test]
+    fn drives_in_order_only() {
+        let mut rules = teleop();
+        take(&mut rules, 1000 * MS, "op", 0);
+        drive(&mut rules, 1010 * MS, "op", 5, 10).expect("first");
+        for seq in [5, 4, 0] {
+            let refused = drive(&mut rules, 1020 * MS, "op", seq, 20).expect_err("not newer");
+            assert!(matches!(refused, CommandError::OutOfOrder { last: 5, .. }));
+        }
+        drive(&mut rules, 1030 * MS, "op", 9, 30).expect("a gap is fine");
+    }
+
+    #[test]
+    fn a_drive_held_up_past_its_life_is_refused_and_ages_by_the_fastest_delivery() {
+        let mut rules = teleop();
+        // The peer's clock is 10 s behind; its fastest delivery so far took 20 ms.
+        take(&mut rules, 10_020 * MS, "op", 0);
+        let on_time = drive(&mut rules, 10_120 * MS, "op", 1, 100).expect("as fast");
+        assert_eq!(on_time.via, Via::Control { sent: 10_120 * MS });
+        // 300 ms slower than the fastest: sent 300 ms before it arrived, as far as we can tell.
+        let slow = drive(&mut rules, 10_520 * MS, "op", 2, 200).expect("within 500 ms");
+        assert_eq!(slow.via, Via::Control { sent: 10_220 * MS });
+        let late = drive(&mut rules, 11_121 * MS, "op", 3, 300).expect_err("501 ms late");
+        assert!(
+            matches!(
+                late,
+                CommandError::Late {
+                    late_ms: 801,
+                    life_ms: 500
+                }
+            ),
+            "{late}"
+        );
+        // A shorter ttl is a shorter life.
+        let payload = br#"{"seq":4,"sent_ms":400,"ttl_ms":100,"linear":0,"angular":0}"#;
+        let short = rules.handle_command(10_621 * MS, &key("drive", "op"), Some(payload));
+        assert!(matches!(
+            short,
+            Err(CommandError::Late { life_ms: 100, .. })
+        ));
+    }
+
+    #[test]
+    fn a_lost_lease_must_be_taken_again() {
+        let mut rules = teleop();
+        take(&mut rules, 1000 * MS, "op", 0);
+        let send = drive(&mut rules, 1010 * MS, "op", 1, 10).expect("leased");
+        rules.handle_answer(
+            &send.peer,
+            &send.request,
+            &Err(RequestError::Rejected(Rejected {
+                kind: Some(RejectionKind::Revoked),
+                reason: "revoked".into(),
+            })),
+        );
+        let refused = drive(&mut rules, 1020 * MS, "op", 2, 20).expect_err("lease gone");
+        assert!(matches!(refused, CommandError::NoControl(_)));
+    }
+
+    #[test]
+    fn permissions_come_first_and_keep_nothing() {
+        let mut rules = rules(&[Permission::Estop]);
+        for peer in 0..100 {
+            let peer = format!("p{peer}");
+            let refused = rules
+                .handle_command(
+                    MS,
+                    &key("take-control", &peer),
+                    Some(br#"{"class":"teleop","sent_ms":0}"#),
+                )
+                .expect_err("teleop not granted");
+            assert!(matches!(refused, CommandError::NotAllowed { .. }));
+        }
+        assert!(rules.peers.is_empty(), "a refused peer is not kept");
+        let stop = rules
+            .handle_command(MS, &key("estop", "p1"), Some(b"{}"))
+            .expect("estop granted");
+        assert_eq!(stop.via, Via::Control { sent: MS });
+    }
+
+    #[test]
+    fn releases_go_through_the_safety_port_naming_the_peer() {
+        let mut rules = teleop();
+        let send = (rules.handle_command(MS, &key("release", "op"), Some(br#"{"through":3}"#)))
+            .expect("granted");
+        assert_eq!(send.via, Via::Safety);
+        assert_eq!(send.peer, "remote:op");
+    }
+
+    #[test]
+    fn the_least_recently_used_peer_is_forgotten_and_named() {
+        let mut rules = teleop();
+        for peer in 0..MAX_REMOTE_PEERS {
+            let send = rules
+                .handle_command(MS, &key("estop", &format!("p{peer}")), Some(b"{}"))
+                .expect("estop");
+            assert_eq!(send.evicted, None);
+        }
+        // p0 is used again: p1 is the least recently used.
+        rules
+            .handle_command(MS, &key("estop", "p0"), Some(b"{}"))
+            .expect("estop");
+        let send = (rules.handle_command(MS, &key("estop", "new"), Some(b"{}"))).expect("estop");
+        assert_eq!(send.evicted.as_deref(), Some("remote:p1"));
+        assert_eq!(rules.peers.len(), MAX_REMOTE_PEERS);
+    }
+
+    #[test]
+    fn bad_input_says_why() {
+        let mut rules = teleop();
+        let cases: [(&str, Option<&[u8]>); 4] = [
+            ("scout/r/cmd/drive", Some(b"{}")),
+            ("scout/r/cmd/drive/op", None),
+            ("scout/r/cmd/drive/op", Some(b"not json")),
+            ("scout/r/cmd/fly/op", Some(b"{}")),
+        ];
+        for (key, payload) in cases {
+            assert!(rules.handle_command(MS, key, payload).is_err(), "{key}");
+        }
+        let big = vec![b' '; MAX_COMMAND_BYTES + 1];
+        assert!(matches!(
+            rules.handle_command(MS, &key("estop", "op"), Some(&big)),
+            Err(CommandError::TooLarge { .. })
+        ));
+    }
+
+    proptest! {
+        /// Whatever arrives in whatever order: a drive let through is newer than every drive
+        /// let through before it from that peer, never sent before it arrived nor more than its
+        /// life before, and nothing panics.
+        #[test]
+        fn accepted_drives_rise_and_are_fresh(
+            arrivals in proptest::collection::vec((0u64..5, 0u64..40, 0u64..2000, 0u64..3000), 1..60)
+        ) {
+            let mut rules = teleop();
+            take(&mut rules, Duration::from_secs(5), "op", 0);
+            let mut now = Duration::from_secs(5);
+            let mut last_seq = None;
+            for (step, seq, sent_ms, _) in arrivals {
+                now += Duration::from_millis(step * 10);
+                if let Ok(send) = drive(&mut rules, now, "op", seq, sent_ms) {
+                    prop_assert!(last_seq.is_none_or(|last| seq > last));
+                    last_seq = Some(seq);
+                    let Via::Control { sent } = send.via else {
+                        return Err(TestCaseError::fail("a drive goes on the control port"));
+                    };
+                    prop_assert!(sent <= now && now - sent <= MAX_REMOTE_LIFE);
+                }
+            }
+        }
+    }
+}
