@@ -261,7 +261,7 @@ fn serve_queries(
     // Two lanes, each through a channel to block on. The zenoh callback only sorts by key
     // (no allocation per peer, no I/O): an e-stop never waits behind other queries. A query
     // that finds its lane full is dropped unanswered and counted.
-    let (estop_sender, estops) = std::sync::mpsc::sync_channel::<Query>(MAX_QUEUED_ESTOPS);
+    let (estop_sender, estops) = std::sync::mpsc::sync_channel::<Estop>(MAX_QUEUED_ESTOPS);
     let (sender, inbox) = std::sync::mpsc::sync_channel::<Work>(MAX_QUEUED_QUERIES);
     let dropped = Arc::new(Dropped::default());
     let drives = Arc::new(DriveSlots::default());
@@ -277,7 +277,7 @@ fn serve_queries(
                         Ok((RemoteKind::Estop, _))
                     );
                 if estop {
-                    if estop_sender.try_send(query).is_err() {
+                    if estop_sender.try_send(Estop::Query(query)).is_err() {
                         dropped.estops.fetch_add(1, Ordering::Relaxed);
                     }
                 } else if sender.try_send(Work::Query(asked, query)).is_err() {
@@ -292,18 +292,35 @@ fn serve_queries(
     let _command_queries = queryable(remote::command_keys(robot_name), Asked::Command)?;
     // The fast lane: drives put (not queried) keep only the newest per peer, stamped with
     // their arrival; the command thread is woken once for however many arrive meanwhile.
+    // An e-stop put goes to the e-stop lane, beside the e-stop queries: a peer sends both, and
+    // whichever arrives first latches (the second refreshes the same stop).
     let _command_puts = {
-        let (sender, drives, enabled) = (
+        let (sender, estop_sender, drives, dropped, enabled) = (
             sender.clone(),
+            estop_sender.clone(),
             Arc::clone(&drives),
+            Arc::clone(&dropped),
             config.remote_commands.enabled,
         );
         session
             .declare_subscriber(remote::command_keys(robot_name))
             .callback(move |sample| {
                 let key = sample.key_expr().as_str();
-                let drive = matches!(remote::parse_command_key(key), Ok((RemoteKind::Drive, _)));
-                if !(enabled && drive && sample.kind() == zenoh::sample::SampleKind::Put) {
+                let put = sample.kind() == zenoh::sample::SampleKind::Put;
+                let kind = remote::parse_command_key(key).ok().map(|(kind, _)| kind);
+                if put && kind == Some(RemoteKind::Estop) {
+                    let payload = (sample.payload().len() <= MAX_COMMAND_BYTES)
+                        .then(|| sample.payload().to_bytes().into_owned());
+                    let estop = Estop::Put {
+                        key: key.to_owned(),
+                        payload,
+                    };
+                    if estop_sender.try_send(estop).is_err() {
+                        dropped.estops.fetch_add(1, Ordering::Relaxed);
+                    }
+                    return;
+                }
+                if !(enabled && put && kind == Some(RemoteKind::Drive)) {
                     drives.ignored.fetch_add(1, Ordering::Relaxed);
                     return;
                 }
@@ -472,7 +489,7 @@ impl EstopCounters {
 fn serve_estops(
     robot_name: &RobotName,
     config: &ZenohConfig,
-    estops: &std::sync::mpsc::Receiver<Query>,
+    estops: &std::sync::mpsc::Receiver<Estop>,
     counters: &EstopCounters,
     halt: &(dyn Fn() -> bool + Sync),
 ) -> anyhow::Result<()> {
@@ -481,14 +498,24 @@ fn serve_estops(
     let mut port = ControlPort::open(&node, robot_name, Way::Stop, REMOTE_PREFIX)
         .map_err(|e| anyhow::anyhow!("opening the bridge's stop port: {e}"))?;
     while !halt() {
-        let Ok(query) = estops.recv_timeout(Duration::from_millis(100)) else {
+        let Ok(item) = estops.recv_timeout(Duration::from_millis(100)) else {
             continue;
+        };
+        let (key, payload) = match &item {
+            Estop::Query(query) => (
+                query.key_expr().as_str(),
+                query.payload().map(|payload| payload.to_bytes()),
+            ),
+            Estop::Put { key, payload } => (
+                key.as_str(),
+                payload.as_deref().map(std::borrow::Cow::Borrowed),
+            ),
         };
         let answer = if !config.remote_commands.enabled {
             counters.disabled.fetch_add(1, Ordering::Relaxed);
             RemoteAnswer::rejected(DISABLED)
         } else {
-            match estop(config, &mut port, &query) {
+            match estop(config, &mut port, key, payload.as_deref()) {
                 Ok(_) => {
                     counters.accepted.fetch_add(1, Ordering::Relaxed);
                     RemoteAnswer::accepted(false)
@@ -499,9 +526,22 @@ fn serve_estops(
                 }
             }
         };
-        reply(&query, serde_json::to_string(&answer).unwrap_or_default());
+        if let Estop::Query(query) = &item {
+            reply(query, serde_json::to_string(&answer).unwrap_or_default());
+        }
     }
     Ok(())
+}
+
+/// A remote e-stop: a query (answered) or a put (not; counted alike).
+enum Estop {
+    /// Asked with a query.
+    Query(Query),
+    /// Put on its key; an oversized payload is not kept (it only loses the reason).
+    Put {
+        key: String,
+        payload: Option<Vec<u8>>,
+    },
 }
 
 /// One remote e-stop: never refused for its payload (a missing, oversized or malformed one
@@ -509,14 +549,14 @@ fn serve_estops(
 fn estop(
     config: &ZenohConfig,
     port: &mut ControlPort,
-    query: &Query,
+    key: &str,
+    payload: Option<&[u8]>,
 ) -> Result<Accepted, CommandError> {
     rules::allowed(&config.remote_commands, Permission::Estop)?;
-    let (_, peer) = remote::parse_command_key(query.key_expr().as_str())?;
-    let reason = query
-        .payload()
+    let (_, peer) = remote::parse_command_key(key)?;
+    let reason = payload
         .filter(|payload| payload.len() <= MAX_COMMAND_BYTES)
-        .and_then(|payload| serde_json::from_slice::<Value>(&payload.to_bytes()).ok())
+        .and_then(|payload| serde_json::from_slice::<Value>(payload).ok())
         .and_then(|json| {
             json.get("reason")
                 .and_then(Value::as_str)

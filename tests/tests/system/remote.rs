@@ -400,13 +400,25 @@ fn drives_put_on_the_fast_lane_drive_and_stop_when_they_stop() {
     let before = rejected(&counters_when(&session, &name, |_| true));
     put(seq + 1);
     counters_when(&session, &name, |c| rejected(c) > before);
-    // Anything but a drive is a query: a put of another kind is ignored and counted.
+    // What changes who drives is a query: a put of another kind is ignored and counted.
     session
-        .put(format!("scout/{name}/cmd/estop/laptop"), "{}")
+        .put(format!("scout/{name}/cmd/resume/laptop"), "{}")
         .wait()
         .expect("put");
     counters_when(&session, &name, |c| c["puts_ignored"] == 1);
     assert_eq!(wait_for_status(&status, LIMIT, |_| true)["latched"], false);
+    // But an e-stop goes on both lanes: put and queried, it latches once, as the peer's.
+    let estop_key = format!("scout/{name}/cmd/estop/laptop");
+    let reason = r#"{"reason":"both lanes"}"#;
+    session.put(&estop_key, reason).wait().expect("put");
+    let answered = zenoh_query(&session, &estop_key, Some(reason), QUERY);
+    assert_eq!(answered[0]["accepted"], true, "{answered:?}");
+    counters_when(&session, &name, |c| c["estops_accepted"] == 2);
+    let latched = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
+    let stops = latched["stops"].as_array().expect("stops");
+    assert_eq!(stops.len(), 1, "{latched}");
+    assert_eq!(stops[0]["owner"], "remote:laptop");
+    assert_eq!(stops[0]["reason"], "both lanes");
 }
 
 #[test]
