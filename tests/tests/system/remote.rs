@@ -326,21 +326,31 @@ fn counters_when(session: &zenoh::Session, name: &str, wanted: impl Fn(&Value) -
 
 #[test]
 fn drives_put_on_the_fast_lane_drive_and_stop_when_they_stop() {
-    let name = robot_name("remote-put");
-    let port = free_port();
+    drives_put_on_the_fast_lane(&tcp(free_port()));
+}
+
+/// The same over a plain UDP link (no TLS: on a network you trust only).
+#[test]
+fn drives_put_over_udp_drive_and_stop_when_they_stop() {
+    drives_put_on_the_fast_lane(&format!("udp/127.0.0.1:{}", free_port()));
+}
+
+fn drives_put_on_the_fast_lane(endpoint: &str) {
+    let scheme = endpoint.split('/').next().unwrap_or("link");
+    let name = robot_name(&format!("remote-put-{scheme}"));
     let _gateway = Gateway::start(&[
         "--sim",
         "--name",
         &name,
         "--zenoh-listen",
-        &tcp(port),
+        endpoint,
         "--remote-commands",
         "estop,teleop",
     ]);
     let robot = connect(&name);
     let status = robot.status().expect("status");
     let state = robot.subscribe().expect("subscribe");
-    let session = zenoh_session("client", &[], &[tcp(port)]);
+    let session = zenoh_session("client", &[], &[endpoint.to_owned()]);
     query_until_answered(&session, &format!("scout/{name}/info"));
     let key = format!("scout/{name}/cmd/drive/laptop");
     let started = Instant::now();
@@ -567,7 +577,7 @@ const OPERATOR_ONLY: &str = r#"access_control: {
       },
       {
         id: "command-as-operator",
-        messages: ["query", "reply"],
+        messages: ["put", "query", "reply"],
         flows: ["ingress", "egress"],
         permission: "allow",
         key_exprs: ["scout/*/cmd/*/operator"],
@@ -579,9 +589,19 @@ const OPERATOR_ONLY: &str = r#"access_control: {
 
 #[test]
 fn tls_with_mutual_authentication_and_access_control() {
-    let name = robot_name("tls");
-    let pki = Pki::new("tls");
-    let endpoint = format!("tls/127.0.0.1:{}", free_port());
+    mutual_tls_and_access_control("tls");
+}
+
+/// QUIC takes the TLS settings: the same certificates, the same access control.
+#[test]
+fn quic_with_mutual_authentication_and_access_control() {
+    mutual_tls_and_access_control("quic");
+}
+
+fn mutual_tls_and_access_control(scheme: &str) {
+    let name = robot_name(scheme);
+    let pki = Pki::new(scheme);
+    let endpoint = format!("{scheme}/127.0.0.1:{}", free_port());
     let listen = format!(r#"listen: {{ endpoints: ["{endpoint}"] }}"#);
     let connect_to = format!(r#"connect: {{ endpoints: ["{endpoint}"] }}"#);
     let gateway_config = pki.config("gateway", "peer", &listen, OPERATOR_ONLY);
@@ -633,7 +653,7 @@ fn tls_with_mutual_authentication_and_access_control() {
     // A peer without a certificate cannot even connect: the gateway only speaks mutual TLS.
     let plain = scout_clients::remote::SessionSettings {
         config_file: Some(String::new()),
-        connect: vec![endpoint.replace("tls/", "tcp/")],
+        connect: vec![endpoint.replacen(scheme, "tcp", 1)],
         ..Default::default()
     };
     if let Ok(session) = plain.open("client") {
