@@ -704,6 +704,42 @@ mod tests {
     use super::*;
 
     #[test]
+    fn the_fast_lane_keeps_the_newest_drive_per_key_and_wakes_once() {
+        let slots = DriveSlots::default();
+        let ms = Duration::from_millis;
+        assert!(
+            slots.put("scout/r/cmd/drive/a", ms(10), b"1".to_vec()),
+            "first wakes"
+        );
+        assert!(!slots.put("scout/r/cmd/drive/a", ms(30), b"2".to_vec()));
+        assert!(!slots.put("scout/r/cmd/drive/b", ms(20), b"x".to_vec()));
+        assert_eq!(slots.superseded.load(Ordering::Relaxed), 1);
+        let taken = slots.take();
+        let keys: Vec<(&str, &[u8])> = taken
+            .iter()
+            .map(|(key, (_, payload))| (key.as_str(), payload.as_slice()))
+            .collect();
+        assert_eq!(
+            keys,
+            [
+                ("scout/r/cmd/drive/b", &b"x"[..]),
+                ("scout/r/cmd/drive/a", &b"2"[..])
+            ],
+            "the newest per key, oldest arrival first"
+        );
+        assert!(
+            slots.put("scout/r/cmd/drive/a", ms(40), b"3".to_vec()),
+            "empty again"
+        );
+        // A flood of keys: past MAX_WAITING_DRIVES, new keys are dropped and counted.
+        for peer in 0..MAX_WAITING_DRIVES + 10 {
+            slots.put(&format!("scout/r/cmd/drive/p{peer}"), ms(50), Vec::new());
+        }
+        assert_eq!(slots.take().len(), MAX_WAITING_DRIVES);
+        assert_eq!(slots.superseded.load(Ordering::Relaxed), 1 + 11);
+    }
+
+    #[test]
     fn the_example_zenoh_configs_parse() {
         for file in ["zenoh-tls-gateway.json5", "zenoh-tls-operator.json5"] {
             let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
