@@ -5,6 +5,7 @@
 //! older states are dropped.
 
 use std::collections::HashMap;
+use std::collections::hash_map::Entry;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -124,7 +125,7 @@ fn run(
         "zenoh: publishing scout/{robot_name}/{{state,status,alive,info}}, listening on {:?}, remote commands {}",
         settings.listen,
         if config.remote_commands.enabled {
-            format!("on ({})", config.allowed_names())
+            format!("on ({})", config.remote_commands.allowed_names())
         } else {
             "off".into()
         }
@@ -324,13 +325,10 @@ fn serve_queries(
                     drives.ignored.fetch_add(1, Ordering::Relaxed);
                     return;
                 }
-                let payload = sample.payload();
-                // Oversized: kept as its size only, and refused for it by the rules.
-                let payload = if payload.len() > MAX_COMMAND_BYTES {
-                    vec![b' '; MAX_COMMAND_BYTES + 1]
-                } else {
-                    payload.to_bytes().into_owned()
-                };
+                // Past the limit only its first bytes are kept: enough for the rules to
+                // refuse it as oversized.
+                let payload = sample.payload().to_bytes();
+                let payload = payload[..payload.len().min(MAX_COMMAND_BYTES + 1)].to_vec();
                 if drives.put(key, services::monotonic(), payload) {
                     // The first waiting drive wakes the thread; a full inbox wakes it anyway.
                     let _ = sender.try_send(Work::Drives);
@@ -686,11 +684,15 @@ impl<'a> RemoteControl<'a> {
         let answer = match send.via {
             Via::Safety => self.safety.request_for_peer(&send.request, &send.peer),
             Via::Control { sent } => {
-                let port = match self.ports.remove(&send.peer) {
-                    Some(port) => port,
-                    None => ControlPort::open(self.node, self.robot, Way::Control, &send.peer)?,
+                let port = match self.ports.entry(send.peer.clone()) {
+                    Entry::Occupied(port) => port.into_mut(),
+                    Entry::Vacant(slot) => slot.insert(ControlPort::open(
+                        self.node,
+                        self.robot,
+                        Way::Control,
+                        &send.peer,
+                    )?),
                 };
-                let port = self.ports.entry(send.peer.clone()).or_insert(port);
                 port.request_sent_at(&send.request, sent)
             }
         };

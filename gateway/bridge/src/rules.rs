@@ -193,10 +193,9 @@ pub fn allowed(commands: &RemoteCommands, permission: Permission) -> Result<(), 
     if commands.allowed.contains(&permission) {
         return Ok(());
     }
-    let names: Vec<&str> = commands.allowed.iter().map(|p| p.name()).collect();
     Err(CommandError::NotAllowed {
         permission,
-        allowed: names.join(", "),
+        allowed: commands.allowed_names(),
     })
 }
 

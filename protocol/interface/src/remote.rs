@@ -412,6 +412,14 @@ pub struct RemoteCommands {
     pub allowed: Vec<Permission>,
 }
 
+impl RemoteCommands {
+    /// The remote commands allowed, by name, comma-separated.
+    pub fn allowed_names(&self) -> String {
+        let names: Vec<&str> = self.allowed.iter().map(|p| p.name()).collect();
+        names.join(", ")
+    }
+}
+
 impl Default for RemoteCommands {
     fn default() -> Self {
         Self {
@@ -462,17 +470,6 @@ impl ZenohConfig {
             listen,
             connect: self.connect.clone(),
         }
-    }
-
-    /// The remote commands allowed, by name, comma-separated.
-    pub fn allowed_names(&self) -> String {
-        let names: Vec<&str> = self
-            .remote_commands
-            .allowed
-            .iter()
-            .map(|p| p.name())
-            .collect();
-        names.join(", ")
     }
 }
 

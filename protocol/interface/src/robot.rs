@@ -40,11 +40,6 @@ impl RobotName {
         }
     }
 
-    /// The name.
-    pub fn as_str(&self) -> &str {
-        &self.0
-    }
-
     /// The iceoryx2 node name of `program` serving or using this robot (`scout-gateway-ROBOT`).
     pub fn node(&self, program: Program) -> String {
         format!("{}-{}", program.prefix(), self.0)
@@ -103,12 +98,6 @@ impl Deref for RobotName {
     }
 }
 
-impl AsRef<str> for RobotName {
-    fn as_ref(&self) -> &str {
-        &self.0
-    }
-}
-
 impl fmt::Display for RobotName {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(&self.0)
@@ -134,12 +123,6 @@ impl TryFrom<String> for RobotName {
 impl From<RobotName> for String {
     fn from(name: RobotName) -> Self {
         name.0
-    }
-}
-
-impl PartialEq<str> for RobotName {
-    fn eq(&self, other: &str) -> bool {
-        self.0 == other
     }
 }
 
