@@ -2,7 +2,8 @@
 //!
 //! - [`client`]: connect to a robot by name; subscribe to its state.
 //! - [`control`]: drive, stop, release, resume, lights, fault clear; the arbiter's status.
-//! - [`remote`]: reading gateways through zenoh (feature `remote`, on by default).
+//! - [`remote`]: gateways through zenoh: read the state, drive and stop as a remote peer
+//!   (feature `remote`, on by default).
 //! - [`echo`]: `scout echo`, the state on a terminal or as JSON lines.
 //! - [`decode`]: candump text and serial hex to decoded frames (`scout decode`).
 //! - [`failure`]: the kind of a client error, and every program's exit code from it.

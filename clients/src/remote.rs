@@ -1,5 +1,6 @@
-//! Reading gateways through zenoh: a remote state reader for `scout echo --remote`. The keys,
-//! the command JSON and the session settings are the contract's ([`scout_interface::remote`]).
+//! Gateways through zenoh: a remote state reader (`scout echo --remote`) and a remote
+//! controller (`scout drive --remote`). The keys, the command JSON and the session settings are
+//! the contract's ([`scout_interface::remote`]).
 
 use std::time::Duration;
 
@@ -55,4 +56,242 @@ impl RemoteStates {
             .map(Some)
             .map_err(|e| RemoteError::Zenoh(format!("state is not JSON: {e}")))
     }
+}
+
+/// Remote commands sent as a query: how long to wait for the gateway's answer.
+pub const ANSWER_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// One drive in this many goes as a query, so that its answer tells whether control still
+/// holds; the others are put on the fast lane, unanswered.
+const ANSWERED_EVERY: u64 = 10;
+
+/// Answers to drives awaited at once; an older one is given up.
+const MAX_PENDING_ANSWERS: usize = 8;
+
+/// Best-effort copies an e-stop is put as, beside its query.
+const ESTOP_COPIES: usize = 3;
+
+/// Drives a robot through zenoh as remote peer `peer`, as a remote operator's program would:
+/// take control (a query, answered), drive (samples put on the fast lane: best effort,
+/// express, dropped rather than queued), stop (put and queried: whichever arrives first
+/// latches), release and relinquish (queries). The peer's name is part of each key; with
+/// mutual TLS the gateway's access control binds it to the peer's certificate.
+///
+/// Control is never taken back by this type: when the gateway says it ended (a stop, a gap,
+/// a release, a takeover), [`RemoteController::drive`] returns [`RemoteError::Refused`] with
+/// `lost_control`, and only [`RemoteController::take_control`], called again, resumes.
+pub struct RemoteController {
+    session: zenoh::Session,
+    robot: String,
+    peer: String,
+    seq: u64,
+    drives: zenoh::pubsub::Publisher<'static>,
+    estops: zenoh::pubsub::Publisher<'static>,
+    pending: Vec<zenoh::handlers::FifoChannelHandler<zenoh::query::Reply>>,
+}
+
+impl std::fmt::Debug for RemoteController {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RemoteController")
+            .field("robot", &self.robot)
+            .field("peer", &self.peer)
+            .field("seq", &self.seq)
+            .finish_non_exhaustive()
+    }
+}
+
+impl RemoteController {
+    /// Connects as a zenoh client (to the gateway of `robot`, or a router) as peer `peer`.
+    pub fn connect(
+        settings: &SessionSettings,
+        robot: &str,
+        peer: &str,
+    ) -> Result<Self, RemoteError> {
+        let session = settings.open("client")?;
+        let lane = |kind: RemoteKind| {
+            session
+                .declare_publisher(command_key(robot, kind, peer))
+                .encoding(zenoh::bytes::Encoding::APPLICATION_JSON)
+                .congestion_control(zenoh::qos::CongestionControl::Drop)
+                .reliability(zenoh::qos::Reliability::BestEffort)
+                .priority(zenoh::qos::Priority::RealTime)
+                .express(true)
+                .wait()
+                .map_err(|e| RemoteError::Zenoh(e.to_string()))
+        };
+        let (drives, estops) = (lane(RemoteKind::Drive)?, lane(RemoteKind::Estop)?);
+        Ok(Self {
+            session,
+            robot: robot.to_owned(),
+            peer: peer.to_owned(),
+            seq: 0,
+            drives,
+            estops,
+            pending: Vec::new(),
+        })
+    }
+
+    /// Takes control as `class` (a query; the gateway's answer returned).
+    pub fn take_control(&mut self, class: crate::Class) -> Result<RemoteAnswer, RemoteError> {
+        let command = RemoteCommand {
+            class: Some(class.name().to_owned()),
+            sent_ms: Some(now_ms()),
+            ..RemoteCommand::default()
+        };
+        self.pending.clear();
+        self.ask(RemoteKind::TakeControl, &command)
+    }
+
+    /// Drives at `linear` m/s and `angular` rad/s for at most `ttl` (send again at 20-50 Hz):
+    /// put on the fast lane, one in [`ANSWERED_EVERY`] as a query. Returns the newest answer
+    /// that arrived meanwhile (if any), or [`RemoteError::Refused`] once one says control
+    /// ended.
+    pub fn drive(
+        &mut self,
+        linear: f64,
+        angular: f64,
+        ttl: Duration,
+    ) -> Result<Option<RemoteAnswer>, RemoteError> {
+        self.seq += 1;
+        let command = RemoteCommand {
+            seq: Some(self.seq),
+            sent_ms: Some(now_ms()),
+            linear: Some(linear),
+            angular: Some(angular),
+            ttl_ms: Some(u32::try_from(ttl.as_millis()).unwrap_or(u32::MAX)),
+            ..RemoteCommand::default()
+        };
+        let payload = to_json(&command);
+        if self.seq % ANSWERED_EVERY == 1 {
+            if self.pending.len() >= MAX_PENDING_ANSWERS {
+                self.pending.remove(0);
+            }
+            let replies = self
+                .session
+                .get(command_key(&self.robot, RemoteKind::Drive, &self.peer))
+                .payload(payload)
+                .timeout(ANSWER_TIMEOUT)
+                .wait()
+                .map_err(|e| RemoteError::Zenoh(e.to_string()))?;
+            self.pending.push(replies);
+        } else {
+            self.drives
+                .put(payload)
+                .wait()
+                .map_err(|e| RemoteError::Zenoh(e.to_string()))?;
+        }
+        let mut newest = None;
+        let mut error = None;
+        self.pending.retain(|replies| match replies.try_recv() {
+            Ok(Some(reply)) => {
+                let answer = answer_of(&reply);
+                if answer.lost_control {
+                    error = Some(RemoteError::Refused {
+                        command: RemoteKind::Drive,
+                        answer: answer.clone(),
+                    });
+                }
+                newest = Some(answer);
+                false
+            }
+            Ok(None) => true,
+            Err(_) => false,
+        });
+        match error {
+            Some(error) => {
+                self.pending.clear();
+                Err(error)
+            }
+            None => Ok(newest),
+        }
+    }
+
+    /// Latches a stop owned by this peer: put as best-effort copies and queried, so that it
+    /// latches from whichever arrives first (once). Returns the query's answer.
+    pub fn stop(&mut self, reason: &str) -> Result<RemoteAnswer, RemoteError> {
+        let command = RemoteCommand {
+            reason: Some(reason.to_owned()),
+            ..RemoteCommand::default()
+        };
+        let payload = to_json(&command);
+        for _ in 0..ESTOP_COPIES {
+            // A copy that cannot be sent leaves the query to carry the stop.
+            let _ = self.estops.put(payload.clone()).wait();
+        }
+        self.ask(RemoteKind::Estop, &command)
+    }
+
+    /// Releases this peer's own stops latched up to stop `through` (the status's
+    /// `newest_stop`; `None`: all of them). Nothing moves until control is taken again.
+    pub fn release(&mut self, through: Option<u64>) -> Result<RemoteAnswer, RemoteError> {
+        let command = RemoteCommand {
+            through,
+            ..RemoteCommand::default()
+        };
+        self.ask(RemoteKind::Release, &command)
+    }
+
+    /// Gives up control: the output ramps to zero.
+    pub fn relinquish(&mut self) -> Result<RemoteAnswer, RemoteError> {
+        self.pending.clear();
+        self.ask(RemoteKind::Relinquish, &RemoteCommand::default())
+    }
+
+    /// Sends `command` as a query and waits for the answer: accepted, or
+    /// [`RemoteError::Refused`].
+    fn ask(
+        &mut self,
+        kind: RemoteKind,
+        command: &RemoteCommand,
+    ) -> Result<RemoteAnswer, RemoteError> {
+        let replies = self
+            .session
+            .get(command_key(&self.robot, kind, &self.peer))
+            .payload(to_json(command))
+            .timeout(ANSWER_TIMEOUT)
+            .wait()
+            .map_err(|e| RemoteError::Zenoh(e.to_string()))?;
+        let reply = replies
+            .recv_timeout(ANSWER_TIMEOUT + Duration::from_secs(1))
+            .ok()
+            .flatten()
+            .ok_or(RemoteError::NoAnswer {
+                command: kind,
+                timeout: ANSWER_TIMEOUT,
+            })?;
+        let answer = answer_of(&reply);
+        if answer.accepted {
+            Ok(answer)
+        } else {
+            Err(RemoteError::Refused {
+                command: kind,
+                answer,
+            })
+        }
+    }
+}
+
+/// This host's clock for `sent_ms`: the gateway learns its offset.
+fn now_ms() -> u64 {
+    crate::monotonic_ns() / 1_000_000
+}
+
+fn to_json(command: &RemoteCommand) -> String {
+    // A command of plain fields always serializes.
+    serde_json::to_string(command).unwrap_or_default()
+}
+
+/// The gateway's answer in a reply; an error reply or a payload that is no answer, as a
+/// rejection saying so.
+fn answer_of(reply: &zenoh::query::Reply) -> RemoteAnswer {
+    let sample = match reply.result() {
+        Ok(sample) => sample,
+        Err(error) => {
+            let text = error.payload().try_to_string().unwrap_or_default();
+            return RemoteAnswer::rejected(format!("an error reply: {text}"));
+        }
+    };
+    let text = sample.payload().try_to_string().unwrap_or_default();
+    serde_json::from_str(&text)
+        .unwrap_or_else(|error| RemoteAnswer::rejected(format!("not an answer ({error}): {text}")))
 }

@@ -14,7 +14,9 @@ use scout_clients::interface::stop_socket::StopSocketError;
 use scout_clients::{Accepted, Class, ReleaseTarget, StopCause};
 use scout_protocol::{Light, LightCommand};
 
-use crate::RobotArgs;
+use scout_clients::remote::{RemoteController, RemoteError, SessionSettings, peer_client_name};
+
+use crate::{RemoteArgs, RobotArgs};
 
 /// The drive loop's period: 50 Hz.
 const DRIVE_PERIOD: Duration = Duration::from_millis(20);
@@ -24,7 +26,9 @@ const DRIVE_PERIOD: Duration = Duration::from_millis(20);
 pub struct ClientArgs {
     #[command(flatten)]
     robot: RobotArgs,
-    /// This client's name, shown in the status and the gateway's audit log.
+    /// This client's name, shown in the status and the gateway's audit log; with --remote,
+    /// the peer name in the command keys (default `operator`), which your certificate's access
+    /// control must allow.
     #[arg(long, value_name = "NAME")]
     client: Option<String>,
 }
@@ -62,7 +66,13 @@ pub struct DriveArgs {
     /// The class to drive as.
     #[arg(long, default_value = "teleop")]
     class: Class,
+    // With --remote: see --client.
+    #[command(flatten)]
+    remote: RemoteArgs,
 }
+
+/// A remote drive's life: a partition stops the robot within it.
+const REMOTE_DRIVE_LIFE: Duration = Duration::from_millis(300);
 
 /// The gateway's answer in words (`scout drive` prints it once per change, not per message).
 pub fn describe(answer: &Result<Accepted, ControlError>) -> String {
@@ -79,6 +89,9 @@ pub fn drive(args: &DriveArgs) -> anyhow::Result<ExitCode> {
         Some(s) => anyhow::bail!("--duration must be a non-negative number of seconds, found {s}"),
         None => None,
     };
+    if let Some(settings) = args.remote.settings() {
+        return drive_remote(args, &settings, duration);
+    }
     let name = format!("drive-{}", std::process::id());
     let mut controller = args.client.connect(&name, Some(args.class))?;
     controller.take_control()?;
@@ -121,6 +134,57 @@ pub fn drive(args: &DriveArgs) -> anyhow::Result<ExitCode> {
     }
 }
 
+/// `scout drive --remote`: take control through zenoh, put a drive every 20 ms on the fast
+/// lane (one in ten queried, whose answer says whether control holds), then give control back.
+fn drive_remote(
+    args: &DriveArgs,
+    settings: &SessionSettings,
+    duration: Option<Duration>,
+) -> anyhow::Result<ExitCode> {
+    let peer = args.client.name(OPERATOR);
+    let mut controller = RemoteController::connect(settings, &args.client.robot.name, &peer)?;
+    controller.take_control(args.class)?;
+    println!(
+        "control taken as {} ({})",
+        peer_client_name(&peer),
+        args.class
+    );
+    let stop = Arc::new(AtomicBool::new(false));
+    let on_signal = Arc::clone(&stop);
+    ctrlc::set_handler(move || on_signal.store(true, Ordering::Relaxed))
+        .context("installing the Ctrl-C handler")?;
+    let start = Instant::now();
+    let mut next = start;
+    let mut last: Option<String> = None;
+    while !stop.load(Ordering::Relaxed) && duration.is_none_or(|d| start.elapsed() < d) {
+        match controller.drive(args.linear, args.angular, REMOTE_DRIVE_LIFE) {
+            Ok(Some(answer)) => {
+                let text = match (&answer.reason, answer.clamped) {
+                    (Some(reason), _) => reason.clone(),
+                    (None, true) => "accepted (clamped to the speed caps)".into(),
+                    (None, false) => "accepted".into(),
+                };
+                if last.as_deref() != Some(text.as_str()) {
+                    println!("{text}");
+                    last = Some(text);
+                }
+            }
+            Ok(None) => {}
+            // Control ended (a stop, a gap, a release, a takeover): never taken back by itself.
+            Err(error @ RemoteError::Refused { .. }) => {
+                println!("{error}");
+                return Err(error.into());
+            }
+            Err(error) => return Err(error.into()),
+        }
+        next += DRIVE_PERIOD;
+        std::thread::sleep(next.saturating_duration_since(Instant::now()));
+    }
+    let _ = controller.drive(0.0, 0.0, REMOTE_DRIVE_LIFE);
+    controller.relinquish().context("giving up control")?;
+    Ok(ExitCode::SUCCESS)
+}
+
 #[derive(Debug, Args)]
 pub struct EstopArgs {
     #[command(flatten)]
@@ -128,6 +192,9 @@ pub struct EstopArgs {
     /// Why (shown in the status and the audit log).
     #[arg(long, default_value = "scout estop")]
     reason: String,
+    // With --remote: see --client.
+    #[command(flatten)]
+    remote: RemoteArgs,
 }
 
 /// Latches a stop through the stop endpoint: no iceoryx2, no shared memory, no client slot, so
@@ -135,6 +202,14 @@ pub struct EstopArgs {
 pub fn estop(args: &EstopArgs) -> anyhow::Result<ExitCode> {
     let name = args.client.name(OPERATOR);
     let robot = &args.client.robot.name;
+    if let Some(settings) = args.remote.settings() {
+        RemoteController::connect(&settings, robot, &name)?.stop(&args.reason)?;
+        println!(
+            "stop latched, owned by {}: `scout release --remote` to release it",
+            peer_client_name(&name)
+        );
+        return Ok(ExitCode::SUCCESS);
+    }
     let accepted = match Stopper::new(robot, &name)?.stop(&args.reason) {
         // No stop endpoint here: maybe this process lives in another network namespace than
         // the gateway; its iceoryx2 services tell (no gateway at all: exit 3).
@@ -157,18 +232,35 @@ pub struct ReleaseArgs {
     /// Release only this client's own stops (by default every stop: `scout` is an operator).
     #[arg(long, conflicts_with = "owner")]
     own: bool,
-    /// Release only the stops of this owner (a client's name, or `gateway` for gaps).
-    #[arg(long, value_name = "NAME")]
+    /// Release only the stops of this owner (a client's name, or `gateway` for gaps); not
+    /// with --remote (a remote peer releases only its own).
+    #[arg(long, value_name = "NAME", conflicts_with = "remote")]
     owner: Option<String>,
     /// Release only stops up to this id (as `scout status` lists them); default: the newest in
     /// the status read now, which this command prints. A stop latched after it survives.
     #[arg(long, value_name = "ID")]
     through: Option<u64>,
+    // With --remote: see --client.
+    #[command(flatten)]
+    remote: RemoteArgs,
 }
 
 /// Releases what the status shows now (or up to `--through`): a stop latched after the status
 /// was read survives, and is printed as still holding.
 pub fn release(args: &ReleaseArgs) -> anyhow::Result<ExitCode> {
+    if let Some(settings) = args.remote.settings() {
+        let name = args.client.name(OPERATOR);
+        RemoteController::connect(&settings, &args.client.robot.name, &name)?
+            .release(args.through)?;
+        println!(
+            "released the stops of {}{}: nothing moves until a client takes control again",
+            peer_client_name(&name),
+            args.through
+                .map(|id| format!(" up to #{id}"))
+                .unwrap_or_default()
+        );
+        return Ok(ExitCode::SUCCESS);
+    }
     let target = match (&args.owner, args.own) {
         (Some(owner), _) => ReleaseTarget::Owner(owner.clone()),
         (None, true) => ReleaseTarget::Own,

@@ -12,7 +12,7 @@ use scout_clients::client::Robot;
 use scout_clients::echo::{echo_json, echo_live};
 use scout_clients::remote::{RemoteStates, SessionSettings};
 
-use crate::RobotArgs;
+use crate::{RemoteArgs, RobotArgs};
 
 #[derive(Debug, Args)]
 pub struct EchoArgs {
@@ -27,13 +27,9 @@ pub struct EchoArgs {
     /// Give up when no update arrives for this many seconds.
     #[arg(long, default_value_t = 3.0, value_name = "S")]
     timeout: f64,
-    /// Read through zenoh from this endpoint (a gateway or router, e.g. tcp/127.0.0.1:7448)
-    /// instead of iceoryx2; `--name '*'` then shows every robot.
-    #[arg(long, value_name = "ENDPOINT")]
-    remote: Option<String>,
-    /// Zenoh configuration file for --remote (TLS...) [default: $ZENOH_CONFIG].
-    #[arg(long, value_name = "FILE", requires = "remote")]
-    zenoh_config: Option<String>,
+    // With --remote, `--name '*'` shows every robot.
+    #[command(flatten)]
+    remote: RemoteArgs,
 }
 
 pub fn run(args: &EchoArgs) -> anyhow::Result<ExitCode> {
@@ -41,8 +37,8 @@ pub fn run(args: &EchoArgs) -> anyhow::Result<ExitCode> {
         anyhow::bail!("--timeout must be a positive number of seconds");
     }
     let timeout = Duration::from_secs_f64(args.timeout);
-    if let Some(endpoint) = &args.remote {
-        return remote(args, endpoint, timeout);
+    if let (Some(settings), Some(endpoint)) = (args.remote.settings(), &args.remote.remote) {
+        return remote(args, &settings, endpoint, timeout);
     }
     let robot = Robot::connect(&args.robot.name)?;
     let subscriber = robot.subscribe()?;
@@ -91,13 +87,13 @@ pub struct RemoteSilent {
 
 /// `--remote`: the state JSON through zenoh, one line per update (the JSON itself with --json,
 /// a summary otherwise).
-fn remote(args: &EchoArgs, endpoint: &str, timeout: Duration) -> anyhow::Result<ExitCode> {
-    let settings = SessionSettings {
-        config_file: args.zenoh_config.clone(),
-        listen: Vec::new(),
-        connect: vec![endpoint.to_owned()],
-    };
-    let states = RemoteStates::connect(&settings, &args.robot.name)?;
+fn remote(
+    args: &EchoArgs,
+    settings: &SessionSettings,
+    endpoint: &str,
+    timeout: Duration,
+) -> anyhow::Result<ExitCode> {
+    let states = RemoteStates::connect(settings, &args.robot.name)?;
     let stdout = std::io::stdout();
     let mut out = stdout.lock();
     let mut printed = 0;

@@ -35,7 +35,8 @@ enum Command {
     /// `candump can0 | scout decode`. Prints one line (or JSON object) per frame; a bad line is
     /// reported on standard error with its line number and the rest is still decoded.
     Decode(decode::DecodeArgs),
-    /// Show the chassis state a gateway publishes: a live view, or JSON lines with --json.
+    /// Show the chassis state a gateway publishes: a live view, or JSON lines with --json;
+    /// with --remote, `--name '*'` shows every robot.
     Echo(echo::EchoArgs),
     /// Drive at a speed at 50 Hz for a duration (or until Ctrl-C), then give up control.
     Drive(control::DriveArgs),
@@ -93,6 +94,31 @@ struct RobotArgs {
     /// The robot (gateway) name.
     #[arg(long, default_value = "scout", value_name = "ROBOT")]
     name: String,
+}
+
+/// Through zenoh instead of on this host.
+#[derive(Debug, Args)]
+struct RemoteArgs {
+    /// Through zenoh, connecting to this endpoint (the gateway's or a router's:
+    /// tcp/HOST:PORT, tls/..., quic/HOST:PORT?mixed_rel=1, udp/...), instead of iceoryx2 on
+    /// this host.
+    #[arg(long, value_name = "ENDPOINT")]
+    remote: Option<String>,
+    /// Zenoh configuration file for --remote (TLS...) [default: $ZENOH_CONFIG].
+    #[arg(long, value_name = "FILE", requires = "remote")]
+    zenoh_config: Option<String>,
+}
+
+impl RemoteArgs {
+    /// The zenoh session settings, if --remote was given.
+    fn settings(&self) -> Option<scout_clients::remote::SessionSettings> {
+        let endpoint = self.remote.clone()?;
+        Some(scout_clients::remote::SessionSettings {
+            config_file: self.zenoh_config.clone(),
+            listen: Vec::new(),
+            connect: vec![endpoint],
+        })
+    }
 }
 
 fn main() -> ExitCode {

@@ -32,6 +32,10 @@ pub fn inspect(robot: &str, endpoint: &str, window: Duration) -> Check {
                  --zenoh-listen tcp/0.0.0.0:7448` listens beyond this machine; check firewalls",
             );
         }
+        // Commands are not sent here: subscribing has no answer to refuse or miss.
+        Err(error @ (RemoteError::Refused { .. } | RemoteError::NoAnswer { .. })) => {
+            return Check::fail("zenoh", format!("{endpoint}: {error}"), "see the error");
+        }
     };
     match states.next_timeout(window.max(Duration::from_secs(1))) {
         Ok(Some(_)) => {

@@ -122,7 +122,7 @@ fn run(
         .wait()
         .map_err(zenoh_error)?;
     info!(
-        "zenoh: publishing scout/{robot_name}/{{state,status,alive,info}}, listening on {:?}, remote commands {}",
+        "zenoh: publishing scout/{robot_name}/{{state,status,alive,info,links}}, listening on {:?}, remote commands {}",
         settings.listen,
         if config.remote_commands.enabled {
             format!("on ({})", config.remote_commands.allowed_names())
@@ -349,7 +349,23 @@ fn serve_queries(
             .map_err(|e| anyhow::anyhow!("creating the bridge's iceoryx2 node: {e:?}"))?;
         let mut commands = RemoteControl::new(&node, robot_name, config)?;
         let mut counters = Counters::default();
+        let links = session
+            .declare_publisher(remote::links_key(robot_name))
+            .encoding(Encoding::APPLICATION_JSON)
+            .congestion_control(CongestionControl::Drop)
+            .wait()
+            .map_err(zenoh_error)?;
+        let mut next_links = Instant::now();
         while !halt() {
+            if Instant::now() >= next_links {
+                next_links = Instant::now() + LINKS_PERIOD;
+                let quality = commands.rules.links(services::monotonic());
+                if !quality.is_empty()
+                    && let Err(error) = links.put(serde_json::to_string(&quality)?).wait()
+                {
+                    warn!("zenoh: publishing the link quality failed: {error}");
+                }
+            }
             counters.puts_ignored = drives.ignored.load(Ordering::Relaxed);
             counters.drives_superseded = drives.superseded.load(Ordering::Relaxed);
             counters.queries_dropped = dropped.queries.load(Ordering::Relaxed);
@@ -378,6 +394,11 @@ fn serve_queries(
                         object.insert(
                             "counters".into(),
                             serde_json::to_value(estop_counters.merged(counters))
+                                .unwrap_or(Value::Null),
+                        );
+                        object.insert(
+                            "links".into(),
+                            serde_json::to_value(commands.rules.links(services::monotonic()))
                                 .unwrap_or(Value::Null),
                         );
                     }
@@ -520,7 +541,7 @@ fn serve_estops(
                 }
                 Err(reason) => {
                     counters.rejected.fetch_add(1, Ordering::Relaxed);
-                    RemoteAnswer::rejected(reason.to_string())
+                    RemoteAnswer::refused(&reason)
                 }
             }
         };
@@ -574,6 +595,9 @@ enum Asked {
     Info,
     Command,
 }
+
+/// How often the remote peers' link quality is published (when there are any).
+const LINKS_PERIOD: Duration = Duration::from_secs(1);
 
 /// Queries waiting for the query thread; more are dropped unanswered (and counted).
 const MAX_QUEUED_QUERIES: usize = 1024;
@@ -633,7 +657,7 @@ impl<'a> RemoteControl<'a> {
         }
         let answer = match self.decide(query) {
             Ok(Accepted { clamped, .. }) => RemoteAnswer::accepted(clamped),
-            Err(reason) => RemoteAnswer::rejected(reason.to_string()),
+            Err(reason) => RemoteAnswer::refused(&reason),
         };
         if answer.accepted {
             counters.commands_accepted += 1;

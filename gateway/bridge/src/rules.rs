@@ -4,12 +4,13 @@
 //! back in ([`Rules::handle_answer`]). The bridge's thread is the driver that touches zenoh,
 //! iceoryx2 and the clock.
 
+use std::collections::VecDeque;
 use std::time::Duration;
 
 use scout_interface::control::{Accepted, Class, Request};
 use scout_interface::remote::{
-    self, CommandError, MAX_COMMAND_BYTES, Permission, RemoteCommand, RemoteCommands, RemoteKind,
-    peer_client_name,
+    self, CommandError, LINK_AGES, LinkQuality, MAX_COMMAND_BYTES, Permission, RemoteCommand,
+    RemoteCommands, RemoteKind, peer_client_name,
 };
 use scout_interface::services::RequestError;
 
@@ -39,6 +40,12 @@ struct Peer {
     /// The least (arrival - sent) seen, ms: its clock's offset plus the fastest delivery.
     offset: Option<i128>,
     used: u64,
+    /// When its last command arrived.
+    seen: Duration,
+    /// How its drives fared (`peer`, `age_*` and `last_seen_ms` are filled in when reported).
+    link: LinkQuality,
+    /// The ages of its last [`LINK_AGES`] drives, ms.
+    ages: VecDeque<u64>,
 }
 
 /// A command the rules let through: the request and where it goes.
@@ -112,7 +119,7 @@ impl Rules {
                 evicted: None,
             });
         }
-        let (peer, evicted) = self.peer(&name);
+        let (peer, evicted) = self.peer(&name, now);
         let sent = match kind {
             RemoteKind::TakeControl | RemoteKind::Drive => peer.on_time(now, kind, &command)?,
             RemoteKind::Relinquish
@@ -143,6 +150,7 @@ impl Rules {
         let lost_control =
             matches!(answer, Err(RequestError::Rejected(rejected)) if rejected.lost_control());
         match (request, answer) {
+            (Request::Drive { .. }, Ok(_)) => peer.link.accepted += 1,
             (Request::TakeControl { class }, Ok(accepted)) => {
                 peer.lease = accepted.lease.map(|lease| (lease, *class));
             }
@@ -158,9 +166,16 @@ impl Rules {
         allowed(&self.commands, permission)
     }
 
-    /// The peer named `name` (a client name), kept from now on; past [`MAX_REMOTE_PEERS`] the
-    /// least recently used is forgotten (its name returned).
-    fn peer(&mut self, name: &str) -> (&mut Peer, Option<String>) {
+    /// How each peer's drives fared, as of `now`: the least recently seen first.
+    pub fn links(&self, now: Duration) -> Vec<LinkQuality> {
+        let mut peers: Vec<&Peer> = self.peers.iter().collect();
+        peers.sort_by_key(|peer| peer.used);
+        peers.iter().map(|peer| peer.link_quality(now)).collect()
+    }
+
+    /// The peer named `name` (a client name), seen at `now` and kept from now on; past
+    /// [`MAX_REMOTE_PEERS`] the least recently used is forgotten (its name returned).
+    fn peer(&mut self, name: &str, now: Duration) -> (&mut Peer, Option<String>) {
         self.used += 1;
         let used = self.used;
         let mut evicted = None;
@@ -178,12 +193,16 @@ impl Rules {
                     seq: None,
                     offset: None,
                     used,
+                    seen: now,
+                    link: LinkQuality::default(),
+                    ages: VecDeque::new(),
                 });
                 self.peers.len() - 1
             }
         };
         let peer = &mut self.peers[index];
         peer.used = used;
+        peer.seen = now;
         (peer, evicted)
     }
 }
@@ -224,11 +243,16 @@ impl Peer {
                 }
             }));
         };
-        if kind == RemoteKind::Drive {
-            if let Some(last) = self.seq
-                && seq <= last
-            {
-                return Err(CommandError::OutOfOrder { seq, last });
+        let drive = kind == RemoteKind::Drive;
+        if drive {
+            self.link.received += 1;
+            match self.seq {
+                Some(last) if seq <= last => {
+                    self.link.reordered += 1;
+                    return Err(CommandError::OutOfOrder { seq, last });
+                }
+                Some(last) => self.link.lost = self.link.lost.saturating_add(seq - last - 1),
+                None => {}
             }
             self.seq = Some(seq);
         }
@@ -237,16 +261,39 @@ impl Peer {
             .offset
             .insert(self.offset.map_or(delay, |offset| offset.min(delay)));
         let late = Duration::from_millis((delay - offset).max(0) as u64);
+        if drive {
+            if self.ages.len() == LINK_AGES {
+                self.ages.pop_front();
+            }
+            self.ages.push_back(late.as_millis() as u64);
+        }
         let life = command.ttl_ms.map_or(MAX_REMOTE_LIFE, |ms| {
             Duration::from_millis(u64::from(ms)).min(MAX_REMOTE_LIFE)
         });
         if late > life {
+            self.link.late += u64::from(drive);
             return Err(CommandError::Late {
                 late_ms: late.as_millis(),
                 life_ms: life.as_millis(),
             });
         }
         Ok(now.saturating_sub(late))
+    }
+
+    /// Its link quality as of `now`.
+    fn link_quality(&self, now: Duration) -> LinkQuality {
+        let mut ages: Vec<u64> = self.ages.iter().copied().collect();
+        ages.sort_unstable();
+        // The nearest-rank percentile.
+        let percentile =
+            |p: usize| (!ages.is_empty()).then(|| ages[(ages.len() * p).div_ceil(100).max(1) - 1]);
+        LinkQuality {
+            peer: self.name.clone(),
+            age_p50_ms: percentile(50),
+            age_p99_ms: percentile(99),
+            last_seen_ms: now.saturating_sub(self.seen).as_millis() as u64,
+            ..self.link.clone()
+        }
     }
 }
 
@@ -436,6 +483,50 @@ mod tests {
             rules.handle_command(MS, &key("estop", "op"), Some(&big)),
             Err(CommandError::TooLarge { .. })
         ));
+    }
+
+    #[test]
+    fn link_quality_counts_what_the_peer_s_drives_met() {
+        let mut rules = teleop();
+        take(&mut rules, 1000 * MS, "op", 0);
+        let accept = |rules: &mut Rules, send: Send| {
+            let answer = Ok(Accepted::default());
+            rules.handle_answer(&send.peer, &send.request, &answer);
+        };
+        // Fastest delivery 1000 ms (the offset); then 10, 30, 600 (late) ms slower.
+        let first = drive(&mut rules, 1000 * MS, "op", 1, 0).expect("on time");
+        accept(&mut rules, first);
+        let second = drive(&mut rules, 1030 * MS, "op", 2, 20).expect("on time");
+        accept(&mut rules, second);
+        // Seqs 3 and 4 never came; 6 is repeated.
+        drive(&mut rules, 1070 * MS, "op", 5, 40).expect("a gap is let through");
+        drive(&mut rules, 1080 * MS, "op", 5, 50).expect_err("repeated");
+        drive(&mut rules, 1700 * MS, "op", 6, 100).expect_err("600 ms late");
+        let links = rules.links(1750 * MS);
+        assert_eq!(
+            links,
+            [LinkQuality {
+                peer: "remote:op".into(),
+                received: 5,
+                accepted: 2,
+                late: 1,
+                reordered: 1,
+                lost: 2,
+                age_p50_ms: Some(10),
+                age_p99_ms: Some(600),
+                last_seen_ms: 50,
+            }]
+        );
+        // Only the last LINK_AGES count; a jump to the last seq counts as lost, no overflow.
+        for seq in 0..LINK_AGES as u64 {
+            let now = Duration::from_millis(2000 + seq);
+            drive(&mut rules, now, "op", 10 + seq, 1000 + seq).expect("on time");
+        }
+        drive(&mut rules, 3000 * MS, "op", u64::MAX, 2000).expect("a gap");
+        let link = &rules.links(3000 * MS)[0];
+        assert_eq!((link.age_p50_ms, link.age_p99_ms), (Some(0), Some(0)));
+        // 2, then 7-9, then everything past 265.
+        assert_eq!(link.lost, 2 + 3 + (u64::MAX - 265 - 1));
     }
 
     proptest! {

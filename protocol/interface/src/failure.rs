@@ -127,7 +127,10 @@ impl RemoteError {
     pub fn kind(&self) -> Failure {
         match self {
             Self::Config(_) => Failure::Usage,
-            Self::Open(_) | Self::Zenoh(_) => Failure::Failed,
+            Self::Zenoh(_) => Failure::Failed,
+            Self::Refused { .. } => Failure::Refused,
+            // Nothing reached to connect to, or nothing answered.
+            Self::Open(_) | Self::NoAnswer { .. } => Failure::NoGateway,
         }
     }
 }

@@ -75,6 +75,40 @@ pub fn info_key(robot: &str) -> String {
     format!("{}/info", prefix(robot))
 }
 
+/// The key of the remote peers' link quality, published each second ([`LinkQuality`] list).
+pub fn links_key(robot: &str) -> String {
+    format!("{}/links", prefix(robot))
+}
+
+/// How one remote peer's drive commands fare on their way to the arbiter, as the gateway sees
+/// them: published on [`links_key`] and in the information queryable's `links`.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct LinkQuality {
+    /// The peer's client name (`remote:...`).
+    pub peer: String,
+    /// Drive commands received from it (put or queried) that passed the permission check.
+    pub received: u64,
+    /// Of them, accepted by the arbiter.
+    pub accepted: u64,
+    /// Refused as held up on the way past their life ("dropped as old").
+    pub late: u64,
+    /// Refused as repeated or older than one already let through (duplicated or reordered).
+    pub reordered: u64,
+    /// Sequence numbers skipped: lost on the way, or (on the fast lane) replaced by a newer
+    /// one before the bridge read them (the `drives_superseded` counter counts those).
+    pub lost: u64,
+    /// How much longer than the peer's fastest delivery its drives took, ms: the median of the
+    /// last [`LINK_AGES`] received.
+    pub age_p50_ms: Option<u64>,
+    /// The same, 99th percentile.
+    pub age_p99_ms: Option<u64>,
+    /// Since the last command of any kind from the peer, ms.
+    pub last_seen_ms: u64,
+}
+
+/// The drive ages [`LinkQuality`]'s percentiles are taken over.
+pub const LINK_AGES: usize = 256;
+
 /// The key expression of every remote command: `scout/ROBOT/cmd/KIND/PEER`.
 pub fn command_keys(robot: &str) -> String {
     format!("{}/cmd/**", prefix(robot))
@@ -360,6 +394,10 @@ pub struct RemoteAnswer {
     /// Why it was rejected.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reason: Option<String>,
+    /// Rejected because the peer holds no control (never took it, or a stop, a gap, a
+    /// release or a takeover ended it): only a take-control, sent on purpose, gives it back.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub lost_control: bool,
 }
 
 impl RemoteAnswer {
@@ -369,6 +407,7 @@ impl RemoteAnswer {
             accepted: true,
             clamped,
             reason: None,
+            lost_control: false,
         }
     }
 
@@ -378,6 +417,26 @@ impl RemoteAnswer {
             accepted: false,
             clamped: false,
             reason: Some(reason.into()),
+            lost_control: false,
+        }
+    }
+
+    /// The rejection of a command for `error`.
+    pub fn refused(error: &CommandError) -> Self {
+        Self {
+            lost_control: error.lost_control(),
+            ..Self::rejected(error.to_string())
+        }
+    }
+}
+
+impl CommandError {
+    /// Whether the peer holds no control (see [`RemoteAnswer::lost_control`]).
+    pub fn lost_control(&self) -> bool {
+        match self {
+            Self::NoControl(_) => true,
+            Self::Request(RequestError::Rejected(rejected)) => rejected.lost_control(),
+            _ => false,
         }
     }
 }
@@ -499,6 +558,24 @@ pub enum RemoteError {
     /// Subscribing or declaring failed.
     #[error("zenoh: {0}")]
     Zenoh(String),
+    /// The gateway refused a command.
+    #[error("{command} refused: {}", .answer.reason.as_deref().unwrap_or("no reason given"))]
+    Refused {
+        /// What was refused.
+        command: RemoteKind,
+        /// The gateway's answer.
+        answer: RemoteAnswer,
+    },
+    /// No gateway answered a command.
+    #[error(
+        "no answer to {command} within {timeout:?}: is the gateway running with remote commands on, and reachable?"
+    )]
+    NoAnswer {
+        /// What was sent.
+        command: RemoteKind,
+        /// How long the answer was awaited.
+        timeout: Duration,
+    },
 }
 
 #[cfg(feature = "zenoh")]

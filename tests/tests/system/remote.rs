@@ -431,6 +431,86 @@ fn drives_put_on_the_fast_lane(endpoint: &str) {
     assert_eq!(stops[0]["reason"], "both lanes");
 }
 
+/// `scout drive --remote` drives on the fast lane (over plain UDP) and its
+/// link quality shows; `scout estop --remote` latches the peer's stop, which ends the drive's
+/// control (it exits, refused, and never takes control back); `scout release --remote`
+/// releases that stop, and nothing moves.
+#[test]
+fn scout_drives_stops_and_releases_a_remote_robot() {
+    let name = robot_name("remote-scout");
+    let endpoint = format!("udp/127.0.0.1:{}", free_port());
+    let _gateway = Gateway::start(&[
+        "--sim",
+        "--name",
+        &name,
+        "--zenoh-listen",
+        &endpoint,
+        "--remote-commands",
+        "estop,teleop,release",
+    ]);
+    let robot = connect(&name);
+    let status = robot.status().expect("status");
+    let state = robot.subscribe().expect("subscribe");
+    let session = zenoh_session("client", &[], std::slice::from_ref(&endpoint));
+    query_until_answered(&session, &format!("scout/{name}/info"));
+    let remote = ["--name", &name, "--remote", &endpoint, "--client", "laptop"];
+    let mut drive = Background::scout(&[&["drive", "--linear", "0.4"], &remote[..]].concat());
+    let driving = wait_for_status(&status, LIMIT, |s| {
+        s["selected"]["client"] == "remote:laptop"
+    });
+    assert_eq!(driving["selected"]["class"], "teleop");
+    wait_for_state(&state, LIMIT, |s| {
+        s["motion"]["linear"].as_f64() > Some(0.3)
+    });
+    let links = counters_when(&session, &name, |_| true);
+    let info = query_until_answered(&session, &format!("scout/{name}/info"));
+    let link = &info["links"][0];
+    assert_eq!(link["peer"], "remote:laptop", "{info} {links}");
+    assert!(link["accepted"].as_u64() > Some(10), "{link}");
+    assert!(link["age_p99_ms"].is_u64(), "{link}");
+    // The published link quality says the same.
+    let published = session
+        .declare_subscriber(format!("scout/{name}/links"))
+        .wait()
+        .expect("subscribe to the links");
+    let sample = published
+        .recv_timeout(LIMIT)
+        .expect("links")
+        .expect("links");
+    let text = sample.payload().try_to_string().expect("text").into_owned();
+    let published: Value = serde_json::from_str(&text).expect("links JSON");
+    assert_eq!(published[0]["peer"], "remote:laptop", "{published}");
+
+    let (code, stdout, stderr) = scout(&[&["estop", "--reason", "wall"], &remote[..]].concat());
+    assert_eq!(code, Some(0), "{stdout}{stderr}");
+    let latched = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
+    assert_eq!(latched["stops"][0]["owner"], "remote:laptop", "{latched}");
+    assert_eq!(
+        latched["stops"].as_array().map(Vec::len),
+        Some(1),
+        "{latched}"
+    );
+    // The drive learns from an answer that its control ended, and exits refused (4).
+    assert_eq!(drive.wait_exit(LIMIT), Some(4));
+    wait_for_state(&state, LIMIT, |s| s["command"]["linear"] == 0.0);
+
+    let (code, stdout, stderr) = scout(&[&["release"], &remote[..]].concat());
+    assert_eq!(code, Some(0), "{stdout}{stderr}");
+    wait_for_status(&status, LIMIT, |s| s["latched"] == false);
+    let (code, _, stderr) = scout(&[&["release", "--owner", "x"], &remote[..]].concat());
+    assert_eq!(code, Some(2), "{stderr}");
+    // Released, nothing moves: control ended with the stop.
+    let still = Instant::now();
+    while still.elapsed() < Duration::from_secs(1) {
+        if let Some(sample) = state
+            .next_timeout(Duration::from_millis(100))
+            .expect("state")
+        {
+            assert_eq!(sample.command.linear, 0.0, "a release restarted motion");
+        }
+    }
+}
+
 #[test]
 fn a_two_robot_fleet_through_a_router() {
     let router_port = free_port();
