@@ -730,6 +730,19 @@ fn mutual_tls_and_access_control(scheme: &str) {
     assert!(zenoh_query(&intruder, &format!("scout/{name}/state"), None, QUERY).is_empty());
     std::thread::sleep(Duration::from_millis(300));
     assert_eq!(wait_for_status(&status, LIMIT, |_| true)["latched"], false);
+    // A certificate named `operator` but signed by another CA: the gateway does not trust it
+    // (nor does that peer trust the gateway's), so it reaches nothing.
+    let rogue = Pki::new(&format!("{scheme}-rogue"));
+    let rogue_settings = scout_clients::remote::SessionSettings {
+        config_file: Some(rogue.config("operator", "client", &connect_to, "")),
+        ..Default::default()
+    };
+    if let Ok(session) = rogue_settings.open("client") {
+        let answers = zenoh_query(&session, &estop, Some("{}"), QUERY);
+        assert!(answers.is_empty(), "a wrong CA was answered: {answers:?}");
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    assert_eq!(wait_for_status(&status, LIMIT, |_| true)["latched"], false);
     // A peer without a certificate cannot even connect: the gateway only speaks mutual TLS.
     let plain = scout_clients::remote::SessionSettings {
         config_file: Some(String::new()),
