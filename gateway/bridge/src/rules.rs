@@ -108,7 +108,19 @@ impl Rules {
         let lease = (self.peers.iter())
             .find(|known| known.name == name)
             .and_then(|known| known.lease);
-        let (permission, request) = command.request(kind, lease)?;
+        let (permission, request) = match command.request(kind, lease) {
+            Ok(asked) => asked,
+            Err(error) => {
+                // A drive from a peer kept (it was granted before) is counted on its link.
+                if kind == RemoteKind::Drive
+                    && let Some(known) = self.peers.iter_mut().find(|known| known.name == name)
+                {
+                    known.link.received += 1;
+                    known.link.no_control += u64::from(error.lost_control());
+                }
+                return Err(error);
+            }
+        };
         // The permission before anything is kept for this peer.
         self.allowed(permission)?;
         if let Request::Release { .. } = request {
@@ -151,6 +163,10 @@ impl Rules {
             matches!(answer, Err(RequestError::Rejected(rejected)) if rejected.lost_control());
         match (request, answer) {
             (Request::Drive { .. }, Ok(_)) => peer.link.accepted += 1,
+            (Request::Drive { .. }, Err(_)) if lost_control => {
+                peer.link.no_control += 1;
+                peer.lease = None;
+            }
             (Request::TakeControl { class }, Ok(accepted)) => {
                 peer.lease = accepted.lease.map(|lease| (lease, *class));
             }
@@ -502,15 +518,22 @@ mod tests {
         drive(&mut rules, 1070 * MS, "op", 5, 40).expect("a gap is let through");
         drive(&mut rules, 1080 * MS, "op", 5, 50).expect_err("repeated");
         drive(&mut rules, 1700 * MS, "op", 6, 100).expect_err("600 ms late");
-        let links = rules.links(1750 * MS);
+        // Its control ends: the next drive is refused, and counted.
+        rules
+            .handle_command(1750 * MS, &key("relinquish", "op"), Some(b"{}"))
+            .expect("granted");
+        rules.handle_answer("remote:op", &Request::Relinquish, &Ok(Accepted::default()));
+        drive(&mut rules, 1750 * MS, "op", 7, 150).expect_err("no control");
+        let links = rules.links(1800 * MS);
         assert_eq!(
             links,
             [LinkQuality {
                 peer: "remote:op".into(),
-                received: 5,
+                received: 6,
                 accepted: 2,
                 late: 1,
                 reordered: 1,
+                no_control: 1,
                 lost: 2,
                 age_p50_ms: Some(10),
                 age_p99_ms: Some(600),
@@ -518,6 +541,7 @@ mod tests {
             }]
         );
         // Only the last LINK_AGES count; a jump to the last seq counts as lost, no overflow.
+        take(&mut rules, 2000 * MS, "op", 1000);
         for seq in 0..LINK_AGES as u64 {
             let now = Duration::from_millis(2000 + seq);
             drive(&mut rules, now, "op", 10 + seq, 1000 + seq).expect("on time");

@@ -86,7 +86,8 @@ pub fn links_key(robot: &str) -> String {
 pub struct LinkQuality {
     /// The peer's client name (`remote:...`).
     pub peer: String,
-    /// Drive commands received from it (put or queried) that passed the permission check.
+    /// Drive commands received from it (put or queried) since the gateway keeps it (from its
+    /// first granted command on).
     pub received: u64,
     /// Of them, accepted by the arbiter.
     pub accepted: u64,
@@ -94,6 +95,9 @@ pub struct LinkQuality {
     pub late: u64,
     /// Refused as repeated or older than one already let through (duplicated or reordered).
     pub reordered: u64,
+    /// Refused because it held no control (never taken, or ended by a stop, a gap, a release
+    /// or a takeover): it must take control again.
+    pub no_control: u64,
     /// Sequence numbers skipped: lost on the way, or (on the fast lane) replaced by a newer
     /// one before the bridge read them (the `drives_superseded` counter counts those).
     pub lost: u64,

@@ -1,5 +1,6 @@
 //! Zenoh remote teleop over a bad network, made with netem on loopback: 100 ms delay and 10 %
-//! loss, then a partition (100 % loss) and its healing.
+//! loss, then a partition (100 % loss) and its healing; the drives queried over TCP (the old
+//! path, which stutters) and put on the fast lane over UDP (which drives smoothly).
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
@@ -7,7 +8,8 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use scout_system_tests::{
-    Gateway, connect_within, free_port, robot_name, try_zenoh_session, wait_for_state, zenoh_query,
+    Gateway, connect_within, free_port, robot_name, try_zenoh_session, wait_for_state,
+    wait_for_status, zenoh_query,
 };
 use zenoh::Wait;
 
@@ -290,5 +292,181 @@ fn remote_teleop_through_delay_and_loss_then_a_partition() {
         answers.accepted[usize::from(PARTITION)],
         0,
         "a command sent in the partition was accepted after it: {answers:?}"
+    );
+}
+
+/// The remote teleop of `scout drive --remote`, on its own thread: a drive put every 20 ms
+/// (life 300 ms); it keeps streaming whatever the answers say (as a careless client would), and
+/// counts the answers that said its control had ended.
+fn fast_lane_teleop(
+    mut controller: scout_clients::remote::RemoteController,
+    running: Arc<AtomicBool>,
+    lost_control: Arc<std::sync::atomic::AtomicU64>,
+) -> std::thread::JoinHandle<()> {
+    std::thread::spawn(move || {
+        let mut next = Instant::now();
+        while running.load(Ordering::Relaxed) {
+            if let Err(scout_clients::remote::RemoteError::Refused { answer, .. }) =
+                controller.drive(0.3, 0.0, Duration::from_millis(300))
+                && answer.lost_control
+            {
+                lost_control.fetch_add(1, Ordering::Relaxed);
+            }
+            next += Duration::from_millis(20);
+            std::thread::sleep(next.saturating_duration_since(Instant::now()));
+        }
+    })
+}
+
+#[test]
+fn fast_lane_teleop_drives_through_loss_a_partition_stops_healing_restarts_nothing() {
+    const TEST: &str =
+        "fast_lane_teleop_drives_through_loss_a_partition_stops_healing_restarts_nothing";
+    let loopback = match Loopback::set(&["delay", "0ms"]) {
+        Ok(loopback) => loopback,
+        Err(reason) => {
+            skip(
+                TEST,
+                &format!("no netem here ({reason}); socketcan_tests_in_a_vm runs it in a VM"),
+            );
+            return;
+        }
+    };
+    let name = robot_name("netem-fast");
+    let endpoint = format!("udp/127.0.0.1:{}", free_port());
+    let gateway = Gateway::start(&[
+        "--sim",
+        "--name",
+        &name,
+        "--zenoh-listen",
+        &endpoint,
+        "--remote-commands",
+        "estop,teleop,release",
+    ]);
+    let robot = connect_within(&name, LIMIT);
+    let state = robot.subscribe().expect("state");
+    let status = robot.status().expect("status");
+    let settings = scout_clients::remote::SessionSettings {
+        connect: vec![endpoint.clone()],
+        ..Default::default()
+    };
+    // Every session opens before the loss (a handshake over UDP would not survive it); the
+    // gateway listens a moment after its services are up (long in the VM).
+    let deadline = Instant::now() + LIMIT;
+    let session = loop {
+        if let Ok(session) = try_zenoh_session("client", &[], std::slice::from_ref(&endpoint))
+            && !zenoh_query(&session, &format!("scout/{name}/info"), None, LIMIT).is_empty()
+        {
+            break session;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the gateway never answered: {}",
+            gateway.log()
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    let connect = |peer: &str| {
+        scout_clients::remote::RemoteController::connect(&settings, &name, peer)
+            .expect("connect a remote controller")
+    };
+    let (mut controller, mut officer) = (connect("laptop"), connect("officer"));
+    controller
+        .take_control(scout_clients::Class::Teleop)
+        .expect("take control");
+    // Streaming at once: a gap longer than the teleop's age would end its control.
+    let running = Arc::new(AtomicBool::new(true));
+    let lost_control = Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let teleop = fast_lane_teleop(controller, Arc::clone(&running), Arc::clone(&lost_control));
+    loopback.change(&["delay", "100ms", "loss", "10%"]);
+    // Through 100 ms and 10 % loss the chassis reaches the commanded speed and keeps it: a
+    // lost drive is replaced by the next, nothing waits behind it.
+    let info = || {
+        let info = zenoh_query(&session, &format!("scout/{name}/info"), None, LIMIT);
+        info.first()
+            .map(|info| format!("counters {}, links {}", info["counters"], info["links"]))
+            .unwrap_or_default()
+    };
+    let deadline = Instant::now() + LIMIT;
+    loop {
+        if let Ok(Some(sample)) = state.next_timeout(Duration::from_millis(200))
+            && sample.motion.linear() > 0.25
+        {
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the fast lane never drove the chassis through 100 ms and 10 % loss: {}; the \
+             gateway's log:\n{}",
+            info(),
+            gateway.log()
+        );
+    }
+    let lossy_end = Instant::now() + Duration::from_secs(5);
+    let (mut samples, mut at_speed) = (0u32, 0u32);
+    while Instant::now() < lossy_end {
+        if let Ok(Some(sample)) = state.next_timeout(Duration::from_millis(200)) {
+            samples += 1;
+            at_speed += u32::from((sample.motion.linear() - 0.3).abs() < 0.05);
+        }
+    }
+    eprintln!(
+        "fast lane, 100 ms delay, 10 % loss: at speed in {at_speed} of {samples} states; {}",
+        info()
+    );
+    assert!(
+        samples > 0 && f64::from(at_speed) >= 0.8 * f64::from(samples),
+        "the chassis was at the commanded speed in only {at_speed} of {samples} states; the \
+         gateway's log:\n{}",
+        gateway.log()
+    );
+
+    // A partition: the robot stops within the commands' life, by itself, although the
+    // teleop goes on streaming.
+    loopback.change(&["loss", "100%"]);
+    let cut = Instant::now();
+    wait_for_state(&state, LIMIT, |s| s["command"]["linear"] == 0.0);
+    eprintln!(
+        "fast lane, partition: command zero after {} ms",
+        cut.elapsed().as_millis()
+    );
+    std::thread::sleep(Duration::from_secs(2));
+    // Healing, the teleop still streaming: its control ended in the partition, so nothing
+    // moves, and its answers say so.
+    loopback.change(&["delay", "0ms"]);
+    let healed = Instant::now();
+    while healed.elapsed() < Duration::from_secs(3) {
+        if let Ok(Some(sample)) = state.next_timeout(Duration::from_millis(200)) {
+            assert_eq!(
+                sample.command.linear, 0.0,
+                "the streaming teleop moved the robot after the partition healed"
+            );
+        }
+    }
+    let deadline = Instant::now() + LIMIT;
+    while lost_control.load(Ordering::Relaxed) == 0 {
+        assert!(
+            Instant::now() < deadline,
+            "no answer told the teleop its control ended"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    running.store(false, Ordering::Relaxed);
+    teleop.join().expect("teleop thread");
+
+    // The stop gets through the loss: put three times and queried, it latches once.
+    loopback.change(&["delay", "100ms", "loss", "10%"]);
+    let asked = Instant::now();
+    let answer = officer.stop("through loss");
+    let latched = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
+    eprintln!(
+        "fast lane, e-stop through 100 ms and 10 % loss: latched seen after {} ms, answer {answer:?}",
+        asked.elapsed().as_millis()
+    );
+    assert_eq!(latched["stops"][0]["owner"], "remote:officer", "{latched}");
+    assert_eq!(
+        latched["stops"].as_array().map(Vec::len),
+        Some(1),
+        "{latched}"
     );
 }
