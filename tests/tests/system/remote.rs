@@ -511,6 +511,69 @@ fn scout_drives_stops_and_releases_a_remote_robot() {
     }
 }
 
+/// The Python example of docs/remote.md (plain `eclipse-zenoh`, the JSON protocol) drives the
+/// robot on the fast lane and gives control back. Needs `python3` (or `$SCOUT_PYTHON`) with
+/// `eclipse-zenoh`; `.ci/run` installs it (and requires this test to run).
+#[test]
+fn the_python_zenoh_example_drives_on_the_fast_lane() {
+    const TEST: &str = "the_python_zenoh_example_drives_on_the_fast_lane";
+    let python = std::env::var("SCOUT_PYTHON").unwrap_or_else(|_| "python3".into());
+    let has_zenoh = std::process::Command::new(&python)
+        .args(["-c", "import zenoh"])
+        .output()
+        .is_ok_and(|output| output.status.success());
+    if !has_zenoh {
+        assert!(
+            std::env::var_os("SCOUT_REQUIRE_ROS2_STANDIN").is_none(),
+            "{TEST}: {python} lacks eclipse-zenoh"
+        );
+        scout_system_tests::skip(
+            TEST,
+            &format!("{python} lacks eclipse-zenoh (pip install eclipse-zenoh)"),
+        );
+        return;
+    }
+    let name = robot_name("remote-python");
+    let endpoint = format!("udp/127.0.0.1:{}", free_port());
+    let _gateway = Gateway::start(&[
+        "--sim",
+        "--name",
+        &name,
+        "--zenoh-listen",
+        &endpoint,
+        "--remote-commands",
+        "estop,teleop",
+    ]);
+    let robot = connect(&name);
+    let status = robot.status().expect("status");
+    let state = robot.subscribe().expect("subscribe");
+    let session = zenoh_session("client", &[], std::slice::from_ref(&endpoint));
+    query_until_answered(&session, &format!("scout/{name}/info"));
+    let example =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/examples/remote_drive.py");
+    let mut command = std::process::Command::new(&python);
+    command
+        .arg(example)
+        .args(["--connect", &endpoint, "--name", &name, "--peer", "py"])
+        .args(["--linear", "0.4", "--duration", "4"]);
+    let mut driver = Background::spawn(command);
+    let driving = wait_for_status(&status, LIMIT, |s| s["selected"]["client"] == "remote:py");
+    assert_eq!(driving["selected"]["class"], "teleop");
+    wait_for_state(&state, LIMIT, |s| {
+        s["motion"]["linear"].as_f64() > Some(0.3)
+    });
+    assert_eq!(driver.wait_exit(LIMIT), Some(0));
+    // Control given back: the output ramps to zero.
+    wait_for_state(&state, LIMIT, |s| s["command"]["linear"] == 0.0);
+    let links = counters_when(&session, &name, |_| true);
+    let info = query_until_answered(&session, &format!("scout/{name}/info"));
+    assert!(
+        info["links"][0]["accepted"].as_u64() > Some(50),
+        "{info} {links}"
+    );
+    assert!(links["drives_put_accepted"].as_u64() > Some(50), "{links}");
+}
+
 #[test]
 fn a_two_robot_fleet_through_a_router() {
     let router_port = free_port();
