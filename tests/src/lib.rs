@@ -834,3 +834,83 @@ impl Drop for NetNs {
         let _ = self.holder.wait();
     }
 }
+/// Test certificates, made fresh for each run: a CA, the gateway, an operator the access control
+/// allows, and an intruder it does not (signed by the same CA, so TLS alone would let it in).
+#[derive(Debug)]
+pub struct Pki {
+    dir: std::path::PathBuf,
+}
+
+impl Pki {
+    pub fn new(test: &str) -> Pki {
+        use rcgen::{
+            BasicConstraints, CertificateParams, DnType, ExtendedKeyUsagePurpose, IsCa, Issuer,
+            KeyPair, KeyUsagePurpose,
+        };
+        let dir = std::env::temp_dir().join(format!("scout-pki-{test}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let ca_key = KeyPair::generate().expect("CA key");
+        let mut ca = CertificateParams::new(Vec::<String>::new()).expect("CA params");
+        ca.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
+        ca.distinguished_name
+            .push(DnType::CommonName, "scout test CA");
+        ca.key_usages = vec![
+            KeyUsagePurpose::KeyCertSign,
+            KeyUsagePurpose::CrlSign,
+            KeyUsagePurpose::DigitalSignature,
+        ];
+        let ca_cert = ca.self_signed(&ca_key).expect("CA certificate");
+        std::fs::write(dir.join("ca.pem"), ca_cert.pem()).expect("write CA");
+        let issuer = Issuer::new(ca, ca_key);
+        for name in ["gateway", "operator", "intruder"] {
+            let key = KeyPair::generate().expect("key");
+            let mut params =
+                CertificateParams::new(vec!["localhost".to_owned(), "127.0.0.1".to_owned()])
+                    .expect("params");
+            params.distinguished_name.push(DnType::CommonName, name);
+            params.extended_key_usages = vec![
+                ExtendedKeyUsagePurpose::ServerAuth,
+                ExtendedKeyUsagePurpose::ClientAuth,
+            ];
+            let cert = params.signed_by(&key, &issuer).expect("certificate");
+            std::fs::write(dir.join(format!("{name}.pem")), cert.pem()).expect("write certificate");
+            std::fs::write(dir.join(format!("{name}.key")), key.serialize_pem())
+                .expect("write key");
+        }
+        Pki { dir }
+    }
+
+    pub fn path(&self, file: &str) -> String {
+        self.dir.join(file).display().to_string()
+    }
+
+    /// A zenoh configuration: TLS with mutual authentication as `who`; `extra` is appended.
+    pub fn config(&self, who: &str, mode: &str, endpoints: &str, extra: &str) -> String {
+        let path = self.dir.join(format!("{who}-{mode}.json5"));
+        let text = format!(
+            r#"{{
+  mode: "{mode}",
+  {endpoints},
+  scouting: {{ multicast: {{ enabled: false }}, gossip: {{ enabled: false }} }},
+  transport: {{ link: {{ tls: {{
+    root_ca_certificate: "{ca}",
+    listen_certificate: "{cert}", listen_private_key: "{key}",
+    connect_certificate: "{cert}", connect_private_key: "{key}",
+    enable_mtls: true,
+  }} }} }},
+  {extra}
+}}"#,
+            ca = self.path("ca.pem"),
+            cert = self.path(&format!("{who}.pem")),
+            key = self.path(&format!("{who}.key")),
+        );
+        std::fs::write(&path, text).expect("write zenoh config");
+        path.display().to_string()
+    }
+}
+
+impl Drop for Pki {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}

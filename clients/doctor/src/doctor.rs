@@ -24,8 +24,10 @@ pub struct Options {
     pub port: Option<DeviceSpec>,
     /// How long to listen.
     pub window: Duration,
-    /// A zenoh endpoint to read the robot's state through, if asked.
+    /// A zenoh endpoint to read the robot's state through and measure, if asked.
     pub zenoh: Option<String>,
+    /// The zenoh configuration file for it (TLS), if any.
+    pub zenoh_config: Option<String>,
 }
 
 /// Whether the gateway's device names the same device as `spec`.
@@ -57,11 +59,12 @@ pub fn run(options: &Options, report: &mut dyn FnMut(&Check)) -> Vec<Check> {
         check_gateway(options, &mut out);
     }
     if let Some(endpoint) = &options.zenoh {
-        out.emit(vec![remote::inspect(
+        out.emit(remote::inspect(
             &options.robot,
             endpoint,
+            options.zenoh_config.as_deref(),
             options.window,
-        )]);
+        ));
     }
     out.checks
 }

@@ -1,62 +1,212 @@
-//! The zenoh check, when asked (`--zenoh ENDPOINT`): a zenoh client session to that endpoint, and
-//! the robot's state arriving through it, as a remote peer would see it.
+//! The zenoh checks, when asked (`--zenoh ENDPOINT`): a zenoh client session to that endpoint
+//! (with TLS when `--zenoh-config` says so), the robot's state arriving through it, and the link
+//! measured as a remote peer would meet it: queries answered, their round trip, and what the
+//! gateway allows remote peers.
 
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
-use scout_clients::remote::{RemoteError, RemoteStates, SessionSettings};
+use scout_clients::remote::{RemoteError, RemoteStates, SessionSettings, info_key};
+use zenoh::Wait;
 
-use crate::check::Check;
+use crate::check::{Check, Verdict};
 
-/// Connects to `endpoint` as a zenoh client and waits up to `window` for robot `robot`'s state.
-pub fn inspect(robot: &str, endpoint: &str, window: Duration) -> Check {
+/// Queries the link check sends, one every [`PROBE_SPACING`].
+const PROBES: usize = 20;
+
+/// Between two probes.
+const PROBE_SPACING: Duration = Duration::from_millis(50);
+
+/// How long a probe's answer is awaited.
+const PROBE_TIMEOUT: Duration = Duration::from_secs(2);
+
+/// A round trip past this makes remote driving over TCP unreliable: drives live 300 ms.
+const SLOW_ROUND_TRIP: Duration = Duration::from_millis(250);
+
+/// Connects to `endpoint` as a zenoh client (with `config_file`'s TLS settings if given), waits
+/// up to `window` for robot `robot`'s state, then measures the link.
+pub fn inspect(
+    robot: &str,
+    endpoint: &str,
+    config_file: Option<&str>,
+    window: Duration,
+) -> Vec<Check> {
     let settings = SessionSettings {
-        config_file: None,
+        config_file: config_file.map(str::to_owned),
         listen: Vec::new(),
         connect: vec![endpoint.to_owned()],
     };
     let states = match RemoteStates::connect(&settings, robot) {
         Ok(states) => states,
-        Err(error @ (RemoteError::Config(_) | RemoteError::Zenoh(_))) => {
-            return Check::fail(
-                "zenoh",
-                format!("{endpoint}: {error}"),
-                "give an endpoint as tcp/HOST:PORT (the gateway listens on tcp/127.0.0.1:7448 \
-                 unless --zenoh-listen says otherwise)",
-            );
-        }
-        Err(error @ RemoteError::Open(_)) => {
-            return Check::fail(
-                "zenoh",
-                format!("cannot reach {endpoint}: {error}"),
-                "is the gateway (or the zenoh router) listening there? `scout-gateway \
-                 --zenoh-listen tcp/0.0.0.0:7448` listens beyond this machine; check firewalls",
-            );
-        }
-        // Commands are not sent here: subscribing has no answer to refuse or miss.
-        Err(error @ (RemoteError::Refused { .. } | RemoteError::NoAnswer { .. })) => {
-            return Check::fail("zenoh", format!("{endpoint}: {error}"), "see the error");
-        }
+        Err(error) => return vec![cannot_connect(endpoint, config_file, &error)],
     };
-    match states.next_timeout(window.max(Duration::from_secs(1))) {
-        Ok(Some(_)) => {
-            return Check::pass(
-                "zenoh",
-                format!("robot {robot}'s state arrives through zenoh at {endpoint}"),
-            );
-        }
-        Ok(None) => {}
-        Err(error) => {
-            return Check::fail(
-                "zenoh",
-                format!("reading robot {robot}'s state at {endpoint}: {error}"),
-                "see the error; `scout echo --remote` shows what arrives",
-            );
-        }
+    let state = match states.next_timeout(window.max(Duration::from_secs(1))) {
+        Ok(Some(_)) => Check::pass(
+            "zenoh",
+            format!("robot {robot}'s state arrives through zenoh at {endpoint}"),
+        ),
+        Ok(None) => Check::fail(
+            "zenoh",
+            format!(
+                "connected to {endpoint}, but no state of robot {robot} arrived in {window:.1?}"
+            ),
+            if config_file.is_some() {
+                "the access control may not list your certificate's common name (it then \
+                 denies everything); or no gateway named so publishes there: `scout echo \
+                 --remote --name '*'` lists the robots you may read"
+            } else {
+                "does the gateway run with zenoh (not --no-zenoh) and this --name? `scout echo \
+                 --remote --name '*'` lists the robots that publish there"
+            },
+        ),
+        Err(error) => Check::fail(
+            "zenoh",
+            format!("reading robot {robot}'s state at {endpoint}: {error}"),
+            "see the error; `scout echo --remote` shows what arrives",
+        ),
+    };
+    let reached = state.verdict == Verdict::Pass;
+    let mut checks = vec![state];
+    if reached {
+        checks.push(measure_link(&settings, robot, endpoint));
     }
-    Check::fail(
-        "zenoh",
-        format!("connected to {endpoint}, but no state of robot {robot} arrived in {window:.1?}"),
-        "does the gateway run with zenoh (not --no-zenoh) and this --name? `scout echo --remote \
-         --name '*'` lists the robots that publish there",
-    )
+    checks
+}
+
+/// Why no session opened, and what to do: a TLS failure names the certificates.
+fn cannot_connect(endpoint: &str, config_file: Option<&str>, error: &RemoteError) -> Check {
+    let text = error.to_string();
+    let lower = text.to_lowercase();
+    let tls = ["certificate", "issuer", "tls", "handshake", "alert"]
+        .iter()
+        .any(|word| lower.contains(word));
+    match error {
+        RemoteError::Config(_) => Check::fail(
+            "zenoh",
+            format!("{endpoint}: {error}"),
+            "give an endpoint as tcp/HOST:PORT, tls/..., quic/... or udp/... (the gateway \
+             listens on tcp/127.0.0.1:7448 unless --zenoh-listen says otherwise) and a valid \
+             --zenoh-config",
+        ),
+        _ if tls => Check::fail(
+            "zenoh",
+            format!("TLS with {endpoint} failed: {text}"),
+            "the gateway's certificate and yours must be signed by the CA your configuration's \
+             root_ca_certificate names (a wrong CA fails here), and not expired",
+        ),
+        _ if config_file.is_none()
+            && (endpoint.starts_with("tls/") || endpoint.starts_with("quic/")) =>
+        {
+            Check::fail(
+                "zenoh",
+                format!("cannot reach {endpoint}: {text}"),
+                "tls/ and quic/ need certificates: give --zenoh-config with your TLS settings \
+                 (config/zenoh-tls-operator.json5)",
+            )
+        }
+        // zenoh does not always say why a TLS or QUIC handshake failed.
+        _ if endpoint.starts_with("tls/") || endpoint.starts_with("quic/") => Check::fail(
+            "zenoh",
+            format!("cannot reach {endpoint}: {text}"),
+            "is the gateway listening there (check firewalls)? If it is, the TLS handshake \
+             failed: both certificates must be signed by the CA the other side trusts (a \
+             certificate from another CA fails here), and not expired",
+        ),
+        _ => Check::fail(
+            "zenoh",
+            format!("cannot reach {endpoint}: {text}"),
+            "is the gateway (or the zenoh router) listening there? `scout-gateway \
+             --zenoh-listen tcp/0.0.0.0:7448` listens beyond this machine; check firewalls",
+        ),
+    }
+}
+
+/// [`PROBES`] information queries, one every [`PROBE_SPACING`] without waiting for the
+/// answers: how many are answered, their round trip, and what the gateway allows remote peers.
+fn measure_link(settings: &SessionSettings, robot: &str, endpoint: &str) -> Check {
+    let session = match settings.open("client") {
+        Ok(session) => session,
+        Err(error) => return Check::fail("zenoh.link", error.to_string(), "see the error"),
+    };
+    // Each answer stamped as it arrives, with the probe it answers.
+    let arrivals = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+    let mut sent = Vec::new();
+    for probe in 0..PROBES {
+        let arrivals = std::sync::Arc::clone(&arrivals);
+        let asked = session
+            .get(info_key(robot))
+            .timeout(PROBE_TIMEOUT)
+            .callback(move |reply| {
+                let info = reply.result().ok().and_then(|sample| {
+                    let text = sample.payload().try_to_string().ok()?;
+                    serde_json::from_str::<serde_json::Value>(&text).ok()
+                });
+                if let (Some(info), Ok(mut arrivals)) = (info, arrivals.lock()) {
+                    arrivals.push((probe, Instant::now(), info));
+                }
+            })
+            .wait();
+        if let Err(error) = asked {
+            return Check::fail("zenoh.link", format!("querying: {error}"), "see the error");
+        }
+        sent.push(Instant::now());
+        std::thread::sleep(PROBE_SPACING);
+    }
+    let deadline = Instant::now() + PROBE_TIMEOUT;
+    while Instant::now() < deadline && arrivals.lock().map_or(0, |a| a.len()) < PROBES {
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let arrivals = arrivals.lock().map(|a| a.clone()).unwrap_or_default();
+    let mut round_trips: Vec<Duration> = (arrivals.iter())
+        .map(|(probe, arrived, _)| arrived.saturating_duration_since(sent[*probe]))
+        .collect();
+    let info = arrivals.last().map(|(_, _, info)| info.clone());
+    round_trips.sort_unstable();
+    let Some(info) = info else {
+        return Check::fail(
+            "zenoh.link",
+            format!("none of {PROBES} queries on scout/{robot}/info was answered"),
+            "the state arrives, but queries do not: the access control may allow reading the \
+             state and not scout/ROBOT/info, or the link drops every answer",
+        );
+    };
+    let (median, slowest) = (
+        round_trips[round_trips.len() / 2],
+        round_trips[round_trips.len() - 1],
+    );
+    let commands = &info["remote_commands"];
+    let allowed = match commands["enabled"].as_bool() {
+        Some(true) => format!(
+            "remote commands on ({})",
+            commands["allowed"]
+                .as_array()
+                .map(|list| {
+                    list.iter()
+                        .filter_map(serde_json::Value::as_str)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                })
+                .unwrap_or_default()
+        ),
+        _ => "remote commands off (read-only)".to_owned(),
+    };
+    let detail = format!(
+        "{} of {PROBES} queries answered through {endpoint}, round trip {median:.0?} median, \
+         {slowest:.0?} slowest; {allowed}",
+        round_trips.len()
+    );
+    if round_trips.len() < PROBES || slowest > SLOW_ROUND_TRIP {
+        let udp = endpoint.starts_with("udp/");
+        return Check::warn(
+            "zenoh.link",
+            detail,
+            if udp {
+                "a lossy or slow link: drives put on the fast lane (scout drive --remote) \
+                 still get through; expect stops within their 300 ms life"
+            } else {
+                "a lossy or slow link: over TCP, TLS and QUIC a lost packet holds drives back \
+                 (docs/remote.md: which link); use udp/ inside a network you trust or a VPN"
+            },
+        );
+    }
+    Check::pass("zenoh.link", detail)
 }

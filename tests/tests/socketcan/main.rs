@@ -11,6 +11,7 @@ mod can_utils;
 mod doctor;
 mod faults;
 mod netem;
+mod netem_bench;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -16,14 +16,14 @@ use zenoh::Wait;
 use crate::{LIMIT, skip, tc};
 
 /// netem on loopback for as long as it lives.
-struct Loopback;
+pub(crate) struct Loopback;
 
 impl Loopback {
-    fn set(rule: &[&str]) -> Result<Loopback, String> {
+    pub(crate) fn set(rule: &[&str]) -> Result<Loopback, String> {
         Self::replace(rule).map(|()| Loopback)
     }
 
-    fn change(&self, rule: &[&str]) {
+    pub(crate) fn change(&self, rule: &[&str]) {
         Self::replace(rule).expect("change netem on loopback");
     }
 

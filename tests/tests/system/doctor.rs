@@ -391,6 +391,14 @@ fn doctor_reads_the_robot_through_zenoh_when_asked() {
     let (code, checks) = doctor(&["--name", &name, "--zenoh", &tcp(port)]);
     assert_eq!(code, Some(0), "{checks:#?}");
     assert_eq!(verdict(&checks, "zenoh"), "pass", "{checks:#?}");
+    // The link, measured as a remote peer meets it.
+    let link = check(&checks, "zenoh.link");
+    assert_eq!(link["verdict"], "pass", "{checks:#?}");
+    let detail = link["detail"].as_str().unwrap_or_default();
+    assert!(
+        detail.contains("20 of 20 queries answered") && detail.contains("remote commands off"),
+        "{link}"
+    );
 
     // Another robot's name at the same endpoint: reached, but no state.
     let other = robot_name("doctor-zenoh-other");

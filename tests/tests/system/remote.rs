@@ -8,7 +8,7 @@ use nix::sys::signal::Signal;
 use scout_clients::interface::json::state_json;
 use scout_clients::monotonic_ns;
 use scout_system_tests::{
-    Background, Gateway, Sim, connect, free_port, robot_name, scout, tcp, wait_for_state,
+    Background, Gateway, Pki, Sim, connect, free_port, robot_name, scout, tcp, wait_for_state,
     wait_for_status, zenoh_query, zenoh_session,
 };
 use serde_json::Value;
@@ -617,86 +617,6 @@ fn a_two_robot_fleet_through_a_router() {
     }
 }
 
-/// Test certificates, made fresh for each run: a CA, the gateway, an operator the access control
-/// allows, and an intruder it does not (signed by the same CA, so TLS alone would let it in).
-struct Pki {
-    dir: std::path::PathBuf,
-}
-
-impl Pki {
-    fn new(test: &str) -> Pki {
-        use rcgen::{
-            BasicConstraints, CertificateParams, DnType, ExtendedKeyUsagePurpose, IsCa, Issuer,
-            KeyPair, KeyUsagePurpose,
-        };
-        let dir = std::env::temp_dir().join(format!("scout-pki-{test}-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).expect("temp dir");
-        let ca_key = KeyPair::generate().expect("CA key");
-        let mut ca = CertificateParams::new(Vec::<String>::new()).expect("CA params");
-        ca.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
-        ca.distinguished_name
-            .push(DnType::CommonName, "scout test CA");
-        ca.key_usages = vec![
-            KeyUsagePurpose::KeyCertSign,
-            KeyUsagePurpose::CrlSign,
-            KeyUsagePurpose::DigitalSignature,
-        ];
-        let ca_cert = ca.self_signed(&ca_key).expect("CA certificate");
-        std::fs::write(dir.join("ca.pem"), ca_cert.pem()).expect("write CA");
-        let issuer = Issuer::new(ca, ca_key);
-        for name in ["gateway", "operator", "intruder"] {
-            let key = KeyPair::generate().expect("key");
-            let mut params =
-                CertificateParams::new(vec!["localhost".to_owned(), "127.0.0.1".to_owned()])
-                    .expect("params");
-            params.distinguished_name.push(DnType::CommonName, name);
-            params.extended_key_usages = vec![
-                ExtendedKeyUsagePurpose::ServerAuth,
-                ExtendedKeyUsagePurpose::ClientAuth,
-            ];
-            let cert = params.signed_by(&key, &issuer).expect("certificate");
-            std::fs::write(dir.join(format!("{name}.pem")), cert.pem()).expect("write certificate");
-            std::fs::write(dir.join(format!("{name}.key")), key.serialize_pem())
-                .expect("write key");
-        }
-        Pki { dir }
-    }
-
-    fn path(&self, file: &str) -> String {
-        self.dir.join(file).display().to_string()
-    }
-
-    /// A zenoh configuration: TLS with mutual authentication as `who`; `extra` is appended.
-    fn config(&self, who: &str, mode: &str, endpoints: &str, extra: &str) -> String {
-        let path = self.dir.join(format!("{who}-{mode}.json5"));
-        let text = format!(
-            r#"{{
-  mode: "{mode}",
-  {endpoints},
-  scouting: {{ multicast: {{ enabled: false }}, gossip: {{ enabled: false }} }},
-  transport: {{ link: {{ tls: {{
-    root_ca_certificate: "{ca}",
-    listen_certificate: "{cert}", listen_private_key: "{key}",
-    connect_certificate: "{cert}", connect_private_key: "{key}",
-    enable_mtls: true,
-  }} }} }},
-  {extra}
-}}"#,
-            ca = self.path("ca.pem"),
-            cert = self.path(&format!("{who}.pem")),
-            key = self.path(&format!("{who}.key")),
-        );
-        std::fs::write(&path, text).expect("write zenoh config");
-        path.display().to_string()
-    }
-}
-
-impl Drop for Pki {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.dir);
-    }
-}
-
 /// The access control of the documented set-up: only the operator's certificate may use the
 /// robot's keys; everyone else is denied everything.
 const OPERATOR_ONLY: &str = r#"access_control: {
@@ -806,6 +726,40 @@ fn mutual_tls_and_access_control(scheme: &str) {
     }
     std::thread::sleep(Duration::from_millis(300));
     assert_eq!(wait_for_status(&status, LIMIT, |_| true)["latched"], false);
+    // `scout doctor --zenoh` names each case: the operator passes, a wrong CA fails the TLS,
+    // an unlisted name is reached but reads nothing.
+    let doctor_with = |config: String| {
+        scout_system_tests::doctor(&[
+            "--name",
+            &name,
+            "--zenoh",
+            &endpoint,
+            "--zenoh-config",
+            &config,
+        ])
+        .1
+    };
+    let checks = doctor_with(pki.config("operator", "client", &connect_to, ""));
+    assert_eq!(
+        scout_system_tests::doctor_check(&checks, "zenoh.link")["verdict"],
+        "pass",
+        "{checks:#?}"
+    );
+    let checks = doctor_with(rogue.config("operator", "client", &connect_to, ""));
+    let zenoh = scout_system_tests::doctor_check(&checks, "zenoh");
+    assert_eq!(zenoh["verdict"], "fail", "{checks:#?}");
+    assert!(
+        zenoh["fix"].as_str().is_some_and(|fix| fix.contains("CA")),
+        "{zenoh}"
+    );
+    let checks = doctor_with(pki.config("intruder", "client", &connect_to, ""));
+    let zenoh = scout_system_tests::doctor_check(&checks, "zenoh");
+    assert!(
+        zenoh["fix"]
+            .as_str()
+            .is_some_and(|fix| fix.contains("access control")),
+        "{zenoh}"
+    );
     // A peer without a certificate cannot even connect: the gateway only speaks mutual TLS.
     let plain = scout_clients::remote::SessionSettings {
         config_file: Some(String::new()),

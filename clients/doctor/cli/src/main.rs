@@ -39,9 +39,12 @@ struct Args {
     #[arg(long)]
     json: bool,
     /// Also read the robot's state through zenoh from this endpoint (a gateway's or a router's,
-    /// e.g. tcp/127.0.0.1:7448), as a remote peer would.
+    /// e.g. tcp/127.0.0.1:7448) and measure the link, as a remote peer would.
     #[arg(long, value_name = "ENDPOINT")]
     zenoh: Option<String>,
+    /// The zenoh configuration file for --zenoh (TLS certificates) [default: $ZENOH_CONFIG].
+    #[arg(long, value_name = "FILE", requires = "zenoh")]
+    zenoh_config: Option<String>,
     /// How long to listen to the port or the gateway, seconds.
     #[arg(long, default_value_t = 1.5, value_name = "SECONDS")]
     listen: f64,
@@ -67,6 +70,7 @@ fn main() -> ExitCode {
         port,
         window: Duration::from_secs_f64(args.listen),
         zenoh: args.zenoh.clone(),
+        zenoh_config: args.zenoh_config.clone(),
     };
     let mut stdout = std::io::stdout();
     let mut print = |check: &Check| {

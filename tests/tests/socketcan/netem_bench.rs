@@ -1,0 +1,354 @@
+//! The remote-drive benchmark over a bad network (netem on loopback, in the VM): today's path
+//! (drives queried) beside the fast lane (drives put), over TCP, QUIC and UDP, at 100 ms delay
+//! with 10 % loss and at a bad 4G link. It prints figures and asserts nothing about them; run it
+//! with the command in BENCHMARKS.md.
+
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use scout_clients::remote::{RemoteController, RemoteError, SessionSettings};
+use scout_system_tests::{
+    Gateway, Pki, connect_within, free_port, release_all, robot_name, zenoh_query,
+};
+use zenoh::Wait;
+
+use crate::netem::Loopback;
+use crate::{LIMIT, skip};
+
+/// How long each configuration drives.
+const DRIVING: Duration = Duration::from_secs(10);
+
+/// E-stops timed per configuration.
+const ESTOPS: usize = 10;
+
+/// A drive's life: the same on both paths, so that only the transport differs.
+const LIFE: Duration = Duration::from_millis(300);
+
+/// The network profiles: a name and the netem rule.
+const PROFILES: [(&str, &[&str]); 2] = [
+    ("100 ms, 10 % loss", &["delay", "100ms", "loss", "10%"]),
+    (
+        "4G: 300 ± 50 ms, 20 % loss",
+        &["delay", "300ms", "50ms", "loss", "20%"],
+    ),
+];
+
+/// How drives travel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Path {
+    /// Each drive a query, answered (before the fast lane).
+    Queried,
+    /// Drives put on the fast lane (`RemoteController`).
+    Put,
+}
+
+/// The links and paths compared.
+const RUNS: [(&str, Path); 5] = [
+    ("tcp", Path::Queried),
+    ("tcp", Path::Put),
+    ("quic", Path::Queried),
+    ("quic", Path::Put),
+    ("udp", Path::Put),
+];
+
+/// What one configuration measured.
+#[derive(Debug, Default)]
+struct Figures {
+    sent: u64,
+    accepted: u64,
+    age_p50_ms: Option<u64>,
+    age_p99_ms: Option<u64>,
+    lapses: u64,
+    estops_ms: Vec<u64>,
+}
+
+#[test]
+#[ignore = "a benchmark: prints figures (BENCHMARKS.md says how to run it in the VM)"]
+fn netem_bench_remote_drive() {
+    const TEST: &str = "netem_bench_remote_drive";
+    let loopback = match Loopback::set(&["delay", "0ms"]) {
+        Ok(loopback) => loopback,
+        Err(reason) => {
+            skip(TEST, &format!("no netem here ({reason}): run it in the VM"));
+            return;
+        }
+    };
+    let pki = Pki::new("netem-bench");
+    // `SCOUT_NETEM_RUNS=udp-put,quic-put` runs only those.
+    let only: Option<Vec<String>> = std::env::var("SCOUT_NETEM_RUNS")
+        .ok()
+        .map(|runs| runs.split(',').map(str::to_owned).collect());
+    let mut rows = Vec::new();
+    for (p, (profile, rule)) in PROFILES.into_iter().enumerate() {
+        for (r, (link, path)) in RUNS.into_iter().enumerate() {
+            let label = format!("{link}-{path:?}").to_lowercase();
+            if only.as_ref().is_some_and(|only| !only.contains(&label)) {
+                continue;
+            }
+            let name = robot_name(&format!("bench-{p}-{r}"));
+            let figures = run(&loopback, &pki, &name, link, path, rule);
+            eprintln!("{link} {path:?} {profile}: {figures:?}");
+            rows.push((profile, link, path, figures));
+        }
+    }
+    println!(
+        "| network | link | drives | accepted | age p50 / p99 (ms) | control lapsed | e-stop latched p50 / max (ms) |"
+    );
+    println!("|---|---|---|---|---|---|---|");
+    for (profile, link, path, figures) in rows {
+        let mut estops = figures.estops_ms.clone();
+        estops.sort_unstable();
+        let show = |ms: Option<u64>| ms.map_or("-".to_owned(), |ms| ms.to_string());
+        println!(
+            "| {profile} | {link}, {} | {} | {:.0} % | {} / {} | {} | {} / {} ({} of {ESTOPS}) |",
+            match path {
+                Path::Queried => "queried",
+                Path::Put => "put (fast lane)",
+            },
+            figures.sent,
+            100.0 * figures.accepted as f64 / figures.sent.max(1) as f64,
+            show(figures.age_p50_ms),
+            show(figures.age_p99_ms),
+            figures.lapses,
+            show(estops.get(estops.len() / 2).copied()),
+            show(estops.last().copied()),
+            estops.len(),
+        );
+    }
+}
+
+/// One configuration: a gateway of its own (robot `name`), a teleop driving at 50 Hz through `rule` for
+/// [`DRIVING`] (taking control again whenever it lapsed), then [`ESTOPS`] e-stops timed to the
+/// latch, each released locally.
+fn run(
+    loopback: &Loopback,
+    pki: &Pki,
+    name: &str,
+    link: &str,
+    path: Path,
+    rule: &[&str],
+) -> Figures {
+    loopback.change(&["delay", "0ms"]);
+    let endpoint = match link {
+        "quic" => format!("quic/127.0.0.1:{}?mixed_rel=1", free_port()),
+        _ => format!("{link}/127.0.0.1:{}", free_port()),
+    };
+    let tls = link == "quic";
+    let mut args = vec![
+        "--sim",
+        "--name",
+        &name,
+        "--remote-commands",
+        "estop,teleop",
+    ];
+    let gateway_config;
+    if tls {
+        let listen = format!(r#"listen: {{ endpoints: ["{endpoint}"] }}"#);
+        gateway_config = pki.config("gateway", "peer", &listen, "");
+        args.extend(["--zenoh-config", &gateway_config]);
+    } else {
+        args.extend(["--zenoh-listen", &endpoint]);
+    }
+    let _gateway = Gateway::start(&args);
+    let robot = connect_within(name, LIMIT);
+    let status = robot.status().expect("status");
+    let settings = SessionSettings {
+        config_file: tls.then(|| {
+            let connect = format!(r#"connect: {{ endpoints: ["{endpoint}"] }}"#);
+            pki.config("operator", "client", &connect, "")
+        }),
+        connect: if tls {
+            Vec::new()
+        } else {
+            vec![endpoint.clone()]
+        },
+        ..Default::default()
+    };
+    // Every session opens before the loss; the gateway listens a moment after it starts.
+    let deadline = Instant::now() + LIMIT;
+    let session = loop {
+        if let Ok(session) = settings.open("client")
+            && !zenoh_query(&session, &format!("scout/{name}/info"), None, LIMIT).is_empty()
+        {
+            break session;
+        }
+        assert!(Instant::now() < deadline, "the gateway never answered");
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    // The emulated CPU may overrun a tick as the gateway starts (a stop): released first, on
+    // purpose, as an operator would after checking the robot.
+    release_all(name);
+    let mut controller = RemoteController::connect(&settings, name, "operator").expect("connect");
+    controller
+        .take_control(scout_clients::Class::Teleop)
+        .expect("take control");
+    let figures = Arc::new(Mutex::new(Figures::default()));
+    let running = Arc::new(AtomicBool::new(true));
+    let sent = Arc::new(AtomicU64::new(0));
+    let teleop = {
+        let (session, name, running, sent, figures) = (
+            session.clone(),
+            name.to_owned(),
+            Arc::clone(&running),
+            Arc::clone(&sent),
+            Arc::clone(&figures),
+        );
+        std::thread::spawn(move || match path {
+            Path::Put => drive_put(controller, &running, &sent, &figures),
+            Path::Queried => drive_queried(&session, &name, &running, &sent, &figures),
+        })
+    };
+    loopback.change(rule);
+    std::thread::sleep(DRIVING);
+    running.store(false, Ordering::Relaxed);
+    teleop.join().expect("teleop");
+    let mut figures = std::mem::take(&mut *figures.lock().expect("figures"));
+    figures.sent = sent.load(Ordering::Relaxed);
+
+    // E-stops through the same loss: put and queried on the fast lane, queried on the old.
+    let estop_key = format!("scout/{name}/cmd/estop/operator");
+    let copies = session
+        .declare_publisher(estop_key.clone())
+        .congestion_control(zenoh::qos::CongestionControl::Drop)
+        .reliability(zenoh::qos::Reliability::BestEffort)
+        .express(true)
+        .wait()
+        .expect("e-stop publisher");
+    for _ in 0..ESTOPS {
+        // The statuses so far are not this stop's.
+        while status.try_next().expect("status").is_some() {}
+        let asked = Instant::now();
+        if path == Path::Put {
+            for _ in 0..3 {
+                let _ = copies.put(r#"{"reason":"bench"}"#).wait();
+            }
+        }
+        let _answer = session
+            .get(&estop_key)
+            .payload(r#"{"reason":"bench"}"#)
+            .timeout(LIMIT)
+            .wait()
+            .expect("e-stop query");
+        let deadline = asked + LIMIT;
+        let latched = loop {
+            if status
+                .try_next()
+                .expect("status")
+                .is_some_and(|status| status.stopped())
+            {
+                break Some(asked.elapsed());
+            }
+            if Instant::now() > deadline {
+                break None;
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        };
+        if let Some(latched) = latched {
+            figures.estops_ms.push(latched.as_millis() as u64);
+            release_all(name);
+            while status
+                .latest(Duration::from_millis(100))
+                .expect("status")
+                .is_some_and(|status| status.stopped())
+            {}
+        }
+    }
+    // The link quality, read once the network is good again.
+    loopback.change(&["delay", "0ms"]);
+    let info = zenoh_query(&session, &format!("scout/{name}/info"), None, LIMIT);
+    if let Some(link) = info.first().map(|info| &info["links"][0]) {
+        eprintln!("{name}: {link}");
+        figures.accepted = link["accepted"].as_u64().unwrap_or(0);
+        figures.age_p50_ms = link["age_p50_ms"].as_u64();
+        figures.age_p99_ms = link["age_p99_ms"].as_u64();
+    }
+    figures
+}
+
+/// The fast lane: a drive put every 20 ms; control taken again when an answer says it lapsed.
+fn drive_put(
+    mut controller: RemoteController,
+    running: &AtomicBool,
+    sent: &AtomicU64,
+    figures: &Mutex<Figures>,
+) {
+    let mut next = Instant::now();
+    while running.load(Ordering::Relaxed) {
+        sent.fetch_add(1, Ordering::Relaxed);
+        if let Err(RemoteError::Refused { answer, .. }) = controller.drive(0.3, 0.0, LIFE)
+            && answer.lost_control
+        {
+            figures.lock().expect("figures").lapses += 1;
+            let _ = controller.take_control(scout_clients::Class::Teleop);
+        }
+        next += Duration::from_millis(20);
+        std::thread::sleep(next.saturating_duration_since(Instant::now()));
+    }
+}
+
+/// Today's path: each drive a query, its answer read when it comes; control taken again when
+/// an answer says it lapsed.
+fn drive_queried(
+    session: &zenoh::Session,
+    name: &str,
+    running: &AtomicBool,
+    sent: &AtomicU64,
+    figures: &Mutex<Figures>,
+) {
+    let key = |kind: &str| format!("scout/{name}/cmd/{kind}/operator");
+    let mut pending = Vec::new();
+    let mut seq = 0u64;
+    let mut next = Instant::now();
+    while running.load(Ordering::Relaxed) {
+        seq += 1;
+        let payload = format!(
+            r#"{{"seq":{seq},"sent_ms":{},"linear":0.3,"angular":0.0,"ttl_ms":{}}}"#,
+            scout_clients::monotonic_ns() / 1_000_000,
+            LIFE.as_millis()
+        );
+        let replies = (session.get(key("drive")).payload(payload))
+            .timeout(LIMIT)
+            .wait()
+            .expect("send a drive query");
+        pending.push(replies);
+        sent.fetch_add(1, Ordering::Relaxed);
+        let mut lapsed = false;
+        pending.retain(|replies| match replies.try_recv() {
+            Ok(Some(reply)) => {
+                let answer: serde_json::Value = reply
+                    .result()
+                    .ok()
+                    .and_then(|sample| {
+                        sample
+                            .payload()
+                            .try_to_string()
+                            .ok()
+                            .map(|t| t.into_owned())
+                    })
+                    .and_then(|text| serde_json::from_str(&text).ok())
+                    .unwrap_or_default();
+                lapsed |= answer["lost_control"] == true;
+                false
+            }
+            Ok(None) => true,
+            Err(_) => false,
+        });
+        if lapsed {
+            figures.lock().expect("figures").lapses += 1;
+            pending.clear();
+            // As an operator would: take control, and wait for the answer.
+            let _ = session
+                .get(key("take-control"))
+                .payload(format!(
+                    r#"{{"class":"teleop","sent_ms":{}}}"#,
+                    scout_clients::monotonic_ns() / 1_000_000
+                ))
+                .timeout(LIMIT)
+                .wait()
+                .map(|replies| replies.recv_timeout(LIMIT));
+        }
+        next += Duration::from_millis(20);
+        std::thread::sleep(next.saturating_duration_since(Instant::now()));
+    }
+}
