@@ -25,7 +25,7 @@ import time
 import zenoh
 
 PERIOD = 0.02  # s between drives
-LIFE_MS = 300  # a drive's life: a partition stops the robot within it
+LIFE_MS = 300  # a drive's life: after a partition the robot stops from there
 ANSWERED_EVERY = 10  # one drive in this many is a query, to learn whether control holds
 TIMEOUT = 5.0  # s to wait for an answer
 

@@ -71,7 +71,7 @@ pub struct DriveArgs {
     remote: RemoteArgs,
 }
 
-/// A remote drive's life: a partition stops the robot within it.
+/// A remote drive's life: after a partition, the output ramps to zero from its end.
 const REMOTE_DRIVE_LIFE: Duration = Duration::from_millis(300);
 
 /// The gateway's answer in words (`scout drive` prints it once per change, not per message).

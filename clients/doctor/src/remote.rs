@@ -132,6 +132,7 @@ fn measure_link(settings: &SessionSettings, robot: &str, endpoint: &str) -> Chec
     let mut sent = Vec::new();
     for probe in 0..PROBES {
         let arrivals = std::sync::Arc::clone(&arrivals);
+        sent.push(Instant::now());
         let asked = session
             .get(info_key(robot))
             .timeout(PROBE_TIMEOUT)
@@ -148,14 +149,22 @@ fn measure_link(settings: &SessionSettings, robot: &str, endpoint: &str) -> Chec
         if let Err(error) = asked {
             return Check::fail("zenoh.link", format!("querying: {error}"), "see the error");
         }
-        sent.push(Instant::now());
         std::thread::sleep(PROBE_SPACING);
     }
     let deadline = Instant::now() + PROBE_TIMEOUT;
-    while Instant::now() < deadline && arrivals.lock().map_or(0, |a| a.len()) < PROBES {
+    let answered = |arrivals: &[(usize, Instant, serde_json::Value)]| {
+        let mut probes: Vec<usize> = arrivals.iter().map(|(probe, _, _)| *probe).collect();
+        probes.sort_unstable();
+        probes.dedup();
+        probes.len()
+    };
+    while Instant::now() < deadline && arrivals.lock().map_or(0, |a| answered(&a)) < PROBES {
         std::thread::sleep(Duration::from_millis(10));
     }
-    let arrivals = arrivals.lock().map(|a| a.clone()).unwrap_or_default();
+    let mut arrivals = arrivals.lock().map(|a| a.clone()).unwrap_or_default();
+    // The first answer to each probe (a router may pass on more than one).
+    arrivals.sort_by_key(|(probe, arrived, _)| (*probe, *arrived));
+    arrivals.dedup_by_key(|(probe, _, _)| *probe);
     let mut round_trips: Vec<Duration> = (arrivals.iter())
         .map(|(probe, arrived, _)| arrived.saturating_duration_since(sent[*probe]))
         .collect();
@@ -200,8 +209,9 @@ fn measure_link(settings: &SessionSettings, robot: &str, endpoint: &str) -> Chec
             "zenoh.link",
             detail,
             if udp {
-                "a lossy or slow link: drives put on the fast lane (scout drive --remote) \
-                 still get through; expect stops within their 300 ms life"
+                "a lossy or slow link: drives put on the fast lane (scout drive --remote) get \
+                 through a little loss; past a few percent, or a round trip near 300 ms (a \
+                 drive's life), remote driving is not supported (docs/remote.md: which link)"
             } else {
                 "a lossy or slow link: over TCP, TLS and QUIC a lost packet holds drives back \
                  (docs/remote.md: which link); use udp/ inside a network you trust or a VPN"

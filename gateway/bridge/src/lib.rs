@@ -281,7 +281,9 @@ fn serve_queries(
                     if estop_sender.try_send(Estop::Query(query)).is_err() {
                         dropped.estops.fetch_add(1, Ordering::Relaxed);
                     }
-                } else if sender.try_send(Work::Query(asked, query)).is_err() {
+                } else if (sender.try_send(Work::Query(asked, query, services::monotonic())))
+                    .is_err()
+                {
                     dropped.queries.fetch_add(1, Ordering::Relaxed);
                 }
             })
@@ -370,8 +372,8 @@ fn serve_queries(
             counters.drives_superseded = drives.superseded.load(Ordering::Relaxed);
             counters.queries_dropped = dropped.queries.load(Ordering::Relaxed);
             counters.estops_dropped = dropped.estops.load(Ordering::Relaxed);
-            let (asked, query) = match inbox.recv_timeout(Duration::from_millis(100)) {
-                Ok(Work::Query(asked, query)) => (asked, query),
+            let (asked, query, arrived) = match inbox.recv_timeout(Duration::from_millis(100)) {
+                Ok(Work::Query(asked, query, arrived)) => (asked, query, arrived),
                 Ok(Work::Drives) => {
                     for (key, (arrived, payload)) in drives.take() {
                         commands.handle_put(arrived, &key, &payload, &mut counters);
@@ -405,7 +407,7 @@ fn serve_queries(
                     reply(&query, info.to_string());
                 }
                 Asked::Command => {
-                    let answer = commands.handle(&query, &mut counters);
+                    let answer = commands.handle(arrived, &query, &mut counters);
                     reply(&query, serde_json::to_string(&answer).unwrap_or_default());
                 }
             }
@@ -418,8 +420,9 @@ fn serve_queries(
 
 /// What the command thread is woken for.
 enum Work {
-    /// A query to answer.
-    Query(Asked, Query),
+    /// A query to answer, and when it arrived (commands are aged from their arrival, not
+    /// from when this thread got to them).
+    Query(Asked, Query, Duration),
     /// Drives put on the fast lane wait in [`DriveSlots`].
     Drives,
 }
@@ -650,12 +653,17 @@ impl<'a> RemoteControl<'a> {
         })
     }
 
-    fn handle(&mut self, query: &Query, counters: &mut Counters) -> RemoteAnswer {
+    fn handle(
+        &mut self,
+        arrived: Duration,
+        query: &Query,
+        counters: &mut Counters,
+    ) -> RemoteAnswer {
         if !self.config.remote_commands.enabled {
             counters.commands_ignored_disabled += 1;
             return RemoteAnswer::rejected(DISABLED);
         }
-        let answer = match self.decide(query) {
+        let answer = match self.decide(arrived, query) {
             Ok(Accepted { clamped, .. }) => RemoteAnswer::accepted(clamped),
             Err(reason) => RemoteAnswer::refused(&reason),
         };
@@ -685,13 +693,9 @@ impl<'a> RemoteControl<'a> {
         }
     }
 
-    fn decide(&mut self, query: &Query) -> Result<Accepted, CommandError> {
+    fn decide(&mut self, arrived: Duration, query: &Query) -> Result<Accepted, CommandError> {
         let payload = query.payload().map(|payload| payload.to_bytes());
-        self.send(
-            services::monotonic(),
-            query.key_expr().as_str(),
-            payload.as_deref(),
-        )
+        self.send(arrived, query.key_expr().as_str(), payload.as_deref())
     }
 
     /// A command through the rules, then to the arbiter.

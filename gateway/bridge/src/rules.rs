@@ -20,6 +20,10 @@ pub const MAX_REMOTE_PEERS: usize = 16;
 /// The longest a remote drive command may live: the chassis' own timeout.
 pub const MAX_REMOTE_LIFE: Duration = Duration::from_millis(500);
 
+/// A peer without control silent this long has its timing (drive numbers, clock offset)
+/// forgotten: no command is held up that long, and its next session may use another clock.
+pub const FORGET_TIMING_AFTER: Duration = Duration::from_secs(60);
+
 /// What the rules keep of remote peers.
 #[derive(Debug)]
 pub struct Rules {
@@ -167,10 +171,19 @@ impl Rules {
                 peer.link.no_control += 1;
                 peer.lease = None;
             }
+            // A control session starts its drive numbers anew (a client's `seq` counts from 1
+            // each time it runs); the offset stays, so drives held up from before still age.
             (Request::TakeControl { class }, Ok(accepted)) => {
                 peer.lease = accepted.lease.map(|lease| (lease, *class));
+                peer.seq = None;
             }
-            (Request::Relinquish, Ok(_)) => peer.lease = None,
+            // Given up on purpose: the next session may come from another clock (a reboot,
+            // another machine under this name), and its take-control seeds the age check.
+            (Request::Relinquish, Ok(_)) => {
+                peer.lease = None;
+                peer.seq = None;
+                peer.offset = None;
+            }
             // Revoked or not held: the peer must take control again.
             _ if lost_control => peer.lease = None,
             _ => {}
@@ -217,6 +230,12 @@ impl Rules {
             }
         };
         let peer = &mut self.peers[index];
+        // Without control and silent for longer than anything zenoh holds up (its session
+        // lease is 10 s by default): its timing is forgotten, as after a relinquish.
+        if peer.lease.is_none() && now.saturating_sub(peer.seen) > FORGET_TIMING_AFTER {
+            peer.seq = None;
+            peer.offset = None;
+        }
         peer.used = used;
         peer.seen = now;
         (peer, evicted)
@@ -276,7 +295,7 @@ impl Peer {
         let offset = *self
             .offset
             .insert(self.offset.map_or(delay, |offset| offset.min(delay)));
-        let late = Duration::from_millis((delay - offset).max(0) as u64);
+        let late = Duration::from_millis(u64::try_from(delay - offset).unwrap_or(u64::MAX));
         if drive {
             if self.ages.len() == LINK_AGES {
                 self.ages.pop_front();
@@ -514,7 +533,7 @@ mod tests {
         accept(&mut rules, first);
         let second = drive(&mut rules, 1030 * MS, "op", 2, 20).expect("on time");
         accept(&mut rules, second);
-        // Seqs 3 and 4 never came; 6 is repeated.
+        // Seqs 3 and 4 never came; 5 is repeated.
         drive(&mut rules, 1070 * MS, "op", 5, 40).expect("a gap is let through");
         drive(&mut rules, 1080 * MS, "op", 5, 50).expect_err("repeated");
         drive(&mut rules, 1700 * MS, "op", 6, 100).expect_err("600 ms late");
@@ -549,8 +568,49 @@ mod tests {
         drive(&mut rules, 3000 * MS, "op", u64::MAX, 2000).expect("a gap");
         let link = &rules.links(3000 * MS)[0];
         assert_eq!((link.age_p50_ms, link.age_p99_ms), (Some(0), Some(0)));
-        // 2, then 7-9, then everything past 265.
-        assert_eq!(link.lost, 2 + 3 + (u64::MAX - 265 - 1));
+        // 3 and 4, then (the take-control started the numbers anew) everything past 265.
+        assert_eq!(link.lost, 2 + (u64::MAX - 265 - 1));
+    }
+
+    #[test]
+    fn a_new_session_numbers_anew_and_a_new_clock_needs_a_relinquish_or_a_minute() {
+        let mut rules = teleop();
+        take(&mut rules, 1000 * MS, "op", 0);
+        for seq in 1..=3u64 {
+            let now = Duration::from_millis(1000 + seq * 10);
+            drive(&mut rules, now, "op", seq, seq * 10).expect("on time");
+        }
+        // The same client run again: its numbers start at 1.
+        take(&mut rules, 1100 * MS, "op", 100);
+        drive(&mut rules, 1110 * MS, "op", 1, 110).expect("a new session's first drive");
+        // A drive held up from before it is still aged by the old offset.
+        drive(&mut rules, 1700 * MS, "op", 2, 120).expect_err("held up 580 ms");
+        // Another clock, 3 s behind (a reboot): refused as held up while the peer is known...
+        let behind = |rules: &mut Rules, now: Duration| {
+            let payload = format!(r#"{{"class":"teleop","sent_ms":{}}}"#, 10);
+            rules.handle_command(now, &key("take-control", "op"), Some(payload.as_bytes()))
+        };
+        behind(&mut rules, 3010 * MS).expect_err("3 s late by the old clock");
+        // ... until the peer gives control up on purpose,
+        rules
+            .handle_command(3020 * MS, &key("relinquish", "op"), Some(b"{}"))
+            .expect("granted");
+        rules.handle_answer("remote:op", &Request::Relinquish, &Ok(Accepted::default()));
+        behind(&mut rules, 3030 * MS).expect("the new clock seeds the age check");
+        // or, without control, is silent for longer than anything is held up.
+        let mut rules = teleop();
+        take(&mut rules, 1000 * MS, "op", 0);
+        rules.handle_answer(
+            "remote:op",
+            &Request::Relinquish,
+            &Err(RequestError::Rejected(Rejected {
+                kind: Some(RejectionKind::Revoked),
+                reason: "revoked".into(),
+            })),
+        );
+        behind(&mut rules, 30_000 * MS).expect_err("29 s late: maybe held up");
+        let later = 30_000 * MS + FORGET_TIMING_AFTER + MS;
+        behind(&mut rules, later).expect("forgotten after a silent minute");
     }
 
     proptest! {

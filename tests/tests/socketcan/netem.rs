@@ -296,11 +296,14 @@ fn remote_teleop_through_delay_and_loss_then_a_partition() {
 }
 
 /// The remote teleop of `scout drive --remote`, on its own thread: a drive put every 20 ms
-/// (life 300 ms); it keeps streaming whatever the answers say (as a careless client would), and
-/// counts the answers that said its control had ended.
+/// (life 300 ms), counting the answers that said its control had ended. While `retake` holds,
+/// it then takes control again, as an operator holding the stick would (the emulated CPU may
+/// stall it past the teleop's age); otherwise it keeps streaming whatever the answers say, as a
+/// careless client would.
 fn fast_lane_teleop(
     mut controller: scout_clients::remote::RemoteController,
     running: Arc<AtomicBool>,
+    retake: Arc<AtomicBool>,
     lost_control: Arc<std::sync::atomic::AtomicU64>,
 ) -> std::thread::JoinHandle<()> {
     std::thread::spawn(move || {
@@ -311,6 +314,9 @@ fn fast_lane_teleop(
                 && answer.lost_control
             {
                 lost_control.fetch_add(1, Ordering::Relaxed);
+                if retake.load(Ordering::Relaxed) {
+                    let _ = controller.take_control(scout_clients::Class::Teleop);
+                }
             }
             next += Duration::from_millis(20);
             std::thread::sleep(next.saturating_duration_since(Instant::now()));
@@ -377,7 +383,13 @@ fn fast_lane_teleop_drives_through_loss_a_partition_stops_healing_restarts_nothi
     // Streaming at once: a gap longer than the teleop's age would end its control.
     let running = Arc::new(AtomicBool::new(true));
     let lost_control = Arc::new(std::sync::atomic::AtomicU64::new(0));
-    let teleop = fast_lane_teleop(controller, Arc::clone(&running), Arc::clone(&lost_control));
+    let retake = Arc::new(AtomicBool::new(true));
+    let teleop = fast_lane_teleop(
+        controller,
+        Arc::clone(&running),
+        Arc::clone(&retake),
+        Arc::clone(&lost_control),
+    );
     loopback.change(&["delay", "100ms", "loss", "10%"]);
     // Through 100 ms and 10 % loss the chassis reaches the commanded speed and keeps it: a
     // lost drive is replaced by the next, nothing waits behind it.
@@ -411,7 +423,9 @@ fn fast_lane_teleop_drives_through_loss_a_partition_stops_healing_restarts_nothi
         }
     }
     eprintln!(
-        "fast lane, 100 ms delay, 10 % loss: at speed in {at_speed} of {samples} states; {}",
+        "fast lane, 100 ms delay, 10 % loss: at speed in {at_speed} of {samples} states, \
+         control lapsed {} times; {}",
+        lost_control.load(Ordering::Relaxed),
         info()
     );
     assert!(
@@ -421,8 +435,9 @@ fn fast_lane_teleop_drives_through_loss_a_partition_stops_healing_restarts_nothi
         gateway.log()
     );
 
-    // A partition: the robot stops within the commands' life, by itself, although the
-    // teleop goes on streaming.
+    // A partition: the robot stops by itself, although the teleop goes on streaming (and from
+    // now on never takes control again).
+    retake.store(false, Ordering::Relaxed);
     loopback.change(&["loss", "100%"]);
     let cut = Instant::now();
     wait_for_state(&state, LIMIT, |s| s["command"]["linear"] == 0.0);
@@ -433,6 +448,7 @@ fn fast_lane_teleop_drives_through_loss_a_partition_stops_healing_restarts_nothi
     std::thread::sleep(Duration::from_secs(2));
     // Healing, the teleop still streaming: its control ended in the partition, so nothing
     // moves, and its answers say so.
+    let before_healing = lost_control.load(Ordering::Relaxed);
     loopback.change(&["delay", "0ms"]);
     let healed = Instant::now();
     while healed.elapsed() < Duration::from_secs(3) {
@@ -444,10 +460,10 @@ fn fast_lane_teleop_drives_through_loss_a_partition_stops_healing_restarts_nothi
         }
     }
     let deadline = Instant::now() + LIMIT;
-    while lost_control.load(Ordering::Relaxed) == 0 {
+    while lost_control.load(Ordering::Relaxed) == before_healing {
         assert!(
             Instant::now() < deadline,
-            "no answer told the teleop its control ended"
+            "no answer after the healing told the teleop its control ended"
         );
         std::thread::sleep(Duration::from_millis(50));
     }

@@ -494,6 +494,28 @@ fn scout_drives_stops_and_releases_a_remote_robot() {
     assert_eq!(drive.wait_exit(LIMIT), Some(4));
     wait_for_state(&state, LIMIT, |s| s["command"]["linear"] == 0.0);
 
+    // A careless client of the same peer goes on putting drives through the release: they
+    // are refused, since control ended with the stop.
+    let streaming = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(true));
+    let careless = {
+        let (session, key, streaming) = (
+            session.clone(),
+            format!("scout/{name}/cmd/drive/laptop"),
+            std::sync::Arc::clone(&streaming),
+        );
+        std::thread::spawn(move || {
+            let mut seq = 1_000_000;
+            while streaming.load(std::sync::atomic::Ordering::Relaxed) {
+                seq += 1;
+                let drive = format!(
+                    r#"{{"seq":{seq},"sent_ms":{},"linear":0.4,"angular":0.0,"ttl_ms":300}}"#,
+                    monotonic_ns() / 1_000_000
+                );
+                session.put(&key, drive).wait().expect("put");
+                std::thread::sleep(Duration::from_millis(20));
+            }
+        })
+    };
     let (code, stdout, stderr) = scout(&[&["release"], &remote[..]].concat());
     assert_eq!(code, Some(0), "{stdout}{stderr}");
     wait_for_status(&status, LIMIT, |s| s["latched"] == false);
@@ -509,6 +531,13 @@ fn scout_drives_stops_and_releases_a_remote_robot() {
             assert_eq!(sample.command.linear, 0.0, "a release restarted motion");
         }
     }
+    streaming.store(false, std::sync::atomic::Ordering::Relaxed);
+    careless.join().expect("the careless client");
+    let refused = counters_when(&session, &name, |_| true);
+    assert!(
+        refused["drives_put_rejected"].as_u64() > Some(10),
+        "{refused}"
+    );
 }
 
 /// The Python example of docs/remote.md (plain `eclipse-zenoh`, the JSON protocol) drives the
