@@ -95,10 +95,7 @@ pub fn drive(args: &DriveArgs) -> anyhow::Result<ExitCode> {
     let name = format!("drive-{}", std::process::id());
     let mut controller = args.client.connect(&name, Some(args.class))?;
     controller.take_control()?;
-    let stop = Arc::new(AtomicBool::new(false));
-    let on_signal = Arc::clone(&stop);
-    ctrlc::set_handler(move || on_signal.store(true, Ordering::Relaxed))
-        .context("installing the Ctrl-C handler")?;
+    let stop = ctrl_c()?;
     let start = Instant::now();
     let mut next = start;
     let mut last: Option<String> = None;
@@ -134,6 +131,15 @@ pub fn drive(args: &DriveArgs) -> anyhow::Result<ExitCode> {
     }
 }
 
+/// A flag Ctrl-C (and SIGTERM) raises: the drive loops end on it, stopping the robot first.
+fn ctrl_c() -> anyhow::Result<Arc<AtomicBool>> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let on_signal = Arc::clone(&stop);
+    ctrlc::set_handler(move || on_signal.store(true, Ordering::Relaxed))
+        .context("installing the Ctrl-C handler")?;
+    Ok(stop)
+}
+
 /// `scout drive --remote`: take control through zenoh, put a drive every 20 ms on the fast
 /// lane (one in ten queried, whose answer says whether control holds), then give control back.
 fn drive_remote(
@@ -149,10 +155,7 @@ fn drive_remote(
         peer_client_name(&peer),
         args.class
     );
-    let stop = Arc::new(AtomicBool::new(false));
-    let on_signal = Arc::clone(&stop);
-    ctrlc::set_handler(move || on_signal.store(true, Ordering::Relaxed))
-        .context("installing the Ctrl-C handler")?;
+    let stop = ctrl_c()?;
     let start = Instant::now();
     let mut next = start;
     let mut last: Option<String> = None;

@@ -141,7 +141,10 @@ fn measure_link(settings: &SessionSettings, robot: &str, endpoint: &str) -> Chec
                     let text = sample.payload().try_to_string().ok()?;
                     serde_json::from_str::<serde_json::Value>(&text).ok()
                 });
-                if let (Some(info), Ok(mut arrivals)) = (info, arrivals.lock()) {
+                // The first answer to each probe (a router may pass on more than one).
+                if let (Some(info), Ok(mut arrivals)) = (info, arrivals.lock())
+                    && !arrivals.iter().any(|(answered, _, _)| *answered == probe)
+                {
                     arrivals.push((probe, Instant::now(), info));
                 }
             })
@@ -152,19 +155,10 @@ fn measure_link(settings: &SessionSettings, robot: &str, endpoint: &str) -> Chec
         std::thread::sleep(PROBE_SPACING);
     }
     let deadline = Instant::now() + PROBE_TIMEOUT;
-    let answered = |arrivals: &[(usize, Instant, serde_json::Value)]| {
-        let mut probes: Vec<usize> = arrivals.iter().map(|(probe, _, _)| *probe).collect();
-        probes.sort_unstable();
-        probes.dedup();
-        probes.len()
-    };
-    while Instant::now() < deadline && arrivals.lock().map_or(0, |a| answered(&a)) < PROBES {
+    while Instant::now() < deadline && arrivals.lock().map_or(0, |a| a.len()) < PROBES {
         std::thread::sleep(Duration::from_millis(10));
     }
-    let mut arrivals = arrivals.lock().map(|a| a.clone()).unwrap_or_default();
-    // The first answer to each probe (a router may pass on more than one).
-    arrivals.sort_by_key(|(probe, arrived, _)| (*probe, *arrived));
-    arrivals.dedup_by_key(|(probe, _, _)| *probe);
+    let arrivals = arrivals.lock().map(|a| a.clone()).unwrap_or_default();
     let mut round_trips: Vec<Duration> = (arrivals.iter())
         .map(|(probe, arrived, _)| arrived.saturating_duration_since(sent[*probe]))
         .collect();

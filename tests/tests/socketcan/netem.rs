@@ -19,7 +19,20 @@ use crate::{LIMIT, skip, tc};
 pub(crate) struct Loopback;
 
 impl Loopback {
-    pub(crate) fn set(rule: &[&str]) -> Result<Loopback, String> {
+    /// No added delay, for as long as it lives; `None` (and `test` skipped, saying why) where
+    /// this kernel has no netem.
+    pub(crate) fn or_skip(test: &str) -> Option<Loopback> {
+        Self::set(&["delay", "0ms"])
+            .map_err(|reason| {
+                skip(
+                    test,
+                    &format!("no netem here ({reason}); socketcan_tests_in_a_vm runs it in a VM"),
+                );
+            })
+            .ok()
+    }
+
+    fn set(rule: &[&str]) -> Result<Loopback, String> {
         Self::replace(rule).map(|()| Loopback)
     }
 
@@ -156,15 +169,8 @@ fn reason_kind(reason: &str) -> String {
 fn remote_teleop_through_delay_and_loss_then_a_partition() {
     const TEST: &str = "remote_teleop_through_delay_and_loss_then_a_partition";
     // Checks that netem works here before anything starts.
-    let loopback = match Loopback::set(&["delay", "0ms"]) {
-        Ok(loopback) => loopback,
-        Err(reason) => {
-            skip(
-                TEST,
-                &format!("no netem here ({reason}); socketcan_tests_in_a_vm runs it in a VM"),
-            );
-            return;
-        }
+    let Some(loopback) = Loopback::or_skip(TEST) else {
+        return;
     };
     let name = robot_name("netem");
     let port = free_port();
@@ -328,15 +334,8 @@ fn fast_lane_teleop(
 fn fast_lane_teleop_drives_through_loss_a_partition_stops_healing_restarts_nothing() {
     const TEST: &str =
         "fast_lane_teleop_drives_through_loss_a_partition_stops_healing_restarts_nothing";
-    let loopback = match Loopback::set(&["delay", "0ms"]) {
-        Ok(loopback) => loopback,
-        Err(reason) => {
-            skip(
-                TEST,
-                &format!("no netem here ({reason}); socketcan_tests_in_a_vm runs it in a VM"),
-            );
-            return;
-        }
+    let Some(loopback) = Loopback::or_skip(TEST) else {
+        return;
     };
     let name = robot_name("netem-fast");
     let endpoint = format!("udp/127.0.0.1:{}", free_port());

@@ -13,8 +13,8 @@ use scout_system_tests::{
 };
 use zenoh::Wait;
 
+use crate::LIMIT;
 use crate::netem::Loopback;
-use crate::{LIMIT, skip};
 
 /// How long each configuration drives.
 const DRIVING: Duration = Duration::from_secs(10);
@@ -67,12 +67,8 @@ struct Figures {
 #[ignore = "a benchmark: prints figures (BENCHMARKS.md says how to run it in the VM)"]
 fn netem_bench_remote_drive() {
     const TEST: &str = "netem_bench_remote_drive";
-    let loopback = match Loopback::set(&["delay", "0ms"]) {
-        Ok(loopback) => loopback,
-        Err(reason) => {
-            skip(TEST, &format!("no netem here ({reason}): run it in the VM"));
-            return;
-        }
+    let Some(loopback) = Loopback::or_skip(TEST) else {
+        return;
     };
     let pki = Pki::new("netem-bench");
     // `SCOUT_NETEM_RUNS=udp-put,quic-put` runs only those.

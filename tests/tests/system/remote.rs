@@ -546,7 +546,7 @@ fn scout_drives_stops_and_releases_a_remote_robot() {
 #[test]
 fn the_python_zenoh_example_drives_on_the_fast_lane() {
     const TEST: &str = "the_python_zenoh_example_drives_on_the_fast_lane";
-    let python = std::env::var("SCOUT_PYTHON").unwrap_or_else(|_| "python3".into());
+    let python = crate::ros2::python();
     let has_zenoh = std::process::Command::new(&python)
         .args(["-c", "import zenoh"])
         .output()

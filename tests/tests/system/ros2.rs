@@ -23,7 +23,8 @@ const LIMIT: Duration = Duration::from_secs(10);
 /// after a stop (or the bridge's start) before it may take control.
 const BLOCKED_PAUSE: Duration = Duration::from_millis(2100);
 
-fn python() -> String {
+/// The Python with the stand-in's packages (eclipse-zenoh among them): `$SCOUT_PYTHON`.
+pub(crate) fn python() -> String {
     std::env::var("SCOUT_PYTHON").unwrap_or_else(|_| "python3".into())
 }
 
