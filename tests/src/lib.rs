@@ -271,6 +271,23 @@ impl Sim {
         )
     }
 
+    /// Waits until the simulator has sent feedback on its port (its `link.frames_sent`), so
+    /// that a listener started now hears the chassis at once; panics after [`LINE_TIMEOUT`].
+    pub fn wait_sending(&mut self) {
+        let deadline = Instant::now() + LINE_TIMEOUT;
+        loop {
+            let stats = self.stats();
+            if stats["link"]["frames_sent"].as_u64().is_some_and(|sent| sent > 0) {
+                return;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "scout-sim sent no feedback within {LINE_TIMEOUT:?}: {stats}"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
     /// Asks for the statistics and returns them.
     pub fn stats(&mut self) -> serde_json::Value {
         self.send("stats");

@@ -21,9 +21,15 @@ fn doctor(interface: &str) -> (Option<i32>, Vec<Value>) {
 fn doctor_on_a_bus_with_the_chassis_passes() {
     const TEST: &str = "doctor_on_a_bus_with_the_chassis_passes";
     let Some(bus) = Bus::create(TEST) else { return };
-    let _sim = Sim::start(&["--can", bus.name()]);
+    let mut sim = Sim::start(&["--can", bus.name()]);
+    sim.wait_sending();
     let (code, checks) = doctor(bus.name());
-    assert_eq!(code, Some(0), "{checks:#?}");
+    assert_eq!(
+        code,
+        Some(0),
+        "{checks:#?}\nthe simulator now: {}",
+        sim.stats_or_state()
+    );
     for name in [
         "can.interface",
         "can.up",
@@ -126,7 +132,7 @@ fn doctor_names_a_bus_off_it_hears() {
 fn doctor_on_a_bus_with_a_v2_chassis_names_it_and_what_to_do() {
     const TEST: &str = "doctor_on_a_bus_with_a_v2_chassis_names_it_and_what_to_do";
     let Some(bus) = Bus::create(TEST) else { return };
-    let _sim = Sim::start(&[
+    let mut sim = Sim::start(&[
         "--can",
         bus.name(),
         "--protocol",
@@ -134,6 +140,7 @@ fn doctor_on_a_bus_with_a_v2_chassis_names_it_and_what_to_do() {
         "--model",
         "scout-mini",
     ]);
+    sim.wait_sending();
     let (_, checks) = doctor(bus.name());
     assert_eq!(check(&checks, "traffic")["verdict"], "pass", "{checks:#?}");
     let protocol = check(&checks, "protocol");
