@@ -277,7 +277,10 @@ impl Sim {
         let deadline = Instant::now() + LINE_TIMEOUT;
         loop {
             let stats = self.stats();
-            if stats["link"]["frames_sent"].as_u64().is_some_and(|sent| sent > 0) {
+            if stats["link"]["frames_sent"]
+                .as_u64()
+                .is_some_and(|sent| sent > 0)
+            {
                 return;
             }
             assert!(
