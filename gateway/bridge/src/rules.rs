@@ -24,6 +24,12 @@ pub const MAX_REMOTE_LIFE: Duration = Duration::from_millis(500);
 /// forgotten: no command is held up that long, and its next session may use another clock.
 pub const FORGET_TIMING_AFTER: Duration = Duration::from_secs(60);
 
+/// How fast a peer's clock may fall behind the gateway's, parts per million: the learned
+/// offset rises at most this fast, so that over a long session a slow clock's drives do not
+/// seem ever older (a quartz clock is off by up to 100 ppm: 360 ms an hour), while a link that
+/// starts holding drives up is still seen (hiding 100 ms of it takes more than 8 minutes).
+pub const MAX_CLOCK_DRIFT_PPM: u64 = 200;
+
 /// What the rules keep of remote peers.
 #[derive(Debug)]
 pub struct Rules {
@@ -41,8 +47,9 @@ struct Peer {
     lease: Option<(u64, Class)>,
     /// Its last drive's number.
     seq: Option<u64>,
-    /// The least (arrival - sent) seen, ms: its clock's offset plus the fastest delivery.
-    offset: Option<i128>,
+    /// The least (arrival - sent) seen, µs (its clock's offset plus the fastest delivery),
+    /// allowed to rise by [`MAX_CLOCK_DRIFT_PPM`] since, and when it was last updated.
+    offset: Option<(i128, Duration)>,
     used: u64,
     /// When its last command arrived.
     seen: Duration,
@@ -291,16 +298,26 @@ impl Peer {
             }
             self.seq = Some(seq);
         }
-        let delay = now.as_millis() as i128 - i128::from(sent_ms);
-        let offset = *self
-            .offset
-            .insert(self.offset.map_or(delay, |offset| offset.min(delay)));
-        let late = Duration::from_millis(u64::try_from(delay - offset).unwrap_or(u64::MAX));
+        let delay = now.as_micros() as i128 - i128::from(sent_ms) * 1000;
+        let offset = match self.offset {
+            Some((offset, at)) => {
+                let drift = now.saturating_sub(at).as_micros() * u128::from(MAX_CLOCK_DRIFT_PPM)
+                    / 1_000_000;
+                offset
+                    .saturating_add(i128::try_from(drift).unwrap_or(i128::MAX))
+                    .min(delay)
+            }
+            None => delay,
+        };
+        self.offset = Some((offset, now));
+        let late = Duration::from_micros(u64::try_from(delay - offset).unwrap_or(u64::MAX));
         if drive {
             if self.ages.len() == LINK_AGES {
                 self.ages.pop_front();
             }
-            self.ages.push_back(late.as_millis() as u64);
+            // To the nearest ms.
+            self.ages
+                .push_back(late.saturating_add(Duration::from_micros(500)).as_millis() as u64);
         }
         let life = command.ttl_ms.map_or(MAX_REMOTE_LIFE, |ms| {
             Duration::from_millis(u64::from(ms)).min(MAX_REMOTE_LIFE)
@@ -415,13 +432,16 @@ mod tests {
         assert_eq!(on_time.via, Via::Control { sent: 10_120 * MS });
         // 300 ms slower than the fastest: sent 300 ms before it arrived, as far as we can tell.
         let slow = drive(&mut rules, 10_520 * MS, "op", 2, 200).expect("within 500 ms");
-        assert_eq!(slow.via, Via::Control { sent: 10_220 * MS });
-        let late = drive(&mut rules, 11_121 * MS, "op", 3, 300).expect_err("501 ms late");
+        // (80 µs later: in the 400 ms since, the offset may have risen 200 ppm.)
+        let sent = Duration::from_micros(10_220_080);
+        assert_eq!(slow.via, Via::Control { sent });
+        let late = drive(&mut rules, 11_121 * MS, "op", 3, 300).expect_err("301 ms too late");
+        // 801 ms, less the 0.2 ms the offset may have risen, in whole ms.
         assert!(
             matches!(
                 late,
                 CommandError::Late {
-                    late_ms: 801,
+                    late_ms: 800,
                     life_ms: 500
                 }
             ),
@@ -570,6 +590,37 @@ mod tests {
         assert_eq!((link.age_p50_ms, link.age_p99_ms), (Some(0), Some(0)));
         // 3 and 4, then (the take-control started the numbers anew) everything past 265.
         assert_eq!(link.lost, 2 + (u64::MAX - 265 - 1));
+    }
+
+    #[test]
+    fn a_slow_clock_drives_for_hours_and_a_link_that_holds_drives_up_is_still_seen() {
+        let mut rules = teleop();
+        // The peer's clock runs 100 ppm slow: 360 ms behind after an hour. Drives every 100 ms
+        // for two hours, each delivered in 5 ms.
+        take(&mut rules, 5 * MS, "op", 0);
+        let peer_ms = |t_ms: u64| t_ms - t_ms / 10_000;
+        for seq in 1..=72_000u64 {
+            let sent = seq * 100;
+            drive(
+                &mut rules,
+                Duration::from_millis(sent + 5),
+                "op",
+                seq,
+                peer_ms(sent),
+            )
+            .unwrap_or_else(|error| panic!("drive {seq} at {sent} ms: {error}"));
+        }
+        let link = &rules.links(7_200_005 * MS)[0];
+        // (The peer's clock here falls behind 1 ms at a time, which takes 5 s to absorb.)
+        assert!(link.age_p99_ms <= Some(1), "{link:?}");
+        // Now the link holds every drive up 520 ms more (their life is 500 ms): refused for a
+        // minute on end (the offset rises 12 ms in it).
+        for seq in 72_001..=72_600u64 {
+            let sent = seq * 100;
+            let now = Duration::from_millis(sent + 525);
+            let refused = drive(&mut rules, now, "op", seq, peer_ms(sent)).expect_err("held up");
+            assert!(matches!(refused, CommandError::Late { .. }), "{refused}");
+        }
     }
 
     #[test]
