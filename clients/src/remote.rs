@@ -1,6 +1,7 @@
-//! Gateways through zenoh: a remote state reader (`scout echo --remote`) and a remote
-//! controller (`scout drive --remote`). The keys, the command JSON and the session settings are
-//! the contract's ([`scout_interface::remote`]).
+//! Gateways through zenoh: a remote reader of state and status (`scout echo --remote`, `scout
+//! status --remote`) and a remote controller (`scout drive --remote`, `scout teleop
+//! --remote`). The keys, the command JSON and the session settings are the contract's
+//! ([`scout_interface::remote`]).
 
 use std::time::Duration;
 
@@ -8,9 +9,10 @@ use zenoh::Wait;
 
 pub use scout_interface::remote::*;
 
-/// Reads state JSON from gateways through zenoh (`scout echo --remote`).
+/// Reads the JSON a gateway publishes through zenoh: its state (`scout echo --remote`) or its
+/// arbiter's status (`scout status --remote`), and answers its information query.
 pub struct RemoteStates {
-    _session: zenoh::Session,
+    session: zenoh::Session,
     subscriber:
         zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
 }
@@ -25,18 +27,57 @@ impl RemoteStates {
     /// Connects as a zenoh client to `endpoints` and subscribes to the state of `robot` (`*` for
     /// every robot).
     pub fn connect(settings: &SessionSettings, robot: &str) -> Result<Self, RemoteError> {
+        Self::subscribe(settings, state_key(robot))
+    }
+
+    /// Connects as [`RemoteStates::connect`] does, subscribing to the arbiter's status of
+    /// `robot` instead (published on change, and each second).
+    pub fn connect_status(settings: &SessionSettings, robot: &str) -> Result<Self, RemoteError> {
+        Self::subscribe(settings, status_key(robot))
+    }
+
+    fn subscribe(settings: &SessionSettings, key: String) -> Result<Self, RemoteError> {
         let session = settings.open("client")?;
         let subscriber = session
-            .declare_subscriber(state_key(robot))
+            .declare_subscriber(key)
             .wait()
             .map_err(|e| RemoteError::Zenoh(e.to_string()))?;
         Ok(Self {
-            _session: session,
+            session,
             subscriber,
         })
     }
 
-    /// The next state JSON, waiting at most `timeout`.
+    /// The information `robot`'s gateway gives on [`info_key`] (its settings, counters and
+    /// remote peers' `links`), waiting at most `timeout`; `None` when nothing answered.
+    pub fn info(
+        &self,
+        robot: &str,
+        timeout: Duration,
+    ) -> Result<Option<serde_json::Value>, RemoteError> {
+        let replies = self
+            .session
+            .get(info_key(robot))
+            .timeout(timeout)
+            .wait()
+            .map_err(|e| RemoteError::Zenoh(e.to_string()))?;
+        let Some(reply) = replies.recv_timeout(timeout).ok().flatten() else {
+            return Ok(None);
+        };
+        let sample = reply.result().map_err(|error| {
+            let text = error.payload().try_to_string().unwrap_or_default();
+            RemoteError::Zenoh(format!("the information query failed: {text}"))
+        })?;
+        let text = sample
+            .payload()
+            .try_to_string()
+            .map_err(|e| RemoteError::Zenoh(e.to_string()))?;
+        serde_json::from_str(&text)
+            .map(Some)
+            .map_err(|e| RemoteError::Zenoh(format!("the information is not JSON: {e}")))
+    }
+
+    /// The next state (or status) JSON, waiting at most `timeout`.
     pub fn next_timeout(
         &self,
         timeout: Duration,
@@ -54,7 +95,7 @@ impl RemoteStates {
             .map_err(|e| RemoteError::Zenoh(e.to_string()))?;
         serde_json::from_str(&text)
             .map(Some)
-            .map_err(|e| RemoteError::Zenoh(format!("state is not JSON: {e}")))
+            .map_err(|e| RemoteError::Zenoh(format!("a sample is not JSON: {e}")))
     }
 }
 

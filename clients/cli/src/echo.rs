@@ -77,12 +77,14 @@ pub fn run(args: &EchoArgs) -> anyhow::Result<ExitCode> {
 /// No state through zenoh within the timeout.
 #[derive(Debug, thiserror::Error)]
 #[error(
-    "no state from robot '{robot}' through {endpoint} for {timeout:?}: is the gateway running with zenoh, and reachable?"
+    "no {what} from robot '{robot}' through {endpoint} for {timeout:?}: is the gateway running with zenoh, and reachable?"
 )]
 pub struct RemoteSilent {
-    robot: String,
-    endpoint: String,
-    timeout: Duration,
+    /// What did not arrive: `state`, `status`.
+    pub what: &'static str,
+    pub robot: String,
+    pub endpoint: String,
+    pub timeout: Duration,
 }
 
 /// `--remote`: the state JSON through zenoh, one line per update (the JSON itself with --json,
@@ -100,6 +102,7 @@ fn remote(
     while args.count.is_none_or(|count| printed < count) {
         let Some(state) = states.next_timeout(timeout)? else {
             return Err(RemoteSilent {
+                what: "state",
                 robot: args.robot.name.clone(),
                 endpoint: endpoint.to_owned(),
                 timeout,

@@ -12,7 +12,10 @@ use scout_clients::interface::json::status_json;
 use scout_clients::monotonic_ns;
 use serde_json::Value;
 
-use crate::RobotArgs;
+use scout_clients::remote::{ANSWER_TIMEOUT, RemoteStates, SessionSettings};
+
+use crate::echo::RemoteSilent;
+use crate::{RemoteArgs, RobotArgs};
 
 /// The gateway publishes no status.
 #[derive(Debug, thiserror::Error)]
@@ -26,21 +29,48 @@ pub struct StatusArgs {
     /// The status as one JSON object (the schema in docs/safety.md).
     #[arg(long)]
     json: bool,
+    // With --remote, the status also lists each remote peer's link quality (`links`).
+    #[command(flatten)]
+    remote: RemoteArgs,
 }
 
+/// How long `--remote` waits for the status (the gateway publishes it each second).
+const REMOTE_WAIT: Duration = Duration::from_secs(3);
+
 pub fn run(args: &StatusArgs) -> anyhow::Result<ExitCode> {
-    let robot = Robot::connect(&args.robot.name)?;
-    let status = robot
-        .status()?
-        .latest(Duration::from_secs(2))?
-        .ok_or_else(|| Silent(args.robot.name.clone()))?;
-    let json = status_json(&status, monotonic_ns());
+    let json = match (args.remote.settings(), &args.remote.remote) {
+        (Some(settings), Some(endpoint)) => remote(&args.robot.name, &settings, endpoint)?,
+        _ => {
+            let robot = Robot::connect(&args.robot.name)?;
+            let status = robot
+                .status()?
+                .latest(Duration::from_secs(2))?
+                .ok_or_else(|| Silent(args.robot.name.clone()))?;
+            status_json(&status, monotonic_ns())
+        }
+    };
     if args.json {
         println!("{json}");
     } else {
         print!("{}", render(&json));
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// `--remote`: the status through zenoh, with the remote peers' link quality (`links`) from the
+/// gateway's information query.
+fn remote(robot: &str, settings: &SessionSettings, endpoint: &str) -> anyhow::Result<Value> {
+    let reader = RemoteStates::connect_status(settings, robot)?;
+    let silent = || RemoteSilent {
+        what: "status",
+        robot: robot.to_owned(),
+        endpoint: endpoint.to_owned(),
+        timeout: REMOTE_WAIT,
+    };
+    let mut json = reader.next_timeout(REMOTE_WAIT)?.ok_or_else(silent)?;
+    let info = reader.info(robot, ANSWER_TIMEOUT)?.ok_or_else(silent)?;
+    json["links"] = info["links"].clone();
+    Ok(json)
 }
 
 /// How many of the latest events the text shows (the status keeps 16).
@@ -93,6 +123,9 @@ fn render(json: &Value) -> String {
     }
     for source in sources {
         lines.push("client", source_line(source));
+    }
+    for link in json["links"].as_array().map_or(&[][..], Vec::as_slice) {
+        lines.push("link", link_line(link));
     }
     lines.push("rejected", rejections(&json["rejections"]));
     let events: &[Value] = json["events"].as_array().map_or(&[], Vec::as_slice);
@@ -279,6 +312,34 @@ fn source_line(source: &Value) -> String {
         seconds(&source["age_ms"])
     ));
     line
+}
+
+/// One remote peer's drive commands as the gateway's zenoh bridge counted them.
+fn link_line(link: &Value) -> String {
+    let share = match (link["accepted"].as_f64(), link["received"].as_f64()) {
+        (Some(accepted), Some(received)) if received > 0.0 => {
+            format!(" ({:.0} %)", 100.0 * accepted / received)
+        }
+        _ => String::new(),
+    };
+    let ms = |value: &Value| match value.as_u64() {
+        Some(ms) => format!("{ms} ms"),
+        None => "?".into(),
+    };
+    format!(
+        "{}  accepted {} of {} drives{share}  late {}  reordered {}  lost {}  no control {}  \
+         age p50 {} p99 {}  seen {} ago",
+        text(&link["peer"]),
+        text(&link["accepted"]),
+        text(&link["received"]),
+        text(&link["late"]),
+        text(&link["reordered"]),
+        text(&link["lost"]),
+        text(&link["no_control"]),
+        ms(&link["age_p50_ms"]),
+        ms(&link["age_p99_ms"]),
+        seconds(&link["last_seen_ms"]),
+    )
 }
 
 /// The non-zero rejection counters, in the schema's order.
@@ -505,6 +566,30 @@ mod tests {
             "{text}"
         );
         assert!(text.contains("autonomy  armed\n"), "{text}");
+    }
+
+    #[test]
+    fn remote_links_one_line_per_peer() {
+        let mut json = idle();
+        assert!(labelled(&render(&json), "link").is_empty());
+        json["links"] = json!([
+            {"peer": "remote:operator", "received": 200, "accepted": 170, "late": 9,
+             "reordered": 1, "no_control": 0, "lost": 20, "age_p50_ms": 12, "age_p99_ms": 140,
+             "last_seen_ms": 40},
+            {"peer": "remote:laptop\u{1b}[2J", "received": 0, "accepted": 0, "late": 0,
+             "reordered": 0, "no_control": 3, "lost": 0, "age_p50_ms": null,
+             "age_p99_ms": null, "last_seen_ms": 2500},
+        ]);
+        let text = render(&json);
+        assert_eq!(
+            labelled(&text, "link"),
+            [
+                "link      remote:operator  accepted 170 of 200 drives (85 %)  late 9  \
+                 reordered 1  lost 20  no control 0  age p50 12 ms p99 140 ms  seen 0.0 s ago",
+                "link      remote:laptop\\u{1b}[2J  accepted 0 of 0 drives  late 0  reordered 0  \
+                 lost 0  no control 3  age p50 ? p99 ?  seen 2.5 s ago",
+            ]
+        );
     }
 
     #[test]

@@ -480,6 +480,29 @@ fn scout_drives_stops_and_releases_a_remote_robot() {
     let text = sample.payload().try_to_string().expect("text").into_owned();
     let published: Value = serde_json::from_str(&text).expect("links JSON");
     assert_eq!(published[0]["peer"], "remote:laptop", "{published}");
+    // `scout status --remote`: the status through zenoh, with each peer's link quality.
+    let (code, stdout, stderr) =
+        scout(&["status", "--json", "--name", &name, "--remote", &endpoint]);
+    assert_eq!(code, Some(0), "{stdout}{stderr}");
+    let remote_status: Value = serde_json::from_str(&stdout).expect("status JSON");
+    assert_eq!(
+        remote_status["selected"]["client"], "remote:laptop",
+        "{remote_status}"
+    );
+    assert_eq!(
+        remote_status["links"][0]["peer"], "remote:laptop",
+        "{remote_status}"
+    );
+    assert!(
+        remote_status["links"][0]["accepted"].as_u64() > Some(10),
+        "{remote_status}"
+    );
+    let (code, stdout, stderr) = scout(&["status", "--name", &name, "--remote", &endpoint]);
+    assert_eq!(code, Some(0), "{stdout}{stderr}");
+    assert!(
+        stdout.contains("link      remote:laptop  accepted "),
+        "{stdout}"
+    );
 
     let (code, stdout, stderr) = scout(&[&["estop", "--reason", "wall"], &remote[..]].concat());
     assert_eq!(code, Some(0), "{stdout}{stderr}");
