@@ -120,6 +120,29 @@ fn cannot_connect(endpoint: &str, config_file: Option<&str>, error: &RemoteError
     }
 }
 
+/// The gateway's clock (`now_ms` in its information) less this host's, ms, and how far off
+/// that may be (half the round trip, and 1 ms for the gateway's whole ms), from the probe
+/// answered fastest: as NTP does, taking the
+/// gateway's reading to fall halfway through the round trip. `None` from a gateway that does
+/// not give its clock. Remote commands need no common clock (the gateway learns each peer's
+/// offset), so this is shown, not judged.
+fn clock_offset(
+    sent: &[(Instant, u64)],
+    arrivals: &[(usize, Instant, serde_json::Value)],
+) -> Option<(f64, f64)> {
+    arrivals
+        .iter()
+        .filter_map(|(probe, arrived, info)| {
+            let (sent_at, sent_ns) = sent[*probe];
+            let round_trip = arrived.saturating_duration_since(sent_at);
+            let gateway_ms = info["now_ms"].as_u64()? as f64;
+            let halfway_ms = sent_ns as f64 / 1e6 + round_trip.as_secs_f64() * 1e3 / 2.0;
+            Some((round_trip, gateway_ms - halfway_ms))
+        })
+        .min_by_key(|(round_trip, _)| *round_trip)
+        .map(|(round_trip, offset)| (offset, round_trip.as_secs_f64() * 1e3 / 2.0 + 1.0))
+}
+
 /// [`PROBES`] information queries, one every [`PROBE_SPACING`] without waiting for the
 /// answers: how many are answered, their round trip, and what the gateway allows remote peers.
 fn measure_link(settings: &SessionSettings, robot: &str, endpoint: &str) -> Check {
@@ -132,7 +155,7 @@ fn measure_link(settings: &SessionSettings, robot: &str, endpoint: &str) -> Chec
     let mut sent = Vec::new();
     for probe in 0..PROBES {
         let arrivals = std::sync::Arc::clone(&arrivals);
-        sent.push(Instant::now());
+        sent.push((Instant::now(), scout_clients::monotonic_ns()));
         let asked = session
             .get(info_key(robot))
             .timeout(PROBE_TIMEOUT)
@@ -160,8 +183,9 @@ fn measure_link(settings: &SessionSettings, robot: &str, endpoint: &str) -> Chec
     }
     let arrivals = arrivals.lock().map(|a| a.clone()).unwrap_or_default();
     let mut round_trips: Vec<Duration> = (arrivals.iter())
-        .map(|(probe, arrived, _)| arrived.saturating_duration_since(sent[*probe]))
+        .map(|(probe, arrived, _)| arrived.saturating_duration_since(sent[*probe].0))
         .collect();
+    let offset = clock_offset(&sent, &arrivals);
     let info = arrivals.last().map(|(_, _, info)| info.clone());
     round_trips.sort_unstable();
     let Some(info) = info else {
@@ -192,9 +216,12 @@ fn measure_link(settings: &SessionSettings, robot: &str, endpoint: &str) -> Chec
         ),
         _ => "remote commands off (read-only)".to_owned(),
     };
+    let offset = offset.map_or_else(String::new, |(offset, within)| {
+        format!("; clock offset {offset:+.1} ms (within {within:.1} ms)")
+    });
     let detail = format!(
         "{} of {PROBES} queries answered through {endpoint}, round trip {median:.0?} median, \
-         {slowest:.0?} slowest; {allowed}",
+         {slowest:.0?} slowest{offset}; {allowed}",
         round_trips.len()
     );
     if round_trips.len() < PROBES || slowest > SLOW_ROUND_TRIP {
@@ -213,4 +240,30 @@ fn measure_link(settings: &SessionSettings, robot: &str, endpoint: &str) -> Chec
         );
     }
     Check::pass("zenoh.link", detail)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_clock_offset_comes_from_the_fastest_answer() {
+        let start = Instant::now();
+        let ms = Duration::from_millis;
+        // This host's clock reads 1000 ms at the start; the gateway's is 5000 ms ahead.
+        let sent = [(start, 1_000_000_000), (start + ms(50), 1_050_000_000)];
+        let info = |now_ms: u64| serde_json::json!({ "now_ms": now_ms });
+        let arrivals = [
+            // Probe 0: 40 ms there, 10 back (the gateway read 6040).
+            (0, start + ms(50), info(6_040)),
+            // Probe 1: 5 ms each way (6055), the fastest.
+            (1, start + ms(60), info(6_055)),
+        ];
+        let (offset, within) = clock_offset(&sent, &arrivals).expect("an offset");
+        assert!((offset - 5000.0).abs() < 1e-6, "{offset}");
+        assert!((within - 6.0).abs() < 1e-6, "{within}");
+        // A gateway that does not give its clock: no offset.
+        let silent = [(0, start + ms(10), serde_json::json!({}))];
+        assert_eq!(clock_offset(&sent, &silent), None);
+    }
 }

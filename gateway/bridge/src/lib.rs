@@ -398,11 +398,14 @@ fn serve_queries(
                             serde_json::to_value(estop_counters.merged(counters))
                                 .unwrap_or(Value::Null),
                         );
+                        let now = services::monotonic();
                         object.insert(
                             "links".into(),
-                            serde_json::to_value(commands.rules.links(services::monotonic()))
-                                .unwrap_or(Value::Null),
+                            serde_json::to_value(commands.rules.links(now)).unwrap_or(Value::Null),
                         );
+                        // The clock remote commands are aged by: `scout doctor` estimates the
+                        // offset of its own from it.
+                        object.insert("now_ms".into(), (now.as_millis() as u64).into());
                     }
                     reply(&query, info.to_string());
                 }

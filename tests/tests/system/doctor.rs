@@ -399,6 +399,14 @@ fn doctor_reads_the_robot_through_zenoh_when_asked() {
         detail.contains("20 of 20 queries answered") && detail.contains("remote commands off"),
         "{link}"
     );
+    // One host, one clock: the offset is zero, within what the doctor says it may be off.
+    let number = |after: &str| -> f64 {
+        let rest = &detail[detail.find(after).expect(after) + after.len()..];
+        let end = rest.find(' ').unwrap_or(rest.len());
+        rest[..end].parse().expect("a number")
+    };
+    let (offset, within) = (number("clock offset "), number("(within "));
+    assert!(offset.abs() <= within, "{link}");
 
     // Another robot's name at the same endpoint: reached, but no state.
     let other = robot_name("doctor-zenoh-other");
