@@ -72,7 +72,7 @@ pub struct DriveArgs {
 }
 
 /// A remote drive's life: after a partition, the output ramps to zero from its end.
-const REMOTE_DRIVE_LIFE: Duration = Duration::from_millis(300);
+pub const REMOTE_DRIVE_LIFE: Duration = Duration::from_millis(300);
 
 /// The gateway's answer in words (`scout drive` prints it once per change, not per message).
 pub fn describe(answer: &Result<Accepted, ControlError>) -> String {
@@ -206,9 +206,10 @@ pub fn estop(args: &EstopArgs) -> anyhow::Result<ExitCode> {
     let name = args.client.name(OPERATOR);
     let robot = &args.client.robot.name;
     if let Some(settings) = args.remote.settings() {
-        RemoteController::connect(&settings, robot, &name)?.stop(&args.reason)?;
+        let answer = RemoteController::connect(&settings, robot, &name)?.stop(&args.reason)?;
         println!(
-            "stop latched, owned by {}: `scout release --remote` to release it",
+            "stop #{} latched, owned by {}: `scout release --remote` to release it",
+            answer.stop.unwrap_or(0),
             peer_client_name(&name)
         );
         return Ok(ExitCode::SUCCESS);

@@ -1,5 +1,5 @@
-//! `scout teleop`: keyboard teleop in the terminal, with the state shown live. The terminal is
-//! restored on every way out: quit, error, panic.
+//! `scout teleop`: keyboard teleop in the terminal, with the state shown live, on this host or
+//! through zenoh (`--remote`). The terminal is restored on every way out: quit, error, panic.
 
 use std::io::Write;
 use std::process::ExitCode;
@@ -8,13 +8,16 @@ use std::time::{Duration, Instant};
 use clap::Args;
 use crossterm::event::{self, Event, KeyCode, KeyEvent, KeyEventKind, KeyModifiers};
 use crossterm::{cursor, execute, terminal};
-use scout_clients::client::Robot;
-use scout_clients::control::ControlError;
+use scout_clients::client::{Robot, StateSubscriber};
+use scout_clients::control::{ControlError, Controller, StatusReader};
+use scout_clients::interface::control::OPERATOR;
 use scout_clients::interface::json::{state_json, status_json};
+use scout_clients::remote::{RemoteAnswer, RemoteController, RemoteError, RemoteStates};
 use scout_clients::{Class, ReleaseTarget, monotonic_ns};
+use serde_json::Value;
 
-use crate::RobotArgs;
-use crate::control::describe;
+use crate::control::{REMOTE_DRIVE_LIFE, describe};
+use crate::{RemoteArgs, RobotArgs};
 
 /// Commands go out at 50 Hz.
 const PERIOD: Duration = Duration::from_millis(20);
@@ -26,9 +29,13 @@ const ANGULAR_STEP: f64 = 0.1;
 pub struct TeleopArgs {
     #[command(flatten)]
     robot: RobotArgs,
-    /// This client's name.
+    /// This client's name; with --remote, the peer name in the command keys (default
+    /// `operator`), which your certificate's access control must allow.
     #[arg(long, value_name = "NAME")]
     client: Option<String>,
+    // With --remote: drives go on the fast lane, the state and status come through zenoh.
+    #[command(flatten)]
+    remote: RemoteArgs,
 }
 
 /// Raw mode and the alternate screen while it lives; the terminal as it was after.
@@ -94,22 +101,197 @@ fn key(event: KeyEvent) -> Key {
     }
 }
 
+/// The robot the keys drive: on this host (iceoryx2), or through zenoh (`--remote`).
+#[expect(clippy::large_enum_variant, reason = "one per process, never moved")]
+enum Link {
+    Local {
+        controller: Controller,
+        state: StateSubscriber,
+        status: StatusReader,
+        _robot: Robot,
+    },
+    Remote {
+        controller: RemoteController,
+        state: RemoteStates,
+        status: RemoteStates,
+        /// Whether control was taken and no answer has said it ended since.
+        control: bool,
+    },
+}
+
+/// What one drive command met.
+enum Driven {
+    /// The gateway's answer, in words.
+    Answer(String),
+    /// Sent on the fast lane; no answer to it.
+    Sent,
+    /// Control ended (a stop, a gap, a release, a takeover): a key press takes it again.
+    Lost(String),
+}
+
+/// A remote command's answer in words.
+fn describe_remote(answer: &Result<RemoteAnswer, RemoteError>) -> String {
+    match answer {
+        Ok(RemoteAnswer { clamped: true, .. }) => "accepted (clamped to the speed caps)".into(),
+        Ok(_) => "accepted".into(),
+        Err(error) => error.to_string(),
+    }
+}
+
+impl Link {
+    fn connect(args: &TeleopArgs) -> anyhow::Result<Self> {
+        let robot_name = &args.robot.name;
+        if let Some(settings) = args.remote.settings() {
+            let peer = args.client.clone().unwrap_or_else(|| OPERATOR.to_owned());
+            return Ok(Self::Remote {
+                controller: RemoteController::connect(&settings, robot_name, &peer)?,
+                state: RemoteStates::connect(&settings, robot_name)?,
+                status: RemoteStates::connect_status(&settings, robot_name)?,
+                control: false,
+            });
+        }
+        let robot = Robot::connect(robot_name)?;
+        let name = args
+            .client
+            .clone()
+            .unwrap_or_else(|| format!("teleop-{}", std::process::id()));
+        Ok(Self::Local {
+            controller: robot.controller(&name, Some(Class::Teleop))?,
+            state: robot.subscribe()?,
+            status: robot.status()?,
+            _robot: robot,
+        })
+    }
+
+    fn has_control(&self) -> bool {
+        match self {
+            Self::Local { controller, .. } => controller.lease().is_some(),
+            Self::Remote { control, .. } => *control,
+        }
+    }
+
+    /// Takes control as teleop: the answer in words.
+    fn take_control(&mut self) -> String {
+        match self {
+            Self::Local { controller, .. } => describe(&controller.take_control()),
+            Self::Remote {
+                controller,
+                control,
+                ..
+            } => {
+                let answer = controller.take_control(Class::Teleop);
+                *control = answer.is_ok();
+                describe_remote(&answer)
+            }
+        }
+    }
+
+    /// One drive command; an error when the gateway is gone.
+    fn drive(&mut self, linear: f64, angular: f64) -> anyhow::Result<Driven> {
+        match self {
+            Self::Local { controller, .. } => match controller.drive(linear, angular) {
+                Err(error @ ControlError::NoAnswer { .. }) => Err(error.into()),
+                Err(error) if error.lost_control() => Ok(Driven::Lost(error.to_string())),
+                answer => Ok(Driven::Answer(describe(&answer))),
+            },
+            Self::Remote {
+                controller,
+                control,
+                ..
+            } => match controller.drive(linear, angular, REMOTE_DRIVE_LIFE) {
+                Ok(Some(answer)) => Ok(Driven::Answer(describe_remote(&Ok(answer)))),
+                Ok(None) => Ok(Driven::Sent),
+                Err(error @ RemoteError::Refused { .. }) => {
+                    *control = false;
+                    Ok(Driven::Lost(error.to_string()))
+                }
+                Err(error) => Err(error.into()),
+            },
+        }
+    }
+
+    /// Latches a stop owned by this client: the answer in words, and the stop's id.
+    fn stop(&mut self) -> (String, Option<u64>) {
+        const REASON: &str = "teleop e-stop key";
+        match self {
+            Self::Local { controller, .. } => {
+                let answer = controller.stop(REASON);
+                let id = answer.as_ref().ok().and_then(|accepted| accepted.stop);
+                (describe(&answer), id)
+            }
+            Self::Remote { controller, .. } => {
+                let answer = controller.stop(REASON);
+                let id = answer.as_ref().ok().and_then(|accepted| accepted.stop);
+                (describe_remote(&answer), id)
+            }
+        }
+    }
+
+    /// Releases the stops up to `through` (here every one; through zenoh this peer's own).
+    fn release(&mut self, through: u64) -> String {
+        match self {
+            Self::Local { controller, .. } => {
+                describe(&controller.release(ReleaseTarget::All, through))
+            }
+            Self::Remote { controller, .. } => describe_remote(&controller.release(Some(through))),
+        }
+    }
+
+    /// Zero speed, then control given back.
+    fn quit(&mut self) {
+        match self {
+            Self::Local { controller, .. } => {
+                let _ = controller.drive(0.0, 0.0);
+                let _ = controller.relinquish();
+            }
+            Self::Remote { controller, .. } => {
+                let _ = controller.drive(0.0, 0.0, REMOTE_DRIVE_LIFE);
+                let _ = controller.relinquish();
+            }
+        }
+    }
+
+    /// The newest state and status, as JSON, into `shown` (what did not change stays).
+    fn refresh(&mut self, shown: &mut Shown) -> anyhow::Result<()> {
+        match self {
+            Self::Local { state, status, .. } => {
+                let now = monotonic_ns();
+                if let Some(state) = state.try_latest()? {
+                    shown.state = Some(state_json(&state, now));
+                }
+                if let Some(status) = status.latest(Duration::ZERO)? {
+                    shown.status = Some(status_json(&status, now));
+                }
+            }
+            Self::Remote { state, status, .. } => {
+                while let Some(json) = state.next_timeout(Duration::ZERO)? {
+                    shown.state = Some(json);
+                }
+                while let Some(json) = status.next_timeout(Duration::ZERO)? {
+                    shown.status = Some(json);
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The state and the arbiter's status last shown.
+#[derive(Default)]
+struct Shown {
+    state: Option<Value>,
+    status: Option<Value>,
+}
+
 pub fn run(args: &TeleopArgs) -> anyhow::Result<ExitCode> {
-    let robot = Robot::connect(&args.robot.name)?;
-    let name = args
-        .client
-        .clone()
-        .unwrap_or_else(|| format!("teleop-{}", std::process::id()));
-    let mut controller = robot.controller(&name, Some(Class::Teleop))?;
-    let mut action = format!("take control: {}", describe(&controller.take_control()));
-    let state = robot.subscribe()?;
-    let status = robot.status()?;
+    let mut link = Link::connect(args)?;
+    let mut action = format!("take control: {}", link.take_control());
     let _guard = TerminalGuard::enter()?;
     let (mut linear, mut angular) = (0.0f64, 0.0f64);
     let mut next = Instant::now();
-    let mut last_state = None;
-    let mut last_status = None;
+    let mut shown = Shown::default();
     let mut own_stop = 0;
+    let mut answer = String::new();
     let mut out = std::io::stdout();
     loop {
         while event::poll(next.saturating_duration_since(Instant::now()))? {
@@ -121,10 +303,10 @@ pub fn run(args: &TeleopArgs) -> anyhow::Result<ExitCode> {
             }
             match key(event) {
                 Key::Speed(dl, da) => {
-                    if controller.lease().is_none() {
+                    if !link.has_control() {
                         // A key press is the deliberate act that takes control again.
                         (linear, angular) = (0.0, 0.0);
-                        action = format!("take control: {}", describe(&controller.take_control()));
+                        action = format!("take control: {}", link.take_control());
                     }
                     linear = (linear + dl).clamp(-1.5, 1.5);
                     angular = (angular + da).clamp(-1.0, 1.0);
@@ -132,58 +314,41 @@ pub fn run(args: &TeleopArgs) -> anyhow::Result<ExitCode> {
                 Key::Zero => (linear, angular) = (0.0, 0.0),
                 Key::EStop => {
                     (linear, angular) = (0.0, 0.0);
-                    let answer = controller.stop("teleop e-stop key");
-                    if let Ok(accepted) = &answer {
-                        own_stop = own_stop.max(accepted.stop.unwrap_or(0));
-                    }
-                    action = format!("e-stop: {}", describe(&answer));
+                    let (answer, id) = link.stop();
+                    own_stop = own_stop.max(id.unwrap_or(0));
+                    action = format!("e-stop: {answer}");
                 }
                 Key::Release => {
                     // What the screen shows, and this keyboard's own e-stops: a stop that
                     // latched since is not released.
-                    let shown = last_status
-                        .as_ref()
-                        .map_or(0, |s: &scout_clients::StatusPayload| s.newest_stop);
-                    let seen = shown.max(own_stop);
-                    action = format!(
-                        "release: {}",
-                        describe(&controller.release(ReleaseTarget::All, seen))
-                    );
+                    let shown_stop = (shown.status.as_ref())
+                        .and_then(|status| status["newest_stop"].as_u64())
+                        .unwrap_or(0);
+                    action = format!("release: {}", link.release(shown_stop.max(own_stop)));
                 }
                 Key::Quit => {
-                    let _ = controller.drive(0.0, 0.0);
-                    let _ = controller.relinquish();
+                    link.quit();
                     return Ok(ExitCode::SUCCESS);
                 }
                 Key::Other => {}
             }
         }
         next += PERIOD;
-        let answer = if controller.lease().is_some() {
-            let result = controller.drive(linear, angular);
-            let answer = describe(&result);
-            match result {
-                Err(error @ ControlError::NoAnswer { .. }) => return Err(error.into()),
-                Err(error) if error.lost_control() => {
+        if link.has_control() {
+            match link.drive(linear, angular)? {
+                Driven::Answer(text) => answer = text,
+                Driven::Sent if answer.is_empty() => answer = "sent on the fast lane".into(),
+                Driven::Sent => {}
+                Driven::Lost(error) => {
                     (linear, angular) = (0.0, 0.0);
-                    format!("{error} (press a movement key to take control)")
+                    answer = format!("{error} (press a movement key to take control)");
                 }
-                _ => answer,
             }
-        } else {
-            "no control: press a movement key to take control".to_owned()
-        };
-        last_state = state.try_latest()?.or(last_state);
-        last_status = status.latest(Duration::ZERO)?.or(last_status);
-        let answers = [answer.as_str(), action.as_str()];
-        draw(
-            &mut out,
-            linear,
-            angular,
-            answers,
-            last_state.as_ref(),
-            last_status.as_ref(),
-        )?;
+        } else if !answer.ends_with("to take control)") {
+            answer = "no control: press a movement key to take control".to_owned();
+        }
+        link.refresh(&mut shown)?;
+        draw(&mut out, linear, angular, [&answer, &action], &shown)?;
     }
 }
 
@@ -192,18 +357,15 @@ fn draw(
     linear: f64,
     angular: f64,
     [answer, action]: [&str; 2],
-    state: Option<&scout_clients::StatePayload>,
-    status: Option<&scout_clients::StatusPayload>,
+    shown: &Shown,
 ) -> std::io::Result<()> {
-    let now = monotonic_ns();
     let mut lines = vec![
         "scout teleop   arrows/WASD speed  space zero  e e-stop  r release  q quit".to_owned(),
         String::new(),
         format!("asking   linear {linear:+.2} m/s   angular {angular:+.2} rad/s"),
         format!("gateway  drive: {answer}   last key: {action}"),
     ];
-    if let Some(status) = status {
-        let json = status_json(status, now);
+    if let Some(json) = &shown.status {
         lines.push(format!(
             "arbiter  stop {}   driving {}   output {:+.3} m/s {:+.3} rad/s{}",
             if json["latched"] == true {
@@ -221,8 +383,7 @@ fn draw(
             },
         ));
     }
-    if let Some(state) = state {
-        let json = state_json(state, now);
+    if let Some(json) = &shown.state {
         lines.push(format!(
             "chassis  link {}   {}   battery {:.1} V   moving {:+.3} m/s {:+.3} rad/s",
             json["link"]["state"].as_str().unwrap_or("?"),

@@ -541,9 +541,9 @@ fn serve_estops(
             RemoteAnswer::rejected(DISABLED)
         } else {
             match estop(config, &mut port, key, payload.as_deref()) {
-                Ok(_) => {
+                Ok(accepted) => {
                     counters.accepted.fetch_add(1, Ordering::Relaxed);
-                    RemoteAnswer::accepted(false)
+                    RemoteAnswer::accepted(&accepted)
                 }
                 Err(reason) => {
                     counters.rejected.fetch_add(1, Ordering::Relaxed);
@@ -667,7 +667,7 @@ impl<'a> RemoteControl<'a> {
             return RemoteAnswer::rejected(DISABLED);
         }
         let answer = match self.decide(arrived, query) {
-            Ok(Accepted { clamped, .. }) => RemoteAnswer::accepted(clamped),
+            Ok(accepted) => RemoteAnswer::accepted(&accepted),
             Err(reason) => RemoteAnswer::refused(&reason),
         };
         if answer.accepted {

@@ -402,16 +402,21 @@ pub struct RemoteAnswer {
     /// release or a takeover ended it): only a take-control, sent on purpose, gives it back.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub lost_control: bool,
+    /// For an e-stop: the id of the stop it latched (or refreshed), as the status lists it;
+    /// a release naming it (`through`) releases it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stop: Option<u64>,
 }
 
 impl RemoteAnswer {
-    /// An acceptance (`clamped`: a speed beyond the caps was clamped).
-    pub fn accepted(clamped: bool) -> Self {
+    /// The acceptance the arbiter gave.
+    pub fn accepted(accepted: &crate::control::Accepted) -> Self {
         Self {
             accepted: true,
-            clamped,
+            clamped: accepted.clamped,
             reason: None,
             lost_control: false,
+            stop: accepted.stop,
         }
     }
 
@@ -422,6 +427,7 @@ impl RemoteAnswer {
             clamped: false,
             reason: Some(reason.into()),
             lost_control: false,
+            stop: None,
         }
     }
 

@@ -508,6 +508,12 @@ fn scout_drives_stops_and_releases_a_remote_robot() {
     assert_eq!(code, Some(0), "{stdout}{stderr}");
     let latched = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
     assert_eq!(latched["stops"][0]["owner"], "remote:laptop", "{latched}");
+    // The answer names the stop, as the status lists it.
+    let id = &latched["stops"][0]["id"];
+    assert!(
+        stdout.starts_with(&format!("stop #{id} latched")),
+        "{stdout}"
+    );
     assert_eq!(
         latched["stops"].as_array().map(Vec::len),
         Some(1),

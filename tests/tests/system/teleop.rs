@@ -1,10 +1,10 @@
-//! `scout teleop` on a pseudo-terminal, as a person at a keyboard: keys drive, `e` latches the
-//! stop, `q` quits and restores the terminal.
+//! `scout teleop` on a pseudo-terminal, as a person at a keyboard, on the gateway's host and
+//! through zenoh: keys drive, `e` latches the stop, `q` quits and restores the terminal.
 
 use std::io::{Read, Write};
 use std::time::{Duration, Instant};
 
-use scout_system_tests::{Gateway, command, connect, robot_name, wait_for_status};
+use scout_system_tests::{Gateway, command, connect, free_port, robot_name, wait_for_status};
 use serialport::{SerialPort, TTYPort};
 
 const LIMIT: Duration = Duration::from_secs(10);
@@ -28,7 +28,32 @@ fn read_until(master: &mut TTYPort, screen: &mut String, wanted: &str) {
 fn keyboard_teleop_drives_stops_and_restores_the_terminal() {
     let name = robot_name("teleop");
     let _gateway = Gateway::start(&["--sim", "--name", &name]);
-    let robot = connect(&name);
+    keyboard_teleop(&name, &[], "keyboard");
+}
+
+/// `scout teleop --remote` over UDP: drives on the fast lane, state and status through zenoh,
+/// the e-stop and the release through the remote commands, as on this host.
+#[test]
+fn keyboard_teleop_through_zenoh_drives_stops_and_restores_the_terminal() {
+    let name = robot_name("teleop-remote");
+    let endpoint = format!("udp/127.0.0.1:{}", free_port());
+    let _gateway = Gateway::start(&[
+        "--sim",
+        "--name",
+        &name,
+        "--zenoh-listen",
+        &endpoint,
+        "--remote-commands",
+        "estop,teleop,release",
+    ]);
+    keyboard_teleop(&name, &["--remote", &endpoint], "remote:keyboard");
+}
+
+/// Runs `scout teleop` on a pseudo-terminal with `extra` arguments, as client `keyboard`
+/// (`client` as the gateway names it): keys drive, `e` stops, `r` releases, a movement key
+/// takes control again, `q` quits and restores the terminal.
+fn keyboard_teleop(name: &str, extra: &[&str], client: &str) {
+    let robot = connect(name);
     let status = robot.status().expect("status");
     let (mut master, slave) = TTYPort::pair().expect("a pseudo-terminal");
     master
@@ -43,7 +68,8 @@ fn keyboard_teleop_drives_stops_and_restores_the_terminal() {
             .expect("open the pty")
     };
     let mut teleop = command("scout")
-        .args(["teleop", "--name", &name, "--client", "keyboard"])
+        .args(["teleop", "--name", name, "--client", "keyboard"])
+        .args(extra)
         .stdin(open())
         .stdout(open())
         .stderr(open())
@@ -53,11 +79,14 @@ fn keyboard_teleop_drives_stops_and_restores_the_terminal() {
     read_until(&mut master, &mut screen, "scout teleop");
     master.write_all(b"ww").expect("keys");
     read_until(&mut master, &mut screen, "linear +0.20 m/s");
-    let driving = wait_for_status(&status, LIMIT, |s| s["selected"]["client"] == "keyboard");
+    // The state and the arbiter's status are shown (through zenoh with --remote).
+    read_until(&mut master, &mut screen, "chassis  link ok");
+    read_until(&mut master, &mut screen, &format!("driving {client}"));
+    let driving = wait_for_status(&status, LIMIT, |s| s["selected"]["client"] == client);
     assert_eq!(driving["selected"]["class"], "teleop");
     master.write_all(b"e").expect("e-stop key");
     let latched = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
-    assert_eq!(latched["stops"][0]["owner"], "keyboard");
+    assert_eq!(latched["stops"][0]["owner"], client);
     // Released: nothing moves until a movement key takes control again.
     master.write_all(b"r").expect("release key");
     read_until(&mut master, &mut screen, "press a movement key");
@@ -65,7 +94,7 @@ fn keyboard_teleop_drives_stops_and_restores_the_terminal() {
         s["latched"] == false && s["selected"].is_null()
     });
     master.write_all(b"w").expect("a movement key");
-    let again = wait_for_status(&status, LIMIT, |s| s["selected"]["client"] == "keyboard");
+    let again = wait_for_status(&status, LIMIT, |s| s["selected"]["client"] == client);
     assert_eq!(again["selected"]["class"], "teleop");
     master.write_all(b"q").expect("quit key");
     let deadline = Instant::now() + LIMIT;
