@@ -47,6 +47,10 @@ struct Peer {
     lease: Option<(u64, Class)>,
     /// Its last drive's number.
     seq: Option<u64>,
+    /// The `sent_ms` of its take-control let through last, and of the last one granted: a
+    /// copy of a granted one (no newer) gives no control once that control ended.
+    take_asked: Option<u64>,
+    take_granted: Option<u64>,
     /// The least (arrival - sent) seen, µs (its clock's offset plus the fastest delivery),
     /// allowed to rise by [`MAX_CLOCK_DRIFT_PPM`] since, and when it was last updated.
     offset: Option<(i128, Duration)>,
@@ -83,6 +87,9 @@ pub enum Via {
         /// The send time the arbiter ages the request by.
         sent: Duration,
     },
+    /// Nowhere: the rules answer it (a copy of a granted take-control while that control
+    /// holds gets its grant again, and asks the arbiter for nothing).
+    Answered(Accepted),
 }
 
 impl Rules {
@@ -152,6 +159,26 @@ impl Rules {
             | RemoteKind::Lights
             | RemoteKind::ClearFault => now,
         };
+        if kind == RemoteKind::TakeControl
+            && let Some(sent_ms) = command.sent_ms
+        {
+            // A copy of a granted take-control (no newer than it) never asks for control
+            // again: while that control holds, its grant is the answer; after, a refusal.
+            if peer.take_granted.is_some_and(|granted| sent_ms <= granted) {
+                let (lease, _) = peer.lease.ok_or(CommandError::Replayed { sent_ms })?;
+                let granted = Accepted {
+                    lease: Some(lease),
+                    ..Accepted::default()
+                };
+                return Ok(Send {
+                    peer: name,
+                    request,
+                    via: Via::Answered(granted),
+                    evicted,
+                });
+            }
+            peer.take_asked = Some(sent_ms);
+        }
         Ok(Send {
             peer: name,
             request,
@@ -183,13 +210,13 @@ impl Rules {
             (Request::TakeControl { class }, Ok(accepted)) => {
                 peer.lease = accepted.lease.map(|lease| (lease, *class));
                 peer.seq = None;
+                peer.take_granted = peer.take_asked.max(peer.take_granted);
             }
             // Given up on purpose: the next session may come from another clock (a reboot,
             // another machine under this name), and its take-control seeds the age check.
             (Request::Relinquish, Ok(_)) => {
                 peer.lease = None;
-                peer.seq = None;
-                peer.offset = None;
+                peer.forget_timing();
             }
             // Revoked or not held: the peer must take control again.
             _ if lost_control => peer.lease = None,
@@ -227,6 +254,8 @@ impl Rules {
                     name: name.to_owned(),
                     lease: None,
                     seq: None,
+                    take_asked: None,
+                    take_granted: None,
                     offset: None,
                     used,
                     seen: now,
@@ -240,8 +269,7 @@ impl Rules {
         // Without control and silent for longer than anything zenoh holds up (its session
         // lease is 10 s by default): its timing is forgotten, as after a relinquish.
         if peer.lease.is_none() && now.saturating_sub(peer.seen) > FORGET_TIMING_AFTER {
-            peer.seq = None;
-            peer.offset = None;
+            peer.forget_timing();
         }
         peer.used = used;
         peer.seen = now;
@@ -261,6 +289,15 @@ pub fn allowed(commands: &RemoteCommands, permission: Permission) -> Result<(), 
 }
 
 impl Peer {
+    /// Forgets its drive numbers, its clock's offset and its take-controls: its next session
+    /// may come from another clock (a reboot, another machine under this name).
+    fn forget_timing(&mut self) {
+        self.seq = None;
+        self.offset = None;
+        self.take_asked = None;
+        self.take_granted = None;
+    }
+
     /// Checks a take-control's or drive command's age (and a drive's order) at `now`; returns
     /// when it was sent, on this host's clock. A repeated or older drive `seq` is refused; so
     /// is a command the network held up for longer than its life, measured against the fastest
@@ -471,6 +508,57 @@ mod tests {
         );
         let refused = drive(&mut rules, 1020 * MS, "op", 2, 20).expect_err("lease gone");
         assert!(matches!(refused, CommandError::NoControl(_)));
+    }
+
+    #[test]
+    fn a_copy_of_a_granted_take_control_gives_no_control_once_it_ended() {
+        let mut rules = teleop();
+        let granted = |rules: &mut Rules, send: &Send| {
+            let answer = Ok(Accepted {
+                lease: Some(7),
+                ..Accepted::default()
+            });
+            rules.handle_answer(&send.peer, &send.request, &answer);
+        };
+        let first = take(&mut rules, 1000 * MS, "op", 500);
+        granted(&mut rules, &first);
+        // Its copy (the answer was lost on the way) while control holds: let through again.
+        let copy = |rules: &mut Rules, now| {
+            let payload = br#"{"class":"teleop","sent_ms":500}"#;
+            rules.handle_command(now, &key("take-control", "op"), Some(payload))
+        };
+        let again = copy(&mut rules, 1150 * MS).expect("control holds: its grant again");
+        let lease = Accepted {
+            lease: Some(7),
+            ..Accepted::default()
+        };
+        assert_eq!(
+            again.via,
+            Via::Answered(lease),
+            "nothing asked of the arbiter"
+        );
+        // A stop ends the control; a copy arriving after it gives none.
+        rules.handle_answer(
+            "remote:op",
+            &Request::Drive {
+                lease: 7,
+                linear: 0.0,
+                angular: 0.0,
+                ttl: None,
+            },
+            &Err(RequestError::Rejected(Rejected {
+                kind: Some(RejectionKind::Revoked),
+                reason: "a stop".into(),
+            })),
+        );
+        let refused = copy(&mut rules, 1300 * MS).expect_err("a copy after control ended");
+        assert!(
+            matches!(refused, CommandError::Replayed { sent_ms: 500 }),
+            "{refused}"
+        );
+        assert!(refused.lost_control());
+        // A new take-control, sent on purpose later, is granted.
+        take(&mut rules, 1400 * MS, "op", 900);
     }
 
     #[test]

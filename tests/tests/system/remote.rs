@@ -951,3 +951,67 @@ fn any_peer_name_zenoh_carries_can_stop_and_release_its_own() {
         wait_for_status(&status, LIMIT, |s| s["latched"] == false);
     }
 }
+
+/// A take-control sent again (its answer lost, say) gets its grant again while the gateway
+/// knows of no end to that control, and never asks the arbiter for control: after a stop and
+/// its release a copy gives no control (the next drive is refused), and once the gateway knows
+/// the control ended, a copy is refused as one.
+#[test]
+fn a_copy_of_a_take_control_restarts_nothing_after_a_stop_and_a_release() {
+    let name = robot_name("remote-copy");
+    let port = free_port();
+    let _gateway = Gateway::start(&[
+        "--sim",
+        "--name",
+        &name,
+        "--zenoh-listen",
+        &tcp(port),
+        "--remote-commands",
+        "estop,teleop,release",
+    ]);
+    let robot = connect(&name);
+    let status = robot.status().expect("status");
+    let session = zenoh_session("client", &[], &[tcp(port)]);
+    query_until_answered(&session, &format!("scout/{name}/info"));
+    let ask = |kind: &str, payload: &str| -> Value {
+        let key = format!("scout/{name}/cmd/{kind}/pilot");
+        zenoh_query(&session, &key, Some(payload), QUERY)
+            .pop()
+            .unwrap_or_else(|| panic!("no answer to {kind}"))
+    };
+    let now_ms = || monotonic_ns() / 1_000_000;
+    let take = format!(r#"{{"class":"teleop","sent_ms":{}}}"#, now_ms());
+    assert_eq!(ask("take-control", &take)["accepted"], true);
+    // The copy, at once: its grant again.
+    let copy = ask("take-control", &take);
+    assert_eq!(copy["accepted"], true, "{copy}");
+    // A stop, then its release.
+    let stop = ask("estop", r#"{"reason":"copy test"}"#);
+    assert_eq!(stop["accepted"], true, "{stop}");
+    let through = stop["stop"].as_u64().expect("the stop's id");
+    let release = ask("release", &format!(r#"{{"through":{through}}}"#));
+    assert_eq!(release["accepted"], true, "{release}");
+    wait_for_status(&status, LIMIT, |s| s["latched"] == false);
+    // The copy now asks the arbiter for nothing: the drive after it has no control.
+    ask("take-control", &take);
+    let drive = format!(
+        r#"{{"seq":1,"sent_ms":{},"linear":0.3,"angular":0.0,"ttl_ms":300}}"#,
+        now_ms()
+    );
+    let driven = ask("drive", &drive);
+    assert_eq!(driven["accepted"], false, "a copy gave control: {driven}");
+    assert_eq!(driven["lost_control"], true, "{driven}");
+    // Now that the gateway knows the control ended, a copy is refused as one.
+    let copy = ask("take-control", &take);
+    assert_eq!(copy["accepted"], false, "{copy}");
+    assert_eq!(copy["lost_control"], true, "{copy}");
+    assert!(
+        copy["reason"]
+            .as_str()
+            .is_some_and(|r| r.contains("a copy of a take-control")),
+        "{copy}"
+    );
+    // A take-control sent on purpose now (a newer sent_ms) is granted.
+    let fresh = format!(r#"{{"class":"teleop","sent_ms":{}}}"#, now_ms() + 1);
+    assert_eq!(ask("take-control", &fresh)["accepted"], true);
+}
