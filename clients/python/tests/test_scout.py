@@ -256,7 +256,9 @@ def test_a_killed_python_driver_is_a_dead_client(robot: scout.Robot) -> None:
 
 WAITER = textwrap.dedent(
     """
-    import sys, scout
+    import signal, sys, scout
+    # Ctrl-C as in a terminal: a test run started in the background inherits SIGINT ignored.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     robot = scout.Robot.connect(sys.argv[1])
     robot.latest()
     try:
