@@ -59,6 +59,11 @@ struct Figures {
     accepted: u64,
     age_p50_ms: Option<u64>,
     age_p99_ms: Option<u64>,
+    /// Drives the bridge read, and of those refused for holding no control.
+    received: u64,
+    no_control: u64,
+    /// Fast-lane drives replaced by a newer one of the same peer before the bridge read them.
+    superseded: u64,
     lapses: u64,
     estops_ms: Vec<u64>,
 }
@@ -89,21 +94,24 @@ fn netem_bench_remote_drive() {
         }
     }
     println!(
-        "| network | link | drives | accepted | age p50 / p99 (ms) | control lapsed | e-stop latched p50 / max (ms) |"
+        "| network | link | drives | read / superseded | accepted | no control | age p50 / p99 (ms) | control lapsed | e-stop latched p50 / max (ms) |"
     );
-    println!("|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|");
     for (profile, link, path, figures) in rows {
         let mut estops = figures.estops_ms.clone();
         estops.sort_unstable();
         let show = |ms: Option<u64>| ms.map_or("-".to_owned(), |ms| ms.to_string());
         println!(
-            "| {profile} | {link}, {} | {} | {:.0} % | {} / {} | {} | {} / {} ({} of {ESTOPS}) |",
+            "| {profile} | {link}, {} | {} | {} / {} | {:.0} % | {} | {} / {} | {} | {} / {} ({} of {ESTOPS}) |",
             match path {
                 Path::Queried => "queried",
                 Path::Put => "put (fast lane)",
             },
             figures.sent,
+            figures.received,
+            figures.superseded,
             100.0 * figures.accepted as f64 / figures.sent.max(1) as f64,
+            figures.no_control,
             show(figures.age_p50_ms),
             show(figures.age_p99_ms),
             figures.lapses,
@@ -258,6 +266,11 @@ fn run(
         figures.accepted = link["accepted"].as_u64().unwrap_or(0);
         figures.age_p50_ms = link["age_p50_ms"].as_u64();
         figures.age_p99_ms = link["age_p99_ms"].as_u64();
+        figures.received = link["received"].as_u64().unwrap_or(0);
+        figures.no_control = link["no_control"].as_u64().unwrap_or(0);
+    }
+    if let Some(info) = info.first() {
+        figures.superseded = info["counters"]["drives_superseded"].as_u64().unwrap_or(0);
     }
     figures
 }
