@@ -776,5 +776,73 @@ mod tests {
                 }
             }
         }
+
+        /// Take-controls fresh and copied, granted or refused, leases revoked and given up, in
+        /// any order: the arbiter is never asked for control by a take-control no newer than
+        /// one it granted (since control was last given up), and nothing panics.
+        #[test]
+        fn a_copy_of_a_granted_take_control_never_reaches_the_arbiter(
+            ops in proptest::collection::vec((0u8..5, 0usize..6, any::<bool>()), 1..80)
+        ) {
+            let mut rules = teleop();
+            let mut now = Duration::from_secs(5);
+            let mut sent_so_far: Vec<u64> = Vec::new();
+            let mut granted: Option<u64> = None;
+            let revoked = || Err(RequestError::Rejected(Rejected {
+                kind: Some(RejectionKind::Revoked),
+                reason: "a stop".into(),
+            }));
+            for (op, pick, grant) in ops {
+                now += 10 * MS;
+                let now_ms = now.as_millis() as u64;
+                match op {
+                    // A take-control: a copy of an earlier one (its bytes again), or a new one.
+                    0 | 1 => {
+                        let sent_ms = match sent_so_far.get(pick) {
+                            Some(&earlier) if op == 0 => earlier,
+                            _ => now_ms,
+                        };
+                        sent_so_far.push(sent_ms);
+                        let payload = format!(r#"{{"class":"teleop","sent_ms":{sent_ms}}}"#);
+                        let asked = rules.handle_command(now, &key("take-control", "op"), Some(payload.as_bytes()));
+                        if let Ok(send) = asked && let Via::Control { .. } = send.via {
+                            prop_assert!(
+                                granted.is_none_or(|granted| sent_ms > granted),
+                                "a copy (sent_ms {sent_ms}) asked for control after {granted:?} was granted"
+                            );
+                            let answer = if grant {
+                                granted = granted.max(Some(sent_ms));
+                                Ok(Accepted { lease: Some(7), ..Accepted::default() })
+                            } else {
+                                Err(RequestError::Rejected(Rejected {
+                                    kind: Some(RejectionKind::Latched),
+                                    reason: "a stop holds".into(),
+                                }))
+                            };
+                            rules.handle_answer(&send.peer, &send.request, &answer);
+                        }
+                    }
+                    // A drive, answered: the control was revoked, or it drove.
+                    2 => {
+                        let payload = format!(r#"{{"seq":{now_ms},"sent_ms":{now_ms},"linear":0.1,"angular":0.0}}"#);
+                        if let Ok(send) = rules.handle_command(now, &key("drive", "op"), Some(payload.as_bytes())) {
+                            let answer = if grant { Ok(Accepted::default()) } else { revoked() };
+                            rules.handle_answer(&send.peer, &send.request, &answer);
+                        }
+                    }
+                    // Control given up on purpose: a new session, from any clock.
+                    3 => {
+                        if let Ok(send) = rules.handle_command(now, &key("relinquish", "op"), Some(b"{}")) {
+                            rules.handle_answer(&send.peer, &send.request, &Ok(Accepted::default()));
+                            granted = None;
+                        }
+                    }
+                    // Garbage on the take-control key.
+                    _ => {
+                        let _ = rules.handle_command(now, &key("take-control", "op"), Some(&[pick as u8; 9]));
+                    }
+                }
+            }
+        }
     }
 }
