@@ -112,13 +112,6 @@ const MAX_PENDING_ANSWERS: usize = 8;
 /// Best-effort copies an e-stop is put as, beside its query.
 const ESTOP_COPIES: usize = 3;
 
-/// A take-control or e-stop query not answered this soon is sent again...
-const COPY_AFTER: Duration = Duration::from_millis(150);
-
-/// ... up to this many times in all: the last copy leaves well within a take-control's life
-/// (the gateway refuses one held up longer than 500 ms).
-const QUERY_COPIES: usize = 3;
-
 /// Drives a robot through zenoh as remote peer `peer`, as a remote operator's program would:
 /// take control (a query, answered), drive (samples put on the fast lane: best effort,
 /// express, dropped rather than queued), stop (put and queried: whichever arrives first
@@ -286,53 +279,27 @@ impl RemoteController {
     }
 
     /// Sends `command` as a query and waits for the answer: accepted, or
-    /// [`RemoteError::Refused`]. A take-control or an e-stop not answered within
-    /// [`COPY_AFTER`] is sent again, the same bytes, up to [`QUERY_COPIES`] in all (over plain
-    /// UDP a query or its answer can be lost): the first answer to any copy is the answer.
-    /// Both are safe to repeat: a repeated stop refreshes the same stop, and the gateway never
-    /// gives control for a copy of a take-control it already granted.
+    /// [`RemoteError::Refused`].
     fn ask(
         &mut self,
         kind: RemoteKind,
         command: &RemoteCommand,
     ) -> Result<RemoteAnswer, RemoteError> {
-        let copies = match kind {
-            RemoteKind::TakeControl | RemoteKind::Estop => QUERY_COPIES,
-            RemoteKind::Drive
-            | RemoteKind::Relinquish
-            | RemoteKind::Release
-            | RemoteKind::Resume
-            | RemoteKind::Lights
-            | RemoteKind::ClearFault => 1,
-        };
-        let payload = to_json(command);
-        let start = std::time::Instant::now();
-        let mut asked = Vec::new();
-        let reply = loop {
-            if asked.len() < copies && start.elapsed() >= COPY_AFTER * asked.len() as u32 {
-                let replies = self
-                    .session
-                    .get(command_key(&self.robot, kind, &self.peer))
-                    .payload(payload.clone())
-                    .timeout(ANSWER_TIMEOUT)
-                    .wait()
-                    .map_err(|e| RemoteError::Zenoh(e.to_string()))?;
-                asked.push(replies);
-            }
-            if let Some(reply) = asked
-                .iter()
-                .find_map(|replies| replies.try_recv().ok().flatten())
-            {
-                break reply;
-            }
-            if start.elapsed() > ANSWER_TIMEOUT + Duration::from_secs(1) {
-                return Err(RemoteError::NoAnswer {
-                    command: kind,
-                    timeout: ANSWER_TIMEOUT,
-                });
-            }
-            std::thread::sleep(Duration::from_millis(2));
-        };
+        let replies = self
+            .session
+            .get(command_key(&self.robot, kind, &self.peer))
+            .payload(to_json(command))
+            .timeout(ANSWER_TIMEOUT)
+            .wait()
+            .map_err(|e| RemoteError::Zenoh(e.to_string()))?;
+        let reply = replies
+            .recv_timeout(ANSWER_TIMEOUT + Duration::from_secs(1))
+            .ok()
+            .flatten()
+            .ok_or(RemoteError::NoAnswer {
+                command: kind,
+                timeout: ANSWER_TIMEOUT,
+            })?;
         let answer = answer_of(&reply);
         if answer.accepted {
             Ok(answer)

@@ -713,7 +713,6 @@ impl<'a> RemoteControl<'a> {
             self.ports.remove(evicted);
         }
         let answer = match send.via {
-            Via::Answered(accepted) => return Ok(accepted),
             Via::Safety => self.safety.request_for_peer(&send.request, &send.peer),
             Via::Control { sent } => {
                 let port = match self.ports.entry(send.peer.clone()) {

@@ -47,10 +47,6 @@ struct Peer {
     lease: Option<(u64, Class)>,
     /// Its last drive's number.
     seq: Option<u64>,
-    /// The `sent_ms` of its take-control let through last, and of the last one granted: a
-    /// copy of a granted one (no newer) gives no control once that control ended.
-    take_asked: Option<u64>,
-    take_granted: Option<u64>,
     /// The least (arrival - sent) seen, µs (its clock's offset plus the fastest delivery),
     /// allowed to rise by [`MAX_CLOCK_DRIFT_PPM`] since, and when it was last updated.
     offset: Option<(i128, Duration)>,
@@ -87,9 +83,6 @@ pub enum Via {
         /// The send time the arbiter ages the request by.
         sent: Duration,
     },
-    /// Nowhere: the rules answer it (a copy of a granted take-control while that control
-    /// holds gets its grant again, and asks the arbiter for nothing).
-    Answered(Accepted),
 }
 
 impl Rules {
@@ -159,26 +152,6 @@ impl Rules {
             | RemoteKind::Lights
             | RemoteKind::ClearFault => now,
         };
-        if kind == RemoteKind::TakeControl
-            && let Some(sent_ms) = command.sent_ms
-        {
-            // A copy of a granted take-control (no newer than it) never asks for control
-            // again: while that control holds, its grant is the answer; after, a refusal.
-            if peer.take_granted.is_some_and(|granted| sent_ms <= granted) {
-                let (lease, _) = peer.lease.ok_or(CommandError::Replayed { sent_ms })?;
-                let granted = Accepted {
-                    lease: Some(lease),
-                    ..Accepted::default()
-                };
-                return Ok(Send {
-                    peer: name,
-                    request,
-                    via: Via::Answered(granted),
-                    evicted,
-                });
-            }
-            peer.take_asked = Some(sent_ms);
-        }
         Ok(Send {
             peer: name,
             request,
@@ -210,13 +183,13 @@ impl Rules {
             (Request::TakeControl { class }, Ok(accepted)) => {
                 peer.lease = accepted.lease.map(|lease| (lease, *class));
                 peer.seq = None;
-                peer.take_granted = peer.take_asked.max(peer.take_granted);
             }
             // Given up on purpose: the next session may come from another clock (a reboot,
             // another machine under this name), and its take-control seeds the age check.
             (Request::Relinquish, Ok(_)) => {
                 peer.lease = None;
-                peer.forget_timing();
+                peer.seq = None;
+                peer.offset = None;
             }
             // Revoked or not held: the peer must take control again.
             _ if lost_control => peer.lease = None,
@@ -254,8 +227,6 @@ impl Rules {
                     name: name.to_owned(),
                     lease: None,
                     seq: None,
-                    take_asked: None,
-                    take_granted: None,
                     offset: None,
                     used,
                     seen: now,
@@ -269,7 +240,8 @@ impl Rules {
         // Without control and silent for longer than anything zenoh holds up (its session
         // lease is 10 s by default): its timing is forgotten, as after a relinquish.
         if peer.lease.is_none() && now.saturating_sub(peer.seen) > FORGET_TIMING_AFTER {
-            peer.forget_timing();
+            peer.seq = None;
+            peer.offset = None;
         }
         peer.used = used;
         peer.seen = now;
@@ -289,15 +261,6 @@ pub fn allowed(commands: &RemoteCommands, permission: Permission) -> Result<(), 
 }
 
 impl Peer {
-    /// Forgets its drive numbers, its clock's offset and its take-controls: its next session
-    /// may come from another clock (a reboot, another machine under this name).
-    fn forget_timing(&mut self) {
-        self.seq = None;
-        self.offset = None;
-        self.take_asked = None;
-        self.take_granted = None;
-    }
-
     /// Checks a take-control's or drive command's age (and a drive's order) at `now`; returns
     /// when it was sent, on this host's clock. A repeated or older drive `seq` is refused; so
     /// is a command the network held up for longer than its life, measured against the fastest
@@ -508,57 +471,6 @@ mod tests {
         );
         let refused = drive(&mut rules, 1020 * MS, "op", 2, 20).expect_err("lease gone");
         assert!(matches!(refused, CommandError::NoControl(_)));
-    }
-
-    #[test]
-    fn a_copy_of_a_granted_take_control_gives_no_control_once_it_ended() {
-        let mut rules = teleop();
-        let granted = |rules: &mut Rules, send: &Send| {
-            let answer = Ok(Accepted {
-                lease: Some(7),
-                ..Accepted::default()
-            });
-            rules.handle_answer(&send.peer, &send.request, &answer);
-        };
-        let first = take(&mut rules, 1000 * MS, "op", 500);
-        granted(&mut rules, &first);
-        // Its copy (the answer was lost on the way) while control holds: let through again.
-        let copy = |rules: &mut Rules, now| {
-            let payload = br#"{"class":"teleop","sent_ms":500}"#;
-            rules.handle_command(now, &key("take-control", "op"), Some(payload))
-        };
-        let again = copy(&mut rules, 1150 * MS).expect("control holds: its grant again");
-        let lease = Accepted {
-            lease: Some(7),
-            ..Accepted::default()
-        };
-        assert_eq!(
-            again.via,
-            Via::Answered(lease),
-            "nothing asked of the arbiter"
-        );
-        // A stop ends the control; a copy arriving after it gives none.
-        rules.handle_answer(
-            "remote:op",
-            &Request::Drive {
-                lease: 7,
-                linear: 0.0,
-                angular: 0.0,
-                ttl: None,
-            },
-            &Err(RequestError::Rejected(Rejected {
-                kind: Some(RejectionKind::Revoked),
-                reason: "a stop".into(),
-            })),
-        );
-        let refused = copy(&mut rules, 1300 * MS).expect_err("a copy after control ended");
-        assert!(
-            matches!(refused, CommandError::Replayed { sent_ms: 500 }),
-            "{refused}"
-        );
-        assert!(refused.lost_control());
-        // A new take-control, sent on purpose later, is granted.
-        take(&mut rules, 1400 * MS, "op", 900);
     }
 
     #[test]
@@ -773,74 +685,6 @@ mod tests {
                         return Err(TestCaseError::fail("a drive goes on the control port"));
                     };
                     prop_assert!(sent <= now && now - sent <= MAX_REMOTE_LIFE);
-                }
-            }
-        }
-
-        /// Take-controls fresh and copied, granted or refused, leases revoked and given up, in
-        /// any order: the arbiter is never asked for control by a take-control no newer than
-        /// one it granted (since control was last given up), and nothing panics.
-        #[test]
-        fn a_copy_of_a_granted_take_control_never_reaches_the_arbiter(
-            ops in proptest::collection::vec((0u8..5, 0usize..6, any::<bool>()), 1..80)
-        ) {
-            let mut rules = teleop();
-            let mut now = Duration::from_secs(5);
-            let mut sent_so_far: Vec<u64> = Vec::new();
-            let mut granted: Option<u64> = None;
-            let revoked = || Err(RequestError::Rejected(Rejected {
-                kind: Some(RejectionKind::Revoked),
-                reason: "a stop".into(),
-            }));
-            for (op, pick, grant) in ops {
-                now += 10 * MS;
-                let now_ms = now.as_millis() as u64;
-                match op {
-                    // A take-control: a copy of an earlier one (its bytes again), or a new one.
-                    0 | 1 => {
-                        let sent_ms = match sent_so_far.get(pick) {
-                            Some(&earlier) if op == 0 => earlier,
-                            _ => now_ms,
-                        };
-                        sent_so_far.push(sent_ms);
-                        let payload = format!(r#"{{"class":"teleop","sent_ms":{sent_ms}}}"#);
-                        let asked = rules.handle_command(now, &key("take-control", "op"), Some(payload.as_bytes()));
-                        if let Ok(send) = asked && let Via::Control { .. } = send.via {
-                            prop_assert!(
-                                granted.is_none_or(|granted| sent_ms > granted),
-                                "a copy (sent_ms {sent_ms}) asked for control after {granted:?} was granted"
-                            );
-                            let answer = if grant {
-                                granted = granted.max(Some(sent_ms));
-                                Ok(Accepted { lease: Some(7), ..Accepted::default() })
-                            } else {
-                                Err(RequestError::Rejected(Rejected {
-                                    kind: Some(RejectionKind::Latched),
-                                    reason: "a stop holds".into(),
-                                }))
-                            };
-                            rules.handle_answer(&send.peer, &send.request, &answer);
-                        }
-                    }
-                    // A drive, answered: the control was revoked, or it drove.
-                    2 => {
-                        let payload = format!(r#"{{"seq":{now_ms},"sent_ms":{now_ms},"linear":0.1,"angular":0.0}}"#);
-                        if let Ok(send) = rules.handle_command(now, &key("drive", "op"), Some(payload.as_bytes())) {
-                            let answer = if grant { Ok(Accepted::default()) } else { revoked() };
-                            rules.handle_answer(&send.peer, &send.request, &answer);
-                        }
-                    }
-                    // Control given up on purpose: a new session, from any clock.
-                    3 => {
-                        if let Ok(send) = rules.handle_command(now, &key("relinquish", "op"), Some(b"{}")) {
-                            rules.handle_answer(&send.peer, &send.request, &Ok(Accepted::default()));
-                            granted = None;
-                        }
-                    }
-                    // Garbage on the take-control key.
-                    _ => {
-                        let _ = rules.handle_command(now, &key("take-control", "op"), Some(&[pick as u8; 9]));
-                    }
                 }
             }
         }

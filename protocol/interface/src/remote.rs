@@ -193,16 +193,6 @@ pub enum CommandError {
         /// Its life, ms.
         life_ms: u128,
     },
-    /// A copy of a take-control that was already granted, arriving after that control ended
-    /// (a client sends copies of its take-control when no answer comes): the control it
-    /// asked for was given and has ended, so it does not give control again.
-    #[error(
-        "a copy of a take-control already granted (sent_ms {sent_ms}), and control ended since: take control again"
-    )]
-    Replayed {
-        /// The copy's `sent_ms`.
-        sent_ms: u64,
-    },
     /// The peer's control port could not be opened.
     #[error(transparent)]
     Port(#[from] ControlPortError),
@@ -454,7 +444,7 @@ impl CommandError {
     /// Whether the peer holds no control (see [`RemoteAnswer::lost_control`]).
     pub fn lost_control(&self) -> bool {
         match self {
-            Self::NoControl(_) | Self::Replayed { .. } => true,
+            Self::NoControl(_) => true,
             Self::Request(RequestError::Rejected(rejected)) => rejected.lost_control(),
             _ => false,
         }
