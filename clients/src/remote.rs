@@ -112,6 +112,12 @@ const MAX_PENDING_ANSWERS: usize = 8;
 /// Best-effort copies an e-stop is put as, beside its query.
 const ESTOP_COPIES: usize = 3;
 
+/// An e-stop query not answered this soon is asked again...
+const ESTOP_QUERY_AFTER: Duration = Duration::from_millis(150);
+
+/// ... up to this many queries in all.
+const ESTOP_QUERIES: usize = 3;
+
 /// Drives a robot through zenoh as remote peer `peer`, as a remote operator's program would:
 /// take control (a query, answered), drive (samples put on the fast lane: best effort,
 /// express, dropped rather than queued), stop (put and queried: whichever arrives first
@@ -279,27 +285,63 @@ impl RemoteController {
     }
 
     /// Sends `command` as a query and waits for the answer: accepted, or
-    /// [`RemoteError::Refused`].
+    /// [`RemoteError::Refused`]. An e-stop not answered within [`ESTOP_QUERY_AFTER`] is asked
+    /// again, the same bytes, up to [`ESTOP_QUERIES`] in all (over plain UDP a query or its
+    /// answer can be lost; a repeated stop only refreshes the same stop): the first answer is
+    /// the answer. Nothing else is repeated: a take-control held up and applied late could give
+    /// control after a stop and its release.
     fn ask(
         &mut self,
         kind: RemoteKind,
         command: &RemoteCommand,
     ) -> Result<RemoteAnswer, RemoteError> {
-        let replies = self
-            .session
-            .get(command_key(&self.robot, kind, &self.peer))
-            .payload(to_json(command))
-            .timeout(ANSWER_TIMEOUT)
-            .wait()
-            .map_err(|e| RemoteError::Zenoh(e.to_string()))?;
-        let reply = replies
-            .recv_timeout(ANSWER_TIMEOUT + Duration::from_secs(1))
-            .ok()
-            .flatten()
-            .ok_or(RemoteError::NoAnswer {
-                command: kind,
-                timeout: ANSWER_TIMEOUT,
-            })?;
+        let queries = match kind {
+            RemoteKind::Estop => ESTOP_QUERIES,
+            RemoteKind::Drive
+            | RemoteKind::TakeControl
+            | RemoteKind::Relinquish
+            | RemoteKind::Release
+            | RemoteKind::Resume
+            | RemoteKind::Lights
+            | RemoteKind::ClearFault => 1,
+        };
+        let payload = to_json(command);
+        let start = std::time::Instant::now();
+        let mut asked = Vec::new();
+        let reply = loop {
+            if asked.len() < queries && start.elapsed() >= ESTOP_QUERY_AFTER * asked.len() as u32 {
+                let replies = self
+                    .session
+                    .get(command_key(&self.robot, kind, &self.peer))
+                    .payload(payload.clone())
+                    .timeout(ANSWER_TIMEOUT)
+                    .wait()
+                    .map_err(|e| RemoteError::Zenoh(e.to_string()))?;
+                asked.push(Some(replies));
+            }
+            let mut reply = None;
+            for slot in &mut asked {
+                match slot.as_ref().map(|replies| replies.try_recv()) {
+                    Some(Ok(Some(answer))) => reply = Some(answer),
+                    Some(Ok(None)) | None => {}
+                    // Finished unanswered: nothing (no gateway of that name) answers it.
+                    Some(Err(_)) => *slot = None,
+                }
+            }
+            if let Some(reply) = reply {
+                break reply;
+            }
+            let finished = asked.len() == queries && asked.iter().all(Option::is_none);
+            if finished || start.elapsed() > ANSWER_TIMEOUT + Duration::from_secs(1) {
+                return Err(RemoteError::NoAnswer {
+                    command: kind,
+                    // In whole ms, for people.
+                    timeout: Duration::from_millis(start.elapsed().as_millis() as u64)
+                        .min(ANSWER_TIMEOUT),
+                });
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        };
         let answer = answer_of(&reply);
         if answer.accepted {
             Ok(answer)

@@ -208,8 +208,8 @@ pub fn estop(args: &EstopArgs) -> anyhow::Result<ExitCode> {
     if let Some(settings) = args.remote.settings() {
         let answer = RemoteController::connect(&settings, robot, &name)?.stop(&args.reason)?;
         println!(
-            "stop #{} latched, owned by {}: `scout release --remote` to release it",
-            answer.stop.unwrap_or(0),
+            "stop{} latched, owned by {}: `scout release --remote` to release it",
+            answer.stop.map(|id| format!(" #{id}")).unwrap_or_default(),
             peer_client_name(&name)
         );
         return Ok(ExitCode::SUCCESS);

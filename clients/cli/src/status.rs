@@ -68,7 +68,13 @@ fn remote(robot: &str, settings: &SessionSettings, endpoint: &str) -> anyhow::Re
         timeout: REMOTE_WAIT,
     };
     let mut json = reader.next_timeout(REMOTE_WAIT)?.ok_or_else(silent)?;
-    let info = reader.info(robot, ANSWER_TIMEOUT)?.ok_or_else(silent)?;
+    let info = reader.info(robot, ANSWER_TIMEOUT)?.ok_or_else(|| {
+        anyhow::anyhow!(
+            "robot '{robot}' published its status through {endpoint} but did not answer \
+             scout/{robot}/info within {ANSWER_TIMEOUT:?}: does the access control allow \
+             querying it?"
+        )
+    })?;
     json["links"] = info["links"].clone();
     Ok(json)
 }
