@@ -20,8 +20,9 @@ pub const MAX_REMOTE_PEERS: usize = 16;
 /// The longest a remote drive command may live: the chassis' own timeout.
 pub const MAX_REMOTE_LIFE: Duration = Duration::from_millis(500);
 
-/// A peer without control silent this long has its timing (drive numbers, clock offset)
-/// forgotten: no command is held up that long, and its next session may use another clock.
+/// A peer silent this long has its timing (drive numbers, clock offset) and any lease the
+/// rules still knew forgotten: no command is held up that long, no lease outlives its commands
+/// that long, and its next session may use another clock.
 pub const FORGET_TIMING_AFTER: Duration = Duration::from_secs(60);
 
 /// How fast a peer's clock may fall behind the gateway's, parts per million: the learned
@@ -237,9 +238,12 @@ impl Rules {
             }
         };
         let peer = &mut self.peers[index];
-        // Without control and silent for longer than anything zenoh holds up (its session
-        // lease is 10 s by default): its timing is forgotten, as after a relinquish.
-        if peer.lease.is_none() && now.saturating_sub(peer.seen) > FORGET_TIMING_AFTER {
+        // Silent for longer than anything zenoh holds up (its session lease is 10 s by
+        // default): its timing is forgotten, as after a relinquish. A lease it held is gone
+        // too (the arbiter ends one within 500 ms of its last command), though no answer said
+        // so: a client that died without giving control up.
+        if now.saturating_sub(peer.seen) > FORGET_TIMING_AFTER {
+            peer.lease = None;
             peer.seq = None;
             peer.offset = None;
         }
@@ -301,8 +305,9 @@ impl Peer {
         let delay = now.as_micros() as i128 - i128::from(sent_ms) * 1000;
         let offset = match self.offset {
             Some((offset, at)) => {
-                let drift = now.saturating_sub(at).as_micros() * u128::from(MAX_CLOCK_DRIFT_PPM)
-                    / 1_000_000;
+                // At most what drifts while the peer is known: silent longer, it is forgotten.
+                let since = now.saturating_sub(at).min(FORGET_TIMING_AFTER);
+                let drift = since.as_micros() * u128::from(MAX_CLOCK_DRIFT_PPM) / 1_000_000;
                 offset
                     .saturating_add(i128::try_from(drift).unwrap_or(i128::MAX))
                     .min(delay)
@@ -662,6 +667,20 @@ mod tests {
         behind(&mut rules, 30_000 * MS).expect_err("29 s late: maybe held up");
         let later = 30_000 * MS + FORGET_TIMING_AFTER + MS;
         behind(&mut rules, later).expect("forgotten after a silent minute");
+
+        // A client that died holding control (no answer told the rules it ended): forgotten
+        // after a silent minute all the same, lease included.
+        let mut rules = teleop();
+        let send = take(&mut rules, 1000 * MS, "op", 0);
+        let granted = Ok(Accepted {
+            lease: Some(7),
+            ..Accepted::default()
+        });
+        rules.handle_answer(&send.peer, &send.request, &granted);
+        behind(&mut rules, 30_000 * MS).expect_err("29 s late: maybe held up");
+        let later = 30_000 * MS + FORGET_TIMING_AFTER + MS;
+        behind(&mut rules, later).expect("forgotten after a silent minute");
+        assert_eq!(rules.peers[0].lease, None);
     }
 
     proptest! {
