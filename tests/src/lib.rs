@@ -341,6 +341,59 @@ pub fn robot_name(test: &str) -> String {
 #[derive(Debug)]
 pub struct TempDir(PathBuf);
 
+/// A working directory whose `config/iceoryx2.toml` (iceoryx2 reads it first, from the
+/// working directory) gives the processes started there a resource prefix of their own: what
+/// they leave in shared memory is seen by them alone, not cleaned up by the other tests'
+/// clients running beside them.
+#[derive(Debug)]
+pub struct Iceoryx2Domain {
+    dir: TempDir,
+    prefix: String,
+}
+
+impl Iceoryx2Domain {
+    /// A new domain for `test`.
+    pub fn new(test: &str) -> Self {
+        let dir = TempDir::new(test);
+        let config = dir.path().join("config");
+        std::fs::create_dir_all(&config).expect("create the iceoryx2 config directory");
+        let prefix = format!("iox2t{}_", std::process::id() % 100_000);
+        std::fs::write(
+            config.join("iceoryx2.toml"),
+            format!("[global]\nprefix = \"{prefix}\"\n"),
+        )
+        .expect("write the iceoryx2 config");
+        Self { dir, prefix }
+    }
+
+    /// The working directory to start processes in.
+    pub fn dir(&self) -> &std::path::Path {
+        self.dir.path()
+    }
+}
+
+impl Drop for Iceoryx2Domain {
+    /// Removes what is left of the domain's resources (iceoryx2 keeps a small management file
+    /// per prefix) under iceoryx2's default root and in `/dev/shm`.
+    fn drop(&mut self) {
+        let mut dirs = vec![PathBuf::from("/dev/shm"), PathBuf::from("/tmp/iceoryx2")];
+        while let Some(dir) = dirs.pop() {
+            for entry in std::fs::read_dir(&dir).into_iter().flatten().flatten() {
+                let path = entry.path();
+                if path.is_dir() {
+                    dirs.push(path);
+                } else if entry
+                    .file_name()
+                    .to_string_lossy()
+                    .starts_with(&self.prefix)
+                {
+                    let _ = std::fs::remove_file(path);
+                }
+            }
+        }
+    }
+}
+
 impl TempDir {
     /// Creates an empty directory named after `name` (a [`robot_name`]) in the system's
     /// temporary directory.
@@ -386,10 +439,20 @@ impl Gateway {
 
     /// Starts `scout-gateway` with `args` and the environment variables `env` set.
     pub fn start_with_env(args: &[&str], env: &[(&str, &str)]) -> Gateway {
+        Self::start_at(None, args, env)
+    }
+
+    /// [`Gateway::start_with_env`] in the working directory `dir` (where an
+    /// `config/iceoryx2.toml` gives it iceoryx2 resources of its own: see [`Iceoryx2Domain`]).
+    pub fn start_at(dir: Option<&std::path::Path>, args: &[&str], env: &[(&str, &str)]) -> Gateway {
         let zenoh = args
             .iter()
             .any(|a| a.starts_with("--zenoh") || *a == "--remote-commands");
-        let mut child = command("scout-gateway")
+        let mut command = command("scout-gateway");
+        if let Some(dir) = dir {
+            command.current_dir(dir);
+        }
+        let mut child = command
             .env("RUST_LOG", "info")
             .envs(env.iter().copied())
             .args(args)
@@ -738,7 +801,18 @@ pub fn drive_until_moving(sim: &mut Sim, name: &str, args: &[&str], limit: Durat
 /// `scout doctor ARGS --json` (ARGS giving `--listen` too), run to its end: the exit code and
 /// the checks, one JSON object each.
 pub fn doctor(args: &[&str]) -> (Option<i32>, Vec<serde_json::Value>) {
+    doctor_at(None, args)
+}
+
+/// [`doctor`] in the working directory `dir` (see [`Iceoryx2Domain`]).
+pub fn doctor_at(
+    dir: Option<&std::path::Path>,
+    args: &[&str],
+) -> (Option<i32>, Vec<serde_json::Value>) {
     let mut doctor = command("scout");
+    if let Some(dir) = dir {
+        doctor.current_dir(dir);
+    }
     doctor.arg("doctor").args(args).arg("--json");
     let output = run_with_input(doctor, b"", Duration::from_secs(120));
     let checks = String::from_utf8_lossy(&output.stdout)

@@ -426,41 +426,35 @@ fn doctor_reads_the_robot_through_zenoh_when_asked() {
     assert_eq!(verdict(&checks, "zenoh"), "fail", "{checks:#?}");
 }
 
-/// A gateway started and SIGKILLed: what `scout doctor --name` then says of iceoryx2.
-fn doctor_after_a_killed_gateway(name: &str) -> Value {
-    let mut gateway = Gateway::start(&["--sim", "--name", name]);
-    let states = connect(name).subscribe().expect("subscribe");
-    wait_for_state(&states, Duration::from_secs(10), |s| {
-        s["link"]["state"] == "ok"
-    });
-    drop(states);
-    gateway.signal(nix::sys::signal::Signal::SIGKILL);
-    assert_eq!(gateway.wait_exit(Duration::from_secs(10)), None, "killed");
-    let (_, checks) = doctor(&["--name", name]);
-    check(&checks, "iceoryx2").clone()
-}
-
+/// A gateway started and SIGKILLed: what `scout doctor --name` then says of iceoryx2. Both run
+/// in an iceoryx2 domain of their own: any other test's client connecting meanwhile would
+/// remove what the killed gateway left (CI saw five tries in a row lose that race).
 #[test]
 fn what_a_killed_gateway_left_in_shared_memory_is_removed_and_named() {
     let name = robot_name("doctor-leftovers");
-    // Any iceoryx2 client that connects between the kill and the doctor (the other tests run
-    // beside this one, and CI saw two tries in a row lose) removes what dead processes left:
-    // up to five tries, each saying so.
-    let mut leftovers = doctor_after_a_killed_gateway(&name);
-    for _ in 1..5 {
-        if leftovers["verdict"] != "pass" {
-            break;
-        }
-        eprintln!("the killed gateway's resources were removed before the doctor ran; again");
-        leftovers = doctor_after_a_killed_gateway(&name);
+    let domain = scout_system_tests::Iceoryx2Domain::new(&name);
+    let mut gateway = Gateway::start_at(Some(domain.dir()), &["--sim", "--name", &name], &[]);
+    let deadline = std::time::Instant::now() + Duration::from_secs(10);
+    while !gateway.log().contains("silent -> ok") {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the gateway never drove the simulator: {}",
+            gateway.log()
+        );
+        std::thread::sleep(Duration::from_millis(20));
     }
+    gateway.signal(nix::sys::signal::Signal::SIGKILL);
+    assert_eq!(gateway.wait_exit(Duration::from_secs(10)), None, "killed");
+    let doctor_here = || scout_system_tests::doctor_at(Some(domain.dir()), &["--name", &name]);
+    let (_, checks) = doctor_here();
+    let leftovers = check(&checks, "iceoryx2").clone();
     assert_eq!(leftovers["verdict"], "warn", "{leftovers}");
     let detail = leftovers["detail"].as_str().unwrap_or_default();
     assert!(
         detail.contains(&format!("the gateway of robot {name}")),
         "{leftovers}"
     );
-    let (_, again) = doctor(&["--name", &name]);
+    let (_, again) = doctor_here();
     assert_eq!(
         check(&again, "iceoryx2")["verdict"],
         "pass",
