@@ -135,6 +135,8 @@ pub struct RemoteController {
     drives: zenoh::pubsub::Publisher<'static>,
     estops: zenoh::pubsub::Publisher<'static>,
     pending: Vec<zenoh::handlers::FifoChannelHandler<zenoh::query::Reply>>,
+    /// How long a query waits for its answer.
+    answer_timeout: Duration,
 }
 
 impl std::fmt::Debug for RemoteController {
@@ -175,7 +177,14 @@ impl RemoteController {
             drives,
             estops,
             pending: Vec::new(),
+            answer_timeout: ANSWER_TIMEOUT,
         })
+    }
+
+    /// Waits at most `timeout` for each answer from now on (default [`ANSWER_TIMEOUT`]): a
+    /// program that asks again on its own, on a link that loses queries, waits less.
+    pub fn set_answer_timeout(&mut self, timeout: Duration) {
+        self.answer_timeout = timeout;
     }
 
     /// Takes control as `class` (a query; the gateway's answer returned).
@@ -217,7 +226,7 @@ impl RemoteController {
                 .session
                 .get(command_key(&self.robot, RemoteKind::Drive, &self.peer))
                 .payload(payload)
-                .timeout(ANSWER_TIMEOUT)
+                .timeout(self.answer_timeout)
                 .wait()
                 .map_err(|e| RemoteError::Zenoh(e.to_string()))?;
             self.pending.push(replies);
@@ -314,7 +323,7 @@ impl RemoteController {
                     .session
                     .get(command_key(&self.robot, kind, &self.peer))
                     .payload(payload.clone())
-                    .timeout(ANSWER_TIMEOUT)
+                    .timeout(self.answer_timeout)
                     .wait()
                     .map_err(|e| RemoteError::Zenoh(e.to_string()))?;
                 asked.push(Some(replies));
@@ -332,12 +341,12 @@ impl RemoteController {
                 break reply;
             }
             let finished = asked.len() == queries && asked.iter().all(Option::is_none);
-            if finished || start.elapsed() > ANSWER_TIMEOUT + Duration::from_secs(1) {
+            if finished || start.elapsed() > self.answer_timeout + Duration::from_secs(1) {
                 return Err(RemoteError::NoAnswer {
                     command: kind,
                     // In whole ms, for people.
                     timeout: Duration::from_millis(start.elapsed().as_millis() as u64)
-                        .min(ANSWER_TIMEOUT),
+                        .min(self.answer_timeout),
                 });
             }
             std::thread::sleep(Duration::from_millis(2));

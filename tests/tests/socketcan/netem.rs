@@ -379,6 +379,10 @@ fn fast_lane_teleop_drives_through_loss_a_partition_stops_healing_restarts_nothi
     controller
         .take_control(scout_clients::Class::Teleop)
         .expect("take control");
+    // Over plain UDP a take-control or its answer can be lost: the teleop below takes control
+    // again at the next answer that says it has none, rather than wait the default 5 s (CI saw
+    // one lost retake cost a quarter of the lossy phase).
+    controller.set_answer_timeout(Duration::from_secs(1));
     // Streaming at once: a gap longer than the teleop's age would end its control.
     let running = Arc::new(AtomicBool::new(true));
     let lost_control = Arc::new(std::sync::atomic::AtomicU64::new(0));
