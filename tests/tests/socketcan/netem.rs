@@ -339,10 +339,18 @@ fn fast_lane_teleop_drives_through_loss_a_partition_stops_healing_restarts_nothi
     };
     let name = robot_name("netem-fast");
     let endpoint = format!("udp/127.0.0.1:{}", free_port());
+    // The emulated CPU stalls the processes for up to a quarter second: a teleop's default
+    // life (250 ms) would end its control at every stall. The arbiter's longest (500 ms)
+    // tests what the link does, not what the emulation does.
+    let config = std::env::temp_dir().join(format!("{name}.toml"));
+    std::fs::write(&config, "[arbiter]\nteleop_max_age_ms = 500\n").expect("write the config");
+    let config = config.to_string_lossy().into_owned();
     let gateway = Gateway::start(&[
         "--sim",
         "--name",
         &name,
+        "--config",
+        &config,
         "--zenoh-listen",
         &endpoint,
         "--remote-commands",
@@ -376,13 +384,21 @@ fn fast_lane_teleop_drives_through_loss_a_partition_stops_healing_restarts_nothi
             .expect("connect a remote controller")
     };
     let (mut controller, mut officer) = (connect("laptop"), connect("officer"));
-    controller
-        .take_control(scout_clients::Class::Teleop)
-        .expect("take control");
-    // Over plain UDP a take-control or its answer can be lost: the teleop below takes control
-    // again at the next answer that says it has none, rather than wait the default 5 s (CI saw
-    // one lost retake cost a quarter of the lossy phase).
+    // Over plain UDP a take-control or its answer can be lost: the teleop asks again rather
+    // than wait the default 5 s (CI saw one lost retake cost a quarter of the lossy phase).
     controller.set_answer_timeout(Duration::from_secs(1));
+    // Control is taken through the loss, as an operator on that link would: the gateway then
+    // ages the drives against a delivery through the same delay. (Learned before the delay, it
+    // would take every drive for 100 ms old, and a stall of the emulated CPU would end the
+    // control.)
+    loopback.change(&["delay", "100ms", "loss", "10%"]);
+    let deadline = Instant::now() + LIMIT;
+    while let Err(error) = controller.take_control(scout_clients::Class::Teleop) {
+        assert!(
+            Instant::now() < deadline,
+            "no take-control through 100 ms and 10 % loss: {error}"
+        );
+    }
     // Streaming at once: a gap longer than the teleop's age would end its control.
     let running = Arc::new(AtomicBool::new(true));
     let lost_control = Arc::new(std::sync::atomic::AtomicU64::new(0));
@@ -393,7 +409,6 @@ fn fast_lane_teleop_drives_through_loss_a_partition_stops_healing_restarts_nothi
         Arc::clone(&retake),
         Arc::clone(&lost_control),
     );
-    loopback.change(&["delay", "100ms", "loss", "10%"]);
     // Through 100 ms and 10 % loss the chassis reaches the commanded speed and keeps it: a
     // lost drive is replaced by the next, nothing waits behind it.
     let info = || {
