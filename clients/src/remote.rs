@@ -68,13 +68,7 @@ impl RemoteStates {
             let text = error.payload().try_to_string().unwrap_or_default();
             RemoteError::Zenoh(format!("the information query failed: {text}"))
         })?;
-        let text = sample
-            .payload()
-            .try_to_string()
-            .map_err(|e| RemoteError::Zenoh(e.to_string()))?;
-        serde_json::from_str(&text)
-            .map(Some)
-            .map_err(|e| RemoteError::Zenoh(format!("the information is not JSON: {e}")))
+        json_of(sample.payload(), "the information").map(Some)
     }
 
     /// The next state (or status) JSON, waiting at most `timeout`.
@@ -89,14 +83,16 @@ impl RemoteStates {
         else {
             return Ok(None);
         };
-        let text = sample
-            .payload()
-            .try_to_string()
-            .map_err(|e| RemoteError::Zenoh(e.to_string()))?;
-        serde_json::from_str(&text)
-            .map(Some)
-            .map_err(|e| RemoteError::Zenoh(format!("a sample is not JSON: {e}")))
+        json_of(sample.payload(), "a sample").map(Some)
     }
+}
+
+/// The JSON in `payload` (`what` names it in the error).
+fn json_of(payload: &zenoh::bytes::ZBytes, what: &str) -> Result<serde_json::Value, RemoteError> {
+    let text = payload
+        .try_to_string()
+        .map_err(|e| RemoteError::Zenoh(e.to_string()))?;
+    serde_json::from_str(&text).map_err(|e| RemoteError::Zenoh(format!("{what} is not JSON: {e}")))
 }
 
 /// Remote commands sent as a query: how long to wait for the gateway's answer.

@@ -437,6 +437,21 @@ impl Gateway {
         Self::start_with_env(args, &[("SCOUT_RUN_DIR", run_dir.as_ref())])
     }
 
+    /// Starts `scout-gateway` on the simulated chassis as robot `name`, its zenoh listening on
+    /// `endpoint` with remote e-stop, teleop and release on, and `extra` arguments.
+    pub fn start_remote(name: &str, endpoint: &str, extra: &[&str]) -> Gateway {
+        let args = [
+            "--sim",
+            "--name",
+            name,
+            "--zenoh-listen",
+            endpoint,
+            "--remote-commands",
+            "estop,teleop,release",
+        ];
+        Self::start(&[&args[..], extra].concat())
+    }
+
     /// Starts `scout-gateway` with `args` and the environment variables `env` set.
     pub fn start_with_env(args: &[&str], env: &[(&str, &str)]) -> Gateway {
         Self::start_at(None, args, env)

@@ -122,8 +122,8 @@ fn cannot_connect(endpoint: &str, config_file: Option<&str>, error: &RemoteError
 
 /// The gateway's clock (`now_ms` in its information) less this host's, ms, and how far off
 /// that may be (half the round trip, and 1 ms for the gateway's whole ms), from the probe
-/// answered fastest: as NTP does, taking the
-/// gateway's reading to fall halfway through the round trip. `None` from a gateway that does
+/// answered fastest: as NTP does, taking the gateway's reading to fall halfway through the
+/// round trip. `None` from a gateway that does
 /// not give its clock. Remote commands need no common clock (the gateway learns each peer's
 /// offset), so this is shown, not judged.
 fn clock_offset(

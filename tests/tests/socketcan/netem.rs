@@ -175,15 +175,7 @@ fn remote_teleop_through_delay_and_loss_then_a_partition() {
     let name = robot_name("netem");
     let port = free_port();
     let endpoint = format!("tcp/127.0.0.1:{port}");
-    let gateway = Gateway::start(&[
-        "--sim",
-        "--name",
-        &name,
-        "--zenoh-listen",
-        &endpoint,
-        "--remote-commands",
-        "estop,teleop,release",
-    ]);
+    let gateway = Gateway::start_remote(&name, &endpoint, &[]);
     let state = connect_within(&name, LIMIT).subscribe().expect("state");
     // The gateway listens a moment after its services are up (long in the VM).
     let deadline = Instant::now() + LIMIT;
@@ -345,17 +337,7 @@ fn fast_lane_teleop_drives_through_loss_a_partition_stops_healing_restarts_nothi
     let config = std::env::temp_dir().join(format!("{name}.toml"));
     std::fs::write(&config, "[arbiter]\nteleop_max_age_ms = 500\n").expect("write the config");
     let config = config.to_string_lossy().into_owned();
-    let gateway = Gateway::start(&[
-        "--sim",
-        "--name",
-        &name,
-        "--config",
-        &config,
-        "--zenoh-listen",
-        &endpoint,
-        "--remote-commands",
-        "estop,teleop,release",
-    ]);
+    let gateway = Gateway::start_remote(&name, &endpoint, &["--config", &config]);
     let robot = connect_within(&name, LIMIT);
     let state = robot.subscribe().expect("state");
     let status = robot.status().expect("status");

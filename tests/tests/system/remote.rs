@@ -158,15 +158,7 @@ fn remote_commands_are_ignored_by_default_and_counted() {
 fn enabled_remote_commands_go_through_the_arbiter_and_bad_input_is_rejected() {
     let name = robot_name("remote-on");
     let port = free_port();
-    let _gateway = Gateway::start(&[
-        "--sim",
-        "--name",
-        &name,
-        "--zenoh-listen",
-        &tcp(port),
-        "--remote-commands",
-        "estop,teleop,release",
-    ]);
+    let _gateway = Gateway::start_remote(&name, &tcp(port), &[]);
     let robot = connect(&name);
     let status = robot.status().expect("status");
     let session = zenoh_session("client", &[], &[tcp(port)]);
@@ -439,15 +431,7 @@ fn drives_put_on_the_fast_lane(endpoint: &str) {
 fn scout_drives_stops_and_releases_a_remote_robot() {
     let name = robot_name("remote-scout");
     let endpoint = format!("udp/127.0.0.1:{}", free_port());
-    let _gateway = Gateway::start(&[
-        "--sim",
-        "--name",
-        &name,
-        "--zenoh-listen",
-        &endpoint,
-        "--remote-commands",
-        "estop,teleop,release",
-    ]);
+    let _gateway = Gateway::start_remote(&name, &endpoint, &[]);
     let robot = connect(&name);
     let status = robot.status().expect("status");
     let state = robot.subscribe().expect("subscribe");

@@ -37,15 +37,7 @@ fn keyboard_teleop_drives_stops_and_restores_the_terminal() {
 fn keyboard_teleop_through_zenoh_drives_stops_and_restores_the_terminal() {
     let name = robot_name("teleop-remote");
     let endpoint = format!("udp/127.0.0.1:{}", free_port());
-    let _gateway = Gateway::start(&[
-        "--sim",
-        "--name",
-        &name,
-        "--zenoh-listen",
-        &endpoint,
-        "--remote-commands",
-        "estop,teleop,release",
-    ]);
+    let _gateway = Gateway::start_remote(&name, &endpoint, &[]);
     keyboard_teleop(&name, &["--remote", &endpoint], "remote:keyboard");
 }
 
