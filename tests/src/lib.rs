@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 use std::process::{Command, Output, Stdio};
-use std::sync::OnceLock;
+use std::sync::{Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
 /// The directory holding the workspace's binaries for the profile these tests were built with.
@@ -1021,5 +1021,86 @@ impl Pki {
 impl Drop for Pki {
     fn drop(&mut self) {
         let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+/// Releases the stops the gateway latches for its own gaps (a tick overrun, a silent
+/// simulator: the VM's emulated CPU stalls now and then), as an operator would after checking
+/// the robot, for as long as it lives; the other owners' stops it leaves alone. Tests of a link,
+/// not of the host's speed, run one; a release restarts nothing, so the rules they check hold.
+#[derive(Debug)]
+pub struct GapStopReleaser {
+    running: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    released: std::sync::Arc<Mutex<Vec<String>>>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl GapStopReleaser {
+    /// Watches the status of gateway `name` on a thread of its own.
+    pub fn start(name: &str) -> Self {
+        use std::sync::atomic::{AtomicBool, Ordering};
+        let running = std::sync::Arc::new(AtomicBool::new(true));
+        let released = std::sync::Arc::new(Mutex::new(Vec::new()));
+        let thread = {
+            let (name, running, released) = (
+                name.to_owned(),
+                std::sync::Arc::clone(&running),
+                std::sync::Arc::clone(&released),
+            );
+            std::thread::spawn(move || {
+                let robot = connect_within(&name, Duration::from_secs(30));
+                let status = robot.status().expect("status");
+                while running.load(Ordering::Relaxed) {
+                    let Ok(Some(now)) = status.latest(Duration::from_millis(100)) else {
+                        continue;
+                    };
+                    let now = scout_clients::interface::json::status_json(
+                        &now,
+                        scout_clients::monotonic_ns(),
+                    );
+                    let gaps: Vec<String> = now["stops"]
+                        .as_array()
+                        .into_iter()
+                        .flatten()
+                        .filter(|stop| stop["owner"] == "gateway")
+                        .map(|stop| format!("{} ({})", stop["reason"], stop["cause"]))
+                        .collect();
+                    if gaps.is_empty() {
+                        std::thread::sleep(Duration::from_millis(100));
+                        continue;
+                    }
+                    // Refused while its cause persists: asked again at the next status.
+                    let (code, _, stderr) =
+                        scout(&["release", "--name", &name, "--owner", "gateway"]);
+                    if code == Some(0) {
+                        eprintln!("released the gateway's stops {gaps:?}");
+                        released.lock().expect("released").extend(gaps);
+                    } else {
+                        eprintln!("releasing the gateway's stops {gaps:?}: {stderr}");
+                        std::thread::sleep(Duration::from_millis(200));
+                    }
+                }
+            })
+        };
+        Self {
+            running,
+            released,
+            thread: Some(thread),
+        }
+    }
+
+    /// The gateway's stops released so far.
+    pub fn released(&self) -> Vec<String> {
+        self.released.lock().expect("released").clone()
+    }
+}
+
+impl Drop for GapStopReleaser {
+    fn drop(&mut self) {
+        self.running
+            .store(false, std::sync::atomic::Ordering::Relaxed);
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
     }
 }
