@@ -559,24 +559,35 @@ pub fn connect_within(name: &str, limit: Duration) -> scout_clients::client::Rob
     }
 }
 
-/// Polls `next` until it gives a JSON value that satisfies `wanted`, at most `limit`.
-fn wait_for(
-    what: &str,
+/// Polls `next` until it gives a JSON value that satisfies `wanted`, at most `limit`: that
+/// value, or the last one seen (`Null` if none).
+fn try_wait_for(
     limit: Duration,
     mut next: impl FnMut() -> Option<serde_json::Value>,
     wanted: impl Fn(&serde_json::Value) -> bool,
-) -> serde_json::Value {
+) -> Result<serde_json::Value, serde_json::Value> {
     let deadline = Instant::now() + limit;
     let mut last = serde_json::Value::Null;
     while Instant::now() < deadline {
         if let Some(value) = next() {
             if wanted(&value) {
-                return value;
+                return Ok(value);
             }
             last = value;
         }
     }
-    panic!("no wanted {what} within {limit:?}; last: {last}");
+    Err(last)
+}
+
+/// As [`try_wait_for`], panicking at the deadline.
+fn wait_for(
+    what: &str,
+    limit: Duration,
+    next: impl FnMut() -> Option<serde_json::Value>,
+    wanted: impl Fn(&serde_json::Value) -> bool,
+) -> serde_json::Value {
+    try_wait_for(limit, next, wanted)
+        .unwrap_or_else(|last| panic!("no wanted {what} within {limit:?}; last: {last}"))
 }
 
 /// Waits for a state that satisfies `wanted`, at most `limit`; returns it as JSON.
@@ -597,22 +608,40 @@ pub fn wait_for_state(
     wait_for("state", limit, next, wanted)
 }
 
+/// The arbiter's newest status as JSON, if one came within `wait`.
+pub fn status_now(
+    reader: &scout_clients::control::StatusReader,
+    wait: Duration,
+) -> Option<serde_json::Value> {
+    let status = reader.latest(wait).expect("read status")?;
+    Some(scout_clients::interface::json::status_json(
+        &status,
+        scout_clients::monotonic_ns(),
+    ))
+}
+
 /// Waits for an arbiter status that satisfies `wanted`, at most `limit`; returns it as JSON.
 pub fn wait_for_status(
     reader: &scout_clients::control::StatusReader,
     limit: Duration,
     wanted: impl Fn(&serde_json::Value) -> bool,
 ) -> serde_json::Value {
-    let next = || {
-        let status = reader
-            .latest(Duration::from_millis(50))
-            .expect("read status")?;
-        Some(scout_clients::interface::json::status_json(
-            &status,
-            scout_clients::monotonic_ns(),
-        ))
-    };
+    let next = || status_now(reader, Duration::from_millis(50));
     wait_for("status", limit, next, wanted)
+}
+
+/// As [`wait_for_status`], but the last status seen (`Null` if none) at the deadline instead
+/// of a panic: for a test that acts again, as a person would, when nothing came.
+pub fn try_wait_for_status(
+    reader: &scout_clients::control::StatusReader,
+    limit: Duration,
+    wanted: impl Fn(&serde_json::Value) -> bool,
+) -> Result<serde_json::Value, serde_json::Value> {
+    try_wait_for(
+        limit,
+        || status_now(reader, Duration::from_millis(50)),
+        wanted,
+    )
 }
 
 /// A `scout` process in the background (a driver, a router), killed when dropped.
@@ -1051,13 +1080,9 @@ impl GapStopReleaser {
                 let robot = connect_within(&name, Duration::from_secs(30));
                 let status = robot.status().expect("status");
                 while running.load(Ordering::Relaxed) {
-                    let Ok(Some(now)) = status.latest(Duration::from_millis(100)) else {
+                    let Some(now) = status_now(&status, Duration::from_millis(100)) else {
                         continue;
                     };
-                    let now = scout_clients::interface::json::status_json(
-                        &now,
-                        scout_clients::monotonic_ns(),
-                    );
                     let gaps: Vec<String> = now["stops"]
                         .as_array()
                         .into_iter()

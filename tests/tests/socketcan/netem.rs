@@ -8,8 +8,8 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use scout_system_tests::{
-    GapStopReleaser, Gateway, connect_within, free_port, robot_name, try_zenoh_session,
-    wait_for_state, zenoh_query,
+    GapStopReleaser, Gateway, connect_within, free_port, robot_name, try_wait_for_status,
+    try_zenoh_session, wait_for_state, zenoh_query,
 };
 use zenoh::Wait;
 
@@ -500,28 +500,9 @@ fn fast_lane_teleop_drives_through_loss_a_partition_stops_healing_restarts_nothi
     let mut answers = Vec::new();
     let latched = loop {
         answers.push(officer.stop("through loss"));
-        let pressed = Instant::now();
-        let latched = loop {
-            match status
-                .latest(Duration::from_millis(50))
-                .expect("read status")
-            {
-                Some(now) => {
-                    let now = scout_clients::interface::json::status_json(
-                        &now,
-                        scout_clients::monotonic_ns(),
-                    );
-                    if officers(&now) > 0 || pressed.elapsed() > Duration::from_secs(3) {
-                        break now;
-                    }
-                }
-                None if pressed.elapsed() > Duration::from_secs(3) => {
-                    break serde_json::Value::Null;
-                }
-                None => {}
-            }
-        };
-        if officers(&latched) > 0 {
+        if let Ok(latched) =
+            try_wait_for_status(&status, Duration::from_secs(3), |s| officers(s) > 0)
+        {
             break latched;
         }
         assert!(
