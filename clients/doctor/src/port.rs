@@ -134,8 +134,12 @@ pub fn listen(spec: &DeviceSpec, window: Duration, checks: &mut Vec<Check>) -> O
     ));
     let mut traffic = Traffic::new();
     let mut buffer = [0_u8; 4096];
-    let deadline = started + window;
-    while Instant::now() < deadline {
+    // The window counts from the open, and what arrived is read once more after it ends: a
+    // doctor the host stalls past its window (a loaded Jetson) still counts what the kernel
+    // queued meanwhile, rather than reporting a silent bus.
+    let deadline = Instant::now() + window;
+    loop {
+        let ended = Instant::now() >= deadline;
         let now = clock(Instant::now());
         let result = device.receive(now, true, &mut buffer, |event| traffic.handle(&event, now));
         if let Err(error) = result {
@@ -145,6 +149,9 @@ pub fn listen(spec: &DeviceSpec, window: Duration, checks: &mut Vec<Check>) -> O
                 "a CAN bus-off or error-passive controller (see can.state), or the adapter was \
                  unplugged",
             ));
+            break;
+        }
+        if ended {
             break;
         }
         std::thread::sleep(Duration::from_millis(5));

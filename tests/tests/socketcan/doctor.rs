@@ -142,7 +142,12 @@ fn doctor_on_a_bus_with_a_v2_chassis_names_it_and_what_to_do() {
     ]);
     sim.wait_sending();
     let (_, checks) = doctor(bus.name());
-    assert_eq!(check(&checks, "traffic")["verdict"], "pass", "{checks:#?}");
+    assert_eq!(
+        check(&checks, "traffic")["verdict"],
+        "pass",
+        "{checks:#?}\nthe simulator now: {}",
+        sim.stats_or_state()
+    );
     let protocol = check(&checks, "protocol");
     assert_eq!(protocol["verdict"], "pass", "{checks:#?}");
     assert!(
