@@ -342,6 +342,9 @@ pub struct Source {
     lease: Option<Lease>,
     /// Why its last lease ended.
     revoked: Option<String>,
+    /// When its control last ended other than by its own relinquish (a stop, a takeover, a
+    /// lapse): a take-control it sent before then is outdated.
+    lost_control: Option<Duration>,
     heartbeat: Option<Heartbeat>,
     budget: TokenBucket,
     /// When it last sent a request.
@@ -389,6 +392,8 @@ pub struct Arbiter {
     rejections: [u64; REJECTION_COUNTERS],
     urgent_stop: bool,
     newest_stop: u64,
+    /// When a release last left no stop: a take-control sent before then is outdated.
+    released: Option<Duration>,
     next_lease: u64,
     history: VecDeque<(Duration, String)>,
 }
@@ -410,6 +415,7 @@ impl Arbiter {
             rejections: [0; REJECTION_COUNTERS],
             urgent_stop: false,
             newest_stop: 0,
+            released: None,
             next_lease: (u64::from(instance) << 32) | 1,
             history: VecDeque::with_capacity(HISTORY),
         }
@@ -557,7 +563,7 @@ impl Arbiter {
             Request::Release { target, through } => self.release(now, origin, &target, through),
             Request::TakeControl { class } => {
                 let index = self.admit(now, origin)?;
-                self.take_control(now, index, class)
+                self.take_control(now, index, class, sent)
             }
             Request::Drive {
                 lease,
@@ -698,7 +704,17 @@ impl Arbiter {
         listed.join("; ")
     }
 
-    fn take_control(&mut self, now: Duration, index: usize, class: Class) -> Answer {
+    /// Grants `class` to client `index` if no stop holds, autonomy is armed (for autonomy) and
+    /// no other client holds it, unless the request was sent (at `sent`) before a release or
+    /// before the client lost control: a take-control held up in the network across a stop or
+    /// a partition is a decision from before it, never applied after.
+    fn take_control(
+        &mut self,
+        now: Duration,
+        index: usize,
+        class: Class,
+        sent: Duration,
+    ) -> Answer {
         if !self.stops.is_empty() {
             return Err(self.latched());
         }
@@ -735,6 +751,20 @@ impl Arbiter {
             return Ok(Accepted {
                 lease: Some(lease.id),
                 ..Accepted::default()
+            });
+        }
+        let ends = [
+            (self.released, "the stops were released"),
+            (self.sources[index].lost_control, "this client lost control"),
+        ];
+        if let Some((at, ended)) = ends
+            .into_iter()
+            .filter_map(|(at, ended)| at.filter(|at| sent < *at).map(|at| (at, ended)))
+            .max_by_key(|(at, _)| *at)
+        {
+            return Err(Rejection::Outdated {
+                ended: ended.to_owned(),
+                by: at - sent,
             });
         }
         let id = self.next_lease;
@@ -895,6 +925,9 @@ impl Arbiter {
         let (released, kept): (Vec<Stop>, Vec<Stop>) =
             std::mem::take(&mut self.stops).into_iter().partition(named);
         self.stops = kept;
+        if self.stops.is_empty() {
+            self.released = Some(now);
+        }
         for stop in &released {
             self.audit(now, format!("stop #{} released by {name}: {stop}", stop.id));
         }
@@ -923,6 +956,7 @@ impl Arbiter {
             {
                 source.lease = None;
                 source.revoked = Some(why.to_owned());
+                source.lost_control = Some(now);
                 ended.push(format!("{} {}", lease.class, source.key.name));
             }
         }
@@ -1050,6 +1084,7 @@ impl Arbiter {
             key: client.clone(),
             lease: None,
             revoked: None,
+            lost_control: None,
             heartbeat: None,
             budget: TokenBucket::full(f64::from(self.config.request_burst), now),
             last_seen: now,
@@ -1129,6 +1164,7 @@ impl Arbiter {
         }
         for index in stale {
             self.end_lease(now, index, "stale: no command within its life");
+            self.sources[index].lost_control = Some(now);
         }
         for (name, port, period) in missed {
             let reason = format!("heartbeat missed (period {} ms)", period.as_millis());

@@ -296,6 +296,81 @@ fn a_command_lives_from_when_it_was_sent() {
     );
 }
 
+/// A take-control stamped `ago` before now.
+fn take_sent(bench: &mut Bench, who: &Origin, class: Class, ago: Duration) -> Answer {
+    let sent = bench.now - ago;
+    bench
+        .arbiter
+        .handle_request(bench.now, who, Request::TakeControl { class }, sent)
+}
+
+#[test]
+fn a_take_control_sent_before_a_release_is_outdated_after_it() {
+    let mut bench = Bench::new();
+    let (joy, officer) = (client("joy", 1), operator("officer", 2));
+    bench.stop(&officer, "check the robot");
+    bench.idle(ms(100));
+    // The peer asked for control 50 ms before the release: held up in the network (or sent
+    // while the stop held), it arrives after.
+    bench
+        .release(&officer, ReleaseTarget::All)
+        .expect("released");
+    let outdated = take_sent(&mut bench, &joy, Class::Teleop, ms(50)).expect_err("outdated");
+    assert_eq!(outdated.kind(), RejectionKind::Outdated);
+    assert!(
+        outdated
+            .to_string()
+            .contains("50 ms before the stops were released"),
+        "{outdated}"
+    );
+    assert_eq!(
+        bench.arbiter.rejections()[usize::from(RejectionKind::Outdated.raw())],
+        1
+    );
+    assert_eq!(bench.arbiter.selected(bench.now), None);
+    // One sent after the release is a new decision.
+    bench.idle(ms(20));
+    take_sent(&mut bench, &joy, Class::Teleop, ms(10)).expect("sent after the release");
+}
+
+#[test]
+fn a_take_control_sent_before_control_lapsed_is_outdated() {
+    let mut bench = Bench::new();
+    let joy = client("joy", 1);
+    let lease = bench.take(&joy, Class::Teleop);
+    bench.run(&joy, lease, 0.3, ms(100));
+    // A partition: the drives stop arriving and the lease lapses (teleop age 250 ms).
+    bench.idle(ms(400));
+    assert_eq!(
+        bench.drive(&joy, lease, 0.3).map_err(|r| r.kind()),
+        Err(RejectionKind::Revoked)
+    );
+    // A take-control sent during the partition arrives as it heals, after the lapse.
+    let outdated = take_sent(&mut bench, &joy, Class::Teleop, ms(200)).expect_err("outdated");
+    assert_eq!(outdated.kind(), RejectionKind::Outdated);
+    assert!(
+        outdated.to_string().contains("this client lost control"),
+        "{outdated}"
+    );
+    take_sent(&mut bench, &joy, Class::Teleop, ms(0)).expect("sent after the lapse");
+}
+
+#[test]
+fn a_relinquish_or_a_lease_still_held_outdates_nothing() {
+    let mut bench = Bench::new();
+    let joy = client("joy", 1);
+    let lease = bench.take(&joy, Class::Teleop);
+    // Held: a repeated take-control returns the lease, whatever its stamp.
+    let again = take_sent(&mut bench, &joy, Class::Teleop, ms(200)).expect("still held");
+    assert_eq!(again.lease, Some(lease));
+    // Given up on purpose: the client's own order stands, as it sent it.
+    bench
+        .request(&joy, Request::Relinquish)
+        .expect("relinquished");
+    bench.idle(ms(20));
+    take_sent(&mut bench, &joy, Class::Teleop, ms(100)).expect("its own order");
+}
+
 #[test]
 fn stops_stack_and_each_owner_releases_its_own() {
     let mut bench = Bench::new();
@@ -782,7 +857,8 @@ fn config_is_checked() {
 /// One thing that happens to the arbiter.
 #[derive(Debug, Clone)]
 enum Step {
-    Take(usize, Class),
+    /// A take-control sent this many ms before it arrives.
+    Take(usize, Class, u8),
     Drive(usize, f64),
     Stop(usize),
     Release(usize, bool),
@@ -798,7 +874,8 @@ fn any_step() -> impl Strategy<Value = Step> {
     let who = 0usize..4;
     let class = prop::sample::select(Class::ALL.to_vec());
     prop_oneof![
-        (who.clone(), class).prop_map(|(w, c)| Step::Take(w, c)),
+        (who.clone(), class, prop_oneof![Just(0u8), 0u8..100])
+            .prop_map(|(w, c, d)| Step::Take(w, c, d)),
         (who.clone(), -3.0f64..3.0).prop_map(|(w, v)| Step::Drive(w, v)),
         who.clone().prop_map(Step::Stop),
         (who.clone(), any::<bool>()).prop_map(|(w, all)| Step::Release(w, all)),
@@ -813,8 +890,9 @@ fn any_step() -> impl Strategy<Value = Step> {
 
 proptest! {
     /// After any gap, stop or release, nothing moves until no stop is left and a client has
-    /// taken control again; while a stop holds, the output is exactly zero; the output is
-    /// always finite and within the caps, and changes per tick within the ramp outside a stop.
+    /// taken control again, with a take-control sent after it; while a stop holds, the output
+    /// is exactly zero; the output is always finite and within the caps, and changes per tick
+    /// within the ramp outside a stop.
     #[test]
     fn no_motion_after_a_gap_stop_or_release_without_a_new_take(steps in prop::collection::vec(any_step(), 1..120)) {
         let mut bench = Bench::new();
@@ -823,30 +901,39 @@ proptest! {
             .collect();
         let mut leases = [0u64; 4];
         let mut blocked_at = 0usize;
+        let mut blocked_time = Duration::ZERO;
         let mut taken_at: [Option<usize>; 4] = [None; 4];
         for (index, step) in steps.into_iter().enumerate() {
             let index = index + 1;
             match step {
-                Step::Take(w, class) => {
-                    if let Ok(Accepted { lease: Some(lease), .. }) = bench.request(&clients[w], Request::TakeControl { class }) {
+                Step::Take(w, class, delay) => {
+                    let sent = bench.now.saturating_sub(ms(u64::from(delay)));
+                    let answer = bench.arbiter.handle_request(bench.now, &clients[w], Request::TakeControl { class }, sent);
+                    if let Ok(Accepted { lease: Some(lease), .. }) = answer {
+                        if lease != leases[w] {
+                            prop_assert!(sent >= blocked_time, "a take-control sent before the last gap, stop or release granted control");
+                        }
                         leases[w] = lease;
                         taken_at[w] = Some(index);
                     }
                 }
                 Step::Drive(w, v) => { let _ = bench.drive(&clients[w], leases[w], v); }
-                Step::Stop(w) => { bench.stop(&clients[w], "p"); blocked_at = index; }
+                Step::Stop(w) => {
+                    bench.stop(&clients[w], "p");
+                    (blocked_at, blocked_time) = (index, bench.now);
+                }
                 Step::Release(w, all) => {
                     let target = if all { ReleaseTarget::All } else { ReleaseTarget::Own };
                     let before = bench.arbiter.stops().len();
                     if bench.release(&clients[w], target).is_ok() && bench.arbiter.stops().len() < before {
-                        blocked_at = index;
+                        (blocked_at, blocked_time) = (index, bench.now);
                     }
                 }
                 Step::Relinquish(w) => { let _ = bench.request(&clients[w], Request::Relinquish); }
                 Step::Resume(w) => { let _ = bench.request(&clients[w], Request::Resume); }
                 Step::Gap(present) => {
                     bench.arbiter.handle_gap(bench.now, StopCause::LinkLost, "gap", present);
-                    blocked_at = index;
+                    (blocked_at, blocked_time) = (index, bench.now);
                 }
                 Step::GapCleared => bench.arbiter.handle_gap_cleared(bench.now, StopCause::LinkLost),
                 Step::Dies(w) => bench.arbiter.handle_node_gone(bench.now, clients[w].key.node),

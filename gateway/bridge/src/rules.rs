@@ -462,6 +462,23 @@ mod tests {
     }
 
     #[test]
+    fn a_take_control_held_up_carries_when_it_was_sent() {
+        // The arbiter refuses a take-control sent before a release or a lapse it arrives
+        // after: it needs the send time, as far as the fastest delivery tells.
+        let mut rules = teleop();
+        take(&mut rules, 10_020 * MS, "op", 0);
+        drive(&mut rules, 10_120 * MS, "op", 1, 100).expect("as fast");
+        let payload = br#"{"class":"teleop","sent_ms":300}"#;
+        let held_up =
+            (rules.handle_command(10_720 * MS, &key("take-control", "op"), Some(payload)))
+                .expect("within its life");
+        // Sent at 10 320 ms on this host's clock (80 µs later: the offset's allowed drift).
+        let sent = Duration::from_micros(10_320_120);
+        assert_eq!(held_up.via, Via::Control { sent });
+        assert!(matches!(held_up.request, Request::TakeControl { .. }));
+    }
+
+    #[test]
     fn a_lost_lease_must_be_taken_again() {
         let mut rules = teleop();
         take(&mut rules, 1000 * MS, "op", 0);

@@ -432,6 +432,9 @@ wire_enum! {
         CausePersists = 13 => "cause_persists",
         /// The command is stamped later than its arrival: another clock than this host's.
         Future = 14 => "future",
+        /// A take-control sent before control ended (a release, a lapse, a revocation) arrived
+        /// after it: what was decided before is not applied after.
+        Outdated = 15 => "outdated",
     }
 }
 
@@ -440,7 +443,7 @@ wire_enum! {
 pub const OPERATOR: &str = "operator";
 
 /// Rejection counters in a status: one per [`RejectionKind`].
-pub const REJECTION_COUNTERS: usize = 15;
+pub const REJECTION_COUNTERS: usize = 16;
 const _: () = assert!(RejectionKind::ALL.len() == REJECTION_COUNTERS);
 
 /// Why a request was refused.
@@ -504,6 +507,13 @@ pub enum Rejection {
         /// By how much.
         ahead: Duration,
     },
+    /// A take-control was sent before an end of control it arrived after.
+    Outdated {
+        /// What ended control (`the stops were released`, `its control lapsed`).
+        ended: String,
+        /// How long before that end it was sent.
+        by: Duration,
+    },
 }
 
 impl Rejection {
@@ -525,6 +535,7 @@ impl Rejection {
             Self::NotAllowed { .. } => RejectionKind::NotAllowed,
             Self::CausePersists { .. } => RejectionKind::CausePersists,
             Self::Future { .. } => RejectionKind::Future,
+            Self::Outdated { .. } => RejectionKind::Outdated,
         }
     }
 }
@@ -561,6 +572,12 @@ impl std::fmt::Display for Rejection {
                 f,
                 "command stamped {} ms after its arrival: stamp it with this host's CLOCK_BOOTTIME",
                 ahead.as_millis()
+            ),
+            Self::Outdated { ended, by } => write!(
+                f,
+                "take-control sent {} ms before {ended}: a decision from before is not applied \
+                 after it; take control again",
+                by.as_millis()
             ),
         }
     }
@@ -659,7 +676,7 @@ pub struct LightsRequest {
 
 /// A request from a client to the gateway's arbiter.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::ControlRequest.v6")]
+#[type_name("scout::ControlRequest.v7")]
 #[repr(C)]
 pub struct ControlRequest {
     /// [`RequestKind`] as `u8`.
@@ -701,7 +718,7 @@ pub struct ControlRequest {
 
 /// The gateway's answer to one request.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("scout::ControlResponse.v6")]
+#[type_name("scout::ControlResponse.v7")]
 #[repr(C)]
 pub struct ControlResponse {
     /// The request's `seq`.
@@ -798,7 +815,7 @@ pub struct SourcePayload {
 
 /// The arbiter's status, published on every change and at least once a second.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::StatusPayload.v6")]
+#[type_name("scout::StatusPayload.v7")]
 #[repr(C)]
 pub struct StatusPayload {
     /// Rises by one with every publication.

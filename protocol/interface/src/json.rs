@@ -453,7 +453,10 @@ mod tests {
         assert_eq!(json["autonomy_armed"], false);
         assert_eq!(json["lights"], "chassis");
         assert_eq!(json["rejections"]["not_finite"], 0);
-        assert_eq!(json["rejections"].as_object().map(Map::len), Some(15));
+        assert_eq!(
+            json["rejections"].as_object().map(Map::len),
+            Some(crate::control::REJECTION_COUNTERS)
+        );
         let driving = StatusPayload {
             selected_class: Class::Teleop.raw(),
             selected_client: FixedText::new("joy"),

@@ -303,6 +303,73 @@ fn enabled_remote_commands_go_through_the_arbiter_and_bad_input_is_rejected() {
     );
 }
 
+/// A take-control the network held up across a release arrives after it: refused as outdated,
+/// so healing restarts nothing; one sent after the release takes control.
+#[test]
+fn a_take_control_held_up_across_a_release_is_refused_as_outdated() {
+    let name = robot_name("remote-outdated");
+    let port = free_port();
+    let _gateway = Gateway::start_remote(&name, &tcp(port), &[]);
+    let robot = connect(&name);
+    let status = robot.status().expect("status");
+    let session = zenoh_session("client", &[], &[tcp(port)]);
+    query_until_answered(&session, &format!("scout/{name}/info"));
+    let started = Instant::now();
+    let clock_ms = || 1_000 + started.elapsed().as_millis() as u64;
+    let command = |kind: &str, payload: &str| {
+        let mut answers = zenoh_query(
+            &session,
+            &format!("scout/{name}/cmd/{kind}/laptop"),
+            Some(payload),
+            QUERY,
+        );
+        assert_eq!(answers.len(), 1, "{kind} {payload}: {answers:?}");
+        answers.remove(0)
+    };
+    let take = |sent_ms: u64| {
+        command(
+            "take-control",
+            &format!(r#"{{"class":"teleop","sent_ms":{sent_ms}}}"#),
+        )
+    };
+    // The first take-control: the bridge learns how fast this peer's commands arrive.
+    let first = take(clock_ms());
+    assert_eq!(first["accepted"], true, "{first}");
+    // The peer's e-stop ends its control. A take-control it sends while the stop holds (stamped
+    // then) is held up in the network and arrives after the release. A loaded host may hold
+    // the release up past the command's life (500 ms): that is refused too ("held up"), and
+    // tried again.
+    let mut answers = Vec::new();
+    for _ in 0..3 {
+        assert_eq!(command("estop", r#"{"reason":"check"}"#)["accepted"], true);
+        let stamped = clock_ms();
+        std::thread::sleep(Duration::from_millis(50));
+        let released = command("release", "{}");
+        assert_eq!(released["accepted"], true, "{released}");
+        let late = take(stamped);
+        assert_eq!(late["accepted"], false, "{late}");
+        let outdated = late["reason"]
+            .as_str()
+            .is_some_and(|r| r.contains("before the stops were released"));
+        answers.push(late);
+        if outdated {
+            break;
+        }
+    }
+    let last = answers.last().expect("an answer");
+    assert!(
+        last["reason"]
+            .as_str()
+            .is_some_and(|r| r.contains("before the stops were released")),
+        "{answers:#?}"
+    );
+    let counted = wait_for_status(&status, LIMIT, |s| s["rejections"]["outdated"] == 1);
+    assert!(counted["selected"].is_null(), "{counted}");
+    // Sent after the release: a new decision, which takes control.
+    let again = take(clock_ms());
+    assert_eq!(again["accepted"], true, "{again}");
+}
+
 /// The counters of the gateway's information queryable once `wanted` holds (polled).
 fn counters_when(session: &zenoh::Session, name: &str, wanted: impl Fn(&Value) -> bool) -> Value {
     let deadline = Instant::now() + LIMIT;
