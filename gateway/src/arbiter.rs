@@ -48,6 +48,11 @@ pub use scout_interface::control::OPERATOR;
 /// iteration, so a request sent while an iteration runs carries a stamp after that reading;
 /// an iteration that runs longer than a command period is a stall.
 pub const FUTURE_TOLERANCE: Duration = Duration::from_millis(20);
+/// How far before a release or a loss of control a take-control may have been sent and still
+/// be granted after it: a remote peer's send time is estimated from its fastest delivery, so a
+/// take-control sent just after a release but delivered slower than that (jitter, a
+/// millisecond stamp) seems sent before it. Beyond this it was sent before, and is outdated.
+pub const OUTDATED_TOLERANCE: Duration = Duration::from_millis(100);
 
 /// The most clients the arbiter tracks at once.
 pub use scout_interface::control::MAX_CLIENTS as MAX_SOURCES;
@@ -706,8 +711,9 @@ impl Arbiter {
 
     /// Grants `class` to client `index` if no stop holds, autonomy is armed (for autonomy) and
     /// no other client holds it, unless the request was sent (at `sent`) before a release or
-    /// before the client lost control: a take-control held up in the network across a stop or
-    /// a partition is a decision from before it, never applied after.
+    /// before the client lost control (by more than [`OUTDATED_TOLERANCE`]): a take-control
+    /// held up in the network across a stop or a partition is a decision from before it, never
+    /// applied after.
     fn take_control(
         &mut self,
         now: Duration,
@@ -759,7 +765,10 @@ impl Arbiter {
         ];
         if let Some((at, ended)) = ends
             .into_iter()
-            .filter_map(|(at, ended)| at.filter(|at| sent < *at).map(|at| (at, ended)))
+            .filter_map(|(at, ended)| {
+                at.filter(|at| sent + OUTDATED_TOLERANCE < *at)
+                    .map(|at| (at, ended))
+            })
             .max_by_key(|(at, _)| *at)
         {
             return Err(Rejection::Outdated {

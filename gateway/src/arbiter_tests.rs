@@ -310,17 +310,17 @@ fn a_take_control_sent_before_a_release_is_outdated_after_it() {
     let (joy, officer) = (client("joy", 1), operator("officer", 2));
     bench.stop(&officer, "check the robot");
     bench.idle(ms(100));
-    // The peer asked for control 50 ms before the release: held up in the network (or sent
+    // The peer asked for control 150 ms before the release: held up in the network (or sent
     // while the stop held), it arrives after.
     bench
         .release(&officer, ReleaseTarget::All)
         .expect("released");
-    let outdated = take_sent(&mut bench, &joy, Class::Teleop, ms(50)).expect_err("outdated");
+    let outdated = take_sent(&mut bench, &joy, Class::Teleop, ms(150)).expect_err("outdated");
     assert_eq!(outdated.kind(), RejectionKind::Outdated);
     assert!(
         outdated
             .to_string()
-            .contains("50 ms before the stops were released"),
+            .contains("150 ms before the stops were released"),
         "{outdated}"
     );
     assert_eq!(
@@ -328,9 +328,11 @@ fn a_take_control_sent_before_a_release_is_outdated_after_it() {
         1
     );
     assert_eq!(bench.arbiter.selected(bench.now), None);
-    // One sent after the release is a new decision.
+    // Sent just before the release as far as its stamp tells (a remote peer's send time is an
+    // estimate): granted, as one sent after it.
     bench.idle(ms(20));
-    take_sent(&mut bench, &joy, Class::Teleop, ms(10)).expect("sent after the release");
+    take_sent(&mut bench, &joy, Class::Teleop, ms(20) + OUTDATED_TOLERANCE)
+        .expect("within the tolerance");
 }
 
 #[test]
@@ -340,13 +342,13 @@ fn a_take_control_sent_before_control_lapsed_is_outdated() {
     let lease = bench.take(&joy, Class::Teleop);
     bench.run(&joy, lease, 0.3, ms(100));
     // A partition: the drives stop arriving and the lease lapses (teleop age 250 ms).
-    bench.idle(ms(400));
+    bench.idle(ms(600));
     assert_eq!(
         bench.drive(&joy, lease, 0.3).map_err(|r| r.kind()),
         Err(RejectionKind::Revoked)
     );
     // A take-control sent during the partition arrives as it heals, after the lapse.
-    let outdated = take_sent(&mut bench, &joy, Class::Teleop, ms(200)).expect_err("outdated");
+    let outdated = take_sent(&mut bench, &joy, Class::Teleop, ms(500)).expect_err("outdated");
     assert_eq!(outdated.kind(), RejectionKind::Outdated);
     assert!(
         outdated.to_string().contains("this client lost control"),
@@ -874,7 +876,7 @@ fn any_step() -> impl Strategy<Value = Step> {
     let who = 0usize..4;
     let class = prop::sample::select(Class::ALL.to_vec());
     prop_oneof![
-        (who.clone(), class, prop_oneof![Just(0u8), 0u8..100])
+        (who.clone(), class, prop_oneof![Just(0u8), 0u8..250])
             .prop_map(|(w, c, d)| Step::Take(w, c, d)),
         (who.clone(), -3.0f64..3.0).prop_map(|(w, v)| Step::Drive(w, v)),
         who.clone().prop_map(Step::Stop),
@@ -911,7 +913,7 @@ proptest! {
                     let answer = bench.arbiter.handle_request(bench.now, &clients[w], Request::TakeControl { class }, sent);
                     if let Ok(Accepted { lease: Some(lease), .. }) = answer {
                         if lease != leases[w] {
-                            prop_assert!(sent >= blocked_time, "a take-control sent before the last gap, stop or release granted control");
+                            prop_assert!(sent + OUTDATED_TOLERANCE >= blocked_time, "a take-control sent before the last gap, stop or release granted control");
                         }
                         leases[w] = lease;
                         taken_at[w] = Some(index);
