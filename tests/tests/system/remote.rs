@@ -154,6 +154,24 @@ fn remote_commands_are_ignored_by_default_and_counted() {
     }
 }
 
+/// Peer `peer`'s command `kind` with `payload` to robot `name`, queried: its one answer.
+fn remote_command(
+    session: &zenoh::Session,
+    name: &str,
+    kind: &str,
+    peer: &str,
+    payload: &str,
+) -> Value {
+    let mut answers = zenoh_query(
+        session,
+        &format!("scout/{name}/cmd/{kind}/{peer}"),
+        Some(payload),
+        QUERY,
+    );
+    assert_eq!(answers.len(), 1, "{kind} {payload}: {answers:?}");
+    answers.remove(0)
+}
+
 #[test]
 fn enabled_remote_commands_go_through_the_arbiter_and_bad_input_is_rejected() {
     let name = robot_name("remote-on");
@@ -166,14 +184,7 @@ fn enabled_remote_commands_go_through_the_arbiter_and_bad_input_is_rejected() {
     // The peer's name is the last chunk of the key: zenoh's access control binds it to the
     // peer's certificate (see the TLS test); the payload names nobody.
     let command = |kind: &str, peer: &str, payload: &str| {
-        let mut answers = zenoh_query(
-            &session,
-            &format!("scout/{name}/cmd/{kind}/{peer}"),
-            Some(payload),
-            QUERY,
-        );
-        assert_eq!(answers.len(), 1, "{kind} {payload}: {answers:?}");
-        answers.remove(0)
+        remote_command(&session, &name, kind, peer, payload)
     };
     let drive = |seq: u64, sent_ms: u64| {
         format!(r#"{{"seq":{seq},"sent_ms":{sent_ms},"linear":0.3,"angular":0.0,"ttl_ms":300}}"#)
@@ -316,16 +327,8 @@ fn a_take_control_held_up_across_a_release_is_refused_as_outdated() {
     query_until_answered(&session, &format!("scout/{name}/info"));
     let started = Instant::now();
     let clock_ms = || 1_000 + started.elapsed().as_millis() as u64;
-    let command = |kind: &str, payload: &str| {
-        let mut answers = zenoh_query(
-            &session,
-            &format!("scout/{name}/cmd/{kind}/laptop"),
-            Some(payload),
-            QUERY,
-        );
-        assert_eq!(answers.len(), 1, "{kind} {payload}: {answers:?}");
-        answers.remove(0)
-    };
+    let command =
+        |kind: &str, payload: &str| remote_command(&session, &name, kind, "laptop", payload);
     let take = |sent_ms: u64| {
         command(
             "take-control",
