@@ -8,6 +8,7 @@
 //! - [`can`]: CAN frames (id, 8 bytes, rolling count, checksum).
 //! - [`serial`]: 13-byte RS232 frames and a streaming decoder.
 //! - [`slcan`]: the ASCII lines of serial-line CAN adapters.
+//! - [`gs_usb`]: the host protocol of candleLight-style USB-CAN adapters.
 //! - [`candump`]: candump's text formats.
 //! - [`model`]: the SCOUT models' limits and geometry.
 //! - [`units`]: m/s and rad/s to whole percent and back.
@@ -27,6 +28,7 @@ mod listed;
 pub mod can;
 pub mod candump;
 pub mod fault;
+pub mod gs_usb;
 #[cfg(feature = "std")]
 pub mod kinematics;
 pub mod link;

@@ -146,3 +146,190 @@ proptest! {
         prop_assert_eq!(decode(&MessageV2::MotionCommand(command).encode()), Ok(MessageV2::MotionCommand(command)));
     }
 }
+
+mod gs_usb {
+    //! The USB-CAN adapters' protocol: host frames both ways, decoding any bytes, and the bit
+    //! timing against an exhaustive search.
+    use proptest::prelude::*;
+    use scout_protocol::CanFrame;
+    use scout_protocol::gs_usb::{BitTiming, BtConst, HostFrame, RX_ECHO_ID, Received};
+
+    fn any_standard_frame() -> impl Strategy<Value = CanFrame> {
+        (0u16..0x800, proptest::collection::vec(any::<u8>(), 0..=8))
+            .prop_map(|(id, data)| CanFrame::new(id, &data).expect("a valid frame"))
+    }
+
+    fn any_received() -> impl Strategy<Value = Received> {
+        prop_oneof![
+            any_standard_frame().prop_map(Received::Frame),
+            (0..RX_ECHO_ID).prop_map(Received::Echo),
+            (0x800u32..0x2000_0000).prop_map(|id| Received::Foreign(id | 0x8000_0000)),
+            (0u32..0x2000_0000, any::<[u8; 8]>())
+                .prop_map(|(class, data)| Received::BusError { class, data }),
+        ]
+    }
+
+    /// The adapter's host frame for `received`, as an adapter builds it.
+    fn adapter_frame(received: Received, channel: u8, timestamp_us: Option<u32>) -> HostFrame {
+        let (echo_id, can_id, len, data) = match received {
+            Received::Frame(frame) => {
+                let mut data = [0; 8];
+                data[..frame.data().len()].copy_from_slice(frame.data());
+                (
+                    RX_ECHO_ID,
+                    u32::from(frame.id()),
+                    frame.data().len() as u8,
+                    data,
+                )
+            }
+            Received::Echo(echo_id) => (echo_id, 0x130, 8, [0; 8]),
+            Received::Foreign(can_id) => (RX_ECHO_ID, can_id, 0, [0; 8]),
+            Received::BusError { class, data } => (RX_ECHO_ID, class | 0x2000_0000, 8, data),
+        };
+        HostFrame {
+            echo_id,
+            can_id,
+            len,
+            channel,
+            flags: 0,
+            data,
+            timestamp_us,
+        }
+    }
+
+    /// (rate error, sample-point error, fewer quanta): what the timing search minimises.
+    fn quality(timing: &BitTiming, constants: &BtConst, bitrate: u32) -> (u64, u32, i64) {
+        let quanta = 1 + timing.prop_seg + timing.phase_seg1 + timing.phase_seg2;
+        let rate = u64::from(constants.clock_hz) / u64::from(timing.brp * quanta);
+        (
+            rate.abs_diff(u64::from(bitrate)),
+            875 - timing.sample_point(),
+            -i64::from(quanta),
+        )
+    }
+
+    /// Every prescaler, segment 1 and segment 2 the constants allow, the best kept.
+    fn exhaustive(c: &BtConst, bitrate: u32) -> Option<(u64, u32, i64)> {
+        let mut best = None;
+        let mut brp = c.brp_min.div_ceil(c.brp_inc) * c.brp_inc;
+        // A larger prescaler leaves fewer than 3 quanta a bit: no rate within 1 % of it.
+        while brp <= c.brp_max
+            && u64::from(brp) * 3 * u64::from(bitrate) <= u64::from(c.clock_hz) * 2
+        {
+            for tseg1 in c.tseg1_min..=c.tseg1_max {
+                for tseg2 in c.tseg2_min..=c.tseg2_max {
+                    let quanta = 1 + tseg1 + tseg2;
+                    let sample_point = 1000 * (quanta - tseg2) / quanta;
+                    if sample_point > 875 {
+                        continue;
+                    }
+                    let rate = u64::from(c.clock_hz) / u64::from(brp * quanta);
+                    let key = (
+                        rate.abs_diff(u64::from(bitrate)),
+                        875 - sample_point,
+                        -i64::from(quanta),
+                    );
+                    if best.is_none_or(|b| key < b) {
+                        best = Some(key);
+                    }
+                }
+            }
+            brp += c.brp_inc;
+        }
+        best.filter(|&(rate_error, _, _)| rate_error * 100 <= u64::from(bitrate))
+    }
+
+    fn any_constants() -> impl Strategy<Value = BtConst> {
+        (
+            prop_oneof![
+                Just(8_000_000u32),
+                Just(16_000_000),
+                Just(24_000_000),
+                Just(40_000_000),
+                Just(48_000_000),
+                Just(80_000_000),
+                Just(170_000_000),
+                1_000_000u32..200_000_000,
+            ],
+            (1u32..=4, 0u32..=28),
+            (1u32..=2, 0u32..=14),
+            1u32..=16,
+            (1u32..=4, 0u32..=300, 1u32..=4),
+        )
+            .prop_map(
+                |(
+                    clock_hz,
+                    (t1, t1_span),
+                    (t2, t2_span),
+                    sjw_max,
+                    (brp_min, brp_span, brp_inc),
+                )| BtConst {
+                    features: 0,
+                    clock_hz,
+                    tseg1_min: t1,
+                    tseg1_max: t1 + t1_span,
+                    tseg2_min: t2,
+                    tseg2_max: t2 + t2_span,
+                    sjw_max,
+                    brp_min,
+                    brp_max: brp_min + brp_span,
+                    brp_inc,
+                },
+            )
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(128))]
+
+        #[test]
+        fn the_bit_timing_is_as_good_as_an_exhaustive_search_and_within_the_constants(
+            c in any_constants(),
+            bitrate in prop_oneof![Just(125_000u32), Just(250_000), Just(500_000), Just(1_000_000)],
+        ) {
+            match (BitTiming::for_bitrate(&c, bitrate), exhaustive(&c, bitrate)) {
+                (Ok(timing), Some(best)) => {
+                    prop_assert_eq!(quality(&timing, &c, bitrate), best, "{:?}", timing);
+                    let tseg1 = timing.prop_seg + timing.phase_seg1;
+                    prop_assert!((c.tseg1_min..=c.tseg1_max).contains(&tseg1));
+                    prop_assert!((c.tseg2_min..=c.tseg2_max).contains(&timing.phase_seg2));
+                    prop_assert!((1..=c.sjw_max).contains(&timing.sjw));
+                    prop_assert!((c.brp_min..=c.brp_max).contains(&timing.brp));
+                    prop_assert_eq!(timing.brp % c.brp_inc, 0);
+                    prop_assert_eq!(BitTiming::decode(&timing.encode()), Ok(timing));
+                }
+                (Err(_), None) => {}
+                (got, best) => prop_assert!(false, "got {:?}, the exhaustive search {:?}", got, best),
+            }
+        }
+
+        #[test]
+        fn adapter_frames_round_trip(
+            received in any_received(),
+            channel in any::<u8>(),
+            timestamp_us in proptest::option::of(any::<u32>()),
+        ) {
+            let frame = adapter_frame(received, channel, timestamp_us);
+            let (bytes, len) = frame.encode();
+            let decoded = HostFrame::decode(&bytes[..len], timestamp_us.is_some()).expect("decodes");
+            prop_assert_eq!(decoded, frame);
+            prop_assert_eq!(decoded.received(), received);
+        }
+
+        #[test]
+        fn host_frames_carry_their_can_frame(frame in any_standard_frame(), echo_id in 0..RX_ECHO_ID, channel in any::<u8>()) {
+            let host = HostFrame::transmit(&frame, channel, echo_id);
+            let (bytes, len) = host.encode();
+            let decoded = HostFrame::decode(&bytes[..len], false).expect("decodes");
+            prop_assert_eq!(decoded.can_frame(), Some(frame));
+            prop_assert_eq!(decoded.received(), Received::Echo(echo_id));
+        }
+
+        #[test]
+        fn host_frame_decode_never_panics(bytes in proptest::collection::vec(any::<u8>(), 0..64), timestamped in any::<bool>()) {
+            if let Ok(frame) = HostFrame::decode(&bytes, timestamped) {
+                let _ = frame.received();
+                prop_assert!(frame.len <= 8);
+            }
+        }
+    }
+}
