@@ -11,6 +11,7 @@ mod gateway;
 mod package;
 mod protocol_v2;
 mod python;
+mod release;
 mod remote;
 mod ros2;
 mod ros2_dds;

@@ -1,0 +1,45 @@
+//! The release's quick-start check (`tests/release/smoke`, which `tests/release/build` runs on
+//! every architecture's programs), on this build's programs: so that the check a release relies
+//! on is itself checked on every change.
+
+use std::path::Path;
+use std::process::Command;
+
+use scout_system_tests::{Iceoryx2Domain, TempDir, robot_name};
+
+#[test]
+fn the_release_quick_start_check_passes_on_this_builds_programs() {
+    let test = "release_smoke";
+    let domain = Iceoryx2Domain::new(&robot_name(test));
+    let run_dir = TempDir::new(&robot_name(test));
+    let bin_dir = scout_system_tests::bin("scout-gateway")
+        .parent()
+        .expect("the binaries' directory")
+        .to_owned();
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("release/smoke");
+    // The script bounds every step (60 s for the first state, 10 s of silence for the others).
+    let output = Command::new(&script)
+        .arg(&bin_dir)
+        .current_dir(domain.dir())
+        .env("SCOUT_RUN_DIR", run_dir.path())
+        .env_remove("RUNNER")
+        .env_remove("PYTHON")
+        .output()
+        .unwrap_or_else(|e| panic!("run {}: {e}", script.display()));
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        output.status.success(),
+        "{test}: {} failed ({}):\n{stdout}{}",
+        script.display(),
+        output.status,
+        String::from_utf8_lossy(&output.stderr)
+    );
+    for step in [
+        "state read",
+        "moved the chassis",
+        "latched",
+        "stopped the gateway with 0",
+    ] {
+        assert!(stdout.contains(step), "{test}: no '{step}' in:\n{stdout}");
+    }
+}
