@@ -166,6 +166,18 @@ fn u32_at(bytes: &[u8], at: usize) -> u32 {
     u32::from_le_bytes([bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]])
 }
 
+fn put_u32(bytes: &mut [u8], at: usize, value: u32) {
+    bytes[at..at + 4].copy_from_slice(&value.to_le_bytes());
+}
+
+/// `words`, little-endian one after the other from the start of `bytes`: the requests' data
+/// are such rows of u32.
+fn put_words(bytes: &mut [u8], words: &[u32]) {
+    for (chunk, word) in bytes.chunks_exact_mut(4).zip(words) {
+        chunk.copy_from_slice(&word.to_le_bytes());
+    }
+}
+
 fn need(bytes: &[u8], expected: usize) -> Result<(), Error> {
     if bytes.len() < expected {
         Err(Error::Short {
@@ -227,10 +239,8 @@ impl DeviceConfig {
     pub fn encode(&self) -> [u8; Self::LEN] {
         let mut bytes = [0; Self::LEN];
         bytes[Self::ICOUNT] = u8::try_from(self.channels.saturating_sub(1)).unwrap_or(u8::MAX);
-        bytes[Self::SW_VERSION..Self::SW_VERSION + 4]
-            .copy_from_slice(&self.software_version.to_le_bytes());
-        bytes[Self::HW_VERSION..Self::HW_VERSION + 4]
-            .copy_from_slice(&self.hardware_version.to_le_bytes());
+        put_u32(&mut bytes, Self::SW_VERSION, self.software_version);
+        put_u32(&mut bytes, Self::HW_VERSION, self.hardware_version);
         bytes
     }
 }
@@ -291,22 +301,22 @@ impl BtConst {
 
     /// The device's bytes (for an emulated adapter).
     pub fn encode(&self) -> [u8; Self::LEN] {
-        let fields = [
-            self.features,
-            self.clock_hz,
-            self.tseg1_min,
-            self.tseg1_max,
-            self.tseg2_min,
-            self.tseg2_max,
-            self.sjw_max,
-            self.brp_min,
-            self.brp_max,
-            self.brp_inc,
-        ];
         let mut bytes = [0; Self::LEN];
-        for (chunk, field) in bytes.chunks_exact_mut(4).zip(fields) {
-            chunk.copy_from_slice(&field.to_le_bytes());
-        }
+        put_words(
+            &mut bytes,
+            &[
+                self.features,
+                self.clock_hz,
+                self.tseg1_min,
+                self.tseg1_max,
+                self.tseg2_min,
+                self.tseg2_max,
+                self.sjw_max,
+                self.brp_min,
+                self.brp_max,
+                self.brp_inc,
+            ],
+        );
         bytes
     }
 }
@@ -409,14 +419,14 @@ impl BitTiming {
                 let key = (rate_error, sample_error, -(quanta as i64));
                 if best.is_none_or(|(best_key, _)| key < best_key) {
                     let prop_seg = tseg1 / 2;
-                    let phase_seg2 = tseg2;
+                    let phase_seg1 = tseg1 - prop_seg;
                     best = Some((
                         key,
                         Self {
                             prop_seg,
-                            phase_seg1: tseg1 - prop_seg,
-                            phase_seg2,
-                            sjw: (phase_seg2 / 2).min(tseg1 - prop_seg).min(c.sjw_max).max(1),
+                            phase_seg1,
+                            phase_seg2: tseg2,
+                            sjw: (tseg2 / 2).min(phase_seg1).min(c.sjw_max).max(1),
                             brp: brp as u32,
                         },
                     ));
@@ -472,17 +482,17 @@ impl BitTiming {
 
     /// Its bytes.
     pub fn encode(&self) -> [u8; Self::LEN] {
-        let fields = [
-            self.prop_seg,
-            self.phase_seg1,
-            self.phase_seg2,
-            self.sjw,
-            self.brp,
-        ];
         let mut bytes = [0; Self::LEN];
-        for (chunk, field) in bytes.chunks_exact_mut(4).zip(fields) {
-            chunk.copy_from_slice(&field.to_le_bytes());
-        }
+        put_words(
+            &mut bytes,
+            &[
+                self.prop_seg,
+                self.phase_seg1,
+                self.phase_seg2,
+                self.sjw,
+                self.brp,
+            ],
+        );
         bytes
     }
 
@@ -520,8 +530,7 @@ impl DeviceMode {
     pub fn encode(&self) -> [u8; Self::LEN] {
         let mode = if self.start { Self::START } else { Self::RESET };
         let mut bytes = [0; Self::LEN];
-        bytes[..4].copy_from_slice(&mode.to_le_bytes());
-        bytes[4..].copy_from_slice(&self.flags.to_le_bytes());
+        put_words(&mut bytes, &[mode, self.flags]);
         bytes
     }
 

@@ -95,6 +95,13 @@ pub fn bin(name: &str) -> PathBuf {
     path
 }
 
+/// The directory of the workspace's binaries, built if needed: for a program that runs them
+/// by name from there (a script, the Python tests).
+pub fn built_bin_dir() -> PathBuf {
+    ensure_built();
+    bin_dir()
+}
+
 /// A command for the example `name` of the workspace.
 pub fn example(name: &str) -> Command {
     ensure_built();

@@ -59,10 +59,7 @@ fn missing_tools() -> Option<String> {
 
 /// The package of revision `revision`, made in `out`.
 fn package(out: &Path, revision: u32) -> PathBuf {
-    let bin_dir = scout_system_tests::bin("scout-gateway")
-        .parent()
-        .expect("the binaries' directory")
-        .to_path_buf();
+    let bin_dir = scout_system_tests::built_bin_dir();
     let arch = text(&run(Command::new("dpkg").arg("--print-architecture")));
     let made = run(Command::new(script())
         .arg(&bin_dir)

@@ -48,10 +48,7 @@ fn the_python_package_passes_its_tests_against_real_gateways() {
             return skip(test, &why);
         }
     };
-    let bin_dir = scout_system_tests::bin("scout-gateway")
-        .parent()
-        .expect("the binaries' directory")
-        .to_owned();
+    let bin_dir = scout_system_tests::built_bin_dir();
     let tests = Path::new(env!("CARGO_MANIFEST_DIR")).join("../clients/python/tests");
     let child = Command::new(python)
         .args(["-m", "pytest", "-q", "-p", "no:cacheprovider"])

@@ -3,29 +3,31 @@
 //! on is itself checked on every change.
 
 use std::path::Path;
-use std::process::Command;
+use std::process::{Command, Stdio};
+use std::time::Duration;
 
-use scout_system_tests::{Iceoryx2Domain, TempDir, robot_name};
+use scout_system_tests::{Iceoryx2Domain, TempDir, robot_name, wait_output};
 
 #[test]
 fn the_release_quick_start_check_passes_on_this_builds_programs() {
     let test = "release_smoke";
     let domain = Iceoryx2Domain::new(&robot_name(test));
     let run_dir = TempDir::new(&robot_name(test));
-    let bin_dir = scout_system_tests::bin("scout-gateway")
-        .parent()
-        .expect("the binaries' directory")
-        .to_owned();
+    let bin_dir = scout_system_tests::built_bin_dir();
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("release/smoke");
-    // The script bounds every step (60 s for the first state, 10 s of silence for the others).
-    let output = Command::new(&script)
+    // The script bounds every step (60 s for the first state, 10 s of silence for the others),
+    // and the whole run is bounded here too.
+    let child = Command::new(&script)
         .arg(&bin_dir)
         .current_dir(domain.dir())
         .env("SCOUT_RUN_DIR", run_dir.path())
         .env_remove("RUNNER")
         .env_remove("PYTHON")
-        .output()
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
         .unwrap_or_else(|e| panic!("run {}: {e}", script.display()));
+    let output = wait_output(child, Duration::from_secs(180));
     let stdout = String::from_utf8_lossy(&output.stdout);
     assert!(
         output.status.success(),
