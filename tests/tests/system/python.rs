@@ -20,7 +20,7 @@ fn python() -> Result<PathBuf, String> {
         PathBuf::from,
     );
     let how = "python3 -m venv target/python-client-venv && target/python-client-venv/bin/pip \
-               install ./clients/python pytest mypy (again after changing the package)";
+               install ./clients/python 'pytest==8.*' 'mypy==1.*' (again after changing the package)";
     match Command::new(&python)
         .args(["-c", "import scout, pytest"])
         .output()
