@@ -25,8 +25,11 @@ pub struct GatewayConfig {
     pub name: RobotName,
     /// How the chassis is reached.
     pub transport: Option<Transport>,
-    /// The tty or CAN interface.
+    /// The tty or CAN interface; for `gs_usb`, the adapter's serial number (none: the only
+    /// adapter plugged in).
     pub device: Option<String>,
+    /// `gs_usb`: detach a kernel driver bound to the adapter (never done unasked).
+    pub gs_usb_detach: bool,
     /// The chassis' protocol: `auto` tells it from the frames (CAN and slcan; RS232 is v1).
     pub protocol: ProtocolSetting,
     /// The model, for its speed limits and geometry (default: `scout` on v1, `scout2` on v2).
@@ -157,6 +160,7 @@ impl Default for GatewayConfig {
             name: RobotName::new("scout").expect("a valid robot name"),
             transport: None,
             device: None,
+            gs_usb_detach: false,
             protocol: ProtocolSetting::Auto,
             model: None,
             max_angular: None,
@@ -225,7 +229,7 @@ impl GatewayConfig {
         if self.transport == Some(Transport::Serial) && self.protocol == ProtocolSetting::V2 {
             return Err(ConfigError::Invalid(
                 "protocol v2 travels on CAN only (no vendor code speaks v2 over RS232): use \
-                 --slcan or --can, or --protocol v1 for a v1 chassis on RS232"
+                 --slcan, --can or --gs-usb, or --protocol v1 for a v1 chassis on RS232"
                     .into(),
             ));
         }
@@ -271,12 +275,16 @@ impl GatewayConfig {
         Ok(match self.transport {
             None => {
                 return Err(ConfigError::Invalid(
-                    "no transport: use --sim, --serial DEVICE, --slcan DEVICE or --can IFACE (or `transport` in the config)".into(),
+                    "no transport: use --sim, --serial DEVICE, --slcan DEVICE, --can IFACE or --gs-usb [SERIAL] (or `transport` in the config)".into(),
                 ));
             }
             Some(Transport::Serial) => DeviceSpec::Serial(device()?.into()),
             Some(Transport::Slcan) => DeviceSpec::Slcan(device()?.into()),
             Some(Transport::Can) => DeviceSpec::Can(device()?),
+            Some(Transport::GsUsb) => DeviceSpec::GsUsb {
+                serial: self.device.clone().filter(|serial| !serial.is_empty()),
+                detach: self.gs_usb_detach,
+            },
             Some(Transport::Sim) => {
                 let protocol = self.fixed_protocol().unwrap_or(Protocol::V1);
                 let model = self.model.unwrap_or(Model::default_for(protocol));
@@ -298,7 +306,7 @@ impl GatewayConfig {
         match (self.transport, self.protocol.fixed()) {
             (_, Some(protocol)) => Some(protocol),
             (Some(Transport::Serial | Transport::Sim), None) => Some(Protocol::V1),
-            (Some(Transport::Slcan | Transport::Can) | None, None) => None,
+            (Some(Transport::Slcan | Transport::Can | Transport::GsUsb) | None, None) => None,
         }
     }
 

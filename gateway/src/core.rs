@@ -199,7 +199,9 @@ impl Core {
         let timing = &config.timing;
         let light_period_ms = match transport {
             Transport::Serial => timing.serial_light_period_ms,
-            Transport::Slcan | Transport::Can | Transport::Sim => timing.can_light_period_ms,
+            Transport::Slcan | Transport::Can | Transport::GsUsb | Transport::Sim => {
+                timing.can_light_period_ms
+            }
         };
         let mut chassis = ChassisPayload::new(config.limits_model(), config.max_angular());
         if config.model.is_none() {

@@ -1,5 +1,5 @@
-//! What the gateway talks to: a port with its framing (serial, slcan, SocketCAN) or the chassis
-//! simulator in-process (`--sim`). Messages in and out; the control loop does the rest.
+//! What the gateway talks to: a port with its framing (serial, slcan, SocketCAN, a gs_usb
+//! adapter) or the chassis simulator in-process (`--sim`). Messages in and out; the control loop does the rest.
 
 use std::io;
 use std::path::PathBuf;
@@ -26,6 +26,13 @@ pub enum DeviceSpec {
     Slcan(PathBuf),
     /// A SocketCAN interface.
     Can(String),
+    /// A gs_usb USB-CAN adapter in user space.
+    GsUsb {
+        /// Its serial number; `None`: the only adapter plugged in.
+        serial: Option<String>,
+        /// Detach a kernel driver bound to it (never done unasked).
+        detach: bool,
+    },
     /// The simulated chassis, in-process, with the firmware of `protocol`.
     Sim {
         /// Its parameters.
@@ -42,6 +49,7 @@ impl DeviceSpec {
             Self::Serial(_) => Transport::Serial,
             Self::Slcan(_) => Transport::Slcan,
             Self::Can(_) => Transport::Can,
+            Self::GsUsb { .. } => Transport::GsUsb,
             Self::Sim { .. } => Transport::Sim,
         }
     }
@@ -51,6 +59,11 @@ impl DeviceSpec {
         match self {
             Self::Serial(path) | Self::Slcan(path) => path.display().to_string(),
             Self::Can(interface) => interface.clone(),
+            Self::GsUsb {
+                serial: Some(serial),
+                ..
+            } => serial.clone(),
+            Self::GsUsb { serial: None, .. } => "(the only adapter)".into(),
             Self::Sim { .. } => "simulator".into(),
         }
     }
@@ -64,6 +77,9 @@ impl DeviceSpec {
                 .display()
                 .to_string(),
             Self::Can(interface) => format!("can-{interface}"),
+            Self::GsUsb { serial, .. } => {
+                format!("gs-usb-{}", serial.as_deref().unwrap_or("only"))
+            }
             Self::Sim { .. } => return Ok(None),
         };
         let what = format!("device {}", self.name());
@@ -79,6 +95,7 @@ impl DeviceSpec {
                 Port::open_tty(path).map_err(io::Error::from)?
             }
             Self::Can(interface) => Port::open_can(interface)?,
+            Self::GsUsb { serial, detach } => Port::open_gs_usb(serial.as_deref(), *detach)?,
             Self::Sim { params, protocol } => {
                 // The model's clock reads zero at `epoch`, the gateway's time of opening.
                 let chassis = Chassis::new(params.clone(), Transport::Sim);
@@ -115,6 +132,9 @@ pub enum OpenError {
     /// The OS refused (missing, permissions, busy with another program...).
     #[error(transparent)]
     Io(#[from] io::Error),
+    /// The gs_usb adapter is missing, ambiguous, held by a driver or would not start.
+    #[error(transparent)]
+    GsUsb(#[from] scout_io::scout_usb::OpenError),
 }
 
 /// An open device.
@@ -187,9 +207,9 @@ impl Device {
                 Ok(())
             }
             Self::Port {
-                port: port @ Port::Can(_),
+                port: port @ (Port::Can(_) | Port::GsUsb(_)),
                 ..
-            } => port.write_frame(&frame.can_frame()),
+            } => port.write_frame(&frame.can_frame(), WRITE_TIMEOUT),
             Self::Port {
                 port,
                 transport,
@@ -268,6 +288,9 @@ impl Device {
                         }
                         Incoming::BusError(error) => {
                             on_event(RxEvent::Rejected(RxError::ForeignFrame(error.class)));
+                        }
+                        Incoming::Malformed(error) => {
+                            on_event(RxEvent::Rejected(RxError::GsUsb(error)));
                         }
                     }
                 }

@@ -402,10 +402,7 @@ impl Driver {
         if let Err(error) = result {
             self.device = None;
             let what = format!("reading: {error}");
-            if error
-                .get_ref()
-                .is_some_and(|inner| inner.downcast_ref::<scout_io::BusError>().is_some())
-            {
+            if scout_io::is_bus_fault(&error) {
                 self.core.handle_link_fault(now, &what);
             } else {
                 self.core.handle_link_failed(now, &what);
@@ -567,12 +564,12 @@ impl Driver {
             if let Err(error) = device.send(&frame, now) {
                 self.device = None;
                 let what = format!("writing: {error}");
-                // A full CAN transmit queue or a downed interface: the bus or adapter failed.
-                match error.raw_os_error() {
-                    Some(nix::libc::ENOBUFS | nix::libc::ENETDOWN) => {
-                        self.core.handle_link_fault(now, &what);
-                    }
-                    _ => self.core.handle_link_failed(now, &what),
+                // A full CAN transmit queue, a downed interface, frames nothing acknowledges:
+                // the bus or adapter failed.
+                if scout_io::is_bus_fault(&error) {
+                    self.core.handle_link_fault(now, &what);
+                } else {
+                    self.core.handle_link_failed(now, &what);
                 }
             }
         }

@@ -521,6 +521,11 @@ pub struct DeviceMode {
 impl DeviceMode {
     /// Its length.
     pub const LEN: usize = 8;
+    /// Reset the channel (stop it).
+    pub const STOPPED: Self = Self {
+        start: false,
+        flags: 0,
+    };
     /// The flag asking for hardware timestamps on received frames (the frames grow by 4 bytes).
     pub const HW_TIMESTAMP: u32 = 1 << 4;
     const RESET: u32 = 0;

@@ -21,6 +21,8 @@ pub enum Transport {
     Slcan,
     /// A SocketCAN interface.
     Can,
+    /// A gs_usb USB-CAN adapter driven in user space (no kernel CAN driver).
+    GsUsb,
     /// The simulated chassis in the same process: messages are handed over unframed, in CAN's
     /// control mode.
     Sim,
@@ -32,7 +34,7 @@ impl Transport {
     pub const fn control_mode(self) -> ControlMode {
         match self {
             Self::Serial => ControlMode::Serial,
-            Self::Slcan | Self::Can | Self::Sim => ControlMode::Can,
+            Self::Slcan | Self::Can | Self::GsUsb | Self::Sim => ControlMode::Can,
         }
     }
 
@@ -42,6 +44,7 @@ impl Transport {
             Self::Serial => "serial",
             Self::Slcan => "slcan",
             Self::Can => "can",
+            Self::GsUsb => "gs_usb",
             Self::Sim => "sim",
         }
     }
@@ -53,6 +56,7 @@ impl Transport {
             Self::Slcan => 1,
             Self::Can => 2,
             Self::Sim => 3,
+            Self::GsUsb => 4,
         }
     }
 
@@ -63,6 +67,7 @@ impl Transport {
             1 => Some(Self::Slcan),
             2 => Some(Self::Can),
             3 => Some(Self::Sim),
+            4 => Some(Self::GsUsb),
             _ => None,
         }
     }
@@ -87,6 +92,8 @@ pub enum RxError {
     Slcan(slcan::SlcanError),
     /// An extended-id, remote or error CAN frame (SCOUT v1 sends only standard data frames).
     ForeignFrame(u32),
+    /// Bytes from a gs_usb adapter that are no host frame.
+    GsUsb(crate::gs_usb::Error),
 }
 
 impl core::fmt::Display for RxError {
@@ -96,6 +103,7 @@ impl core::fmt::Display for RxError {
             Self::V2(error) => error.fmt(f),
             Self::Serial(error) => error.fmt(f),
             Self::Slcan(error) => error.fmt(f),
+            Self::GsUsb(error) => error.fmt(f),
             Self::ForeignFrame(id) => write!(
                 f,
                 "extended, remote or error CAN frame 0x{id:08X} (SCOUT v1 sends standard data frames)"
@@ -143,7 +151,7 @@ impl RxError {
                 | can::CanError::Checksum { id, .. },
             ) => Some(id),
             Self::V2(v2::V2Error::UnknownId { id } | v2::V2Error::BadLength { id, .. }) => Some(id),
-            Self::Serial(_) | Self::Slcan(_) | Self::ForeignFrame(_) => None,
+            Self::Serial(_) | Self::Slcan(_) | Self::GsUsb(_) | Self::ForeignFrame(_) => None,
         }
     }
 }
@@ -199,7 +207,7 @@ impl StreamFraming {
         match transport {
             Transport::Serial => Some(Self::Serial(StreamDecoder::new())),
             Transport::Slcan => Some(Self::Slcan(LineDecoder::new())),
-            Transport::Can | Transport::Sim => None,
+            Transport::Can | Transport::GsUsb | Transport::Sim => None,
         }
     }
 
@@ -296,7 +304,7 @@ pub fn encode_stream(
             out.extend(serial::encode(&counted.message, counted.count));
         }
         (Transport::Serial, Outgoing::V2(_)) => return Err(NoSerialFraming),
-        (Transport::Slcan | Transport::Can | Transport::Sim, frame) => {
+        (Transport::Slcan | Transport::Can | Transport::GsUsb | Transport::Sim, frame) => {
             let line = slcan::encode(&Slcan::Frame {
                 frame: frame.can_frame(),
                 timestamp: None,

@@ -38,6 +38,7 @@ fn same_device(spec: &DeviceSpec, device: &str) -> bool {
             canonical(path) == canonical(Path::new(device))
         }
         DeviceSpec::Can(interface) => interface == device,
+        DeviceSpec::GsUsb { .. } => spec.name() == device,
         DeviceSpec::Sim { .. } => false,
     }
 }
@@ -138,7 +139,7 @@ fn check_port(spec: &DeviceSpec, options: &Options, out: &mut Report<'_>) -> boo
     let device = match spec {
         DeviceSpec::Serial(path) | DeviceSpec::Slcan(path) => port::tty_checks(path),
         DeviceSpec::Can(interface) => can::inspect(interface),
-        DeviceSpec::Sim { .. } => Vec::new(),
+        DeviceSpec::GsUsb { .. } | DeviceSpec::Sim { .. } => Vec::new(),
     };
     let usable = !device.iter().any(|check| {
         check.verdict == Verdict::Fail
@@ -201,6 +202,7 @@ fn check_gateway(options: &Options, out: &mut Report<'_>) {
                             DeviceSpec::Serial(_) => "serial",
                             DeviceSpec::Slcan(_) => "slcan",
                             DeviceSpec::Can(_) => "can",
+                            DeviceSpec::GsUsb { .. } => "gs-usb",
                             DeviceSpec::Sim { .. } => "sim",
                         },
                         spec.name()

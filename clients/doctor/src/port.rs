@@ -102,7 +102,9 @@ pub fn listen(spec: &DeviceSpec, window: Duration, checks: &mut Vec<Check>) -> O
             // exclusive open refuses ours, whatever the error's kind says.
             let holders = match spec {
                 DeviceSpec::Serial(path) | DeviceSpec::Slcan(path) => holders_of(path),
-                DeviceSpec::Can(_) | DeviceSpec::Sim { .. } => Vec::new(),
+                DeviceSpec::Can(_) | DeviceSpec::GsUsb { .. } | DeviceSpec::Sim { .. } => {
+                    Vec::new()
+                }
             };
             let fix = match (holders.is_empty(), error.kind()) {
                 (false, _) => format!(
@@ -124,6 +126,14 @@ pub fn listen(spec: &DeviceSpec, window: Duration, checks: &mut Vec<Check>) -> O
                 "port",
                 format!("opening {}: {error}", spec.name()),
                 fix,
+            ));
+            return Opened::Failed;
+        }
+        Err(OpenError::GsUsb(error)) => {
+            checks.push(Check::fail(
+                "port",
+                error.to_string(),
+                "see the `usb` checks above for the adapters plugged in",
             ));
             return Opened::Failed;
         }

@@ -142,7 +142,7 @@ impl Traffic {
                 "is the chassis on, the cable on its RS232 port (TX/RX crossed, GND), and the port \
                  at 115200 8N1?"
             }
-            Transport::Slcan | Transport::Can => {
+            Transport::Slcan | Transport::Can | Transport::GsUsb => {
                 "is the chassis on, CAN_H/CAN_L wired (and terminated: 120 ohm at each end), the \
                  bus at 500 kbit/s?"
             }
@@ -195,7 +195,7 @@ impl Traffic {
                     "lines arrive but no SCOUT frame: the adapter's bitrate (500k), or not an \
                      slcan adapter (a plain RS232 link is --serial)"
                 }
-                Transport::Can | Transport::Sim => {
+                Transport::Can | Transport::GsUsb | Transport::Sim => {
                     "frames arrive but none of SCOUT v1: another device on the bus, or the \
                      wrong bitrate"
                 }

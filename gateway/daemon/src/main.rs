@@ -46,6 +46,13 @@ struct Cli {
     /// A SocketCAN interface at 500 kbit/s, e.g. can0.
     #[arg(long, group = "transport", value_name = "IFACE")]
     can: Option<String>,
+    /// A gs_usb USB-CAN adapter (candleLight, CANable, AgileX's), driven in user space with no
+    /// kernel CAN driver: the one with this serial number, else the only one plugged in.
+    #[arg(long, group = "transport", value_name = "SERIAL", num_args = 0..=1, default_missing_value = "")]
+    gs_usb: Option<String>,
+    /// With --gs-usb: take the adapter from a kernel driver bound to it (its canN goes away).
+    #[arg(long)]
+    gs_usb_detach: bool,
     /// The robot's name: every iceoryx2 service and zenoh key carries it [default: scout].
     #[arg(long, value_name = "ROBOT")]
     name: Option<RobotName>,
@@ -157,8 +164,14 @@ fn configure(cli: &Cli) -> anyhow::Result<GatewayConfig> {
         (_, Some(path), ..) => (Some(Transport::Serial), device(path)),
         (_, _, Some(path), _) => (Some(Transport::Slcan), device(path)),
         (_, _, _, Some(interface)) => (Some(Transport::Can), Some(interface.clone())),
-        _ => (config.transport, config.device.clone()),
+        _ => match &cli.gs_usb {
+            Some(serial) => (Some(Transport::GsUsb), Some(serial.clone())),
+            None => (config.transport, config.device.clone()),
+        },
     };
+    if cli.gs_usb_detach {
+        config.gs_usb_detach = true;
+    }
     config.transport = transport;
     config.device = device;
     Ok(config)

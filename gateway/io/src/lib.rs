@@ -1,8 +1,8 @@
 //! scout-io: what the two programs that face the chassis (scout-gateway and scout-sim) share
 //! with the operating system.
 //!
-//! - [`port`]: the chassis port as an OS resource: a tty (serial, slcan adapter, pseudo-terminal)
-//!   or a SocketCAN socket.
+//! - [`port`]: the chassis port as an OS resource: a tty (serial, slcan adapter, pseudo-terminal),
+//!   a SocketCAN socket, or a gs_usb adapter in user space (`scout-usb`).
 //! - [`logging`]: `tracing` to standard error, never blocking the caller.
 //! - [`notify`]: the service manager's notifications (systemd's readiness and watchdog).
 //! - [`raise_priority`]: real-time scheduling for the thread that keeps the wire's time.
@@ -11,7 +11,8 @@ pub mod logging;
 pub mod notify;
 pub mod port;
 
-pub use port::{BusError, Incoming, Port};
+pub use port::{BusError, Incoming, Port, is_bus_fault};
+pub use scout_usb;
 
 /// Puts the calling thread under SCHED_FIFO at `priority` (0: leaves it alone).
 pub fn raise_priority(priority: u8, what: &str) {

@@ -1,5 +1,6 @@
-//! The chassis port as an OS resource: a tty (serial or slcan adapter, or a pseudo-terminal) or
-//! a SocketCAN socket, read with a timeout and written without blocking the caller for long.
+//! The chassis port as an OS resource: a tty (serial or slcan adapter, or a pseudo-terminal), a
+//! SocketCAN socket, or a gs_usb adapter in user space; read with a timeout and written without
+//! blocking the caller for long.
 //! SocketCAN reads also carry the kernel's count of frames it dropped because the receive queue
 //! was full (`SO_RXQ_OVFL`), so no frame is lost without being counted.
 
@@ -8,6 +9,7 @@ use std::path::Path;
 use std::time::Duration;
 
 use scout_protocol::CanFrame;
+use scout_protocol::gs_usb::Received;
 use serialport::{SerialPort, TTYPort};
 use std::os::fd::AsRawFd as _;
 
@@ -24,6 +26,8 @@ pub enum Port {
     Tty(TTYPort),
     /// A SocketCAN socket.
     Can(CanPort),
+    /// A gs_usb USB-CAN adapter, through usbfs.
+    GsUsb(Box<scout_usb::GsUsbPort>),
 }
 
 /// A SocketCAN socket and the kernel's count of the frames it dropped for it.
@@ -47,6 +51,8 @@ pub enum Incoming {
     Foreign(u32),
     /// An error frame the CAN driver reported.
     BusError(BusError),
+    /// Bytes from a gs_usb adapter that are no host frame.
+    Malformed(scout_protocol::gs_usb::Error),
 }
 
 /// An error frame from the CAN driver (`linux/can/error.h`): its class bits and the controller
@@ -123,12 +129,20 @@ impl Port {
         }))
     }
 
-    /// Frames the kernel dropped before they could be read, because the receive queue was full
-    /// (SocketCAN; always 0 for a tty, whose driver does not count).
+    /// Opens a gs_usb adapter (the one with `serial`, else the only one) at 500 kbit/s; a
+    /// kernel driver bound to it is detached only when `detach` says so.
+    pub fn open_gs_usb(serial: Option<&str>, detach: bool) -> Result<Self, scout_usb::OpenError> {
+        scout_usb::GsUsbPort::open(serial, detach).map(|port| Self::GsUsb(Box::new(port)))
+    }
+
+    /// Frames dropped before they could be read: by the kernel, for a full receive queue
+    /// (SocketCAN), or by a gs_usb adapter (one per frame it flagged); always 0 for a tty,
+    /// whose driver does not count.
     pub fn overflowed_frames(&self) -> u64 {
         match self {
             Self::Tty(_) => 0,
             Self::Can(can) => u64::from(can.overflowed),
+            Self::GsUsb(usb) => usb.overflowed_frames(),
         }
     }
 
@@ -145,6 +159,20 @@ impl Port {
                 }
             }
             Self::Can(can) => can.read(timeout),
+            Self::GsUsb(usb) => Ok(match usb.read(timeout)? {
+                None => Incoming::Timeout,
+                Some(scout_usb::Input::Malformed(error)) => Incoming::Malformed(error),
+                Some(scout_usb::Input::Frame(received)) => match received {
+                    Received::Frame(frame) => Incoming::Frame(frame),
+                    Received::Foreign(can_id) => Incoming::Foreign(can_id),
+                    Received::BusError { class, data } => Incoming::BusError(BusError {
+                        class,
+                        controller: data[1],
+                    }),
+                    // Consumed by the port; never handed out.
+                    Received::Echo(_) => Incoming::Timeout,
+                },
+            }),
         }
     }
 
@@ -170,18 +198,36 @@ impl Port {
         Ok(written)
     }
 
-    /// Sends one CAN frame on a SocketCAN socket.
-    pub fn write_frame(&mut self, frame: &CanFrame) -> io::Result<()> {
-        let Self::Can(CanPort { socket, .. }) = self else {
-            return Err(io::Error::new(
+    /// Sends one CAN frame on a SocketCAN socket or a gs_usb adapter, waiting at most
+    /// `timeout` for the adapter to take it.
+    pub fn write_frame(&mut self, frame: &CanFrame, timeout: Duration) -> io::Result<()> {
+        match self {
+            Self::Can(CanPort { socket, .. }) => {
+                let frame = socketcan::CanFrame::from_raw_id(u32::from(frame.id()), frame.data())
+                    .ok_or_else(|| {
+                    io::Error::new(io::ErrorKind::InvalidInput, "invalid CAN frame")
+                })?;
+                socket.write_frame(&frame)
+            }
+            Self::GsUsb(usb) => usb.write(frame, timeout),
+            Self::Tty(_) => Err(io::Error::new(
                 io::ErrorKind::InvalidInput,
-                "frames need a CAN socket",
-            ));
-        };
-        let frame = socketcan::CanFrame::from_raw_id(u32::from(frame.id()), frame.data())
-            .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "invalid CAN frame"))?;
-        socket.write_frame(&frame)
+                "frames need a CAN socket or adapter",
+            )),
+        }
     }
+}
+
+/// Whether a read or write error means the bus or the adapter failed (`link_fault`), not that
+/// the port went away (`link_lost`): an error frame of bus-off or error-passive, a full CAN
+/// transmit queue, a downed interface, frames a gs_usb adapter could not put on the bus.
+pub fn is_bus_fault(error: &io::Error) -> bool {
+    matches!(
+        error.raw_os_error(),
+        Some(nix::libc::ENOBUFS | nix::libc::ENETDOWN)
+    ) || error
+        .get_ref()
+        .is_some_and(|inner| inner.is::<BusError>() || inner.is::<scout_usb::Unacknowledged>())
 }
 
 /// A read or write that ended without data but without a fault: a timeout, or a signal (Ctrl-C,
@@ -292,6 +338,7 @@ impl std::os::fd::AsRawFd for Port {
         match self {
             Self::Tty(tty) => tty.as_raw_fd(),
             Self::Can(can) => can.socket.as_raw_fd(),
+            Self::GsUsb(usb) => usb.as_raw_fd(),
         }
     }
 }
@@ -340,6 +387,25 @@ mod tests {
             matches!(wire::parse(&too_long), Incoming::Frame(f) if f.data().len() == 8),
             "a length over 8 reads 8 bytes"
         );
+    }
+
+    #[test]
+    fn bus_faults_are_told_from_a_lost_port() {
+        let fault = |error: io::Error| is_bus_fault(&error);
+        assert!(fault(io::Error::from_raw_os_error(nix::libc::ENOBUFS)));
+        assert!(fault(io::Error::from_raw_os_error(nix::libc::ENETDOWN)));
+        assert!(fault(io::Error::other(BusError {
+            class: 0x40,
+            controller: 0
+        })));
+        assert!(fault(io::Error::other(scout_usb::Unacknowledged {
+            frames: 10
+        })));
+        assert!(!fault(io::Error::from_raw_os_error(nix::libc::ENODEV)));
+        assert!(!fault(io::Error::new(
+            io::ErrorKind::NotConnected,
+            "unplugged"
+        )));
     }
 
     #[test]

@@ -185,6 +185,7 @@ pub fn run(
         (Protocol::V2, Transport::Serial | Transport::Sim) => anyhow::bail!(
             "protocol v2 is CAN only (the vendor SDK implements no v2 over RS232): use --slcan or --can"
         ),
+        (Protocol::V2, Transport::GsUsb) => chassis.with_protocol_v2(),
     };
     let mut simulator = Simulator {
         start: Instant::now(),
@@ -256,7 +257,7 @@ impl Simulator<'_> {
                 Ok(Incoming::Timeout) => {}
                 Ok(Incoming::Bytes(n)) => self.receive_bytes(&buffer[..n])?,
                 Ok(Incoming::Frame(frame)) => self.receive(decode_can(&frame))?,
-                Ok(Incoming::Foreign(_) | Incoming::BusError(_)) => {
+                Ok(Incoming::Foreign(_) | Incoming::BusError(_) | Incoming::Malformed(_)) => {
                     self.chassis.handle_rejected(self.now())
                 }
                 Err(error) => {
@@ -330,8 +331,10 @@ impl Simulator<'_> {
                     .with_context(|| format!("opening SocketCAN interface {interface}"))?;
                 (Endpoint { port, _slave: None }, interface)
             }
-            Transport::Sim => anyhow::bail!(
-                "scout-sim speaks serial, slcan or SocketCAN (the in-process chassis is scout-gateway --sim)"
+            Transport::Sim | Transport::GsUsb => anyhow::bail!(
+                "scout-sim speaks serial, slcan or SocketCAN (the in-process chassis is \
+                 scout-gateway --sim; a gs_usb adapter is emulated by scout-gs-usb-gadget, on \
+                 a CAN interface the simulator is on)"
             ),
             Transport::Serial | Transport::Slcan => {
                 let (master, slave) =
@@ -421,7 +424,7 @@ impl Simulator<'_> {
     fn feedback_slot(&self, now: Duration) -> Option<(u64, Option<u16>)> {
         let heard = match self.options.transport {
             Transport::Slcan => self.adapter.hears_chassis(),
-            Transport::Serial | Transport::Can | Transport::Sim => true,
+            Transport::Serial | Transport::Can | Transport::GsUsb | Transport::Sim => true,
         };
         if now < self.silent_until || self.endpoint.is_none() || !heard {
             return None;
@@ -472,7 +475,7 @@ impl Simulator<'_> {
             );
             return;
         }
-        match endpoint.port.write_frame(frame) {
+        match endpoint.port.write_frame(frame, Duration::ZERO) {
             Ok(()) if self.stats.write_errors > self.write_errors_reported => {
                 info!(
                     "CAN writes go through again after {} failures",
@@ -526,7 +529,7 @@ impl Simulator<'_> {
                     frame[serial::FRAME_LEN - 1] ^= checksum_damage;
                     bytes.extend_from_slice(&frame);
                 }
-                Transport::Slcan | Transport::Can | Transport::Sim => {
+                Transport::Slcan | Transport::Can | Transport::GsUsb | Transport::Sim => {
                     let frame = can::encode(&counted.message, counted.count);
                     let mut data = [0u8; 8];
                     data.copy_from_slice(frame.data());
