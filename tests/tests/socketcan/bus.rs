@@ -19,11 +19,16 @@ use crate::{Bus, LIMIT};
 /// it three times in two runs of this file, not in the runs around them); these tests are about
 /// what comes after, and a second silent start fails.
 pub fn start(bus: &Bus, test: &str) -> (Sim, Gateway, String) {
+    start_with(bus, test, &["--can", bus.name()])
+}
+
+/// [`start`] with the gateway on `port` (its transport arguments), the simulator on `bus`.
+pub fn start_with(bus: &Bus, test: &str, port: &[&str]) -> (Sim, Gateway, String) {
     let name = robot_name(test);
     let mut attempt = 1;
     loop {
         let mut sim = Sim::start(&["--can", bus.name()]);
-        let gateway = Gateway::start(&["--can", bus.name(), "--name", &name]);
+        let gateway = Gateway::start(&[port, &["--name", &name]].concat());
         let state = connect_within(&name, LIMIT).subscribe().expect("subscribe");
         match link_up(&state) {
             Ok(()) => {

@@ -13,7 +13,7 @@ use crate::{Bus, LIMIT, can_utils, tc};
 
 /// A client streams, `fault` happens, `recover` undoes it: the stop is `link_fault`, it lasts
 /// until the link is healthy again, and nothing moves until a release and a new take.
-fn fault_latches_a_link_fault(
+pub fn fault_latches_a_link_fault(
     sim: &mut Sim,
     name: &str,
     fault: impl FnOnce(),

@@ -1,5 +1,6 @@
 //! SocketCAN end to end: the gateway and the simulator on a virtual CAN bus of each test's own,
-//! can-utils as the independent peer, CAN faults, and zenoh over a lossy, partitioned network.
+//! can-utils as the independent peer, CAN faults, a gs_usb adapter emulated on USB (through the
+//! kernel's driver and in user space), and zenoh over a lossy, partitioned network.
 //!
 //! Each test needs to create network interfaces (root, the `vcan` and `sch_netem` modules).
 //! Where it cannot, it prints why and skips, and `socketcan_tests_in_a_vm` runs this whole
@@ -10,6 +11,7 @@ mod bus;
 mod can_utils;
 mod doctor;
 mod faults;
+mod gs_usb;
 mod netem;
 mod netem_bench;
 
