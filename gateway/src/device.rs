@@ -15,7 +15,10 @@ use scout_protocol::version::Protocol;
 use scout_sim::{Chassis, Feedback, SimParams};
 
 use crate::lock::{Lock, LockError};
+
 use crate::wait::{Ready, wait};
+/// The gs_usb adapters plugged in (for `scout doctor`: the gateway's own way of finding them).
+pub use scout_io::scout_usb::{Adapter as GsUsbAdapter, adapters as gs_usb_adapters};
 
 /// Which device, before it is opened.
 #[derive(Debug, Clone, PartialEq)]

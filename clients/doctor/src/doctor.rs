@@ -13,7 +13,7 @@ use scout_interface::services;
 use crate::check::{Check, Verdict};
 use crate::gateway::{self, is_no_gateway};
 use crate::port::{self, Opened};
-use crate::{can, remote};
+use crate::{can, remote, usb};
 
 /// What to check.
 #[derive(Debug, Clone)]
@@ -52,6 +52,8 @@ pub fn run(options: &Options, report: &mut dyn FnMut(&Check)) -> Vec<Check> {
     // First: connecting to a gateway cleans up after dead processes, and this check says what
     // they left.
     out.emit(vec![leftovers()]);
+    // The USB-CAN adapters: the Jetson's cases (no driver in its kernel, the adapter as can2).
+    out.emit(usb::inspect(options.port.as_ref()));
     let gateway_checked = match &options.port {
         Some(spec) => check_port(spec, options, &mut out),
         None => false,

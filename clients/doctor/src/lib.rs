@@ -5,6 +5,7 @@
 //! - [`check`]: one check's verdict, detail and fix; text and JSON.
 //! - [`traffic`]: what a port said while listened to, and the verdicts (sans-IO).
 //! - [`can`]: a SocketCAN interface as `ip` describes it, and the verdicts.
+//! - [`usb`]: gs_usb USB-CAN adapters on the USB bus: their drivers and names (sans-IO verdicts).
 //! - [`port`]: the device file, opening and listening.
 //! - [`gateway`]: the checks through a running gateway.
 //! - [`remote`]: the robot's state through zenoh, when asked.
@@ -17,3 +18,4 @@ pub mod gateway;
 pub mod port;
 pub mod remote;
 pub mod traffic;
+pub mod usb;

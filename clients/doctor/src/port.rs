@@ -133,7 +133,7 @@ pub fn listen(spec: &DeviceSpec, window: Duration, checks: &mut Vec<Check>) -> O
             checks.push(Check::fail(
                 "port",
                 error.to_string(),
-                "see the `usb` checks above for the adapters plugged in",
+                "the `usb.adapter` checks above say what is plugged in and who holds it",
             ));
             return Opened::Failed;
         }

@@ -13,8 +13,8 @@ use std::time::{Duration, Instant};
 
 use nix::sys::signal::Signal;
 use scout_system_tests::{
-    Gateway, chassis_stays_still, connect, drive_until_moving, release_all, scout, skip,
-    wait_for_state, wait_for_status,
+    Gateway, Sim, chassis_stays_still, connect, doctor_check, drive_until_moving, release_all,
+    scout, skip, wait_for_state, wait_for_status,
 };
 
 use crate::bus::{chassis_commanded, chassis_stays_still_after_braking, start_with};
@@ -437,4 +437,43 @@ fn user_space_gs_usb_frames_nothing_acknowledges_latch_a_link_fault() {
         stats["last_command"].is_null(),
         "nothing reached the chassis: {stats}"
     );
+}
+
+#[test]
+fn doctor_tells_a_jetson_owner_how_to_reach_the_adapter() {
+    const TEST: &str = "doctor_tells_a_jetson_owner_how_to_reach_the_adapter";
+    let Some(bus) = set_up(TEST, false) else {
+        return;
+    };
+    let adapter = Adapter::plug(&bus, 0);
+    let mut sim = Sim::start(&["--can", bus.name()]);
+    sim.wait_sending();
+    let name = scout_system_tests::robot_name("usb-doctor");
+    // No driver bound: the doctor says so and offers the user-space transport.
+    let (_, checks) = scout_system_tests::doctor(&["--name", &name, "--listen", "1"]);
+    let usb = doctor_check(&checks, "usb.adapter");
+    assert_eq!(usb["verdict"], "warn", "{checks:#?}");
+    assert!(
+        usb["fix"]
+            .as_str()
+            .is_some_and(|fix| fix.contains(&format!("--gs-usb {}", adapter.serial))),
+        "{usb}"
+    );
+    // Checked in user space, as the gateway would open it: the chassis is there.
+    let (code, checks) = scout_system_tests::doctor(&[
+        "--name",
+        &name,
+        "--gs-usb",
+        &adapter.serial,
+        "--listen",
+        "2",
+    ]);
+    assert_eq!(code, Some(0), "{checks:#?}");
+    for check in ["usb.adapter", "port", "traffic", "protocol"] {
+        assert_eq!(
+            doctor_check(&checks, check)["verdict"],
+            "pass",
+            "{check}: {checks:#?}"
+        );
+    }
 }

@@ -21,7 +21,7 @@ use scout_interface::failure::Failure;
 /// every check passed (warnings included), 1 a check failed, 2 usage error.
 #[derive(Debug, Parser)]
 #[command(name = "scout doctor", version, about)]
-#[command(group(ArgGroup::new("port").args(["serial", "slcan", "can"])))]
+#[command(group(ArgGroup::new("port").args(["serial", "slcan", "can", "gs_usb"])))]
 struct Args {
     /// The robot (gateway) name.
     #[arg(long, default_value = "scout", value_name = "ROBOT")]
@@ -35,6 +35,10 @@ struct Args {
     /// A SocketCAN interface to check.
     #[arg(long, value_name = "IFACE")]
     can: Option<String>,
+    /// A gs_usb USB-CAN adapter to check in user space (as scout-gateway --gs-usb): the one
+    /// with this serial number, else the only one.
+    #[arg(long, value_name = "SERIAL", num_args = 0..=1, default_missing_value = "")]
+    gs_usb: Option<String>,
     /// One JSON object per check, one per line.
     #[arg(long)]
     json: bool,
@@ -63,7 +67,10 @@ fn main() -> ExitCode {
         (Some(path), _, _) => Some(DeviceSpec::Serial(path.clone())),
         (_, Some(path), _) => Some(DeviceSpec::Slcan(path.clone())),
         (_, _, Some(interface)) => Some(DeviceSpec::Can(interface.clone())),
-        (None, None, None) => None,
+        (None, None, None) => args.gs_usb.as_ref().map(|serial| DeviceSpec::GsUsb {
+            serial: Some(serial.clone()).filter(|s| !s.is_empty()),
+            detach: false,
+        }),
     };
     let options = Options {
         robot: args.name.clone(),
