@@ -13,8 +13,8 @@ use std::os::fd::{AsRawFd, RawFd};
 use std::os::unix::net::UnixStream;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender, TryRecvError};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError, SyncSender, TryRecvError, TrySendError};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
@@ -36,6 +36,10 @@ const CHANNEL: u8 = 0;
 const CONTROL_TIMEOUT: Duration = Duration::from_millis(500);
 /// IN transfers kept queued: frames arrive every millisecond or two at most.
 const IN_TRANSFERS: usize = 8;
+/// Frames read from the adapter and not yet taken by the gateway: three seconds of a v2
+/// chassis' feedback. Past it, frames are dropped and counted, as the kernel's full receive
+/// queue does on SocketCAN.
+const QUEUE: usize = 2048;
 /// OUT transfers the adapter may hold before a write waits.
 const OUT_TRANSFERS: usize = 4;
 /// Frames sent whose echo has not come back (the adapter echoes a frame once it is on the
@@ -284,6 +288,8 @@ pub struct GsUsbPort {
     next_echo: u32,
     unechoed: u32,
     overflowed: u64,
+    /// Frames the reading thread dropped, the queue full.
+    dropped: Arc<AtomicU64>,
     failed: Option<TransferError>,
 }
 
@@ -358,13 +364,14 @@ impl GsUsbPort {
         wake.set_nonblocking(true)
             .and_then(|()| signal.set_nonblocking(true))
             .map_err(|e| OpenError::io(adapter, e))?;
-        let (sender, deliveries) = mpsc::channel();
+        let (sender, deliveries) = mpsc::sync_channel(QUEUE);
         let stop = Arc::new(AtomicBool::new(false));
+        let dropped = Arc::new(AtomicU64::new(0));
         let reader = {
-            let stop = Arc::clone(&stop);
+            let (stop, dropped) = (Arc::clone(&stop), Arc::clone(&dropped));
             std::thread::Builder::new()
                 .name("gs_usb in".into())
-                .spawn(move || read_in(input, &sender, &signal, &stop))
+                .spawn(move || read_in(input, &sender, &signal, &stop, &dropped))
                 .map_err(|e| OpenError::io(adapter, e))?
         };
         tracing::info!("gs_usb adapter {name}: 500 kbit/s, channel started");
@@ -379,14 +386,16 @@ impl GsUsbPort {
             next_echo: 0,
             unechoed: 0,
             overflowed: 0,
+            dropped,
             failed: None,
         })
     }
 
-    /// Frames the adapter said it lost (one per frame flagged with its overflow bit: it does
-    /// not say how many).
+    /// Frames lost before the gateway read them: those the adapter said it lost (one per
+    /// frame flagged with its overflow bit: it does not say how many), and those dropped here
+    /// with the queue full.
     pub fn overflowed_frames(&self) -> u64 {
-        self.overflowed
+        self.overflowed + self.dropped.load(Ordering::Relaxed)
     }
 
     /// Reads one input, waiting at most `timeout` (zero: only what already arrived). Echoes of
@@ -492,6 +501,11 @@ impl Drop for GsUsbPort {
             &DeviceMode::STOPPED.encode(),
         );
         if let Some(reader) = self.reader.take() {
+            // Emptied while it ends: a thread waiting to hand over a failure is let go.
+            while !reader.is_finished() {
+                while self.deliveries.try_recv().is_ok() {}
+                std::thread::sleep(Duration::from_millis(5));
+            }
             let _ = reader.join();
         }
     }
@@ -632,9 +646,10 @@ fn control_in(interface: &Interface, request: Request) -> Result<Vec<u8>, String
 /// `stop` or a transfer fails (unplugged, stalled).
 fn read_in(
     mut input: Endpoint<Bulk, In>,
-    sender: &Sender<Delivery>,
+    sender: &SyncSender<Delivery>,
     signal: &UnixStream,
     stop: &AtomicBool,
+    dropped: &AtomicU64,
 ) {
     let size = input.max_packet_size().max(64);
     let mut signal = signal;
@@ -659,8 +674,18 @@ fn read_in(
             Err(error) => Err(error),
         };
         let failed = delivery.is_err();
-        if sender.send(delivery).is_err() {
-            break;
+        match sender.try_send(delivery) {
+            Ok(()) => {}
+            // A failure is handed over whatever it waits for: it ends the port.
+            Err(TrySendError::Full(delivery)) if failed => {
+                if sender.send(delivery).is_err() {
+                    break;
+                }
+            }
+            Err(TrySendError::Full(_)) => {
+                dropped.fetch_add(1, Ordering::Relaxed);
+            }
+            Err(TrySendError::Disconnected(_)) => break,
         }
         let _ = signal.write(&[1]);
         if failed {

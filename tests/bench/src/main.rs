@@ -9,6 +9,7 @@ mod procs;
 mod roles;
 mod run;
 mod soak;
+mod usb;
 mod watchers;
 
 use std::path::PathBuf;
@@ -76,6 +77,11 @@ enum Role {
         #[arg(long, value_name = "FILE")]
         json: Option<PathBuf>,
     },
+    /// A gs_usb USB-CAN adapter emulated on USB in front of the simulated chassis' CAN bus:
+    /// the gateway on the bus itself, through the kernel's driver, and in user space
+    /// (--gs-usb), measured alike in one run. Needs root and the modules the project's VM has:
+    /// `tests/vm/run -- target/release/scout-bench usb`.
+    Usb,
     /// Control requests as fast as `hz`.
     #[command(hide = true)]
     Flood { name: String, hz: f64, seconds: f64 },
@@ -106,6 +112,12 @@ fn main() -> ExitCode {
             Ok(())
         }
         Some(Role::Flood { name, hz, seconds }) => roles::flood(&name, hz, seconds),
+        Some(Role::Usb) => run::usb(&run::Options {
+            quick: cli.quick,
+            json: cli.json,
+            plots: cli.plots,
+            client_priority: cli.client_priority,
+        }),
         Some(Role::Soak { minutes, json }) => soak::soak(minutes, json.as_deref()),
         Some(Role::DatagramFlood {
             name,

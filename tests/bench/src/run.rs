@@ -34,6 +34,26 @@ struct Plan {
     stops: usize,
 }
 
+impl Plan {
+    fn new(quick: bool) -> Self {
+        if quick {
+            Plan {
+                window: 2.0,
+                python_pairs: 1,
+                commands: 10,
+                stops: 5,
+            }
+        } else {
+            Plan {
+                window: 10.0,
+                python_pairs: 3,
+                commands: 100,
+                stops: 50,
+            }
+        }
+    }
+}
+
 /// Everything the run keeps for the report.
 #[derive(Default)]
 struct Report {
@@ -115,40 +135,46 @@ impl Drop for Scratch {
 }
 
 /// How the bench's chassis is reached: the simulator's firmware and the port in between.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Rig {
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Rig {
     /// Protocol v1 over RS232: the main run.
     SerialV1,
     /// Protocol v1 behind a serial-line CAN adapter.
     SlcanV1,
     /// Protocol v2 (SCOUT 2.0) behind a serial-line CAN adapter.
     SlcanV2,
+    /// Protocol v1 on a CAN bus (`scout-sim --can BUS`), the gateway on `port` (its transport
+    /// arguments): the bus itself, a USB adapter through the kernel's driver, or in user space.
+    Can {
+        /// The JSON key.
+        key: &'static str,
+        /// The table's name.
+        label: &'static str,
+        /// The simulator's interface.
+        bus: String,
+        /// The gateway's transport arguments.
+        port: Vec<String>,
+    },
 }
 
 impl Rig {
     /// The simulator's arguments for its firmware and port.
-    fn sim_args(self) -> &'static [&'static str] {
+    fn sim_args(&self) -> Vec<&str> {
         match self {
-            Self::SerialV1 => &["--serial"],
-            Self::SlcanV1 => &["--slcan"],
-            Self::SlcanV2 => &["--slcan", "--protocol", "v2", "--model", "scout2"],
-        }
-    }
-
-    /// The gateway's flag for the port.
-    fn port_flag(self) -> &'static str {
-        match self {
-            Self::SerialV1 => "--serial",
-            Self::SlcanV1 | Self::SlcanV2 => "--slcan",
+            Self::SerialV1 => vec!["--serial"],
+            Self::SlcanV1 => vec!["--slcan"],
+            Self::SlcanV2 => vec!["--slcan", "--protocol", "v2", "--model", "scout2"],
+            Self::Can { bus, .. } => vec!["--can", bus],
         }
     }
 
     /// Its key in the JSON and its name in the table.
-    fn key_and_label(self) -> (&'static str, &'static str) {
+    fn key_and_label(&self) -> (&'static str, &'static str) {
         match self {
             Self::SerialV1 => ("serial_v1", "v1, RS232"),
             Self::SlcanV1 => ("slcan_v1", "v1 (SCOUT), slcan"),
             Self::SlcanV2 => ("slcan_v2", "v2 (SCOUT 2.0), slcan"),
+            Self::Can { key, label, .. } => (key, label),
         }
     }
 }
@@ -175,21 +201,16 @@ impl Bench {
         plan: Plan,
         priority: u8,
     ) -> anyhow::Result<Bench> {
-        let scratch = Scratch::new(match rig {
-            Rig::SerialV1 => "",
-            Rig::SlcanV1 => "-slcan-v1",
-            Rig::SlcanV2 => "-slcan-v2",
+        let scratch = Scratch::new(&match &rig {
+            Rig::SerialV1 => String::new(),
+            rig => format!("-{}", rig.key_and_label().0.replace('_', "-")),
         })?;
-        let mut args = rig.sim_args().to_vec();
+        let mut args = rig.sim_args();
         let (link, trace) = (scratch.text("chassis.tty"), scratch.text("chassis.trace"));
-        args.extend([
-            "--realtime-priority",
-            "60",
-            "--link",
-            &link,
-            "--trace",
-            &trace,
-        ]);
+        args.extend(["--realtime-priority", "60", "--trace", &trace]);
+        if !matches!(rig, Rig::Can { .. }) {
+            args.extend(["--link", &link]);
+        }
         let sim = Sim::start(&args)?;
         Ok(Bench {
             rig,
@@ -204,12 +225,14 @@ impl Bench {
     }
 
     fn gateway_args(&self, zenoh: bool) -> Vec<String> {
-        let mut args = vec![
-            self.rig.port_flag().to_owned(),
-            self.scratch.text("chassis.tty"),
-            "--name".to_owned(),
-            self.name.clone(),
-        ];
+        let mut args = match &self.rig {
+            Rig::SerialV1 => vec!["--serial".to_owned(), self.scratch.text("chassis.tty")],
+            Rig::SlcanV1 | Rig::SlcanV2 => {
+                vec!["--slcan".to_owned(), self.scratch.text("chassis.tty")]
+            }
+            Rig::Can { port, .. } => port.clone(),
+        };
+        args.extend(["--name".to_owned(), self.name.clone()]);
         if zenoh {
             args.extend(
                 [
@@ -266,21 +289,7 @@ fn wait_state(
 
 pub fn run(options: &Options) -> anyhow::Result<()> {
     ensure_built()?;
-    let plan = if options.quick {
-        Plan {
-            window: 2.0,
-            python_pairs: 1,
-            commands: 10,
-            stops: 5,
-        }
-    } else {
-        Plan {
-            window: 10.0,
-            python_pairs: 3,
-            commands: 100,
-            stops: 50,
-        }
-    };
+    let plan = Plan::new(options.quick);
     let port = std::net::TcpListener::bind("127.0.0.1:0")?
         .local_addr()?
         .port();
@@ -314,6 +323,26 @@ pub fn run(options: &Options) -> anyhow::Result<()> {
     }
     decode_throughput(&mut report);
 
+    finish(options, report)
+}
+
+/// `scout-bench usb`: the chassis on a CAN bus reached three ways in one run (see
+/// `crate::usb`): the bus itself, a gs_usb adapter through the kernel's driver, and the same
+/// adapter in user space.
+pub fn usb(options: &Options) -> anyhow::Result<()> {
+    let plan = Plan::new(options.quick);
+    progress("loading the modules, the bus and the emulated gs_usb adapter");
+    let set = crate::usb::Set::set_up()?;
+    let mut report = Report::default();
+    for rig in set.rigs() {
+        protocol(rig, plan, options.client_priority, &mut report)?;
+    }
+    drop(set);
+    finish(options, report)
+}
+
+/// Prints the table and writes the JSON and plots asked for.
+fn finish(options: &Options, mut report: Report) -> anyhow::Result<()> {
     insert(
         &mut report.json,
         "client_priority",

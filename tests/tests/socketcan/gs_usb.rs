@@ -298,6 +298,24 @@ fn user_space_gs_usb_drives_stops_and_survives_garbage_and_a_stall() {
         &["--linear", "0.5", "--client", "usb-driver"],
         LIMIT,
     );
+    // The 0x130 stream as the chassis saw it through the adapter: valid, on its grid.
+    let stats = sim.stats();
+    let intervals = &stats["motion_command_intervals"];
+    eprintln!(
+        "0x130 through the adapter in user space: {} commands, mean {} ms, max {} ms, p99 {} ms",
+        intervals["count"], intervals["mean_ms"], intervals["max_ms"], intervals["p99_ms"]
+    );
+    assert_eq!(stats["checksum_failures"], 0, "{stats}");
+    assert_eq!(stats["rejected"], 0, "{stats}");
+    assert!(intervals["count"].as_u64() > Some(10), "{stats}");
+    assert!(
+        intervals["mean_ms"]
+            .as_f64()
+            .is_some_and(|mean| (19.0..21.0).contains(&mean)),
+        "a command every 20 ms on average: {stats}"
+    );
+    // The chassis never timed out (its 500 ms): a functional bound, not a timing target.
+    assert!(intervals["max_ms"].as_f64() < Some(500.0), "{stats}");
     let (code, _, stderr) = scout(&["estop", "--name", &name]);
     assert_eq!(code, Some(0), "{stderr}");
     assert_eq!(driver.wait_exit(LIMIT), Some(4), "the driver lost control");
@@ -476,4 +494,29 @@ fn doctor_tells_a_jetson_owner_how_to_reach_the_adapter() {
             "{check}: {checks:#?}"
         );
     }
+}
+
+#[test]
+fn user_space_gs_usb_tells_drives_and_stops_a_v2_chassis() {
+    const TEST: &str = "user_space_gs_usb_tells_drives_and_stops_a_v2_chassis";
+    let Some(bus) = set_up(TEST, false) else {
+        return;
+    };
+    let adapter = Adapter::plug(&bus, 0);
+    let name = scout_system_tests::robot_name("usb-v2");
+    let mut sim = Sim::start(&["--can", bus.name(), "--protocol", "v2", "--model", "scout2"]);
+    let _gateway = Gateway::start(&[&user_space(&adapter)[..], &["--name", &name]].concat());
+    let state = scout_system_tests::connect_within(&name, LIMIT)
+        .subscribe()
+        .expect("subscribe");
+    let told = wait_for_state(&state, LIMIT, |s| {
+        s["link"]["state"] == "ok" && !s["system"].is_null()
+    });
+    assert_eq!(told["link"]["protocol"], "v2", "told by its frames: {told}");
+    release_all(&name);
+    let _driver = drive_until_moving(&mut sim, &name, &["--linear", "0.5"], LIMIT);
+    let (code, _, stderr) = scout(&["estop", "--name", &name]);
+    assert_eq!(code, Some(0), "{stderr}");
+    chassis_commanded(&mut sim, 0.0);
+    chassis_stays_still_after_braking(&mut sim);
 }
