@@ -19,9 +19,9 @@ pub struct UsbId {
 }
 
 /// The adapters known to speak gs_usb, as Linux's driver lists them: candleLight (and the
-/// adapters that reuse its ids, AgileX's among them), its pid.codes id, CES CANext FD and ABE
-/// CANdebugger FD.
-pub const KNOWN_ADAPTERS: [UsbId; 4] = [
+/// adapters that reuse its ids, AgileX's among them), its pid.codes id, CES CANext FD, ABE
+/// CANdebugger FD, Xylanta SAINT3 and CANnectivity.
+pub const KNOWN_ADAPTERS: [UsbId; 6] = [
     UsbId {
         vendor: 0x1d50,
         product: 0x606f,
@@ -37,6 +37,14 @@ pub const KNOWN_ADAPTERS: [UsbId; 4] = [
     UsbId {
         vendor: 0x16d0,
         product: 0x10b8,
+    },
+    UsbId {
+        vendor: 0x16d0,
+        product: 0x0f30,
+    },
+    UsbId {
+        vendor: 0x1209,
+        product: 0xca01,
     },
 ];
 
@@ -62,6 +70,22 @@ pub enum Request {
 }
 
 impl Request {
+    /// Every request the gateway uses.
+    pub const ALL: [Self; 5] = [
+        Self::HostFormat,
+        Self::BitTiming,
+        Self::Mode,
+        Self::BtConst,
+        Self::DeviceConfig,
+    ];
+
+    /// The request numbered `number`, if it is one of [`Request::ALL`].
+    pub fn from_number(number: u8) -> Option<Self> {
+        Self::ALL
+            .into_iter()
+            .find(|request| *request as u8 == number)
+    }
+
     /// Whether the device answers it with data (`REQUEST_TYPE_IN`).
     pub const fn reads(self) -> bool {
         match self {
@@ -92,7 +116,8 @@ impl Request {
 }
 
 /// A control transfer's setup stage: `wValue` is the channel (1 for the device-wide requests),
-/// `wIndex` the interface.
+/// `wIndex` the interface for the device-wide requests and 0 for a channel's, as Linux's driver
+/// sends them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Setup {
     /// bmRequestType.
@@ -101,7 +126,7 @@ pub struct Setup {
     pub request: u8,
     /// wValue: the channel (1 for the device-wide requests).
     pub value: u16,
-    /// wIndex: the interface number.
+    /// wIndex: the interface number (device-wide requests), else 0.
     pub index: u16,
     /// wLength.
     pub length: u16,
@@ -123,7 +148,11 @@ impl Setup {
             } else {
                 channel as u16
             },
-            index: interface as u16,
+            index: if request.device_wide() {
+                interface as u16
+            } else {
+                0
+            },
             length: request.length(),
         }
     }
@@ -139,8 +168,12 @@ pub enum Error {
         /// What arrived.
         got: usize,
     },
-    /// A data length code above 8 (classic CAN).
+    /// A data length code above 15: no CAN frame has one (9 to 15 mean 8 bytes).
     BadLength(u8),
+    /// A frame of another channel than the one the gateway started.
+    Channel(u8),
+    /// The echo of a frame the host did not send, or whose echo already came.
+    UnknownEcho(u32),
     /// A CAN FD frame: the gateway never enables FD.
     Fd,
 }
@@ -152,7 +185,16 @@ impl core::fmt::Display for Error {
                 write!(f, "gs_usb: {got} bytes where {expected} were expected")
             }
             Self::BadLength(dlc) => {
-                write!(f, "gs_usb: frame with data length code {dlc} (at most 8)")
+                write!(f, "gs_usb: frame with data length code {dlc} (at most 15)")
+            }
+            Self::Channel(channel) => {
+                write!(
+                    f,
+                    "gs_usb: a frame of channel {channel} (the gateway uses 0)"
+                )
+            }
+            Self::UnknownEcho(id) => {
+                write!(f, "gs_usb: the echo of frame {id}, which is not on its way")
             }
             Self::Fd => f.write_str("gs_usb: a CAN FD frame, though FD was not enabled"),
         }
@@ -612,7 +654,8 @@ pub struct HostFrame {
     pub echo_id: u32,
     /// The id with SocketCAN's EFF, RTR and ERR flags.
     pub can_id: u32,
-    /// The data length, 0..=8.
+    /// The data length code, 0..=15: above 8 it means 8 bytes (classic CAN, as Linux reads
+    /// it).
     pub len: u8,
     /// The channel.
     pub channel: u8,
@@ -657,7 +700,7 @@ impl HostFrame {
             return Err(Error::Fd);
         }
         let len = bytes[frame::DLC];
-        if len > 8 {
+        if len > 15 {
             return Err(Error::BadLength(len));
         }
         let mut data = [0; 8];
@@ -761,7 +804,14 @@ mod tests {
         assert_eq!(setup(Request::BtConst, 0), (0xc1, 4, 0, 0, 40));
         assert_eq!(setup(Request::BitTiming, 0), (0x41, 1, 0, 0, 20));
         assert_eq!(setup(Request::Mode, 1), (0x41, 2, 1, 0, 8));
-        assert_eq!(Setup::new(Request::Mode, 0, 3).index, 3);
+        // wIndex: the interface for the device-wide requests, 0 for a channel's.
+        assert_eq!(Setup::new(Request::HostFormat, 0, 3).index, 3);
+        assert_eq!(Setup::new(Request::DeviceConfig, 0, 3).index, 3);
+        assert_eq!(Setup::new(Request::Mode, 0, 3).index, 0);
+        for request in Request::ALL {
+            assert_eq!(Request::from_number(request as u8), Some(request));
+        }
+        assert_eq!(Request::from_number(3), None);
     }
 
     #[test]
@@ -959,8 +1009,13 @@ mod tests {
             })
         );
         assert!(HostFrame::decode(&rx[..20], true).is_err());
+        // Length codes 9 to 15 are 8 bytes, as Linux reads them; above is no CAN frame.
         rx[8] = 9;
-        assert_eq!(HostFrame::decode(&rx, false), Err(Error::BadLength(9)));
+        let nine = HostFrame::decode(&rx, false).expect("a length code of 9");
+        assert_eq!(nine.can_frame().map(|f| f.data().len()), Some(8));
+        assert_eq!(nine.encode().0[8], 9, "kept as it came");
+        rx[8] = 16;
+        assert_eq!(HostFrame::decode(&rx, false), Err(Error::BadLength(16)));
         rx[8] = 8;
         rx[10] = frame::FD;
         assert_eq!(HostFrame::decode(&rx, false), Err(Error::Fd));

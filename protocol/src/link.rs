@@ -345,7 +345,7 @@ mod tests {
         for transport in Transport::ALL {
             assert_eq!(Transport::from_raw(transport.raw()), Some(transport));
         }
-        assert_eq!(Transport::from_raw(4), None);
+        assert_eq!(Transport::from_raw(5), None);
     }
 
     #[test]
