@@ -53,7 +53,24 @@ pub fn run(options: &Options, report: &mut dyn FnMut(&Check)) -> Vec<Check> {
     // they left.
     out.emit(vec![leftovers()]);
     // The USB-CAN adapters: the Jetson's cases (no driver in its kernel, the adapter as can2).
-    out.emit(usb::inspect(options.port.as_ref()));
+    let adapters = usb::found();
+    out.emit(usb::judge(
+        &adapters,
+        usb::module(),
+        &usb::interfaces(),
+        usb::Asked::of(options.port.as_ref()),
+    ));
+    // With no port named, the interface a driver made of each adapter is checked as --can
+    // would (down, another bit rate, bus-off), each with the command that fixes it.
+    if options.port.is_none() {
+        for interface in adapters
+            .iter()
+            .filter(|adapter| adapter.driver.is_some())
+            .flat_map(|adapter| &adapter.interfaces)
+        {
+            out.emit(can::inspect(interface));
+        }
+    }
     let gateway_checked = match &options.port {
         Some(spec) => check_port(spec, options, &mut out),
         None => false,

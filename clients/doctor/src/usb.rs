@@ -129,6 +129,23 @@ pub fn judge(
                     }
                 }
             }
+            // A program in user space (a gateway on --gs-usb, most often) holds it.
+            (Some(driver), _) if driver == "usbfs" => {
+                let detail = format!(
+                    "{}: held through usbfs by a program in user space (a scout-gateway \
+                     --gs-usb?)",
+                    adapter.identity
+                );
+                match asked {
+                    Asked::GsUsb(_) => Check::warn(
+                        NAME,
+                        detail,
+                        "`scout doctor` alone checks the robot through its gateway; stop the \
+                         other program to check the adapter here",
+                    ),
+                    Asked::Can(_) | Asked::Nothing => Check::pass(NAME, detail),
+                }
+            }
             (Some(driver), interface) => {
                 let interface = interface.map_or("no interface", String::as_str);
                 let named = if own_controllers.is_empty() || interface == "no interface" {
@@ -223,11 +240,6 @@ pub fn interfaces() -> Vec<String> {
         .unwrap_or_default();
     names.sort();
     names
-}
-
-/// The checks of the adapters plugged in now.
-pub fn inspect(spec: Option<&DeviceSpec>) -> Vec<Check> {
-    judge(&found(), module(), &interfaces(), Asked::of(spec))
 }
 
 #[cfg(test)]
@@ -344,6 +356,28 @@ mod tests {
         assert!(
             fix.contains("--can can0") && fix.contains("--gs-usb-detach"),
             "{fix}"
+        );
+    }
+
+    #[test]
+    fn an_adapter_a_gateway_holds_in_user_space_is_no_kernel_driver() {
+        let held = adapter("A1", Some("usbfs"), &[]);
+        let checks = judge(
+            std::slice::from_ref(&held),
+            Module::Loaded,
+            &[],
+            Asked::Nothing,
+        );
+        assert_eq!(checks[0].verdict, Verdict::Pass);
+        assert!(checks[0].detail.contains("usbfs"), "{:?}", checks[0]);
+        let asked = judge(&[held], Module::Loaded, &[], Asked::GsUsb(Some("A1")));
+        assert_eq!(asked[0].verdict, Verdict::Warn);
+        assert!(
+            !asked[0]
+                .fix
+                .as_deref()
+                .unwrap_or("")
+                .contains("--gs-usb-detach")
         );
     }
 

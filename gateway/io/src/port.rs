@@ -9,7 +9,6 @@ use std::path::Path;
 use std::time::Duration;
 
 use scout_protocol::CanFrame;
-use scout_protocol::gs_usb::Received;
 use serialport::{SerialPort, TTYPort};
 use std::os::fd::AsRawFd as _;
 
@@ -136,8 +135,8 @@ impl Port {
     }
 
     /// Frames dropped before they could be read: by the kernel, for a full receive queue
-    /// (SocketCAN), or by a gs_usb adapter (one per frame it flagged); always 0 for a tty,
-    /// whose driver does not count.
+    /// (SocketCAN), or on a gs_usb adapter's way (see `GsUsbPort::overflowed_frames`); always
+    /// 0 for a tty, whose driver does not count.
     pub fn overflowed_frames(&self) -> u64 {
         match self {
             Self::Tty(_) => 0,
@@ -161,17 +160,13 @@ impl Port {
             Self::Can(can) => can.read(timeout),
             Self::GsUsb(usb) => Ok(match usb.read(timeout)? {
                 None => Incoming::Timeout,
+                Some(scout_usb::Input::Frame(frame)) => Incoming::Frame(frame),
+                Some(scout_usb::Input::Foreign(can_id)) => Incoming::Foreign(can_id),
+                Some(scout_usb::Input::BusError { class, data }) => Incoming::BusError(BusError {
+                    class,
+                    controller: data[1],
+                }),
                 Some(scout_usb::Input::Malformed(error)) => Incoming::Malformed(error),
-                Some(scout_usb::Input::Frame(received)) => match received {
-                    Received::Frame(frame) => Incoming::Frame(frame),
-                    Received::Foreign(can_id) => Incoming::Foreign(can_id),
-                    Received::BusError { class, data } => Incoming::BusError(BusError {
-                        class,
-                        controller: data[1],
-                    }),
-                    // Consumed by the port; never handed out.
-                    Received::Echo(_) => Incoming::Timeout,
-                },
             }),
         }
     }
@@ -399,7 +394,8 @@ mod tests {
             controller: 0
         })));
         assert!(fault(io::Error::other(scout_usb::Unacknowledged {
-            frames: 10
+            frames: 10,
+            untaken: 0
         })));
         assert!(!fault(io::Error::from_raw_os_error(nix::libc::ENODEV)));
         assert!(!fault(io::Error::new(

@@ -134,16 +134,7 @@ pub struct Adapter {
 impl Adapter {
     /// Answers a control request.
     pub fn handle_setup(&mut self, request_type: u8, request: u8, value: u16) -> Reply {
-        let known = [
-            Request::HostFormat,
-            Request::BitTiming,
-            Request::Mode,
-            Request::BtConst,
-            Request::DeviceConfig,
-        ]
-        .into_iter()
-        .find(|known| *known as u8 == request);
-        let Some(known) = known else {
+        let Some(known) = Request::from_number(request) else {
             self.refused.push(request);
             return Reply::Stall;
         };

@@ -175,8 +175,9 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
                 let ep = ep_in
                     .lock()
                     .unwrap_or_else(std::sync::PoisonError::into_inner);
-                let mut bad = adapter::from_bus(0x211, &[0; 8]);
-                bad[gs_usb::frame::DLC] = 15;
+                // A CAN FD frame, which the gateway never enabled.
+                let mut bad = adapter::from_bus(0x151, &[0; 8]);
+                bad[gs_usb::frame::FLAGS] = gs_usb::frame::FD;
                 let _ = (&*ep).write(&[0xde, 0xad, 0xbe, 0xef, 0x01, 0x02, 0x03]);
                 let _ = (&*ep).write(&bad);
                 eprintln!("scout-gs-usb-gadget: sent two malformed transfers");
@@ -398,7 +399,7 @@ fn host_to_bus(
             continue;
         }
         let id = frame.can_id & 0x1fff_ffff;
-        let data = &frame.data[..usize::from(frame.len)];
+        let data = &frame.data[..usize::from(frame.len.min(8))];
         if let Some(out) = socketcan::CanFrame::from_raw_id(id, data)
             && bus.write_frame(&out).is_ok()
         {
