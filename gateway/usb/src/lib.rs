@@ -930,6 +930,9 @@ mod tests {
             frames: MAX_UNECHOED,
             untaken: 4,
         };
-        assert!(stalled.to_string().contains("does not keep up"), "{stalled}");
+        assert!(
+            stalled.to_string().contains("does not keep up"),
+            "{stalled}"
+        );
     }
 }
