@@ -212,7 +212,7 @@ impl Device {
             Self::Port {
                 port: port @ (Port::Can(_) | Port::GsUsb(_)),
                 ..
-            } => port.write_frame(&frame.can_frame(), WRITE_TIMEOUT),
+            } => port.write_frame(&frame.can_frame()),
             Self::Port {
                 port,
                 transport,

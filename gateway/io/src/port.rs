@@ -193,9 +193,8 @@ impl Port {
         Ok(written)
     }
 
-    /// Sends one CAN frame on a SocketCAN socket or a gs_usb adapter, waiting at most
-    /// `timeout` for the adapter to take it.
-    pub fn write_frame(&mut self, frame: &CanFrame, timeout: Duration) -> io::Result<()> {
+    /// Sends one CAN frame on a SocketCAN socket or a gs_usb adapter.
+    pub fn write_frame(&mut self, frame: &CanFrame) -> io::Result<()> {
         match self {
             Self::Can(CanPort { socket, .. }) => {
                 let frame = socketcan::CanFrame::from_raw_id(u32::from(frame.id()), frame.data())
@@ -204,7 +203,7 @@ impl Port {
                 })?;
                 socket.write_frame(&frame)
             }
-            Self::GsUsb(usb) => usb.write(frame, timeout),
+            Self::GsUsb(usb) => usb.write(frame),
             Self::Tty(_) => Err(io::Error::new(
                 io::ErrorKind::InvalidInput,
                 "frames need a CAN socket or adapter",

@@ -181,11 +181,12 @@ pub fn run(
     let chassis = Chassis::new(options.params.clone(), options.transport);
     let chassis = match (options.protocol, options.transport) {
         (Protocol::V1, _) => chassis,
-        (Protocol::V2, Transport::Slcan | Transport::Can) => chassis.with_protocol_v2(),
+        (Protocol::V2, Transport::Slcan | Transport::Can | Transport::GsUsb) => {
+            chassis.with_protocol_v2()
+        }
         (Protocol::V2, Transport::Serial | Transport::Sim) => anyhow::bail!(
             "protocol v2 is CAN only (the vendor SDK implements no v2 over RS232): use --slcan or --can"
         ),
-        (Protocol::V2, Transport::GsUsb) => chassis.with_protocol_v2(),
     };
     let mut simulator = Simulator {
         start: Instant::now(),
@@ -475,7 +476,7 @@ impl Simulator<'_> {
             );
             return;
         }
-        match endpoint.port.write_frame(frame, Duration::ZERO) {
+        match endpoint.port.write_frame(frame) {
             Ok(()) if self.stats.write_errors > self.write_errors_reported => {
                 info!(
                     "CAN writes go through again after {} failures",

@@ -518,9 +518,8 @@ impl GsUsbPort {
     /// Sends one frame without waiting: the transfer is queued, and completed ones are
     /// reaped. A frame needs one of the ten echo ids; with all ten on their way (the adapter
     /// does not take frames, or nothing on the bus acknowledges them) it is an
-    /// [`Unacknowledged`] error, as a full transmit queue is on SocketCAN. `_timeout` is not
-    /// needed: nothing here waits.
-    pub fn write(&mut self, frame: &CanFrame, _timeout: Duration) -> io::Result<()> {
+    /// [`Unacknowledged`] error, as a full transmit queue is on SocketCAN.
+    pub fn write(&mut self, frame: &CanFrame) -> io::Result<()> {
         while self.out.pending() > 0 {
             let Some(done) = self.out.wait_next_complete(Duration::ZERO) else {
                 break;

@@ -53,8 +53,14 @@ fn bus_off_and_error_passive_frames_latch_a_link_fault() {
         return;
     }
     let (mut sim, _gateway, name) = start(&bus, "can-errors");
-    // CAN_ERR_FLAG with CAN_ERR_BUSOFF; CAN_ERR_CRTL with CAN_ERR_CRTL_TX_PASSIVE in byte 1
-    // (linux/can/error.h). cansend sends an 8-digit id with the error flag as an error frame.
+    error_frames_latch_link_faults(&bus, &mut sim, &name);
+}
+
+/// A bus-off, then an error-passive error frame put on `bus` with `cansend`: each latches a
+/// `link_fault` ([`fault_latches_a_link_fault`]). CAN_ERR_FLAG with CAN_ERR_BUSOFF; CAN_ERR_CRTL
+/// with CAN_ERR_CRTL_TX_PASSIVE in byte 1 (linux/can/error.h). cansend sends an 8-digit id with
+/// the error flag as an error frame.
+pub fn error_frames_latch_link_faults(bus: &Bus, sim: &mut Sim, name: &str) {
     for frame in ["20000040#0000000000000000", "20000004#0020000000000000"] {
         let send = || {
             let sent = Command::new("cansend")
@@ -63,7 +69,7 @@ fn bus_off_and_error_passive_frames_latch_a_link_fault() {
                 .expect("cansend");
             assert!(sent.success(), "cansend {frame}");
         };
-        fault_latches_a_link_fault(&mut sim, &name, send, || {});
+        fault_latches_a_link_fault(sim, name, send, || {});
     }
 }
 

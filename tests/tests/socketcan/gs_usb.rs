@@ -18,7 +18,7 @@ use scout_system_tests::{
 };
 
 use crate::bus::{chassis_commanded, chassis_stays_still_after_braking, start_with};
-use crate::faults::fault_latches_a_link_fault;
+use crate::faults::error_frames_latch_link_faults;
 use crate::{Bus, LIMIT, can_utils, ip};
 
 /// The kernel modules: a UDC with its host side (two ports: two adapters at once), the gadget
@@ -377,17 +377,8 @@ fn user_space_gs_usb_bus_off_latches_a_link_fault() {
     let adapter = Adapter::plug(&bus, 0);
     let (mut sim, _gateway, name) = start_with(&bus, "usb-bus-off", &user_space(&adapter));
     // The adapter reports what its controller sees; the emulated one relays the error frames
-    // on its bus (CAN_ERR_BUSOFF, then CAN_ERR_CRTL with TX_PASSIVE).
-    for frame in ["20000040#0000000000000000", "20000004#0020000000000000"] {
-        let send = || {
-            let sent = Command::new("cansend")
-                .args([bus.name(), frame])
-                .status()
-                .expect("cansend");
-            assert!(sent.success(), "cansend {frame}");
-        };
-        fault_latches_a_link_fault(&mut sim, &name, send, || {});
-    }
+    // on its bus.
+    error_frames_latch_link_faults(&bus, &mut sim, &name);
 }
 
 #[test]
