@@ -252,7 +252,9 @@ impl Sim {
     /// The statistics, or, when the simulator does not answer in time, what its process is
     /// doing (its state and where in the kernel it waits), for a failure message.
     pub fn stats_or_state(&mut self) -> String {
-        self.send("stats");
+        use std::io::Write;
+        // Never panics (it runs while a failing test unwinds): a closed stdin shows as silence.
+        let _ = writeln!(self.stdin, "stats").and_then(|()| self.stdin.flush());
         let deadline = Instant::now() + LINE_TIMEOUT;
         while let Ok(line) = self
             .lines
@@ -326,7 +328,15 @@ impl Sim {
 }
 
 impl Drop for Sim {
+    /// Kills the simulator; when a test fails with it still running, first prints what it
+    /// says of its link (or why it does not answer), which the test's own message lacks.
     fn drop(&mut self) {
+        if std::thread::panicking() {
+            match self.child.try_wait() {
+                Ok(None) => eprintln!("scout-sim at the failure: {}", self.stats_or_state()),
+                exited => eprintln!("scout-sim had ended before the failure: {exited:?}"),
+            }
+        }
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
