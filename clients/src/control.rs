@@ -271,10 +271,24 @@ impl Controller {
     /// Sends one request and waits for its answer: stops and releases through the stop
     /// endpoint, the rest through the control service.
     pub fn request(&mut self, request: &Request) -> Result<Accepted, ControlError> {
+        self.request_sent_at(request, scout_interface::services::monotonic())
+    }
+
+    /// [`Controller::request`] for a request sent at `sent` (CLOCK_BOOTTIME, as
+    /// [`scout_interface::services::monotonic`] reads it): earlier than now for a command held
+    /// up before it reached this process (a browser's), so that the gateway ages it from then.
+    pub fn request_sent_at(
+        &mut self,
+        request: &Request,
+        sent: Duration,
+    ) -> Result<Accepted, ControlError> {
         let answer: Result<Accepted, ControlError> = match request {
             Request::Stop { reason } => self.safety.stop(reason),
             Request::Release { target, through } => self.safety.release(target.clone(), *through),
-            _ => self.port.request(request).map_err(ControlError::from),
+            _ => self
+                .port
+                .request_sent_at(request, sent)
+                .map_err(ControlError::from),
         };
         match (&answer, request) {
             (Ok(accepted), Request::TakeControl { .. }) => self.lease = accepted.lease,

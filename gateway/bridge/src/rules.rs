@@ -10,7 +10,7 @@ use std::time::Duration;
 use scout_interface::control::{Accepted, Class, Request};
 use scout_interface::remote::{
     self, CommandError, LINK_AGES, LinkQuality, MAX_COMMAND_BYTES, Permission, RemoteCommand,
-    RemoteCommands, RemoteKind, peer_client_name,
+    RemoteCommands, RemoteKind, SenderClock, peer_client_name,
 };
 use scout_interface::services::RequestError;
 
@@ -24,12 +24,6 @@ pub const MAX_REMOTE_LIFE: Duration = Duration::from_millis(500);
 /// rules still knew forgotten: no command is held up that long, no lease outlives its commands
 /// that long, and its next session may use another clock.
 pub const FORGET_TIMING_AFTER: Duration = Duration::from_secs(60);
-
-/// How fast a peer's clock may fall behind the gateway's, parts per million: the learned
-/// offset rises at most this fast, so that over a long session a slow clock's drives do not
-/// seem ever older (a quartz clock is off by up to 100 ppm: 360 ms an hour), while a link that
-/// starts holding drives up is still seen (hiding 100 ms of it takes more than 8 minutes).
-pub const MAX_CLOCK_DRIFT_PPM: u64 = 200;
 
 /// What the rules keep of remote peers.
 #[derive(Debug)]
@@ -48,9 +42,8 @@ struct Peer {
     lease: Option<(u64, Class)>,
     /// Its last drive's number.
     seq: Option<u64>,
-    /// The least (arrival - sent) seen, µs (its clock's offset plus the fastest delivery),
-    /// allowed to rise by [`MAX_CLOCK_DRIFT_PPM`] since, and when it was last updated.
-    offset: Option<(i128, Duration)>,
+    /// Its clock as this host sees it: how late its commands arrive.
+    clock: SenderClock,
     used: u64,
     /// When its last command arrived.
     seen: Duration,
@@ -190,7 +183,7 @@ impl Rules {
             (Request::Relinquish, Ok(_)) => {
                 peer.lease = None;
                 peer.seq = None;
-                peer.offset = None;
+                peer.clock = SenderClock::default();
             }
             // Revoked or not held: the peer must take control again.
             _ if lost_control => peer.lease = None,
@@ -228,7 +221,7 @@ impl Rules {
                     name: name.to_owned(),
                     lease: None,
                     seq: None,
-                    offset: None,
+                    clock: SenderClock::default(),
                     used,
                     seen: now,
                     link: LinkQuality::default(),
@@ -245,7 +238,7 @@ impl Rules {
         if now.saturating_sub(peer.seen) > FORGET_TIMING_AFTER {
             peer.lease = None;
             peer.seq = None;
-            peer.offset = None;
+            peer.clock = SenderClock::default();
         }
         peer.used = used;
         peer.seen = now;
@@ -302,20 +295,7 @@ impl Peer {
             }
             self.seq = Some(seq);
         }
-        let delay = now.as_micros() as i128 - i128::from(sent_ms) * 1000;
-        let offset = match self.offset {
-            Some((offset, at)) => {
-                // At most what drifts while the peer is known: silent longer, it is forgotten.
-                let since = now.saturating_sub(at).min(FORGET_TIMING_AFTER);
-                let drift = since.as_micros() * u128::from(MAX_CLOCK_DRIFT_PPM) / 1_000_000;
-                offset
-                    .saturating_add(i128::try_from(drift).unwrap_or(i128::MAX))
-                    .min(delay)
-            }
-            None => delay,
-        };
-        self.offset = Some((offset, now));
-        let late = Duration::from_micros(u64::try_from(delay - offset).unwrap_or(u64::MAX));
+        let late = self.clock.late(now, sent_ms);
         if drive {
             if self.ages.len() == LINK_AGES {
                 self.ages.pop_front();

@@ -55,6 +55,48 @@ pub fn peer_client_name(peer: &str) -> String {
     format!("{REMOTE_PREFIX}{escaped}")
 }
 
+/// How fast a sender's clock may fall behind this host's, parts per million: the learned
+/// offset rises at most this fast, so that over a long session a slow clock's commands do not
+/// seem ever older (a quartz clock is off by up to 100 ppm: 360 ms an hour), while a link that
+/// starts holding commands up is still seen (hiding 100 ms of it takes more than 8 minutes).
+pub const MAX_CLOCK_DRIFT_PPM: u64 = 200;
+
+/// The longest [`SenderClock`] lets its offset drift unseen: a sender silent longer is
+/// forgotten by its owner (who makes a new clock for its next session).
+const MAX_DRIFT_SPAN: Duration = Duration::from_secs(60);
+
+/// A remote sender's clock as seen from this host, without a common clock: the least
+/// (arrival - sent) seen is its offset plus the fastest delivery, and a command's age is how
+/// much later than that it arrived. Sans-IO: times are passed in. The zenoh bridge and
+/// `scout web` age commands with it.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct SenderClock {
+    /// The least (arrival - sent) seen, µs, allowed to rise by [`MAX_CLOCK_DRIFT_PPM`] since,
+    /// and when it was last updated.
+    offset: Option<(i128, Duration)>,
+}
+
+impl SenderClock {
+    /// How much longer than the fastest delivery seen a command sent at `sent_ms` (the
+    /// sender's clock, ms) and arriving at `now` (this host's clock) took: its age. The first
+    /// command is age zero: it seeds the measure.
+    pub fn late(&mut self, now: Duration, sent_ms: u64) -> Duration {
+        let delay = now.as_micros() as i128 - i128::from(sent_ms) * 1000;
+        let offset = match self.offset {
+            Some((offset, at)) => {
+                let since = now.saturating_sub(at).min(MAX_DRIFT_SPAN);
+                let drift = since.as_micros() * u128::from(MAX_CLOCK_DRIFT_PPM) / 1_000_000;
+                offset
+                    .saturating_add(i128::try_from(drift).unwrap_or(i128::MAX))
+                    .min(delay)
+            }
+            None => delay,
+        };
+        self.offset = Some((offset, now));
+        Duration::from_micros(u64::try_from(delay - offset).unwrap_or(u64::MAX))
+    }
+}
+
 /// The key of the state JSON (publication and queryable).
 pub fn state_key(robot: &str) -> String {
     format!("{}/state", prefix(robot))
