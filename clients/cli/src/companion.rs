@@ -1,7 +1,8 @@
-//! `scout ros2`, `scout record`, `scout foxglove` and `scout doctor`: run a companion program
-//! (`scout-ros2`, `scout-foxglove`, `scout-doctor`) with the same arguments. The ROS 2 bridge, the
-//! Foxglove SDK and the gateway's device code live in crates of their own (`clients/ros2`,
-//! `clients/foxglove`, `clients/doctor`), so `scout` carries none of them.
+//! `scout ros2`, `scout record`, `scout foxglove`, `scout web` and `scout doctor`: run a companion
+//! program (`scout-ros2`, `scout-foxglove`, `scout-web`, `scout-doctor`) with the same arguments.
+//! The ROS 2 bridge, the Foxglove SDK, the web server and the gateway's device code live in crates
+//! of their own (`clients/ros2`, `clients/foxglove`, `clients/web`, `clients/doctor`), so `scout`
+//! carries none of them.
 
 use std::ffi::OsString;
 use std::os::unix::process::CommandExt;
@@ -41,6 +42,12 @@ pub const ROS2: Companion = Companion {
 pub const FOXGLOVE: Companion = Companion {
     program: "scout-foxglove",
     crate_path: "clients/foxglove",
+};
+
+/// `scout web`.
+pub const WEB: Companion = Companion {
+    program: "scout-web",
+    crate_path: "clients/web/cli",
 };
 
 /// `scout doctor`.

@@ -79,6 +79,11 @@ enum Command {
     /// Runs the `scout-foxglove` program (found beside `scout`, else on PATH).
     #[command(disable_help_flag = true)]
     Foxglove(companion::CompanionArgs),
+    /// Serve the operator's web page: live state, stops, E-STOP and hold-to-drive on any phone
+    /// or laptop, through the arbiter like every client (`scout web --help`). Runs the
+    /// `scout-web` program.
+    #[command(disable_help_flag = true)]
+    Web(companion::CompanionArgs),
     /// Check the set-up in order (device, CAN interface, traffic, protocol, the chassis' e-stop,
     /// RC, faults and battery, the gateway and its stops) and say how to fix what fails (`scout
     /// doctor --help`).
@@ -139,6 +144,7 @@ fn main() -> ExitCode {
         Command::Ros2(args) => companion::run(companion::ROS2, &[], &args),
         Command::Record(args) => companion::run(companion::FOXGLOVE, &["record"], &args),
         Command::Foxglove(args) => companion::run(companion::FOXGLOVE, &["serve"], &args),
+        Command::Web(args) => companion::run(companion::WEB, &[], &args),
         Command::Doctor(args) => companion::run(companion::DOCTOR, &[], &args),
     };
     match result {
