@@ -17,10 +17,11 @@ fn bin_dir() -> PathBuf {
 }
 
 /// The binaries and examples the system tests run.
-const ARTIFACTS: [&str; 9] = [
+const ARTIFACTS: [&str; 10] = [
     "scout",
     "scout-ros2",
     "scout-foxglove",
+    "scout-web",
     "scout-doctor",
     "scout-gateway",
     "scout-sim",

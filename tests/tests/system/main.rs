@@ -20,3 +20,4 @@ mod sim;
 mod status;
 mod teleop;
 mod watchdog;
+mod web;

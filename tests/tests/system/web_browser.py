@@ -1,0 +1,234 @@
+"""The operator's page (`scout web`) in a real browser: headless Chromium driven by Selenium.
+
+Usage: web_browser.py URL TOKEN SCOUT ROBOT SCREENSHOT_DIR
+
+Each check raises AssertionError with what was seen. At the end it prints one JSON line of
+figures (what the test measured; nothing here asserts a speed beyond the issue's bounds).
+"""
+
+import http.server
+import json
+import os
+import statistics
+import subprocess
+import sys
+import threading
+import time
+
+from selenium import webdriver
+from selenium.webdriver.chrome.service import Service
+from selenium.webdriver.common.action_chains import ActionChains
+from selenium.webdriver.common.by import By
+
+URL, TOKEN, SCOUT, ROBOT, SHOTS = sys.argv[1:6]
+HOST = URL.split("//", 1)[1].rstrip("/")
+CHROMIUM = os.environ.get("SCOUT_CHROMIUM", "/usr/bin/chromium")
+DRIVER = os.environ.get("SCOUT_CHROMEDRIVER", "/usr/bin/chromedriver")
+figures = {}
+
+
+class OtherOrigin(http.server.BaseHTTPRequestHandler):
+    """A page of another origin that tries the WebSocket with the right token."""
+
+    def do_GET(self):
+        body = (f"<title>x</title><script>const ws = new WebSocket('ws://{HOST}/ws?token={TOKEN}');"
+                "ws.onopen = () => document.title = 'open';"
+                "ws.onclose = () => { if (document.title !== 'open') document.title = 'refused'; };"
+                "</script>").encode()
+        self.send_response(200)
+        self.send_header("Content-Type", "text/html")
+        self.send_header("Content-Length", str(len(body)))
+        self.end_headers()
+        self.wfile.write(body)
+
+    def log_message(self, *args):
+        pass
+
+
+def browser(width, height, mobile):
+    options = webdriver.ChromeOptions()
+    options.binary_location = CHROMIUM
+    for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--disable-gpu",
+                "--no-first-run", "--disable-extensions", f"--window-size={width},{height}"):
+        options.add_argument(arg)
+    driver = webdriver.Chrome(service=Service(DRIVER), options=options)
+    driver.execute_cdp_cmd("Emulation.setDeviceMetricsOverride", {
+        "width": width, "height": height, "deviceScaleFactor": 1, "mobile": mobile})
+    driver.set_script_timeout(10)
+    return driver
+
+
+def until(what, check, limit=5.0):
+    """Polls `check` until it returns a true value (returned), or fails after `limit` s."""
+    deadline = time.monotonic() + limit
+    last = None
+    while time.monotonic() < deadline:
+        last = check()
+        if last:
+            return last
+        time.sleep(0.02)
+    raise AssertionError(f"{what}: not within {limit} s (last: {last!r})")
+
+
+def js(driver, script, *args):
+    return driver.execute_script(script, *args)
+
+
+def commanded(driver):
+    return js(driver, "return state && state.command ? state.command.linear : null")
+
+
+def moving(driver):
+    return js(driver, "return state && state.motion ? state.motion.linear : null")
+
+
+def web_requests(driver):
+    sources = js(driver, "return status ? status.sources : []") or []
+    return sum(s["requests"] for s in sources if s["client"] == "web:operator")
+
+
+def stops(driver):
+    """The stop list as shown: (owner, text) per stop (read in one go: the list re-renders)."""
+    return js(driver, "return [...document.querySelectorAll('#stops li')]"
+                      ".map(li => [li.dataset.owner, li.textContent])")
+
+
+def owners(driver):
+    return [owner for owner, _ in stops(driver)]
+
+
+def hold(driver, button):
+    ActionChains(driver).click_and_hold(button).perform()
+
+
+def let_go(driver):
+    ActionChains(driver).release().perform()
+
+
+def comes_to_zero(driver, why):
+    """How long until `driver`'s page (another than the one that drove: a page that lost its
+    connection sees no state) shows the gateway commanding zero."""
+    started = time.monotonic()
+    until(f"the command back to zero after {why}", lambda: commanded(driver) == 0.0, 2.0)
+    return round((time.monotonic() - started) * 1000)
+
+
+phone = browser(390, 844, True)
+desktop = browser(1280, 800, False)
+try:
+    # Loads and shows the state.
+    started = time.monotonic()
+    phone.get(f"{URL}#token={TOKEN}")
+    until("the battery shown", lambda: "V" in phone.find_element(By.ID, "battery").text
+          and any(c.isdigit() for c in phone.find_element(By.ID, "battery").text))
+    until("the speed shown", lambda: phone.find_element(By.ID, "actual").text not in ("", "–"))
+    figures["load_to_state_ms"] = round((time.monotonic() - started) * 1000)
+    assert figures["load_to_state_ms"] < 3000, figures
+    until("the user shown", lambda: "operator" in phone.find_element(By.ID, "me").text)
+    # A second page watches (what the gateway commands, while the first one's connection drops).
+    desktop.get(f"{URL}#token={TOKEN}")
+    until("the second page's state", lambda: commanded(desktop) is not None)
+
+    # The E-STOP is on screen without scrolling on a phone held upright.
+    rect = js(phone, "const r = document.getElementById('estop').getBoundingClientRect();"
+                     "return [r.top, r.bottom, innerHeight, innerWidth]")
+    assert rect[0] >= 0 and rect[1] <= rect[2] and rect[3] == 390, rect
+    phone.save_screenshot(os.path.join(SHOTS, "phone-ready.png"))
+
+    # Holding the forward control for 1 s drives; letting go stops.
+    forward = phone.find_element(By.CSS_SELECTOR, "#pad button[aria-label=forward]")
+    before = web_requests(phone)
+    hold(phone, forward)
+    time.sleep(1.0)
+    speed = until("the chassis moving", lambda: (moving(phone) or 0) > 0.1 and moving(phone))
+    let_go(phone)
+    figures["zero_after_let_go_ms"] = comes_to_zero(desktop, "letting go")
+    time.sleep(0.3)
+    sent = web_requests(phone) - before
+    # The take-control and the relinquish are requests too.
+    figures["drives_in_1s_hold"] = sent - 2
+    assert 15 <= sent - 2 <= 25, f"{sent - 2} drives accepted in a 1 s hold (moving at {speed})"
+
+    # Losing focus, being hidden and losing the connection each stop the driving.
+    for why, script in (
+        ("the page losing focus", "window.dispatchEvent(new Event('blur'))"),
+        ("the page hidden", "Object.defineProperty(document, 'hidden', {value: true, configurable: true});"
+                            "document.dispatchEvent(new Event('visibilitychange'));"
+                            "delete document.hidden;"),
+        ("the connection dropped", "ws.close()"),
+    ):
+        until("connected", lambda: js(phone, "return ws.readyState === WebSocket.OPEN"))
+        hold(phone, forward)
+        until(f"driving before {why}", lambda: (commanded(phone) or 0) > 0.05)
+        js(phone, script)
+        figures[f"zero_after_{why.split()[-1]}_ms"] = comes_to_zero(desktop, why)
+        let_go(phone)
+    until("connected again", lambda: js(phone, "return ws.readyState === WebSocket.OPEN"))
+
+    # The E-STOP latches a stop owned by web:operator; tap to the page's answer, 20 times.
+    js(phone, """
+        window.__taps = [];
+        document.getElementById('estop').addEventListener('pointerdown',
+            () => window.__taps.push([performance.now(), null]), true);
+        new MutationObserver(() => {
+            const t = window.__taps[window.__taps.length - 1];
+            if (t && t[1] === null && /latched/.test(document.getElementById('log').textContent)) t[1] = performance.now();
+        }).observe(document.getElementById('log'), {childList: true, characterData: true, subtree: true});
+    """)
+    estop = phone.find_element(By.ID, "estop")
+    for _ in range(20):
+        js(phone, "document.getElementById('log').textContent = ''")
+        ActionChains(phone).click(estop).perform()
+        until("the E-STOP answered", lambda: js(phone, "const t = window.__taps; return t.length && t[t.length-1][1] !== null"))
+    taps = [b - a for a, b in js(phone, "return window.__taps")]
+    figures["estop_tap_to_latched_ms_p50"] = round(statistics.median(taps), 1)
+    figures["estop_tap_to_latched_ms_p99"] = round(sorted(taps)[min(len(taps) - 1, int(len(taps) * 0.99))], 1)
+    until("the stop in the list", lambda: "web:operator" in owners(phone))
+
+    # A second browser sees it.
+    until("the stop in a second browser", lambda: "web:operator" in owners(desktop))
+
+    # A stop from the terminal shows with its owner and cannot be released from the page.
+    done = subprocess.run([SCOUT, "estop", "--name", ROBOT, "--reason", "from the terminal"],
+                          capture_output=True, text=True, timeout=20)
+    assert done.returncode == 0, done.stderr
+    other = until("the terminal's stop shown", lambda: [
+        (who, text) for who, text in stops(phone) if who != "web:operator"])
+    owner, text = other[0]
+    assert "only " + owner in text, text
+    phone.save_screenshot(os.path.join(SHOTS, "phone-stopped.png"))
+    desktop.save_screenshot(os.path.join(SHOTS, "desktop-stopped.png"))
+
+    # Release frees the page's own stops only, and restarts nothing.
+    phone.find_element(By.ID, "release").click()
+    until("own stops released", lambda: "web:operator" not in owners(phone))
+    assert owners(phone) == [owner], stops(phone)
+    # Even asked directly, the page cannot release the terminal's stop.
+    js(phone, "send({op: 'release', through: newestShown})")
+    time.sleep(0.5)
+    assert owners(phone) == [owner], stops(phone)
+    for _ in range(10):
+        assert commanded(phone) == 0.0 and abs(moving(phone) or 0) < 0.01, (commanded(phone), moving(phone))
+        time.sleep(0.05)
+    assert "Stopped by " + owner in phone.find_element(By.ID, "why").text, phone.find_element(By.ID, "why").text
+
+    # Without the token, with a wrong one, or from another origin: refused, nothing can be done.
+    for fragment, shown in (("", "No token"), ("#token=wrong-token-0123456789", "No connection")):
+        desktop.get("about:blank")
+        desktop.get(URL + fragment)
+        until("the page", lambda: js(desktop, "return !!document.getElementById('why')"))
+        until(f"refused ({fragment or 'no token'})", lambda: shown in desktop.find_element(By.ID, "why").text)
+        assert desktop.find_element(By.ID, "me").text == "–"
+        assert js(desktop, "return ws.readyState") != 1
+    # A page of another origin (another port) with the right token.
+    other_origin = http.server.ThreadingHTTPServer(("127.0.0.1", 0), OtherOrigin)
+    threading.Thread(target=other_origin.serve_forever, daemon=True).start()
+    desktop.get(f"http://127.0.0.1:{other_origin.server_address[1]}/")
+    until("another origin refused", lambda: desktop.title in ("open", "refused"))
+    other_origin.shutdown()
+    assert desktop.title == "refused", desktop.title
+
+    print(json.dumps(figures))
+finally:
+    phone.quit()
+    desktop.quit()
