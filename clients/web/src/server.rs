@@ -10,7 +10,7 @@ use std::sync::{Arc, Condvar, Mutex, mpsc};
 use std::time::{Duration, Instant};
 
 use scout_clients::client::{ClientError, Robot};
-use scout_clients::control::{ControlError, Stopper};
+use scout_clients::control::{ControlError, Controller, Stopper};
 use scout_interface::control::{Class, ReleaseTarget, Request};
 use scout_interface::json::{state_json, status_json};
 use scout_interface::services::{monotonic, monotonic_ns};
@@ -23,6 +23,7 @@ use crate::access::{self, Role, Users};
 use crate::http::{self, Head, HeadError, MAX_HEAD_BYTES};
 use crate::page::INDEX_HTML;
 use crate::session::{Action, MAX_MESSAGE_BYTES, Session};
+use crate::tls::Tls;
 
 /// Pages (WebSockets) served at once; more are answered 503.
 pub const MAX_PAGES: usize = 16;
@@ -45,6 +46,9 @@ const PAGE_TICK: Duration = Duration::from_millis(10);
 /// The least time between two states sent to a page (the gateway publishes at 50 Hz).
 const STATE_EVERY: Duration = Duration::from_millis(50);
 
+/// The least time between two statuses sent to a page.
+const STATUS_EVERY: Duration = Duration::from_millis(100);
+
 /// A gateway silent this long is shown as silent.
 const SILENT_AFTER: Duration = Duration::from_millis(500);
 
@@ -60,6 +64,8 @@ pub struct WebOptions {
     pub listen: SocketAddr,
     /// Who may connect.
     pub users: Users,
+    /// TLS (needed beyond loopback).
+    pub tls: Option<Tls>,
 }
 
 /// Why serving failed.
@@ -75,9 +81,10 @@ pub enum WebError {
     },
     /// Not a loopback address, without TLS.
     #[error(
-        "listening on {0} would expose the page and its tokens unencrypted on the network: \
-         scout web listens on loopback only (127.0.0.1 or ::1) until it has TLS; reach it from \
-         another machine through an SSH tunnel (ssh -L 8090:127.0.0.1:8090 ROBOT)"
+        "listening on {0} without TLS would send the page's tokens and commands in clear over \
+         the network: give --tls-self-signed DIR (a certificate made there on first start) or \
+         --tls-cert FILE --tls-key FILE, or listen on 127.0.0.1 and tunnel (ssh -L \
+         8090:127.0.0.1:8090 ROBOT)"
     )]
     NeedsTls(SocketAddr),
     /// The gateway could not be read.
@@ -108,7 +115,7 @@ impl Server {
     /// Binds the address (loopback only) and connects to the gateway: fails at once when it
     /// cannot listen there, or no gateway runs.
     pub fn bind(options: WebOptions) -> Result<Server, WebError> {
-        if !options.listen.ip().is_loopback() {
+        if !options.listen.ip().is_loopback() && options.tls.is_none() {
             return Err(WebError::NeedsTls(options.listen));
         }
         let listener = TcpListener::bind(options.listen).map_err(|source| WebError::Listen {
@@ -128,9 +135,9 @@ impl Server {
         self.listener.local_addr().unwrap_or(self.options.listen)
     }
 
-    /// Serves until `stop` is set.
+    /// Serves until `stop` is set. A gateway that goes silent is shown silent to every page and
+    /// connected to again (a restarted gateway has services of its own).
     pub fn run(self, stop: &AtomicBool) -> Result<(), WebError> {
-        let robot = self.robot;
         let feed = Arc::new((Mutex::new(Feed::default()), Condvar::new()));
         let open = Arc::new(Open::default());
         let listener = self.listener;
@@ -141,9 +148,9 @@ impl Server {
                 source,
             })?;
         let options = Arc::new(self.options);
-        let state = robot.subscribe()?;
-        let status = robot.status()?;
+        let mut source = Some(Source::of(self.robot)?);
         let mut last_state = Instant::now();
+        let mut last_attempt = Instant::now();
         while !stop.load(Ordering::Relaxed) {
             loop {
                 match listener.accept() {
@@ -155,30 +162,30 @@ impl Server {
                     }
                 }
             }
-            let newest = state.next_timeout(Duration::from_millis(20))?;
-            let mut changed = None;
-            if let Some(newest) = newest {
-                last_state = Instant::now();
-                let mut latest = newest;
-                while let Some(next) = state.try_next()? {
-                    latest = next;
+            if last_state.elapsed() > RECONNECT_AFTER && last_attempt.elapsed() > RECONNECT_AFTER {
+                last_attempt = Instant::now();
+                match Robot::connect(&options.robot).and_then(Source::of) {
+                    Ok(fresh) => source = Some(fresh),
+                    Err(error) => debug!("connecting to gateway {} again: {error}", options.robot),
                 }
-                changed.get_or_insert_with(Feed::default).state = Some(
-                    json!({"type": "state", "state": state_json(&latest, monotonic_ns())})
-                        .to_string()
-                        .into(),
-                );
             }
-            if let Some(newest) = status.try_next()? {
-                let mut latest = newest;
-                while let Some(next) = status.try_next()? {
-                    latest = next;
+            let changed = match source.as_ref().map(Source::read) {
+                Some(Ok(changed)) => changed,
+                Some(Err(error)) => {
+                    warn!(
+                        "reading gateway {}: {error}; connecting again",
+                        options.robot
+                    );
+                    source = None;
+                    None
                 }
-                changed.get_or_insert_with(Feed::default).status = Some(
-                    json!({"type": "status", "status": status_json(&latest, monotonic_ns())})
-                        .to_string()
-                        .into(),
-                );
+                None => {
+                    std::thread::sleep(Duration::from_millis(20));
+                    None
+                }
+            };
+            if changed.as_ref().is_some_and(|feed| feed.state.is_some()) {
+                last_state = Instant::now();
             }
             let silent = (last_state.elapsed() > SILENT_AFTER).then(|| {
                 format!(
@@ -196,14 +203,61 @@ impl Server {
             } else if !silent_changed {
                 continue;
             }
-            if silent_changed && silent.is_some() {
-                warn!("{}", silent.as_deref().unwrap_or(""));
+            if silent_changed && let Some(silent) = &silent {
+                warn!("{silent}");
             }
             current.silent = silent;
             current.generation += 1;
             wake.notify_all();
         }
         Ok(())
+    }
+}
+
+/// A silent gateway is connected to again this often.
+const RECONNECT_AFTER: Duration = Duration::from_secs(2);
+
+/// The gateway's state and status.
+#[derive(Debug)]
+struct Source {
+    state: scout_clients::client::StateSubscriber,
+    status: scout_clients::control::StatusReader,
+    _robot: Robot,
+}
+
+impl Source {
+    fn of(robot: Robot) -> Result<Source, ClientError> {
+        Ok(Source {
+            state: robot.subscribe()?,
+            status: robot.status()?,
+            _robot: robot,
+        })
+    }
+
+    /// Waits a little for the next state; the newest state and status as JSON, if any came.
+    fn read(&self) -> Result<Option<Feed>, ClientError> {
+        let mut changed = None;
+        if let Some(mut latest) = self.state.next_timeout(Duration::from_millis(20))? {
+            while let Some(next) = self.state.try_next()? {
+                latest = next;
+            }
+            changed.get_or_insert_with(Feed::default).state = Some(
+                json!({"type": "state", "state": state_json(&latest, monotonic_ns())})
+                    .to_string()
+                    .into(),
+            );
+        }
+        if let Some(mut latest) = self.status.try_next()? {
+            while let Some(next) = self.status.try_next()? {
+                latest = next;
+            }
+            changed.get_or_insert_with(Feed::default).status = Some(
+                json!({"type": "status", "status": status_json(&latest, monotonic_ns())})
+                    .to_string()
+                    .into(),
+            );
+        }
+        Ok(changed)
     }
 }
 
@@ -241,9 +295,9 @@ fn accept(
     }
 }
 
-/// Reads the request head and answers it: the page, its WebSocket, or a refusal.
+/// Sets the connection up (its TLS, where there is) and answers it.
 fn serve(
-    mut stream: TcpStream,
+    stream: TcpStream,
     peer: SocketAddr,
     options: &WebOptions,
     feed: &(Mutex<Feed>, Condvar),
@@ -252,6 +306,34 @@ fn serve(
     stream.set_nonblocking(false)?;
     stream.set_nodelay(true)?;
     stream.set_write_timeout(Some(WRITE_TIMEOUT))?;
+    // Timeouts are set on the socket through this handle, whatever is layered on it.
+    let socket = stream.try_clone()?;
+    match &options.tls {
+        None => respond(stream, &socket, peer, options, feed, open),
+        Some(tls) => {
+            let connection =
+                rustls::ServerConnection::new(tls.config.clone()).map_err(std::io::Error::other)?;
+            respond(
+                rustls::StreamOwned::new(connection, stream),
+                &socket,
+                peer,
+                options,
+                feed,
+                open,
+            )
+        }
+    }
+}
+
+/// Reads the request head and answers it: the page, its WebSocket, or a refusal.
+fn respond<S: Read + Write>(
+    mut stream: S,
+    socket: &TcpStream,
+    peer: SocketAddr,
+    options: &WebOptions,
+    feed: &(Mutex<Feed>, Condvar),
+    open: &Open,
+) -> std::io::Result<()> {
     let mut deadline = Instant::now() + IDLE_TIMEOUT;
     let mut buffer = Vec::with_capacity(1024);
     let mut chunk = [0u8; 1024];
@@ -262,9 +344,12 @@ fn serve(
             return Ok(());
         }
         if left.is_zero() {
-            return stream.write_all(&http::refusal(400, "the request head took too long"));
+            return send(
+                &mut stream,
+                &http::refusal(400, "the request head took too long"),
+            );
         }
-        stream.set_read_timeout(Some(left))?;
+        socket.set_read_timeout(Some(left))?;
         let read = match stream.read(&mut chunk) {
             Ok(0) => return Ok(()),
             Ok(read) => {
@@ -283,30 +368,33 @@ fn serve(
             Ok((head, _)) => break head,
             Err(HeadError::Partial) => continue,
             Err(error @ HeadError::TooLong) => {
-                return stream.write_all(&http::refusal(431, &error.to_string()));
+                return send(&mut stream, &http::refusal(431, &error.to_string()));
             }
-            Err(error) => return stream.write_all(&http::refusal(400, &error.to_string())),
+            Err(error) => return send(&mut stream, &http::refusal(400, &error.to_string())),
         }
     };
     if head.method != "GET" {
-        return stream.write_all(&http::refusal(405, "only GET is served"));
+        return send(&mut stream, &http::refusal(405, "only GET is served"));
     }
     match head.path.as_str() {
-        "/" | "/index.html" => stream.write_all(&http::response(
-            200,
-            "OK",
-            "text/html; charset=utf-8",
-            INDEX_HTML.as_bytes(),
-        )),
+        "/" | "/index.html" => send(
+            &mut stream,
+            &http::response(200, "OK", "text/html; charset=utf-8", INDEX_HTML.as_bytes()),
+        ),
         "/ws" if head.is_websocket() => {
-            let user = match access::admit(&head, &options.users, "http") {
+            let scheme = if options.tls.is_some() {
+                "https"
+            } else {
+                "http"
+            };
+            let user = match access::admit(&head, &options.users, scheme) {
                 Ok(user) => user.clone(),
                 Err(refusal) => {
                     info!(
                         "{peer}: WebSocket refused ({}): {}",
                         refusal.status, refusal.reason
                     );
-                    return stream.write_all(&http::refusal(refusal.status, &refusal.reason));
+                    return send(&mut stream, &http::refusal(refusal.status, &refusal.reason));
                 }
             };
             if open.pages.fetch_add(1, Ordering::SeqCst) >= MAX_PAGES {
@@ -315,14 +403,17 @@ fn serve(
                     "{peer}: page of web:{} refused: {MAX_PAGES} pages are open",
                     user.name
                 );
-                return stream.write_all(&http::refusal(
-                    503,
-                    &format!("{MAX_PAGES} pages are open already: close one"),
-                ));
+                return send(
+                    &mut stream,
+                    &http::refusal(
+                        503,
+                        &format!("{MAX_PAGES} pages are open already: close one"),
+                    ),
+                );
             }
             let key = head.header("sec-websocket-key").unwrap_or("");
-            let outcome = stream
-                .write_all(&http::switching_protocols(key))
+            let outcome = send(&mut stream, &http::switching_protocols(key))
+                .and_then(|()| socket.set_read_timeout(Some(PAGE_TICK)))
                 .and_then(|()| {
                     info!(
                         "{peer}: page of web:{} ({}) connected",
@@ -340,8 +431,17 @@ fn serve(
             info!("{peer}: page of web:{} closed", user.name);
             outcome
         }
-        _ => stream.write_all(&http::refusal(404, "not here: the page is at /")),
+        _ => send(
+            &mut stream,
+            &http::refusal(404, "not here: the page is at /"),
+        ),
     }
+}
+
+/// Writes `bytes` and flushes them (through TLS, where there is).
+fn send(stream: &mut impl Write, bytes: &[u8]) -> std::io::Result<()> {
+    stream.write_all(bytes)?;
+    stream.flush()
 }
 
 fn is_timeout(error: &std::io::Error) -> bool {
@@ -363,14 +463,13 @@ type Slot = Arc<(Mutex<Pending>, Condvar)>;
 
 /// One page's WebSocket: its messages through its session, stops at once on this thread,
 /// control requests to its control thread; the feed sent to it as it changes.
-fn page(
-    stream: TcpStream,
+fn page<S: Read + Write>(
+    stream: S,
     peer: SocketAddr,
     options: &WebOptions,
     feed: &(Mutex<Feed>, Condvar),
     mut session: Session,
 ) -> std::io::Result<()> {
-    stream.set_read_timeout(Some(PAGE_TICK))?;
     let mut config = tungstenite::protocol::WebSocketConfig::default();
     config.max_message_size = Some(MAX_MESSAGE_BYTES * 4);
     config.max_frame_size = Some(MAX_MESSAGE_BYTES * 4);
@@ -401,6 +500,8 @@ fn page(
     let mut seen = 0;
     let mut last_state_sent = Instant::now() - STATE_EVERY;
     let mut pending_state: Option<Arc<str>> = None;
+    let mut last_status_sent = Instant::now() - STATUS_EVERY;
+    let mut pending_status: Option<Arc<str>> = None;
     let outcome = (|| -> Result<(), WsError> {
         socket.send(WsMessage::text(hello.to_string()))?;
         loop {
@@ -457,9 +558,15 @@ fn page(
                 } else if state.is_some() {
                     pending_state = state;
                 }
-                if let Some(status) = status {
-                    socket.send(WsMessage::text(status.to_string()))?;
+                if status.is_some() {
+                    pending_status = status;
                 }
+            }
+            if last_status_sent.elapsed() >= STATUS_EVERY
+                && let Some(status) = pending_status.take()
+            {
+                last_status_sent = Instant::now();
+                socket.send(WsMessage::text(status.to_string()))?;
             }
             if last_state_sent.elapsed() >= STATE_EVERY
                 && let Some(state) = pending_state.take()
@@ -550,22 +657,16 @@ fn release(stopper: &mut Option<Stopper>, client: &str, peer: SocketAddr, throug
     answer_of("release", &result)
 }
 
-/// A driving page's control requests, in order, as `web:USER` with the teleop class.
+/// A driving page's control requests, in order, as `web:USER` with the teleop class. The
+/// control client is made at the first take, and made again at the next take after a take
+/// failed (a gateway restarted since has new services).
 fn control_thread(robot: &str, client: &str, slot: &Slot, answers: &mpsc::Sender<Value>) {
-    let controller = Robot::connect(robot).and_then(|robot| {
+    let connect = || -> Result<(Robot, Controller), ClientError> {
+        let robot = Robot::connect(robot)?;
         let controller = robot.controller(client, Some(Class::Teleop))?;
         Ok((robot, controller))
-    });
-    let (_robot, mut controller) = match controller {
-        Ok(pair) => pair,
-        Err(error) => {
-            warn!("{client}: no control client: {error}");
-            let _ = answers.send(
-                json!({"type": "answer", "op": "take", "ok": false, "error": error.to_string()}),
-            );
-            return;
-        }
     };
+    let mut control: Option<(Robot, Controller)> = None;
     let mut drives_refused = 0u64;
     loop {
         let action = {
@@ -588,18 +689,32 @@ fn control_thread(robot: &str, client: &str, slot: &Slot, answers: &mpsc::Sender
         };
         match action {
             Action::TakeControl => {
-                let result = controller.take_control();
-                info!(
-                    "{client}: take control: {}",
-                    match &result {
-                        Ok(_) => "granted".to_owned(),
-                        Err(error) => error.to_string(),
+                let result = match &mut control {
+                    Some((_, controller)) => controller.take_control(),
+                    None => connect().map_err(ControlError::Client).and_then(
+                        |(robot, mut controller)| {
+                            let result = controller.take_control();
+                            control = Some((robot, controller));
+                            result
+                        },
+                    ),
+                };
+                match &result {
+                    Ok(_) => info!("{client}: took control"),
+                    Err(error) => {
+                        info!("{client}: take control refused: {error}");
+                        if !matches!(error, ControlError::Rejected(_)) {
+                            // Not the arbiter's answer: the gateway is gone or new.
+                            control = None;
+                        }
                     }
-                );
+                }
                 let _ = answers.send(answer_of("take", &result));
             }
             Action::Relinquish => {
-                if controller.lease().is_some() {
+                if let Some((_, controller)) = &mut control
+                    && controller.lease().is_some()
+                {
                     let result = controller.relinquish();
                     info!("{client}: gave up control");
                     let _ = answers.send(answer_of("relinquish", &result));
@@ -611,6 +726,9 @@ fn control_thread(robot: &str, client: &str, slot: &Slot, answers: &mpsc::Sender
                 sent,
                 ttl,
             } => {
+                let Some((_, controller)) = &mut control else {
+                    continue;
+                };
                 let Some(lease) = controller.lease() else {
                     continue;
                 };
@@ -631,7 +749,9 @@ fn control_thread(robot: &str, client: &str, slot: &Slot, answers: &mpsc::Sender
                 }
             }
             Action::Stop { .. } | Action::Release { .. } => {
-                unreachable!("stops and releases are served on the page's thread")
+                warn!(
+                    "{client}: a stop or release reached the control thread: ignored (the page's thread serves them)"
+                );
             }
         }
     }

@@ -2,8 +2,9 @@
 //! (see the `scout_web` library).
 //!
 //! Exit codes: 0 Ctrl-C or SIGTERM ended it; 1 something failed (reading the gateway); 2 usage
-//! error (also: a bad users file, an address that cannot be listened on, one that is not
-//! loopback); 3 no gateway with that name runs.
+//! error (also: a bad users file, an address that cannot be listened on, one beyond loopback
+//! without TLS, a certificate or key that cannot be read or made); 3 no gateway with that name
+//! runs.
 
 use std::io::Write;
 use std::net::SocketAddr;
@@ -16,6 +17,7 @@ use clap::Parser;
 use scout_clients::failure::{self, Failure};
 use scout_web::access::{Role, User, Users, new_token};
 use scout_web::server::{Server, WebError, WebOptions};
+use scout_web::tls::{self, TlsError};
 use serde::Deserialize;
 use tracing_subscriber::EnvFilter;
 
@@ -27,9 +29,20 @@ struct Cli {
     /// The robot (gateway) name.
     #[arg(long, default_value = "scout", value_name = "ROBOT")]
     name: String,
-    /// The address to listen on: loopback only (port 0: any free port, printed at start).
+    /// The address to listen on (port 0: any free port, printed at start). Another address
+    /// than loopback (0.0.0.0: every interface) needs TLS.
     #[arg(long, default_value = "127.0.0.1:8090", value_name = "ADDR:PORT")]
     listen: SocketAddr,
+    /// Serve over TLS with a self-signed certificate kept in DIR (made there on first start;
+    /// its SHA-256 fingerprint is printed, to compare with what the browser shows).
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["tls_cert", "tls_key"])]
+    tls_self_signed: Option<PathBuf>,
+    /// Serve over TLS with this certificate chain (PEM; with --tls-key).
+    #[arg(long, value_name = "FILE", requires = "tls_key")]
+    tls_cert: Option<PathBuf>,
+    /// The certificate's private key (PEM; with --tls-cert).
+    #[arg(long, value_name = "FILE", requires = "tls_cert")]
+    tls_key: Option<PathBuf>,
     /// The users (a TOML file of [[users]] with name, role = "view", "stop" or "drive", and
     /// token). Without it: one user, `operator`, role drive, with a new token each start.
     #[arg(long, value_name = "FILE")]
@@ -86,12 +99,26 @@ fn run(cli: &Cli, stop: &AtomicBool) -> anyhow::Result<()> {
         ),
     };
     let users = Users::new(users).map_err(Usage)?;
+    let tls = match (&cli.tls_self_signed, &cli.tls_cert, &cli.tls_key) {
+        (Some(dir), _, _) => Some(tls::self_signed(dir, &certificate_names(cli.listen))?),
+        (None, Some(cert), Some(key)) => Some(tls::from_files(cert, key)?),
+        _ => None,
+    };
     let server = Server::bind(WebOptions {
         robot: cli.name.clone(),
         listen: cli.listen,
         users: users.clone(),
+        tls: tls.clone(),
     })?;
-    let url = format!("http://{}/", server.address());
+    if let Some(tls) = &tls {
+        println!(
+            "TLS certificate{} SHA-256 {}: the browser shows it; accept the certificate only if they match",
+            if tls.made { " (made just now)" } else { "" },
+            tls.fingerprint
+        );
+    }
+    let scheme = if tls.is_some() { "https" } else { "http" };
+    let url = format!("{scheme}://{}/", server.address());
     if made {
         let user = &users.all()[0];
         println!(
@@ -112,6 +139,23 @@ fn run(cli: &Cli, stop: &AtomicBool) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The names a self-signed certificate is made for: this host's name, localhost, and the
+/// address listened on (when it is one address).
+fn certificate_names(listen: SocketAddr) -> Vec<String> {
+    let mut names = vec!["localhost".to_owned(), "127.0.0.1".to_owned()];
+    if let Ok(host) = std::fs::read_to_string("/etc/hostname") {
+        let host = host.trim();
+        if !host.is_empty() {
+            names.push(host.to_owned());
+            names.push(format!("{host}.local"));
+        }
+    }
+    if !listen.ip().is_unspecified() && !listen.ip().is_loopback() {
+        names.push(listen.ip().to_string());
+    }
+    names
+}
+
 /// A usage error found after parsing.
 #[derive(Debug, thiserror::Error)]
 #[error("{0}")]
@@ -121,7 +165,7 @@ struct Usage(String);
 /// own errors.
 fn exit_code(error: &anyhow::Error) -> u8 {
     failure::exit_code(error.chain(), |cause| {
-        if cause.downcast_ref::<Usage>().is_some() {
+        if cause.downcast_ref::<Usage>().is_some() || cause.downcast_ref::<TlsError>().is_some() {
             return Some(Failure::Usage);
         }
         match cause.downcast_ref::<WebError>() {
