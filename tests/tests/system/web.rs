@@ -1,5 +1,5 @@
 //! `scout web` against a real gateway on the simulated chassis: its refusals without a browser,
-//! and the page in a real browser (`web_browser.py`: headless Chromium driven by Selenium):
+//! TLS with a self-signed certificate (`web_tls.py`), and the page in a real browser (`web_browser.py`: headless Chromium driven by Selenium):
 //! state shown, hold-to-drive and its deadman (letting go, focus, hidden, connection), the
 //! E-STOP and release rules, tokens and origins, a phone-sized screen. The screenshots it takes
 //! land in `target/web-screenshots` (CI keeps them; `docs/images/scout-web-phone.png` is one).
@@ -46,25 +46,55 @@ fn browser_missing(test: &str) -> Option<String> {
     Some(why)
 }
 
-/// `scout web --name NAME --listen 127.0.0.1:0`, and the link it printed.
-fn start_web(name: &str) -> (Background, String) {
+/// Whether the Python lacks `websockets` (said, and skipped; a failure where CI requires the
+/// browser checks).
+fn websockets_missing(test: &str) -> bool {
+    match Command::new(python())
+        .args(["-c", "import websockets"])
+        .output()
+    {
+        Ok(output) if output.status.success() => false,
+        _ => {
+            let why = format!(
+                "{} lacks websockets: pip install websockets==17.4",
+                python()
+            );
+            assert!(
+                std::env::var_os("SCOUT_REQUIRE_BROWSER").is_none(),
+                "{test}: {why}"
+            );
+            skip(test, &why);
+            true
+        }
+    }
+}
+
+/// `scout web --name NAME --listen 127.0.0.1:0 EXTRA`, and the lines it printed up to its link.
+fn start_web(name: &str, extra: &[&str]) -> (Background, Vec<String>) {
     let mut web = command("scout");
     web.args(["web", "--name", name, "--listen", "127.0.0.1:0"])
+        .args(extra)
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit());
     let mut child = web.spawn().expect("spawn scout web");
     let lines = line_reader(child.stdout.take().expect("stdout"));
     let background = Background::from_child(child);
-    let line = lines
-        .recv_timeout(Duration::from_secs(20))
-        .expect("scout web prints its link");
-    let link = line
-        .split_whitespace()
-        .find(|word| word.contains("#token="))
-        .unwrap_or_else(|| panic!("no link with a token in {line:?}"))
-        .to_owned();
-    (background, link)
+    let mut printed = Vec::new();
+    loop {
+        let line = lines
+            .recv_timeout(Duration::from_secs(20))
+            .unwrap_or_else(|_| panic!("scout web printed no link: {printed:?}"));
+        let link = line
+            .split_whitespace()
+            .find(|word| word.contains("#token="))
+            .map(str::to_owned);
+        printed.push(line);
+        if let Some(link) = link {
+            printed.push(link);
+            return (background, printed);
+        }
+    }
 }
 
 #[test]
@@ -76,7 +106,8 @@ fn the_page_in_a_real_browser_drives_stops_and_refuses_as_the_rules_say() {
     let name = robot_name("web");
     let _gateway = Gateway::start(&["--sim", "--name", &name]);
     connect_within(&name, Duration::from_secs(20));
-    let (_web, link) = start_web(&name);
+    let (_web, printed) = start_web(&name, &[]);
+    let link = printed.last().expect("the link");
     let (url, token) = link.split_once("#token=").expect("a link with a token");
     let shots: PathBuf = built_bin_dir()
         .parent()
@@ -109,7 +140,7 @@ fn scout_web_listens_on_loopback_only_and_needs_a_gateway() {
     let (code, _, stderr) =
         scout_system_tests::scout(&["web", "--name", "nobody-here", "--listen", "0.0.0.0:0"]);
     assert_eq!(code, Some(2), "{stderr}");
-    assert!(stderr.contains("loopback only"), "{stderr}");
+    assert!(stderr.contains("without TLS"), "{stderr}");
     let (code, _, stderr) = scout_system_tests::scout(&[
         "web",
         "--name",
@@ -133,4 +164,95 @@ fn a_bad_users_file_is_a_usage_error_naming_the_fault() {
     let (code, _, stderr) = scout_system_tests::scout(&["web", "--users", &file]);
     assert_eq!(code, Some(2), "{stderr}");
     assert!(stderr.contains("at least 16"), "{stderr}");
+}
+
+#[test]
+fn over_tls_the_page_and_its_websocket_go_encrypted_with_the_printed_certificate() {
+    let test = "over_tls_the_page_and_its_websocket_go_encrypted_with_the_printed_certificate";
+    if websockets_missing(test) {
+        return;
+    }
+    let name = robot_name("web-tls");
+    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    connect_within(&name, Duration::from_secs(20));
+    let dir = scout_system_tests::TempDir::new(&name);
+    let certs = dir.path().join("tls").to_string_lossy().into_owned();
+    let (mut web, printed) = start_web(&name, &["--tls-self-signed", &certs]);
+    // `TLS certificate (made just now) SHA-256 AB:...:EF: the browser shows it; ...`
+    let fingerprint = printed
+        .iter()
+        .find_map(|line| line.split("SHA-256 ").nth(1)?.split_whitespace().next())
+        .map(|word| word.trim_end_matches(':').to_owned())
+        .unwrap_or_else(|| panic!("no fingerprint printed: {printed:?}"));
+    assert!(
+        printed.iter().any(|line| line.contains("made just now")),
+        "{printed:?}"
+    );
+    let link = printed.last().expect("the link");
+    assert!(link.starts_with("https://127.0.0.1:"), "{link}");
+    let (url, token) = link.split_once("#token=").expect("a token");
+    let host = url.trim_start_matches("https://").trim_end_matches('/');
+    let mut check = Command::new(python());
+    check
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/system/web_tls.py"))
+        .args([host, token, &fingerprint]);
+    let output = run_with_input(check, b"", Duration::from_secs(60));
+    assert!(
+        output.status.success(),
+        "web_tls.py failed:\n{}{}",
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    );
+    // A restart keeps the certificate.
+    web.signal(nix::sys::signal::Signal::SIGTERM);
+    assert_eq!(web.wait_exit(Duration::from_secs(10)), Some(0));
+    let (_again, printed) = start_web(&name, &["--tls-self-signed", &certs]);
+    assert!(
+        printed
+            .iter()
+            .any(|line| line.contains(&fingerprint) && !line.contains("made just now")),
+        "{printed:?}"
+    );
+}
+
+#[test]
+fn a_gateway_gone_silent_shows_at_once_and_one_restarted_is_read_again() {
+    let test = "a_gateway_gone_silent_shows_at_once_and_one_restarted_is_read_again";
+    if websockets_missing(test) {
+        return;
+    }
+    let name = robot_name("web-silent");
+    let mut gateway = Gateway::start(&["--sim", "--name", &name]);
+    connect_within(&name, Duration::from_secs(20));
+    let (_web, printed) = start_web(&name, &[]);
+    let link = printed.last().expect("the link");
+    let (url, token) = link.split_once("#token=").expect("a token");
+    let host = url.trim_start_matches("http://").trim_end_matches('/');
+    let mut watch = Command::new(python());
+    watch
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/system/web_watch.py"))
+        .args([host, token])
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit());
+    let mut child = watch.spawn().expect("spawn web_watch.py");
+    let lines = line_reader(child.stdout.take().expect("stdout"));
+    let _watch = Background::from_child(child);
+    let wait_for = |kind: &str| {
+        let deadline = std::time::Instant::now() + Duration::from_secs(20);
+        loop {
+            let left = deadline.saturating_duration_since(std::time::Instant::now());
+            match lines.recv_timeout(left) {
+                Ok(line) if line == kind => return,
+                Ok(_) => {}
+                Err(_) => panic!("no {kind} message within 20 s"),
+            }
+        }
+    };
+    wait_for("state");
+    gateway.signal(nix::sys::signal::Signal::SIGKILL);
+    let _ = gateway.wait_exit(Duration::from_secs(10));
+    wait_for("silent");
+    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    wait_for("state");
 }
