@@ -237,20 +237,15 @@ impl Source {
     /// Waits a little for the next state; the newest state and status as JSON, if any came.
     fn read(&self) -> Result<Option<Feed>, ClientError> {
         let mut changed = None;
-        if let Some(mut latest) = self.state.next_timeout(Duration::from_millis(20))? {
-            while let Some(next) = self.state.try_next()? {
-                latest = next;
-            }
+        if let Some(first) = self.state.next_timeout(Duration::from_millis(20))? {
+            let latest = self.state.try_latest()?.unwrap_or(first);
             changed.get_or_insert_with(Feed::default).state = Some(
                 json!({"type": "state", "state": state_json(&latest, monotonic_ns())})
                     .to_string()
                     .into(),
             );
         }
-        if let Some(mut latest) = self.status.try_next()? {
-            while let Some(next) = self.status.try_next()? {
-                latest = next;
-            }
+        if let Some(latest) = self.status.latest(Duration::ZERO)? {
             changed.get_or_insert_with(Feed::default).status = Some(
                 json!({"type": "status", "status": status_json(&latest, monotonic_ns())})
                     .to_string()

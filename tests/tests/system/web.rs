@@ -97,18 +97,51 @@ fn start_web(name: &str, extra: &[&str]) -> (Background, Vec<String>) {
     }
 }
 
+/// A gateway on the simulator and `scout web` (with `extra`) in front of it.
+struct Served {
+    name: String,
+    gateway: Gateway,
+    web: Background,
+    /// What `scout web` printed, its link last.
+    printed: Vec<String>,
+    /// The link without its token, and the token.
+    url: String,
+    token: String,
+}
+
+impl Served {
+    fn start(prefix: &str, extra: &[&str]) -> Served {
+        let name = robot_name(prefix);
+        let gateway = Gateway::start(&["--sim", "--name", &name]);
+        connect_within(&name, Duration::from_secs(20));
+        let (web, printed) = start_web(&name, extra);
+        let link = printed.last().expect("the link");
+        let (url, token) = link.split_once("#token=").expect("a link with a token");
+        let (url, token) = (url.to_owned(), token.to_owned());
+        Served {
+            name,
+            gateway,
+            web,
+            printed,
+            url,
+            token,
+        }
+    }
+
+    /// `HOST:PORT` of the link.
+    fn host(&self) -> &str {
+        let url = self.url.trim_end_matches('/');
+        url.split_once("://").map_or(url, |(_, host)| host)
+    }
+}
+
 #[test]
 fn the_page_in_a_real_browser_drives_stops_and_refuses_as_the_rules_say() {
     let test = "the_page_in_a_real_browser_drives_stops_and_refuses_as_the_rules_say";
     if browser_missing(test).is_some() {
         return;
     }
-    let name = robot_name("web");
-    let _gateway = Gateway::start(&["--sim", "--name", &name]);
-    connect_within(&name, Duration::from_secs(20));
-    let (_web, printed) = start_web(&name, &[]);
-    let link = printed.last().expect("the link");
-    let (url, token) = link.split_once("#token=").expect("a link with a token");
+    let served = Served::start("web", &[]);
     let shots: PathBuf = built_bin_dir()
         .parent()
         .expect("target/")
@@ -117,9 +150,9 @@ fn the_page_in_a_real_browser_drives_stops_and_refuses_as_the_rules_say() {
     let mut browser = Command::new(python());
     browser
         .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/system/web_browser.py"))
-        .args([url, token])
+        .args([&served.url, &served.token])
         .arg(scout_system_tests::bin("scout"))
-        .arg(&name)
+        .arg(&served.name)
         .arg(&shots)
         // Selenium's manager would look for a browser on the internet otherwise.
         .env("SE_OFFLINE", "true");
@@ -172,12 +205,10 @@ fn over_tls_the_page_and_its_websocket_go_encrypted_with_the_printed_certificate
     if websockets_missing(test) {
         return;
     }
-    let name = robot_name("web-tls");
-    let _gateway = Gateway::start(&["--sim", "--name", &name]);
-    connect_within(&name, Duration::from_secs(20));
-    let dir = scout_system_tests::TempDir::new(&name);
+    let dir = scout_system_tests::TempDir::new(&robot_name("web-tls-certs"));
     let certs = dir.path().join("tls").to_string_lossy().into_owned();
-    let (mut web, printed) = start_web(&name, &["--tls-self-signed", &certs]);
+    let mut served = Served::start("web-tls", &["--tls-self-signed", &certs]);
+    let printed = &served.printed;
     // `TLS certificate (made just now) SHA-256 AB:...:EF: the browser shows it; ...`
     let fingerprint = printed
         .iter()
@@ -188,14 +219,15 @@ fn over_tls_the_page_and_its_websocket_go_encrypted_with_the_printed_certificate
         printed.iter().any(|line| line.contains("made just now")),
         "{printed:?}"
     );
-    let link = printed.last().expect("the link");
-    assert!(link.starts_with("https://127.0.0.1:"), "{link}");
-    let (url, token) = link.split_once("#token=").expect("a token");
-    let host = url.trim_start_matches("https://").trim_end_matches('/');
+    assert!(
+        served.url.starts_with("https://127.0.0.1:"),
+        "{}",
+        served.url
+    );
     let mut check = Command::new(python());
     check
         .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/system/web_tls.py"))
-        .args([host, token, &fingerprint]);
+        .args([served.host(), &served.token, &fingerprint]);
     let output = run_with_input(check, b"", Duration::from_secs(60));
     assert!(
         output.status.success(),
@@ -204,9 +236,9 @@ fn over_tls_the_page_and_its_websocket_go_encrypted_with_the_printed_certificate
         String::from_utf8_lossy(&output.stderr)
     );
     // A restart keeps the certificate.
-    web.signal(nix::sys::signal::Signal::SIGTERM);
-    assert_eq!(web.wait_exit(Duration::from_secs(10)), Some(0));
-    let (_again, printed) = start_web(&name, &["--tls-self-signed", &certs]);
+    served.web.signal(nix::sys::signal::Signal::SIGTERM);
+    assert_eq!(served.web.wait_exit(Duration::from_secs(10)), Some(0));
+    let (_again, printed) = start_web(&served.name, &["--tls-self-signed", &certs]);
     assert!(
         printed
             .iter()
@@ -221,17 +253,11 @@ fn a_gateway_gone_silent_shows_at_once_and_one_restarted_is_read_again() {
     if websockets_missing(test) {
         return;
     }
-    let name = robot_name("web-silent");
-    let mut gateway = Gateway::start(&["--sim", "--name", &name]);
-    connect_within(&name, Duration::from_secs(20));
-    let (_web, printed) = start_web(&name, &[]);
-    let link = printed.last().expect("the link");
-    let (url, token) = link.split_once("#token=").expect("a token");
-    let host = url.trim_start_matches("http://").trim_end_matches('/');
+    let mut served = Served::start("web-silent", &[]);
     let mut watch = Command::new(python());
     watch
         .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/system/web_watch.py"))
-        .args([host, token])
+        .args([served.host(), &served.token])
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit());
@@ -250,9 +276,9 @@ fn a_gateway_gone_silent_shows_at_once_and_one_restarted_is_read_again() {
         }
     };
     wait_for("state");
-    gateway.signal(nix::sys::signal::Signal::SIGKILL);
-    let _ = gateway.wait_exit(Duration::from_secs(10));
+    served.gateway.signal(nix::sys::signal::Signal::SIGKILL);
+    let _ = served.gateway.wait_exit(Duration::from_secs(10));
     wait_for("silent");
-    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    let _gateway = Gateway::start(&["--sim", "--name", &served.name]);
     wait_for("state");
 }
