@@ -4,11 +4,12 @@
 //! commands under a lease, aged from the browser's clock. Sans-IO: the request heads
 //! ([`http`]), who may connect and do what ([`access`]) and what a page's messages ask for
 //! ([`session`]); [`server`] is the driver around them (sockets, threads, the clock), over TLS
-//! ([`tls`]) beyond loopback.
+//! ([`tls`]) beyond loopback. [`qr`] shows the link to a phone's camera.
 
 pub mod access;
 pub mod http;
 pub mod page;
+pub mod qr;
 pub mod server;
 pub mod session;
 pub mod tls;

@@ -282,3 +282,66 @@ fn a_gateway_gone_silent_shows_at_once_and_one_restarted_is_read_again() {
     let _gateway = Gateway::start(&["--sim", "--name", &served.name]);
     wait_for("state");
 }
+
+#[test]
+fn on_a_terminal_the_link_is_a_qr_code_too_in_a_pipe_it_is_not() {
+    let test = "on_a_terminal_the_link_is_a_qr_code_too_in_a_pipe_it_is_not";
+    // util-linux's `script` gives scout web a terminal (a pty) and copies it to a pipe.
+    if Command::new("script").arg("--version").output().is_err() {
+        skip(
+            test,
+            "no `script` (util-linux) to run scout web on a terminal",
+        );
+        return;
+    }
+    let served = Served::start("web-qr", &[]);
+    // `Served` reads scout web's output through a pipe: the link only.
+    assert!(
+        !served.printed.iter().any(|line| line.contains("scan")),
+        "{:?}",
+        served.printed
+    );
+    let shell = format!(
+        "exec {} web --name {} --listen 127.0.0.1:0",
+        scout_system_tests::bin("scout").display(),
+        served.name
+    );
+    let mut child = Command::new("script")
+        .args(["--quiet", "--flush", "--command", &shell, "/dev/null"])
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("spawn script");
+    let lines = line_reader(child.stdout.take().expect("stdout"));
+    let _web = Background::from_child(child);
+    // The link, the invitation to scan, then the code: lines in black on white, until a line
+    // of anything else (a log line) or a pause.
+    let mut shown = Vec::new();
+    let mut code: Vec<String> = Vec::new();
+    let colours = "\x1b[30;107m";
+    while let Ok(line) =
+        lines.recv_timeout(Duration::from_secs(if code.is_empty() { 20 } else { 2 }))
+    {
+        match line.trim_end_matches('\r').strip_prefix(colours) {
+            Some(row) => code.push(row.trim_end_matches("\x1b[0m").to_owned()),
+            None if code.is_empty() => shown.push(line),
+            None => break,
+        }
+    }
+    assert!(
+        shown.iter().any(|line| line.contains("#token="))
+            && shown
+                .iter()
+                .any(|line| line.contains("scan it with the phone")),
+        "{shown:?}"
+    );
+    // A version 1 code (21 modules) and its quiet zone at least: 29 wide, 15 lines.
+    let width = code.first().map_or(0, |row| row.chars().count());
+    assert!(code.len() >= 15 && width >= 29, "{shown:?} {code:?}");
+    assert!(
+        code.iter().all(|row| row.chars().count() == width
+            && row.chars().all(|c| matches!(c, ' ' | '▀' | '▄' | '█'))),
+        "{code:?}"
+    );
+}

@@ -7,7 +7,7 @@
 //! runs.
 
 use std::io::Write;
-use std::net::SocketAddr;
+use std::net::{IpAddr, SocketAddr};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -16,6 +16,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use clap::Parser;
 use scout_clients::failure::{self, Failure};
 use scout_web::access::{Role, User, Users, new_token};
+use scout_web::qr;
 use scout_web::server::{Server, WebError, WebOptions};
 use scout_web::tls::{self, TlsError};
 use serde::Deserialize;
@@ -118,13 +119,30 @@ fn run(cli: &Cli, stop: &AtomicBool) -> anyhow::Result<()> {
         );
     }
     let scheme = if tls.is_some() { "https" } else { "http" };
-    let url = format!("{scheme}://{}/", server.address());
+    let urls: Vec<String> = page_hosts(server.address(), &interface_addresses())
+        .iter()
+        .map(|host| format!("{scheme}://{host}/"))
+        .collect();
+    let url = &urls[0];
     if made {
         let user = &users.all()[0];
+        let link = format!("{url}#token={}", user.token);
         println!(
-            "scout web for robot {} on {url}: open {url}#token={} (user {}, role {}; a new token each start)",
-            cli.name, user.token, user.name, user.role
+            "scout web for robot {} on {url}: open {link} (user {}, role {}; a new token each start)",
+            cli.name, user.name, user.role
         );
+        for other in &urls[1..] {
+            println!("  or {other}#token={}", user.token);
+        }
+        // For a phone's camera; only on a terminal (not into a log).
+        if std::io::IsTerminal::is_terminal(&std::io::stdout())
+            && let Some(lines) = qr::terminal_lines(&link)
+        {
+            println!("or scan it with the phone:");
+            for line in lines {
+                println!("{line}");
+            }
+        }
     } else {
         println!(
             "scout web for robot {} on {url}: open {url}#token=TOKEN with a token of {}",
@@ -133,6 +151,9 @@ fn run(cli: &Cli, stop: &AtomicBool) -> anyhow::Result<()> {
                 .as_ref()
                 .map_or(String::new(), |path| path.display().to_string())
         );
+        for other in &urls[1..] {
+            println!("  or {other}#token=TOKEN");
+        }
     }
     std::io::stdout().flush()?;
     server.run(stop)?;
@@ -150,10 +171,61 @@ fn certificate_names(listen: SocketAddr) -> Vec<String> {
             names.push(format!("{host}.local"));
         }
     }
-    if !listen.ip().is_unspecified() && !listen.ip().is_loopback() {
+    if listen.ip().is_unspecified() {
+        names.extend(interface_addresses().iter().map(IpAddr::to_string));
+    } else if !listen.ip().is_loopback() {
         names.push(listen.ip().to_string());
     }
     names
+}
+
+/// The `HOST:PORT`s the page is reached at: the address listened on, or, listening on every
+/// interface, each of this computer's `interfaces` (an IPv4 wildcard: their IPv4 ones), else
+/// `localhost`.
+fn page_hosts(listen: SocketAddr, interfaces: &[IpAddr]) -> Vec<String> {
+    if !listen.ip().is_unspecified() {
+        return vec![listen.to_string()];
+    }
+    let hosts: Vec<String> = interfaces
+        .iter()
+        .filter(|ip| listen.is_ipv6() || ip.is_ipv4())
+        .map(|ip| SocketAddr::new(*ip, listen.port()).to_string())
+        .collect();
+    if hosts.is_empty() {
+        vec![format!("localhost:{}", listen.port())]
+    } else {
+        hosts
+    }
+}
+
+/// This computer's addresses another may reach: of the interfaces that are up, all but
+/// loopback and link-local ones, IPv4 first.
+fn interface_addresses() -> Vec<IpAddr> {
+    use nix::net::if_::InterfaceFlags;
+    let Ok(interfaces) = nix::ifaddrs::getifaddrs() else {
+        return Vec::new();
+    };
+    let mut addresses: Vec<IpAddr> = interfaces
+        .filter(|interface| interface.flags.contains(InterfaceFlags::IFF_UP))
+        .filter_map(|interface| interface.address)
+        .filter_map(|address| {
+            (address.as_sockaddr_in().map(|v4| IpAddr::V4(v4.ip())))
+                .or_else(|| address.as_sockaddr_in6().map(|v6| IpAddr::V6(v6.ip())))
+        })
+        .filter(|ip| reachable_from_another(*ip))
+        .collect();
+    addresses.sort_by_key(IpAddr::is_ipv6);
+    addresses.dedup();
+    addresses
+}
+
+/// Whether `ip` is one another computer may use to reach this one: not loopback, not the
+/// wildcard, not link-local (which needs a scope a link cannot carry).
+fn reachable_from_another(ip: IpAddr) -> bool {
+    match ip {
+        IpAddr::V4(v4) => !(v4.is_loopback() || v4.is_unspecified() || v4.is_link_local()),
+        IpAddr::V6(v6) => !(v6.is_loopback() || v6.is_unspecified() || v6.is_unicast_link_local()),
+    }
 }
 
 /// A usage error found after parsing.
@@ -174,4 +246,48 @@ fn exit_code(error: &anyhow::Error) -> u8 {
             None => None,
         }
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn one_address_is_its_own_link_every_interface_each_of_its_own() {
+        let ours: [IpAddr; 3] = [
+            "192.168.1.23".parse().unwrap(),
+            "10.0.0.7".parse().unwrap(),
+            "fd00::7".parse().unwrap(),
+        ];
+        let listen = |text: &str| text.parse::<SocketAddr>().unwrap();
+        assert_eq!(
+            page_hosts(listen("127.0.0.1:8090"), &ours),
+            ["127.0.0.1:8090"]
+        );
+        assert_eq!(page_hosts(listen("10.0.0.7:443"), &ours), ["10.0.0.7:443"]);
+        assert_eq!(
+            page_hosts(listen("0.0.0.0:8090"), &ours),
+            ["192.168.1.23:8090", "10.0.0.7:8090"]
+        );
+        assert_eq!(
+            page_hosts(listen("[::]:8090"), &ours),
+            ["192.168.1.23:8090", "10.0.0.7:8090", "[fd00::7]:8090"]
+        );
+        assert_eq!(page_hosts(listen("0.0.0.0:8090"), &[]), ["localhost:8090"]);
+    }
+
+    #[test]
+    fn only_addresses_another_computer_can_use_are_offered() {
+        for (ip, offered) in [
+            ("192.168.1.23", true),
+            ("fd00::7", true),
+            ("127.0.0.1", false),
+            ("::1", false),
+            ("169.254.3.4", false),
+            ("fe80::1", false),
+            ("0.0.0.0", false),
+        ] {
+            assert_eq!(reachable_from_another(ip.parse().unwrap()), offered, "{ip}");
+        }
+    }
 }
