@@ -13,7 +13,7 @@ use std::process::{Command, Stdio};
 use std::time::Duration;
 
 use scout_system_tests::{
-    Background, Gateway, built_bin_dir, command, connect_within, line_reader, robot_name,
+    Background, Gateway, Sim, built_bin_dir, command, connect_within, line_reader, robot_name,
     run_with_input, skip,
 };
 
@@ -111,8 +111,13 @@ struct Served {
 
 impl Served {
     fn start(prefix: &str, extra: &[&str]) -> Served {
+        Served::start_on(prefix, &["--sim"], extra)
+    }
+
+    /// As [`Served::start`], the gateway on `chassis` (its chassis arguments).
+    fn start_on(prefix: &str, chassis: &[&str], extra: &[&str]) -> Served {
         let name = robot_name(prefix);
-        let gateway = Gateway::start(&["--sim", "--name", &name]);
+        let gateway = Gateway::start(&[chassis, &["--name", &name]].concat());
         connect_within(&name, Duration::from_secs(20));
         let (web, printed) = start_web(&name, extra);
         let link = printed.last().expect("the link");
@@ -141,7 +146,12 @@ fn the_page_in_a_real_browser_drives_stops_and_refuses_as_the_rules_say() {
     if browser_missing(test).is_some() {
         return;
     }
-    let served = Served::start("web", &[]);
+    // The chassis apart, tracing what it reads off the wire (for the E-STOP to zero on the wire).
+    let run = scout_system_tests::TempDir::new(test);
+    let trace = run.path().join("sim-trace");
+    let trace = trace.to_string_lossy();
+    let sim = Sim::start(&["--serial", "--trace", &trace]);
+    let served = Served::start_on("web", &["--serial", sim.port()], &[]);
     let shots: PathBuf = built_bin_dir()
         .parent()
         .expect("target/")
@@ -154,6 +164,7 @@ fn the_page_in_a_real_browser_drives_stops_and_refuses_as_the_rules_say() {
         .arg(scout_system_tests::bin("scout"))
         .arg(&served.name)
         .arg(&shots)
+        .arg(&*trace)
         // Selenium's manager would look for a browser on the internet otherwise.
         .env("SE_OFFLINE", "true");
     let output = run_with_input(browser, b"", Duration::from_secs(240));
@@ -164,7 +175,7 @@ fn the_page_in_a_real_browser_drives_stops_and_refuses_as_the_rules_say() {
         String::from_utf8_lossy(&output.stderr)
     );
     // The figures (time to the state, drives in a 1 s hold, time to zero, E-STOP tap to its
-    // answer): printed, never asserted beyond the script's bounds.
+    // answer and to zero on the wire): printed, never asserted beyond the script's bounds.
     eprintln!("scout web in Chromium: {}", stdout.trim());
 }
 

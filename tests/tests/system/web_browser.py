@@ -1,6 +1,9 @@
 """The operator's page (`scout web`) in a real browser: headless Chromium driven by Selenium.
 
-Usage: web_browser.py URL TOKEN SCOUT ROBOT SCREENSHOT_DIR
+Usage: web_browser.py URL TOKEN SCOUT ROBOT SCREENSHOT_DIR SIM_TRACE
+
+SIM_TRACE is the simulated chassis' trace (`scout-sim --trace`: what it read off the wire, in
+CLOCK_BOOTTIME), for the E-STOP tap to zero on the wire.
 
 Each check raises AssertionError with what was seen. At the end it prints one JSON line of
 figures (what the test measured; nothing here asserts a speed beyond the issue's bounds).
@@ -20,7 +23,7 @@ from selenium.webdriver.chrome.service import Service
 from selenium.webdriver.common.action_chains import ActionChains
 from selenium.webdriver.common.by import By
 
-URL, TOKEN, SCOUT, ROBOT, SHOTS = sys.argv[1:6]
+URL, TOKEN, SCOUT, ROBOT, SHOTS, TRACE = sys.argv[1:7]
 HOST = URL.split("//", 1)[1].rstrip("/")
 CHROMIUM = os.environ.get("SCOUT_CHROMIUM", "/usr/bin/chromium")
 DRIVER = os.environ.get("SCOUT_CHROMEDRIVER", "/usr/bin/chromedriver")
@@ -105,6 +108,32 @@ def let_go(driver):
     ActionChains(driver).release().perform()
 
 
+def percentiles(name, values):
+    """`name`_p50 and `name`_p99 into the figures (the 99th: the largest of fewer than 100)."""
+    ordered = sorted(values)
+    figures[f"{name}_p50"] = round(statistics.median(ordered), 1)
+    figures[f"{name}_p99"] = round(ordered[min(len(ordered) - 1, int(len(ordered) * 0.99))], 1)
+
+
+def boottime_from_epoch_ns():
+    """What to subtract from a wall-clock time (ns since the epoch) to get CLOCK_BOOTTIME, the
+    simulator's trace clock: the closest of a few readings of both."""
+    pairs = []
+    for _ in range(5):
+        before = time.clock_gettime_ns(time.CLOCK_BOOTTIME)
+        wall = time.time_ns()
+        after = time.clock_gettime_ns(time.CLOCK_BOOTTIME)
+        pairs.append((after - before, wall - (before + after) // 2))
+    return min(pairs)[1]
+
+
+def wire_commands():
+    """The motion commands the chassis read: (CLOCK_BOOTTIME ns, linear, angular)."""
+    with open(TRACE) as trace:
+        return [(int(f[1]), float(f[2]), float(f[3]))
+                for f in (line.split() for line in trace) if len(f) == 4 and f[0] == "C"]
+
+
 def comes_to_zero(driver, why):
     """How long until `driver`'s page (another than the one that drove: a page that lost its
     connection sees no state) shows the gateway commanding zero."""
@@ -165,24 +194,62 @@ try:
         let_go(phone)
     until("connected again", lambda: js(phone, "return ws.readyState === WebSocket.OPEN"))
 
-    # The E-STOP latches a stop owned by web:operator; tap to the page's answer, 20 times.
+    # The E-STOP latches a stop owned by web:operator, while the other page drives: the tap to
+    # the page's answer, and to the first zero command the chassis reads off the wire, 20
+    # times. The tap's time is the page's (performance.timeOrigin + now: the system's wall
+    # clock, through Chromium's own base), the wire's the simulator's (CLOCK_BOOTTIME).
     js(phone, """
         window.__taps = [];
         document.getElementById('estop').addEventListener('pointerdown',
-            () => window.__taps.push([performance.now(), null]), true);
+            () => window.__taps.push([performance.timeOrigin + performance.now(), null]), true);
         new MutationObserver(() => {
             const t = window.__taps[window.__taps.length - 1];
-            if (t && t[1] === null && /latched/.test(document.getElementById('log').textContent)) t[1] = performance.now();
+            if (t && t[1] === null && /latched/.test(document.getElementById('log').textContent))
+                t[1] = performance.timeOrigin + performance.now();
         }).observe(document.getElementById('log'), {childList: true, characterData: true, subtree: true});
     """)
     estop = phone.find_element(By.ID, "estop")
-    for _ in range(20):
+    desktop_forward = desktop.find_element(By.CSS_SELECTOR, "#pad button[aria-label=forward]")
+    taps = 20
+    for tap in range(taps):
+        # Pressed once the page shows the last stop gone (its arrows are off while one holds).
+        until(f"the other page free to drive (tap {tap})",
+              lambda: "web:operator" not in owners(desktop) and desktop_forward.is_enabled())
+        hold(desktop, desktop_forward)
+        until(f"the other page driving (tap {tap})", lambda: (commanded(desktop) or 0) > 0.05)
         js(phone, "document.getElementById('log').textContent = ''")
         ActionChains(phone).click(estop).perform()
         until("the E-STOP answered", lambda: js(phone, "const t = window.__taps; return t.length && t[t.length-1][1] !== null"))
-    taps = [b - a for a, b in js(phone, "return window.__taps")]
-    figures["estop_tap_to_latched_ms_p50"] = round(statistics.median(taps), 1)
-    figures["estop_tap_to_latched_ms_p99"] = round(sorted(taps)[min(len(taps) - 1, int(len(taps) * 0.99))], 1)
+        until(f"the stop shown on the other page (tap {tap})", lambda: "web:operator" in owners(desktop))
+        let_go(desktop)
+        if tap < taps - 1:
+            release = phone.find_element(By.ID, "release")
+            until("the stop shown, to release", release.is_displayed)
+            release.click()
+            until("own stops released", lambda: "web:operator" not in owners(phone))
+    tapped = js(phone, "return window.__taps")
+    percentiles("estop_tap_to_latched_ms", [b - a for a, b in tapped])
+    # The page's clock against the system's: Date.now() is the wall clock itself, floored to
+    # the millisecond, so the least of many differences is the page clock's lead.
+    lead_ms = js(phone, """
+        let least = Infinity;
+        for (let i = 0; i < 20000; i++)
+            least = Math.min(least, performance.timeOrigin + performance.now() - Date.now());
+        return least;""")
+    figures["page_clock_lead_ms"] = round(lead_ms, 2)
+    to_boottime = boottime_from_epoch_ns() + int(lead_ms * 1e6)
+    time.sleep(0.2)  # the trace is flushed every 20 ms feedback period
+    wire = wire_commands()
+    to_wire = []
+    for tapped_at, _ in tapped:
+        at = int(tapped_at * 1e6) - to_boottime
+        before = [c for c in wire if c[0] <= at]
+        zero = next((c for c in wire if c[0] > at and c[1] == 0.0 and c[2] == 0.0), None)
+        assert before and before[-1][1] > 0.0, f"the chassis was not driven when the E-STOP was tapped: {before[-3:]}"
+        assert zero is not None, f"no zero command on the wire after the tap at {at}: {wire[-5:]}"
+        to_wire.append((zero[0] - at) / 1e6)
+    percentiles("estop_tap_to_zero_on_wire_ms", to_wire)
+    figures["estop_taps"] = len(to_wire)
     until("the stop in the list", lambda: "web:operator" in owners(phone))
 
     # A second browser sees it.
