@@ -515,7 +515,15 @@ fn page<S: Read + Write>(
                             None
                         }
                         Err(refused) => {
-                            info!("{peer}: web:{}: refused: {refused}", user.name);
+                            // The first of each kind at info, the rest counted (a lossy link
+                            // refuses late drives 20 times a second) and summed up at close.
+                            let kind = refused.kind();
+                            match session.refused().find(|(k, _)| *k == kind) {
+                                Some((_, 1)) => {
+                                    info!("{peer}: web:{}: refused: {refused}", user.name);
+                                }
+                                _ => debug!("{peer}: web:{}: refused: {refused}", user.name),
+                            }
                             Some(
                                 json!({"type": "answer", "op": "message", "ok": false, "error": refused.to_string()}),
                             )
@@ -571,6 +579,17 @@ fn page<S: Read + Write>(
             }
         }
     })();
+    let refused: Vec<String> = session
+        .refused()
+        .map(|(kind, count)| format!("{kind} {count}"))
+        .collect();
+    if !refused.is_empty() {
+        info!(
+            "{peer}: web:{}: messages refused on this page: {}",
+            user.name,
+            refused.join(", ")
+        );
+    }
     if let Some(action) = session.handle_close() {
         info!("{peer}: web:{}: page gone, giving up control", user.name);
         hand_over(&slot, action);
@@ -680,6 +699,9 @@ fn control_thread(robot: &str, client: &str, slot: &Slot, answers: &mpsc::Sender
             }
         };
         let Some(action) = action else {
+            if drives_refused > 0 {
+                info!("{client}: {drives_refused} drives of this page refused by the gateway");
+            }
             return;
         };
         match action {

@@ -155,6 +155,21 @@ pub enum Refused {
     RateLimited,
 }
 
+impl Refused {
+    /// Its kind, a word for counting and logs.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Refused::Malformed(_) => "malformed",
+            Refused::TooLarge(_) => "too_large",
+            Refused::NotAllowed { .. } => "not_allowed",
+            Refused::OutOfOrder { .. } => "out_of_order",
+            Refused::Late { .. } => "late",
+            Refused::NotFinite => "not_finite",
+            Refused::RateLimited => "rate_limited",
+        }
+    }
+}
+
 /// One page's session.
 #[derive(Debug)]
 pub struct Session {
@@ -165,6 +180,8 @@ pub struct Session {
     budget: (u64, Duration),
     /// It took control and has not given it up.
     holding: bool,
+    /// Messages refused, by kind.
+    refused: std::collections::BTreeMap<&'static str, u64>,
 }
 
 impl Session {
@@ -176,6 +193,7 @@ impl Session {
             last_seq: None,
             budget: (u64::from(RATE_BURST) * 1000, now),
             holding: false,
+            refused: std::collections::BTreeMap::new(),
         }
     }
 
@@ -186,6 +204,19 @@ impl Session {
 
     /// A message from the page, arrived at `now`: what to ask the arbiter, or why not.
     pub fn handle_message(&mut self, now: Duration, text: &str) -> Result<Action, Refused> {
+        let handled = self.handle(now, text);
+        if let Err(refused) = &handled {
+            *self.refused.entry(refused.kind()).or_default() += 1;
+        }
+        handled
+    }
+
+    /// The messages refused so far, by kind (each kind once, counted).
+    pub fn refused(&self) -> impl Iterator<Item = (&'static str, u64)> + '_ {
+        self.refused.iter().map(|(kind, count)| (*kind, *count))
+    }
+
+    fn handle(&mut self, now: Duration, text: &str) -> Result<Action, Refused> {
         if text.len() > MAX_MESSAGE_BYTES {
             return Err(Refused::TooLarge(text.len()));
         }
@@ -348,6 +379,20 @@ mod tests {
         assert_eq!(
             page.handle_message(now + 420 * MS, &drive(4, 15_160)),
             Err(Refused::OutOfOrder { seq: 4, last: 4 })
+        );
+    }
+
+    #[test]
+    fn refusals_are_counted_by_kind() {
+        let mut page = session(Role::View);
+        assert_eq!(page.refused().count(), 0);
+        for text in ["{", "nonsense", r#"{"op":"take"}"#, &drive(1, 0)] {
+            assert!(page.handle_message(Duration::ZERO, text).is_err());
+        }
+        assert!(page.handle_message(Duration::ZERO, ESTOP).is_err());
+        assert_eq!(
+            page.refused().collect::<Vec<_>>(),
+            [("malformed", 2), ("not_allowed", 3)]
         );
     }
 
