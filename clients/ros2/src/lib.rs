@@ -2,15 +2,22 @@
 //! program), the bridge ([`bridge`]) over DDS ([`dds_node`], with its [`ros_discovery`] entry)
 //! or rmw_zenoh ([`zenoh_node`], [`rmw`]: data keys, the sample attachment, liveliness tokens),
 //! with its settings ([`config`]), the messages it makes from the state ([`publish`]), when a
-//! cmd_vel stream may take control ([`stream`]) and the CDR of its messages ([`msgs`], [`cdr`]).
+//! cmd_vel stream may take control ([`stream`]), the CDR of its messages ([`msgs`], [`cdr`]) and
+//! their definitions ([`definitions`]).
+//! Without the `node` feature (on by default), only the sans-IO parts: the messages, their CDR
+//! and settings, for a recorder that writes them.
 
+#[cfg(feature = "node")]
 pub mod bridge;
 pub mod cdr;
 pub mod config;
+#[cfg(feature = "node")]
 pub mod dds_node;
+pub mod definitions;
 pub mod msgs;
 pub mod publish;
 pub mod rmw;
 pub mod ros_discovery;
 pub mod stream;
+#[cfg(feature = "node")]
 pub mod zenoh_node;

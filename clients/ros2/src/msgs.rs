@@ -274,6 +274,13 @@ pub struct PlanarTwist {
     pub angular: f64,
 }
 
+/// Writes a planar `Twist` (what a recording's `/cmd_vel` carries).
+pub fn encode_twist(twist: PlanarTwist) -> Vec<u8> {
+    let mut w = Writer::new();
+    w.f64s(&[twist.linear, 0.0, 0.0, 0.0, 0.0, twist.angular]);
+    w.finish()
+}
+
 /// Reads a `Twist` (or, with `stamped`, a `TwistStamped`).
 pub fn decode_twist(bytes: &[u8], stamped: bool) -> Result<PlanarTwist, CdrError> {
     let mut r = Reader::new(bytes)?;
@@ -426,6 +433,15 @@ mod tests {
             decode_twist(&long, false),
             Err(crate::cdr::CdrError::Trailing(64))
         );
+    }
+
+    #[test]
+    fn a_twist_written_is_rosbags_own() {
+        let twist = PlanarTwist {
+            linear: 0.3,
+            angular: 0.2,
+        };
+        assert_eq!(encode_twist(twist), hex(TWIST));
     }
 
     #[test]

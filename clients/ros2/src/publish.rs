@@ -103,6 +103,8 @@ pub struct Messages {
     wheel_angles: [f64; 4],
     last_motors: [Option<u64>; 4],
     last_diagnostics: Option<(u64, [u8; 3])>,
+    /// What makes them, the name of its own diagnostic status (`<node>: <maker>`).
+    maker: &'static str,
 }
 
 /// The bridge's own counters as diagnostic values, read when they are needed.
@@ -117,6 +119,11 @@ pub struct Outgoing {
 
 impl Messages {
     pub fn new(config: Ros2Config) -> Self {
+        Self::made_by(config, "ros2 bridge")
+    }
+
+    /// Messages made by `maker` (named in its diagnostic status: `ros2 bridge`, `recorder`).
+    pub fn made_by(config: Ros2Config, maker: &'static str) -> Self {
         Self {
             config,
             last_motion: None,
@@ -124,6 +131,7 @@ impl Messages {
             wheel_angles: [0.0; 4],
             last_motors: [None; 4],
             last_diagnostics: None,
+            maker,
         }
     }
 
@@ -365,7 +373,7 @@ impl Messages {
         let mut statuses = statuses.to_vec();
         statuses.push(Status {
             level: OK,
-            name: format!("{}: ros2 bridge", self.config.node),
+            name: format!("{}: {}", self.config.node, self.maker),
             message: "counters".into(),
             hardware_id: robot.to_owned(),
             values: bridge(),
