@@ -42,8 +42,18 @@ pub const BASE_FRAME: &str = "base_link";
 #[derive(Debug, thiserror::Error)]
 #[error("creating the Foxglove channel {topic}: {error}")]
 pub struct ChannelError {
-    topic: &'static str,
+    topic: String,
     error: foxglove::FoxgloveError,
+}
+
+impl ChannelError {
+    /// `topic`'s channel could not be made.
+    pub fn new(topic: &str, error: foxglove::FoxgloveError) -> Self {
+        Self {
+            topic: topic.to_owned(),
+            error,
+        }
+    }
 }
 
 /// The channels, made on one context (a recording's or the live server's).
@@ -75,7 +85,7 @@ fn json_channel(
             schema.to_string().into_bytes(),
         ))
         .build_raw()
-        .map_err(|error| ChannelError { topic, error })
+        .map_err(|error| ChannelError::new(topic, error))
 }
 
 fn timestamp(unix_ns: u64) -> Timestamp {

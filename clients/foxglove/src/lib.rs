@@ -8,6 +8,7 @@
 //! - [`schema`]: the JSON schemas of the JSON channels.
 //! - [`source`]: reading a gateway on a thread of its own, an ordinary subscriber.
 //! - [`record`]: `scout record`, the MCAP file.
+//! - [`ros2`]: `scout record --ros2`, ROS 2 messages in a rosbag2 bag.
 //! - [`live`]: `scout foxglove`, the WebSocket server, stops as problems, an optional e-stop.
 //! - [`subprotocol`]: the protocol under its old name too, in front of the SDK's server.
 //! - [`origin`]: which web pages may connect to the live view.
@@ -18,6 +19,7 @@ pub mod channels;
 pub mod live;
 pub mod origin;
 pub mod record;
+pub mod ros2;
 pub mod schema;
 pub mod source;
 pub mod subprotocol;

@@ -1,6 +1,7 @@
-//! `scout record`: the transcript into an MCAP file, zstd chunks, indexed, one chunk closed and
-//! synced to disk every second so that a recording cut by SIGKILL or a power loss keeps all
-//! but its last second.
+//! `scout record`: the transcript into an MCAP file (or, with `--ros2`, ROS 2 messages into a
+//! rosbag2 bag: [`crate::ros2`]), zstd chunks, indexed, one chunk closed and synced to disk
+//! every second so that a recording cut by SIGKILL or a power loss keeps all but its last
+//! second (a bag's `metadata.yaml` is rewritten with it).
 
 use std::fs::{File, OpenOptions};
 use std::io::{IsTerminal, Seek, SeekFrom, Write};
@@ -12,8 +13,10 @@ use foxglove::{Context, McapCompression, McapWriteOptions, McapWriterHandle};
 use scout_clients::failure::Failure;
 use tracing::{info, warn};
 
-use crate::channels::{ChannelError, Channels};
-use crate::source::{Source, SourceError, Update};
+use crate::channels::{ChannelError, Channels, TOPICS};
+use crate::ros2::{Ros2Channels, Ros2Message, Ros2Transcript};
+use crate::source::{Source, SourceError, Update, realtime_offset_ns};
+use crate::transcript::Timed;
 
 /// How often the current chunk is closed, written and synced.
 pub const SYNC_EVERY: Duration = Duration::from_secs(1);
@@ -27,8 +30,11 @@ const CHUNK_SIZE: u64 = 1 << 20;
 pub struct RecordOptions {
     /// The robot.
     pub robot: String,
-    /// The file to write.
+    /// The file to write (with `ros2`: the bag's directory).
     pub output: PathBuf,
+    /// ROS 2 messages, named as these settings (`scout ros2`'s) name them, in a rosbag2 bag,
+    /// instead of the Foxglove channels.
+    pub ros2: Option<scout_ros2::config::Ros2Config>,
     /// Stop after this long (else at Ctrl-C or SIGTERM).
     pub duration: Option<Duration>,
     /// Replace an existing file.
@@ -69,6 +75,15 @@ pub enum RecordError {
     /// Reading the gateway failed during the recording.
     #[error("reading the gateway")]
     Read(#[source] scout_clients::client::ClientError),
+    /// The bag's metadata could not be written.
+    #[error("writing the bag's metadata {path}")]
+    Metadata {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
     /// The closed file could not be synced to disk.
     #[error("syncing {path} to disk")]
     Sync {
@@ -87,9 +102,11 @@ impl RecordError {
             Self::Exists(_) => Failure::Usage,
             Self::Source(error) => error.kind(),
             Self::Read(error) => error.kind(),
-            Self::Create { .. } | Self::Channel(_) | Self::Write { .. } | Self::Sync { .. } => {
-                Failure::Failed
-            }
+            Self::Create { .. }
+            | Self::Channel(_)
+            | Self::Write { .. }
+            | Self::Metadata { .. }
+            | Self::Sync { .. } => Failure::Failed,
         }
     }
 }
@@ -99,6 +116,10 @@ impl RecordError {
 pub struct Summary {
     /// Messages written, all channels.
     pub messages: u64,
+    /// The channels (topics) in the file.
+    pub channels: usize,
+    /// The MCAP file written (in a bag: the one file in its directory).
+    pub file: PathBuf,
     /// How long it recorded.
     pub duration: Duration,
     /// The file's size.
@@ -135,22 +156,133 @@ fn megabytes(bytes: u64) -> f64 {
     bytes as f64 / 1e6
 }
 
+/// Where recorded items go: the Foxglove channels or a bag's ROS 2 channels.
+trait Sink {
+    /// What it writes.
+    type Item;
+    fn write(&mut self, item: &Self::Item);
+    /// Messages written so far.
+    fn written(&self) -> u64;
+    /// How many channels it has.
+    fn channels(&self) -> usize;
+    /// After each sync of the file (and at its close): what else must be on disk.
+    fn synced(&mut self) -> Result<(), RecordError> {
+        Ok(())
+    }
+}
+
+impl Sink for Channels {
+    type Item = Timed;
+
+    fn write(&mut self, item: &Timed) {
+        Channels::write(self, item);
+    }
+
+    fn written(&self) -> u64 {
+        Channels::written(self)
+    }
+
+    fn channels(&self) -> usize {
+        TOPICS.len()
+    }
+}
+
+/// A rosbag2 bag: its channels, and its `metadata.yaml` rewritten (whole, then renamed over)
+/// at each sync, so that a bag cut short is still one rosbag2 and rosbags open.
+struct Bag {
+    channels: Ros2Channels,
+    dir: PathBuf,
+    file: String,
+}
+
+impl Sink for Bag {
+    type Item = Ros2Message;
+
+    fn write(&mut self, item: &Ros2Message) {
+        self.channels.write(item);
+    }
+
+    fn written(&self) -> u64 {
+        self.channels.written()
+    }
+
+    fn channels(&self) -> usize {
+        self.channels.count()
+    }
+
+    fn synced(&mut self) -> Result<(), RecordError> {
+        let path = self.dir.join("metadata.yaml");
+        let partial = self.dir.join(".metadata.yaml.partial");
+        let metadata = |source| RecordError::Metadata {
+            path: path.clone(),
+            source,
+        };
+        std::fs::write(&partial, self.channels.metadata_yaml(&self.file)).map_err(metadata)?;
+        std::fs::rename(&partial, &path).map_err(metadata)
+    }
+}
+
 /// Records until `options.duration` passes or `stop` is set; closes the file with its summary
 /// and index either way.
 pub fn record(options: &RecordOptions, stop: &AtomicBool) -> Result<Summary, RecordError> {
-    let path = &options.output;
-    if path.exists() && !options.force {
-        return Err(RecordError::Exists(path.clone()));
+    let output = &options.output;
+    if output.exists() && !options.force {
+        return Err(RecordError::Exists(output.clone()));
     }
-    // Connect before creating the file: no gateway leaves no empty file behind.
-    let source = Source::start(&options.robot)?;
+    let Some(config) = &options.ros2 else {
+        // Connect before creating the file: no gateway leaves no empty file behind.
+        let source = Source::start(&options.robot)?;
+        let context = Context::new();
+        let writer = start_writer(&context, create_output(output, options.force)?, options, "")?;
+        let channels = Channels::new(&context, &options.robot)?;
+        return run(options, output, source, writer, channels, stop);
+    };
+    let source = Source::start_with(
+        &options.robot,
+        Ros2Transcript::new(config.clone(), realtime_offset_ns()),
+    )?;
+    std::fs::create_dir_all(output).map_err(|source| RecordError::Create {
+        path: output.clone(),
+        source,
+    })?;
+    // rosbag2's name for the first (here the only) file of a bag.
+    let name = output
+        .file_name()
+        .map_or("bag".into(), |name| name.to_string_lossy().into_owned());
+    let file = format!("{name}_0.mcap");
+    let path = output.join(&file);
     let context = Context::new();
-    let writer = start_writer(&context, create_output(options)?, options)?;
+    let writer = start_writer(
+        &context,
+        create_output(&path, options.force)?,
+        options,
+        "ros2",
+    )?;
+    let mut bag = Bag {
+        channels: Ros2Channels::new(&context, config)?,
+        dir: output.clone(),
+        file,
+    };
+    bag.synced()?;
+    run(options, &path, source, writer, bag, stop)
+}
+
+/// The recording loop: `source`'s items into `sink` on `writer`'s file `path`.
+fn run<S: Sink>(
+    options: &RecordOptions,
+    path: &Path,
+    source: Source<S::Item>,
+    writer: McapWriterHandle<SyncedFile>,
+    mut channels: S,
+    stop: &AtomicBool,
+) -> Result<Summary, RecordError>
+where
+    S::Item: Send + 'static,
+{
     let write_error = |error| RecordError::Write {
-        path: path.clone(),
+        path: path.to_owned(),
         error,
     };
-    let mut channels = Channels::new(&context, &options.robot)?;
     info!("recording robot {} to {}", options.robot, path.display());
 
     let started = Instant::now();
@@ -191,6 +323,9 @@ pub fn record(options: &RecordOptions, stop: &AtomicBool) -> Result<Summary, Rec
             if let Err(error) = writer.flush() {
                 break Err(write_error(error));
             }
+            if let Err(error) = channels.synced() {
+                break Err(error);
+            }
             last_sync = Instant::now();
         }
         if progress && last_progress.is_none_or(|at| at.elapsed() >= PROGRESS_EVERY) {
@@ -225,11 +360,14 @@ pub fn record(options: &RecordOptions, stop: &AtomicBool) -> Result<Summary, Rec
     outcome?;
     let mut file = closed?;
     file.flush().map_err(|source| RecordError::Sync {
-        path: path.clone(),
+        path: path.to_owned(),
         source,
     })?;
+    channels.synced()?;
     let summary = Summary {
         messages: channels.written(),
+        channels: channels.channels(),
+        file: path.to_owned(),
         duration: started.elapsed(),
         bytes: size(path),
         missed_states,
@@ -246,28 +384,29 @@ pub fn record(options: &RecordOptions, stop: &AtomicBool) -> Result<Summary, Rec
 
 /// The output file: created, or replaced with `--force`; an existing file (even one made since
 /// the check) is not replaced without it.
-fn create_output(options: &RecordOptions) -> Result<File, RecordError> {
+fn create_output(path: &Path, force: bool) -> Result<File, RecordError> {
     // Without --force, a file made in the meantime is not replaced either.
     OpenOptions::new()
         .write(true)
-        .create_new(!options.force)
-        .create(options.force)
-        .truncate(options.force)
-        .open(&options.output)
+        .create_new(!force)
+        .create(force)
+        .truncate(force)
+        .open(path)
         .map_err(|source| match source.kind() {
-            std::io::ErrorKind::AlreadyExists => RecordError::Exists(options.output.clone()),
+            std::io::ErrorKind::AlreadyExists => RecordError::Exists(path.to_owned()),
             _ => RecordError::Create {
-                path: options.output.clone(),
+                path: path.to_owned(),
                 source,
             },
         })
 }
 
-/// The MCAP writer on `file`, with the recording's metadata written.
+/// The MCAP writer on `file` (of MCAP `profile`), with the recording's metadata written.
 fn start_writer(
     context: &std::sync::Arc<Context>,
     file: File,
     options: &RecordOptions,
+    profile: &str,
 ) -> Result<McapWriterHandle<SyncedFile>, RecordError> {
     let write_error = |error| RecordError::Write {
         path: options.output.clone(),
@@ -278,7 +417,7 @@ fn start_writer(
             McapWriteOptions::new()
                 .compression(Some(McapCompression::Zstd))
                 .chunk_size(Some(CHUNK_SIZE))
-                .profile(""),
+                .profile(profile),
         )
         .create(SyncedFile(file))
         .map_err(write_error)?;

@@ -13,6 +13,9 @@ use scout_clients::failure::Failure;
 use scout_clients::monotonic_ns;
 use tracing::warn;
 
+use scout_interface::StatePayload;
+use scout_interface::control::StatusPayload;
+
 use crate::transcript::{Timed, Transcript};
 
 /// How long the reader waits for a state before it looks at the status again.
@@ -20,11 +23,34 @@ const WAIT: Duration = Duration::from_millis(50);
 /// No state for this long: the gateway is said to be silent.
 const SILENT_AFTER: Duration = Duration::from_secs(2);
 
+/// What turns the states and statuses read into what is written: the transcript (Foxglove's
+/// channels) or ROS 2 messages.
+pub trait Transcribe: Send + 'static {
+    /// One thing to write.
+    type Item: Send + 'static;
+    /// What to write for a state.
+    fn handle_state(&mut self, state: &StatePayload, out: &mut Vec<Self::Item>);
+    /// What to write for a status.
+    fn handle_status(&mut self, status: &StatusPayload, out: &mut Vec<Self::Item>);
+}
+
+impl Transcribe for Transcript {
+    type Item = Timed;
+
+    fn handle_state(&mut self, state: &StatePayload, out: &mut Vec<Timed>) {
+        Transcript::handle_state(self, state, out);
+    }
+
+    fn handle_status(&mut self, status: &StatusPayload, out: &mut Vec<Timed>) {
+        Transcript::handle_status(self, status, out);
+    }
+}
+
 /// What the reader thread sends.
 #[derive(Debug)]
-pub enum Update {
+pub enum Update<I = Timed> {
     /// Entries to write, in order.
-    Entries(Vec<Timed>),
+    Entries(Vec<I>),
     /// No state came for this long (sent once per silence).
     Silent(Duration),
     /// States flow again after a silence.
@@ -67,29 +93,38 @@ impl SourceError {
 
 /// A reader thread for one robot.
 #[derive(Debug)]
-pub struct Source {
-    updates: Receiver<Update>,
+pub struct Source<I = Timed> {
+    updates: Receiver<Update<I>>,
     stop: Arc<AtomicBool>,
     thread: Option<JoinHandle<()>>,
 }
 
 impl Source {
     /// Connects to robot `name` (fails at once when no gateway of that name runs) and starts
-    /// reading.
+    /// reading into the transcript.
     pub fn start(name: &str) -> Result<Self, SourceError> {
+        Source::start_with(name, Transcript::new(monotonic_ns(), realtime_offset_ns()))
+    }
+}
+
+impl<I: Send + 'static> Source<I> {
+    /// [`Source::start`], turning what it reads into `transcriber`'s items.
+    pub fn start_with<T: Transcribe<Item = I>>(
+        name: &str,
+        transcriber: T,
+    ) -> Result<Self, SourceError> {
         let robot = Robot::connect(name)?;
         let states = robot.subscribe()?;
         let status = robot.status()?;
         let (sender, updates) = mpsc::channel();
         let stop = Arc::new(AtomicBool::new(false));
         let thread_stop = Arc::clone(&stop);
-        let transcript = Transcript::new(monotonic_ns(), realtime_offset_ns());
         let thread = std::thread::Builder::new()
             .name("scout-reader".into())
             .spawn(move || {
                 // The robot's node outlives its ports.
                 let _robot = robot;
-                read(&states, &status, transcript, &sender, &thread_stop);
+                read(&states, &status, transcriber, &sender, &thread_stop);
             })
             .map_err(SourceError::Thread)?;
         Ok(Self {
@@ -100,17 +135,19 @@ impl Source {
     }
 
     /// The next update, waiting at most `timeout`.
-    pub fn next(&self, timeout: Duration) -> Option<Update> {
+    pub fn next(&self, timeout: Duration) -> Option<Update<I>> {
         self.updates.recv_timeout(timeout).ok()
     }
 
     /// Stops reading and hands over what was read and not yet taken, so that nothing read is
     /// lost at the end of a recording.
-    pub fn finish(mut self) -> Vec<Update> {
+    pub fn finish(mut self) -> Vec<Update<I>> {
         self.stop_reading();
         self.updates.try_iter().collect()
     }
+}
 
+impl<I> Source<I> {
     fn stop_reading(&mut self) {
         self.stop.store(true, Ordering::Relaxed);
         if let Some(thread) = self.thread.take() {
@@ -119,17 +156,17 @@ impl Source {
     }
 }
 
-impl Drop for Source {
+impl<I> Drop for Source<I> {
     fn drop(&mut self) {
         self.stop_reading();
     }
 }
 
-fn read(
+fn read<T: Transcribe>(
     states: &scout_clients::client::StateSubscriber,
     status: &scout_clients::control::StatusReader,
-    mut transcript: Transcript,
-    sender: &Sender<Update>,
+    mut transcript: T,
+    sender: &Sender<Update<T::Item>>,
     stop: &AtomicBool,
 ) {
     let mut last_seq: Option<u64> = None;

@@ -3,9 +3,11 @@
 //! the live view read by a Foxglove WebSocket client written with `websockets`
 //! (`foxglove_ws_client.py`): channels, rates, the stop service through the gateway's stop path.
 //!
-//! They need `python3` (or `$SCOUT_PYTHON`) with `mcap` and `websockets` (`.ci/run` installs
-//! them). Without them the tests skip, saying why, unless `SCOUT_REQUIRE_FOXGLOVE_CHECKS` is set
-//! (as in CI): then they fail.
+//! A `--ros2` recording is read by rosbags and mcap-ros2-support (`ros2_bag_check.py`).
+//!
+//! They need `python3` (or `$SCOUT_PYTHON`) with `mcap` and `websockets` (and, for the bag,
+//! `rosbags` and `mcap-ros2-support`; `.ci/run` installs them). Without them the tests skip,
+//! saying why, unless `SCOUT_REQUIRE_FOXGLOVE_CHECKS` is set (as in CI): then they fail.
 
 use std::io::{BufRead, BufReader};
 use std::path::Path;
@@ -25,13 +27,32 @@ fn python() -> String {
 
 /// Why the checks cannot run here, if they cannot; panics instead where they are required.
 fn checks_missing(test: &str) -> Option<String> {
+    modules_missing(
+        test,
+        "mcap, websockets, zstandard",
+        "mcap==1.6.0 websockets==17.4",
+    )
+}
+
+/// [`checks_missing`] for the checks of a ROS 2 bag.
+fn bag_checks_missing(test: &str) -> Option<String> {
+    modules_missing(
+        test,
+        "mcap, rosbags, mcap_ros2",
+        "mcap==1.6.0 rosbags==0.11.* mcap-ros2-support==0.5.*",
+    )
+}
+
+/// Why Python `modules` cannot be imported (pip's `packages` would bring them), if they
+/// cannot; panics instead where the checks are required.
+fn modules_missing(test: &str, modules: &str, packages: &str) -> Option<String> {
     let why = match Command::new(python())
-        .args(["-c", "import mcap, websockets, zstandard"])
+        .args(["-c", &format!("import {modules}")])
         .output()
     {
         Ok(output) if output.status.success() => return None,
         Ok(output) => format!(
-            "{} lacks mcap or websockets ({}): pip install mcap==1.6.0 websockets==17.4",
+            "{} lacks one of {modules} ({}): pip install {packages}",
             python(),
             String::from_utf8_lossy(&output.stderr).trim()
         ),
@@ -309,6 +330,110 @@ fn a_recording_with_a_duration_ends_by_itself_and_one_cut_by_sigkill_reads_up_to
         states["last"]["robot"],
         name.as_str(),
         "the last message read is whole"
+    );
+    drop(sim);
+}
+
+/// The report of `ros2_bag_check.py` on the bag `dir`.
+fn bag_report(dir: &Path) -> Value {
+    let mut check = Command::new(python());
+    check.arg(script("ros2_bag_check.py")).arg(dir);
+    let output = run_with_input(check, b"", Duration::from_secs(60));
+    assert!(
+        output.status.success(),
+        "ros2_bag_check.py failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    serde_json::from_slice(&output.stdout).expect("a JSON report")
+}
+
+#[test]
+fn a_ros2_recording_is_a_bag_rosbags_reads_every_message_of() {
+    let test = "record_ros2";
+    if bag_checks_missing(test).is_some() {
+        return;
+    }
+    let name = robot_name("record-ros2");
+    let dir = TempDir::new(&name);
+    let bag = dir.path().join("drive");
+    let file = bag.join("drive_0.mcap");
+    let mut sim = Sim::start(&["--serial"]);
+    let device = sim.port().to_owned();
+    let _gateway = Gateway::start(&["--serial", &device, "--name", &name]);
+    connect(&name);
+    let mut recording = recorder(&name, &bag, &["--ros2"]);
+    wait_growth(&file, 1, Duration::from_secs(10));
+    let driver = drive_until_moving(
+        &mut sim,
+        &name,
+        &["--linear", "0.4", "--duration", "60"],
+        Duration::from_secs(10),
+    );
+    wait_growth(&file, 1, Duration::from_secs(10));
+    drop(driver);
+    recording.signal(Signal::SIGINT);
+    assert_eq!(recording.wait_exit(Duration::from_secs(10)), Some(0));
+
+    let report = bag_report(&bag);
+    assert_eq!(report["storage"], "mcap", "{report}");
+    for (topic, kind) in [
+        ("/odom", "nav_msgs/msg/Odometry"),
+        ("/tf", "tf2_msgs/msg/TFMessage"),
+        ("/battery_state", "sensor_msgs/msg/BatteryState"),
+        ("/joint_states", "sensor_msgs/msg/JointState"),
+        ("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray"),
+        ("/cmd_vel", "geometry_msgs/msg/Twist"),
+    ] {
+        let read = &report["topics"][topic];
+        assert_eq!(read["type"], kind, "{topic}: {report}");
+        // Both readers decode every message the metadata counts: rosbags with its own Jazzy
+        // types, mcap-ros2-support with the definitions in the file.
+        let count = read["metadata_count"].as_u64().expect("count");
+        assert!(count > 0, "{topic}: {read}");
+        assert_eq!(read["rosbags_count"], count, "{topic}: {read}");
+        assert_eq!(read["mcap_ros2_count"], count, "{topic}: {read}");
+    }
+    let topics = &report["topics"];
+    assert!(topics["/odom"]["max_x"].as_f64() > Some(0.05), "{report}");
+    assert_eq!(topics["/odom"]["frame_id"], "odom");
+    assert_eq!(topics["/odom"]["child_frame_id"], "base_link");
+    assert!(
+        topics["/cmd_vel"]["max_linear"].as_f64() >= Some(0.3),
+        "{report}"
+    );
+    assert!(
+        topics["/battery_state"]["voltage"].as_f64() > Some(20.0),
+        "{report}"
+    );
+    assert_eq!(topics["/battery_state"]["present"], true);
+    assert_eq!(
+        topics["/joint_states"]["names"].as_array().map(Vec::len),
+        Some(4)
+    );
+    assert!(
+        topics["/diagnostics"]["names"]
+            .as_array()
+            .is_some_and(|names| names.contains(&"scout: recorder".into())),
+        "{report}"
+    );
+
+    // Cut by SIGKILL: the metadata of the last second's sync, and the MCAP file read as a
+    // stream up to its last whole chunk (`mcap recover` makes it whole for rosbags).
+    let cut = dir.path().join("cut");
+    let mut killed = recorder(&name, &cut, &["--ros2"]);
+    wait_growth(&cut.join("cut_0.mcap"), 2, Duration::from_secs(15));
+    killed.signal(Signal::SIGKILL);
+    killed.wait_exit(Duration::from_secs(5));
+    let metadata = std::fs::read_to_string(cut.join("metadata.yaml")).expect("metadata.yaml");
+    assert!(metadata.contains("name: /odom"), "{metadata}");
+    let report = mcap_report(&cut.join("cut_0.mcap"), true);
+    let odom = topic(&report, "/odom");
+    assert_eq!(odom["schema"], "nav_msgs/msg/Odometry");
+    assert_eq!(odom["schema_encoding"], "ros2msg");
+    assert_eq!(odom["encoding"], "cdr");
+    assert!(
+        odom["count"].as_u64() >= Some(25),
+        "half a second of odometry: {report}"
     );
     drop(sim);
 }

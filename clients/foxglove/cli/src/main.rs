@@ -16,7 +16,6 @@ use std::time::Duration;
 
 use clap::{Args, Parser, Subcommand};
 use scout_clients::failure::{self, Failure};
-use scout_foxglove::channels::TOPICS;
 use scout_foxglove::live::{Live, LiveError, LiveOptions};
 use scout_foxglove::origin::OriginPolicy;
 use scout_foxglove::record::{RecordError, RecordOptions, record};
@@ -45,9 +44,18 @@ struct RecordArgs {
     /// The robot (gateway) name.
     #[arg(long, default_value = "scout", value_name = "ROBOT")]
     name: String,
-    /// The MCAP file to write.
+    /// The MCAP file to write (with --ros2: the bag, a directory).
     #[arg(long, short, value_name = "FILE.mcap")]
     output: PathBuf,
+    /// Write ROS 2 messages (/odom, /tf, /battery_state, /joint_states, /diagnostics, /cmd_vel:
+    /// CDR with their definitions) into a rosbag2 bag, for `ros2 bag play` and Foxglove's ROS
+    /// panels, instead of the Foxglove channels.
+    #[arg(long)]
+    ros2: bool,
+    /// With --ros2: the topics, namespace and frames as this `scout ros2` settings file names
+    /// them [default: scout ros2's defaults].
+    #[arg(long, value_name = "FILE.toml", requires = "ros2")]
+    ros2_config: Option<PathBuf>,
     /// Stop after this many seconds [default: at Ctrl-C or SIGTERM].
     #[arg(long, value_name = "SECONDS")]
     duration: Option<f64>,
@@ -126,9 +134,18 @@ fn run_record(args: &RecordArgs, stop: &AtomicBool) -> anyhow::Result<()> {
             "--duration {seconds}: give a number of seconds above 0"
         ))),
     };
+    let ros2 = if args.ros2 {
+        Some(
+            scout_ros2::config::Ros2Config::load(args.ros2_config.as_deref())
+                .map_err(|error| Usage(error.to_string()))?,
+        )
+    } else {
+        None
+    };
     let options = RecordOptions {
         robot: args.name.clone(),
         output: args.output.clone(),
+        ros2,
         duration,
         force: args.force,
         progress: true,
@@ -136,9 +153,9 @@ fn run_record(args: &RecordArgs, stop: &AtomicBool) -> anyhow::Result<()> {
     let summary = record(&options, stop)?;
     println!(
         "wrote {}: {} messages on {} channels in {:.1} s, {:.2} MB{}",
-        args.output.display(),
+        summary.file.display(),
         summary.messages,
-        TOPICS.len(),
+        summary.channels,
         summary.duration.as_secs_f64(),
         summary.bytes as f64 / 1e6,
         if summary.missed_states > 0 {
