@@ -187,6 +187,10 @@ impl Sink for Channels {
     }
 }
 
+/// A bag's metadata, and the file it is written to before it is renamed over it.
+const METADATA: &str = "metadata.yaml";
+const METADATA_PARTIAL: &str = ".metadata.yaml.partial";
+
 /// A rosbag2 bag: its channels, and its `metadata.yaml` rewritten (whole, then renamed over)
 /// at each sync, so that a bag cut short is still one rosbag2 and rosbags open.
 struct Bag {
@@ -211,14 +215,21 @@ impl Sink for Bag {
     }
 
     fn synced(&mut self) -> Result<(), RecordError> {
-        let path = self.dir.join("metadata.yaml");
-        let partial = self.dir.join(".metadata.yaml.partial");
+        let path = self.dir.join(METADATA);
+        let partial = self.dir.join(METADATA_PARTIAL);
         let metadata = |source| RecordError::Metadata {
             path: path.clone(),
             source,
         };
-        std::fs::write(&partial, self.channels.metadata_yaml(&self.file)).map_err(metadata)?;
-        std::fs::rename(&partial, &path).map_err(metadata)
+        let mut file = File::create(&partial).map_err(metadata)?;
+        file.write_all(self.channels.metadata_yaml(&self.file).as_bytes())
+            .and_then(|()| file.sync_all())
+            .map_err(metadata)?;
+        std::fs::rename(&partial, &path).map_err(metadata)?;
+        // The rename itself on disk too.
+        File::open(&self.dir)
+            .and_then(|dir| dir.sync_all())
+            .map_err(metadata)
     }
 }
 
@@ -241,15 +252,12 @@ pub fn record(options: &RecordOptions, stop: &AtomicBool) -> Result<Summary, Rec
         &options.robot,
         Ros2Transcript::new(config.clone(), realtime_offset_ns()),
     )?;
-    std::fs::create_dir_all(output).map_err(|source| RecordError::Create {
-        path: output.clone(),
-        source,
-    })?;
     // rosbag2's name for the first (here the only) file of a bag.
     let name = output
         .file_name()
         .map_or("bag".into(), |name| name.to_string_lossy().into_owned());
     let file = format!("{name}_0.mcap");
+    make_bag_dir(output, &file)?;
     let path = output.join(&file);
     let context = Context::new();
     let writer = start_writer(
@@ -265,6 +273,48 @@ pub fn record(options: &RecordOptions, stop: &AtomicBool) -> Result<Summary, Rec
     };
     bag.synced()?;
     run(options, &path, source, writer, bag, stop)
+}
+
+/// The bag's directory `dir`, made, or (`--force`) one that is empty or holds a bag emptied
+/// of that bag's files (`file`, the metadata); any other directory or a file is refused, so
+/// `--force` never drops a bag into, or deletes from, a directory that is not one.
+fn make_bag_dir(dir: &Path, file: &str) -> Result<(), RecordError> {
+    let refuse = |why: &str| RecordError::Create {
+        path: dir.to_owned(),
+        source: std::io::Error::other(why.to_owned()),
+    };
+    if dir.exists() {
+        if !dir.is_dir() {
+            return Err(refuse("not a directory: a ROS 2 bag is a directory"));
+        }
+        let entries: Vec<std::ffi::OsString> = std::fs::read_dir(dir)
+            .and_then(|entries| entries.map(|entry| entry.map(|e| e.file_name())).collect())
+            .map_err(|source| RecordError::Create {
+                path: dir.to_owned(),
+                source,
+            })?;
+        if !entries.is_empty() && !entries.iter().any(|entry| entry == METADATA) {
+            return Err(refuse(
+                "a directory with other files than a bag's: give a new or empty directory",
+            ));
+        }
+        for name in [file, METADATA, METADATA_PARTIAL] {
+            match std::fs::remove_file(dir.join(name)) {
+                Err(error) if error.kind() != std::io::ErrorKind::NotFound => {
+                    return Err(RecordError::Create {
+                        path: dir.join(name),
+                        source: error,
+                    });
+                }
+                _ => {}
+            }
+        }
+        return Ok(());
+    }
+    std::fs::create_dir_all(dir).map_err(|source| RecordError::Create {
+        path: dir.to_owned(),
+        source,
+    })
 }
 
 /// The recording loop: `source`'s items into `sink` on `writer`'s file `path`.
@@ -357,13 +407,15 @@ where
     if progress {
         eprintln!();
     }
+    // What else must be on disk follows what the file holds, whatever went wrong.
+    let synced = channels.synced();
     outcome?;
     let mut file = closed?;
     file.flush().map_err(|source| RecordError::Sync {
         path: path.to_owned(),
         source,
     })?;
-    channels.synced()?;
+    synced?;
     let summary = Summary {
         messages: channels.written(),
         channels: channels.channels(),

@@ -1,8 +1,9 @@
 //! `scout record --ros2`: the chassis as ROS 2 messages (CDR, `ros2msg` schemas, the `ros2`
 //! profile), in a bag directory with its `metadata.yaml`, as rosbag2's MCAP storage writes
 //! them, so `ros2 bag`, rosbags and Foxglove's ROS panels take it. The messages are the ROS 2
-//! bridge's own ([`scout_ros2::publish`]), made from the same states; `/cmd_vel` is each
-//! motion command the gateway sent.
+//! bridge's own ([`scout_ros2::publish`]), made from the same states; `~/cmd_vel_sent` is each
+//! motion command the gateway sent (not `/cmd_vel`: a bag played beside a running `scout ros2`
+//! would drive the robot with it).
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -28,8 +29,13 @@ pub enum Recorded {
     CmdVel,
 }
 
-/// The `/cmd_vel` of a recording.
-pub const CMD_VEL: &str = "/cmd_vel";
+/// The topic of the commands sent, private to the node's name (`/scout/cmd_vel_sent` by
+/// default): never `/cmd_vel`, which `scout ros2` takes commands from.
+pub const CMD_VEL_SENT: &str = "~/cmd_vel_sent";
+
+/// A command older than this before the first state is not recorded (the last one of a
+/// link closed long ago would stretch the bag's start back to it).
+const STALE_COMMAND: Duration = Duration::from_secs(1);
 
 impl Recorded {
     /// Every topic a recording may have (`/tf` only where the settings publish it).
@@ -52,7 +58,7 @@ impl Recorded {
     pub fn name(self, config: &Ros2Config) -> Option<String> {
         match self {
             Recorded::Published(topic) => topic.name(config).map(|name| config.resolve(name)),
-            Recorded::CmdVel => Some(CMD_VEL.to_owned()),
+            Recorded::CmdVel => Some(config.resolve(CMD_VEL_SENT)),
         }
     }
 }
@@ -76,6 +82,7 @@ pub struct Ros2Transcript {
     realtime_offset_ns: i128,
     last_status: Option<StatusPayload>,
     last_command_ns: Option<u64>,
+    first_state_ns: Option<u64>,
 }
 
 impl Ros2Transcript {
@@ -86,6 +93,7 @@ impl Ros2Transcript {
             realtime_offset_ns,
             last_status: None,
             last_command_ns: None,
+            first_state_ns: None,
         }
     }
 
@@ -98,8 +106,10 @@ impl Transcribe for Ros2Transcript {
     type Item = Ros2Message;
 
     fn handle_state(&mut self, state: &StatePayload, out: &mut Vec<Ros2Message>) {
+        let first = *self.first_state_ns.get_or_insert(state.published_ns);
         let command = &state.command;
-        if command.at_ns != 0 && self.last_command_ns != Some(command.at_ns) {
+        let fresh = command.at_ns + STALE_COMMAND.as_nanos() as u64 >= first;
+        if command.at_ns != 0 && fresh && self.last_command_ns != Some(command.at_ns) {
             self.last_command_ns = Some(command.at_ns);
             out.push(Ros2Message {
                 topic: Recorded::CmdVel,
@@ -230,6 +240,8 @@ struct BagTopic<'a> {
 fn bag_metadata(file: &str, topics: &[BagTopic<'_>], span: Option<(u64, u64)>) -> String {
     let (start, duration) = span.map_or((0, 0), |(first, last)| (first, last - first));
     let total: u64 = topics.iter().map(|topic| topic.count).sum();
+    // The file's name double-quoted (a bag's name may hold YAML's own characters).
+    let file = format!("\"{}\"", file.replace('\\', "\\\\").replace('"', "\\\""));
     let mut yaml = format!(
         "rosbag2_bagfile_information:\n  version: 5\n  storage_identifier: mcap\n  \
          duration:\n    nanoseconds: {duration}\n  starting_time:\n    \
@@ -280,12 +292,44 @@ mod tests {
             "  message_count: 50\n",
             "        name: /odom\n        type: nav_msgs/msg/Odometry\n        serialization_format: cdr\n",
             "        name: /cmd_vel\n        type: geometry_msgs/msg/Twist\n",
-            "  relative_file_paths:\n    - run_0.mcap\n",
+            "  relative_file_paths:\n    - \"run_0.mcap\"\n",
         ] {
             assert!(yaml.contains(expected), "{expected:?} in\n{yaml}");
         }
+        // A name YAML would misread goes quoted.
+        assert!(
+            bag_metadata("run: \"2\"_0.mcap", &topics, None)
+                .contains("    - \"run: \\\"2\\\"_0.mcap\"\n")
+        );
         // Nothing written yet: a bag of no messages, readable all the same.
         assert!(bag_metadata("x_0.mcap", &topics, None).contains("  message_count: 50\n"));
+    }
+
+    #[test]
+    fn commands_are_recorded_once_each_and_a_stale_first_one_not_at_all() {
+        let mut transcript = Ros2Transcript::new(Ros2Config::default(), 0);
+        let mut state = StatePayload {
+            published_ns: 3_600_000_000_000,
+            ..StatePayload::default()
+        };
+        // The command of a link closed an hour ago.
+        state.command.at_ns = 1_000_000_000;
+        state.command.linear = 0.5;
+        let commands = |transcript: &mut Ros2Transcript, state: &StatePayload| {
+            let mut out = Vec::new();
+            transcript.handle_state(state, &mut out);
+            out.iter()
+                .filter(|message| message.topic == Recorded::CmdVel)
+                .map(|message| message.log_time_ns)
+                .collect::<Vec<_>>()
+        };
+        assert!(commands(&mut transcript, &state).is_empty());
+        state.published_ns += 20_000_000;
+        state.command.at_ns = state.published_ns - 5_000_000;
+        assert_eq!(commands(&mut transcript, &state), [state.command.at_ns]);
+        // The same command in the next state: not again.
+        state.published_ns += 20_000_000;
+        assert!(commands(&mut transcript, &state).is_empty());
     }
 
     #[test]
@@ -296,7 +340,10 @@ mod tests {
             .collect();
         assert!(names.contains(&Some("/odom".into())), "{names:?}");
         assert!(names.contains(&Some("/tf".into())));
-        assert!(names.contains(&Some("/cmd_vel".into())));
+        assert!(
+            names.contains(&Some("/scout/cmd_vel_sent".into())),
+            "{names:?}"
+        );
         config.namespace = "/robot1".into();
         config.publish_tf = false;
         assert_eq!(

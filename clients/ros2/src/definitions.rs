@@ -9,7 +9,8 @@ const SEPARATOR: &str =
     "================================================================================";
 
 /// Every definition: `package/Type` and its fields (constants where the message has them).
-/// The fields as the ROS 2 interface packages declare them (Humble to Kilted alike).
+/// The fields as the ROS 2 interface packages declare them (Humble to Kilted alike; Iron added
+/// two BatteryState technology constants, which change neither the bytes nor the type hash).
 const DEFINITIONS: [(&str, &str); 19] = [
     ("builtin_interfaces/Time", "int32 sec\nuint32 nanosec\n"),
     (

@@ -2,12 +2,13 @@
 
 Usage: ros2_bag_check.py BAG_DIR
 
-rosbags (its own ROS 2 Jazzy type store, not the bag's definitions) opens the bag through its
-metadata.yaml and deserializes every message; mcap-ros2-support decodes every message of the
-MCAP file with the definitions the file itself carries (its `ros2msg` schemas). The report, per
-topic: the type, the counts each reader decoded and the metadata's, and what the test checks
-(the largest odometry x, the largest commanded speed, the battery's voltage and percentage, the
-wheels' names, the diagnostics' names).
+rosbags opens the bag through its metadata.yaml and reads every message, which is then
+deserialized by rosbags' own ROS 2 Humble and Jazzy type stores (not by the definitions the bag
+carries); mcap-ros2-support decodes every message of the MCAP file with the definitions the file
+itself carries (its `ros2msg` schemas). So the bytes match the real types, and the definitions
+match the bytes. The report, per topic: the type, the counts each decoded and the metadata's,
+and what the test checks (the largest odometry x, the largest commanded speed, the battery's
+voltage and percentage, the wheels' names, the diagnostics' names).
 """
 
 import json
@@ -33,9 +34,11 @@ def finite_or_none(value):
     return value if math.isfinite(value) else None
 
 
-with AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+humble, jazzy = get_typestore(Stores.ROS2_HUMBLE), get_typestore(Stores.ROS2_JAZZY)
+with AnyReader([bag]) as reader:
     for connection, _, raw in reader.messages():
-        message = reader.deserialize(raw, connection.msgtype)
+        humble.deserialize_cdr(raw, connection.msgtype)
+        message = jazzy.deserialize_cdr(raw, connection.msgtype)
         topic = report["topics"][connection.topic]
         topic["rosbags_count"] += 1
         if connection.msgtype == "nav_msgs/msg/Odometry":

@@ -47,9 +47,9 @@ struct RecordArgs {
     /// The MCAP file to write (with --ros2: the bag, a directory).
     #[arg(long, short, value_name = "FILE.mcap")]
     output: PathBuf,
-    /// Write ROS 2 messages (/odom, /tf, /battery_state, /joint_states, /diagnostics, /cmd_vel:
-    /// CDR with their definitions) into a rosbag2 bag, for `ros2 bag play` and Foxglove's ROS
-    /// panels, instead of the Foxglove channels.
+    /// Write ROS 2 messages (/odom, /tf, /battery_state, /joint_states, /diagnostics and the
+    /// commands sent on ~/cmd_vel_sent: CDR with their definitions) into a rosbag2 bag, for
+    /// `ros2 bag` and Foxglove's ROS panels, instead of the Foxglove channels.
     #[arg(long)]
     ros2: bool,
     /// With --ros2: the topics, namespace and frames as this `scout ros2` settings file names
