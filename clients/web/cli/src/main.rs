@@ -198,15 +198,20 @@ fn page_hosts(listen: SocketAddr, interfaces: &[IpAddr]) -> Vec<String> {
     }
 }
 
-/// This computer's addresses another may reach: of the interfaces that are up, all but
-/// loopback and link-local ones, IPv4 first.
+/// This computer's addresses another may reach: of the interfaces that are up and running, all
+/// but loopback and link-local ones, IPv4 first.
 fn interface_addresses() -> Vec<IpAddr> {
     use nix::net::if_::InterfaceFlags;
     let Ok(interfaces) = nix::ifaddrs::getifaddrs() else {
         return Vec::new();
     };
     let mut addresses: Vec<IpAddr> = interfaces
-        .filter(|interface| interface.flags.contains(InterfaceFlags::IFF_UP))
+        // Up and connected (a bridge with nothing behind it is up, not running).
+        .filter(|interface| {
+            interface
+                .flags
+                .contains(InterfaceFlags::IFF_UP | InterfaceFlags::IFF_RUNNING)
+        })
         .filter_map(|interface| interface.address)
         .filter_map(|address| {
             (address.as_sockaddr_in().map(|v4| IpAddr::V4(v4.ip())))
