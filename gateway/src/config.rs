@@ -43,6 +43,8 @@ pub struct GatewayConfig {
     pub arbiter: ArbiterConfig,
     /// Gap detection beyond the chassis' own reports.
     pub safety: SafetyConfig,
+    /// The odometry's calibration: what the chassis reports, scaled to what the robot does.
+    pub odometry: OdometryConfig,
     /// Remote peers through zenoh.
     pub zenoh: ZenohConfig,
     /// The simulated chassis (`transport = "sim"`): keys of the simulator's parameters
@@ -154,6 +156,32 @@ impl Default for SafetyConfig {
     }
 }
 
+/// The odometry's calibration, applied to the pose every client reads (measured on the robot:
+/// docs/chassis.md). 1.0 each: the chassis' reports as they are.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct OdometryConfig {
+    /// The distance the robot travels over the distance the chassis reports (its speed, its
+    /// wheel odometers): 1.05 when it goes 5 % farther than reported.
+    pub distance_scale: f64,
+    /// The turn the robot makes over the turn the chassis reports (its yaw rate): 0.794 when
+    /// it reports 1.26 times its real rotation.
+    pub yaw_scale: f64,
+}
+
+/// The range a calibration factor may take: beyond it, something else is wrong (a model, a
+/// gear ratio), not a calibration.
+pub const ODOMETRY_SCALE_RANGE: std::ops::RangeInclusive<f64> = 0.5..=2.0;
+
+impl Default for OdometryConfig {
+    fn default() -> Self {
+        Self {
+            distance_scale: 1.0,
+            yaw_scale: 1.0,
+        }
+    }
+}
+
 impl Default for GatewayConfig {
     fn default() -> Self {
         Self {
@@ -167,6 +195,7 @@ impl Default for GatewayConfig {
             timing: Timing::default(),
             arbiter: ArbiterConfig::default(),
             safety: SafetyConfig::default(),
+            odometry: OdometryConfig::default(),
             zenoh: ZenohConfig::default(),
             sim: toml::Table::new(),
         }
@@ -263,6 +292,19 @@ impl GatewayConfig {
                  runaway_angular_braking and runaway_time_ms must be positive"
                     .into(),
             ));
+        }
+        for (key, scale) in [
+            ("distance_scale", self.odometry.distance_scale),
+            ("yaw_scale", self.odometry.yaw_scale),
+        ] {
+            if !ODOMETRY_SCALE_RANGE.contains(&scale) {
+                return Err(ConfigError::Invalid(format!(
+                    "odometry.{key} must be within {}..={} (measured over reported), found \
+                     {scale}: check the model and its geometry first",
+                    ODOMETRY_SCALE_RANGE.start(),
+                    ODOMETRY_SCALE_RANGE.end()
+                )));
+            }
         }
         self.zenoh
             .validate()
@@ -376,6 +418,31 @@ mod tests {
             let read: File = toml::from_str(&text).expect("parses");
             assert_eq!(read.protocol, setting);
             assert_eq!(ProtocolSetting::parse(name), Ok(setting));
+        }
+    }
+
+    #[test]
+    fn odometry_scales_outside_their_range_are_refused_saying_which() {
+        for (distance_scale, yaw_scale, refused) in [
+            (1.0, 1.0, None),
+            (0.95, 1.0 / 1.26, None),
+            (0.0, 1.0, Some("distance_scale")),
+            (1.0, 2.5, Some("yaw_scale")),
+            (f64::NAN, 1.0, Some("distance_scale")),
+        ] {
+            let config = GatewayConfig {
+                transport: Some(Transport::Sim),
+                odometry: OdometryConfig {
+                    distance_scale,
+                    yaw_scale,
+                },
+                ..GatewayConfig::default()
+            };
+            match (config.validate(), refused) {
+                (Ok(_), None) => {}
+                (Err(error), Some(key)) => assert!(error.to_string().contains(key), "{error}"),
+                (result, _) => panic!("{distance_scale} {yaw_scale}: {result:?}"),
+            }
         }
     }
 

@@ -217,7 +217,8 @@ impl Core {
             light_period: Duration::from_millis(light_period_ms),
             stop_cycles: timing.stop_cycles,
             reconnect_max: Duration::from_millis(timing.reconnect_max_ms),
-            tracker: StateTracker::new(&config.name, transport, device, fixed, chassis),
+            tracker: StateTracker::new(&config.name, transport, device, fixed, chassis)
+                .with_calibration(config.odometry),
             arbiter: Self::new_arbiter(config, now, start, instance),
             link: Link::Closed {
                 reopen_at: now,

@@ -18,6 +18,8 @@ use scout_protocol::version::{Detection, IdsSeen, Protocol, ProtocolDetector};
 use scout_protocol::{Counted, Direction, Message};
 use tracing::{error, info, warn};
 
+use crate::config::OdometryConfig;
+
 /// No valid feedback for this long: the link is `silent`.
 pub const SILENT_AFTER: Duration = Duration::from_millis(100);
 /// Odometry does not integrate body rates across a gap longer than this (the speed over it is
@@ -90,6 +92,8 @@ pub struct StateTracker {
     sections_from: Option<Protocol>,
     /// The slcan adapter's errors (BEL) since the last said, and when that was.
     adapter_errors: (u64, Option<Duration>),
+    /// The odometry's calibration, applied as the pose is integrated.
+    calibration: OdometryConfig,
 }
 
 impl StateTracker {
@@ -136,7 +140,14 @@ impl StateTracker {
             yaw_at_odometer: 0.0,
             sections_from: fixed,
             adapter_errors: (0, None),
+            calibration: OdometryConfig::default(),
         }
+    }
+
+    /// This tracker, integrating the odometry with `calibration`.
+    pub fn with_calibration(mut self, calibration: OdometryConfig) -> Self {
+        self.calibration = calibration;
+        self
     }
 
     /// When the last valid feedback came, since the port opened.
@@ -558,9 +569,9 @@ impl StateTracker {
             return;
         }
         let dt = step.as_secs_f64();
-        // Trapezoid between the previous and this feedback.
-        let v = (previous.linear() + linear) / 2.0;
-        let w = (previous.angular() + angular) / 2.0;
+        // Trapezoid between the previous and this feedback, calibrated.
+        let v = (previous.linear() + linear) / 2.0 * self.calibration.distance_scale;
+        let w = (previous.angular() + angular) / 2.0 * self.calibration.yaw_scale;
         let odometry = &mut self.state.odometry;
         if !translate {
             odometry.yaw = wrap_angle(odometry.yaw + w * dt);
@@ -592,7 +603,8 @@ impl StateTracker {
         if step > MAX_ODOMETER_STEP {
             return;
         }
-        let advance = |now: i32, then: i32| f64::from(now.wrapping_sub(then)) / 1000.0;
+        let scale = self.calibration.distance_scale;
+        let advance = |now: i32, then: i32| f64::from(now.wrapping_sub(then)) / 1000.0 * scale;
         let (left, right) = (
             advance(left_mm, previous.left_mm),
             advance(right_mm, previous.right_mm),
@@ -888,6 +900,37 @@ mod tests {
             (odometry.x, odometry.y, odometry.yaw, odometry.resets),
             (0.0, 0.0, 0.0, 1)
         );
+    }
+
+    #[test]
+    fn the_calibration_scales_the_distance_and_the_turn_on_both_protocols() {
+        // The chassis reports 0.95 of its distance and 1.26 times its turn.
+        let calibration = OdometryConfig {
+            distance_scale: 1.0 / 0.95,
+            yaw_scale: 1.0 / 1.26,
+        };
+        let mut tracker = connected().with_calibration(calibration);
+        tracker.handle_rx(&status(0), Duration::ZERO);
+        // v1: 1 m in 1 s, reported as 0.95 m/s; then a quarter turn reported as 1.26 of one.
+        for i in 0..=50u8 {
+            tracker.handle_rx(&motion(i, 950, 0), ms(u64::from(i) * 20));
+        }
+        let odometry = tracker.state().odometry;
+        assert!((odometry.x - 1.0).abs() < 1e-9, "{odometry:?}");
+        assert!((odometry.distance - 1.0).abs() < 1e-9, "{odometry:?}");
+        for i in 1..=50u8 {
+            tracker.handle_rx(&motion(50 + i, 0, 1979), ms(1000 + u64::from(i) * 20));
+        }
+        assert!((tracker.state().odometry.yaw - 1.571).abs() < 0.02);
+        // v2: the odometers report 19 mm a step for 20 mm travelled.
+        let mut tracker = connected_with(Some(Protocol::V2)).with_calibration(calibration);
+        for i in 0..=50u64 {
+            let mm = i as i32 * 19;
+            tracker.handle_rx(&motion_v2(950, 0), ms(i * 20));
+            tracker.handle_rx(&odometer(mm, mm), ms(i * 20));
+        }
+        let odometry = tracker.state().odometry;
+        assert!((odometry.x - 1.0).abs() < 1e-9, "{odometry:?}");
     }
 
     #[test]

@@ -56,6 +56,11 @@ pub struct SimParams {
     /// On serial, host light control lapses after this long without a light command.
     #[serde(with = "millis")]
     pub serial_light_timeout: Duration,
+    /// What the firmware reports of the distance travelled (speed, wheel odometers) over the
+    /// truth: a deliberate odometry error, for calibration (1.0: none).
+    pub reported_distance_scale: f64,
+    /// What the firmware reports of the turn (yaw rate) over the truth (scout_ros#5 saw 1.26).
+    pub reported_yaw_scale: f64,
 }
 
 impl Default for SimParams {
@@ -74,6 +79,8 @@ impl Default for SimParams {
             feedback_period: Duration::from_millis(20),
             command_timeout: Duration::from_millis(500),
             serial_light_timeout: Duration::from_millis(500),
+            reported_distance_scale: 1.0,
+            reported_yaw_scale: 1.0,
         }
     }
 }
@@ -609,8 +616,8 @@ impl Chassis {
         }
         let status = Message::SystemStatus(self.system_status());
         let motion = Message::MotionFeedback(MotionFeedback {
-            linear_mm_s: to_i16(self.actual.linear * 1000.0),
-            angular_mrad_s: to_i16(self.actual.angular * 1000.0),
+            linear_mm_s: to_i16(self.actual.linear * 1000.0 * self.params.reported_distance_scale),
+            angular_mrad_s: to_i16(self.actual.angular * 1000.0 * self.params.reported_yaw_scale),
         });
         let motor = |n: usize| Message::MotorFeedback(self.motor_feedback(Motor::ALL[n]));
         let messages = [

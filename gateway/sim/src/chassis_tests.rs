@@ -445,3 +445,30 @@ fn acceleration_is_limited_and_the_pose_integrates() {
     assert!(rpm(1) > 250 && rpm(2) > 250, "{} {}", rpm(1), rpm(2));
     assert!(chassis.pose().yaw.abs() > 0.5);
 }
+
+#[test]
+fn a_deliberate_odometry_error_is_in_the_reports_not_in_the_motion() {
+    let params = SimParams {
+        reported_distance_scale: 0.95,
+        reported_yaw_scale: 1.26,
+        ..SimParams::default()
+    };
+    let mut chassis = Chassis::new(params, Transport::Can);
+    let end = drive(
+        &mut chassis,
+        motion(ControlMode::Can, 20, 40),
+        ms(0),
+        ms(3000),
+    );
+    let batch = chassis
+        .poll_feedback(end + ms(20))
+        .and_then(Feedback::v1)
+        .expect("feedback");
+    let actual = chassis.actual();
+    assert!(actual.linear > 0.2 && actual.angular > 0.1, "{actual:?}");
+    let Message::MotionFeedback(reported) = batch[0].message else {
+        panic!("motion feedback first: {:?}", batch[0]);
+    };
+    assert!((f64::from(reported.linear_mm_s) / 1000.0 - actual.linear * 0.95).abs() < 0.002);
+    assert!((f64::from(reported.angular_mrad_s) / 1000.0 - actual.angular * 1.26).abs() < 0.002);
+}

@@ -320,13 +320,17 @@ impl Chassis {
             .collect();
         let pulses_per_meter = 4096.0 / (2.0 * std::f64::consts::PI * self.params.wheel_radius)
             * self.params.gear_ratio;
+        let (distance_scale, yaw_scale) = (
+            self.params.reported_distance_scale,
+            self.params.reported_yaw_scale,
+        );
         let Some(firmware) = self.v2.as_mut() else {
             return Vec::new();
         };
         let (left, right) = firmware.odometer;
         let mut frames = vec![MessageV2::MotionState(MotionV2 {
-            linear_mm_s: super::to_i16(actual.linear * 1000.0),
-            angular_mrad_s: super::to_i16(actual.angular * 1000.0),
+            linear_mm_s: super::to_i16(actual.linear * 1000.0 * distance_scale),
+            angular_mrad_s: super::to_i16(actual.angular * 1000.0 * yaw_scale),
             lateral_mm_s: 0,
             steering_mrad: 0,
         })];
@@ -353,8 +357,8 @@ impl Chassis {
             count: firmware.light_count.next_count(),
         }));
         frames.push(MessageV2::Odometer(OdometerV2 {
-            left_mm: mm(left),
-            right_mm: mm(right),
+            left_mm: mm(left * distance_scale),
+            right_mm: mm(right * distance_scale),
         }));
         if firmware.tick.is_multiple_of(SLOW_EVERY) {
             if let Some(system) = system {

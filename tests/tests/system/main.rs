@@ -8,6 +8,7 @@ mod doctor;
 mod examples;
 mod foxglove;
 mod gateway;
+mod odometry;
 mod package;
 mod protocol_v2;
 mod python;
