@@ -74,15 +74,22 @@ fn script(name: &str) -> std::path::PathBuf {
 
 /// The report of `mcap_check.py` on `file`.
 fn mcap_report(file: &Path, truncated: bool) -> Value {
-    let mut check = Command::new(python());
-    check.arg(script("mcap_check.py")).arg(file);
+    let mut args = vec![file.as_os_str()];
     if truncated {
-        check.arg("--truncated");
+        args.push(std::ffi::OsStr::new("--truncated"));
     }
+    script_report("mcap_check.py", &args)
+}
+
+/// The JSON report the Python script `name` prints for `args`; panics, with what it said,
+/// when it fails.
+fn script_report<S: AsRef<std::ffi::OsStr>>(name: &str, args: &[S]) -> Value {
+    let mut check = Command::new(python());
+    check.arg(script(name)).args(args);
     let output = run_with_input(check, b"", Duration::from_secs(60));
     assert!(
         output.status.success(),
-        "mcap_check.py failed: {}",
+        "{name} failed: {}",
         String::from_utf8_lossy(&output.stderr)
     );
     serde_json::from_slice(&output.stdout).expect("a JSON report")
@@ -336,15 +343,7 @@ fn a_recording_with_a_duration_ends_by_itself_and_one_cut_by_sigkill_reads_up_to
 
 /// The report of `ros2_bag_check.py` on the bag `dir`.
 fn bag_report(dir: &Path) -> Value {
-    let mut check = Command::new(python());
-    check.arg(script("ros2_bag_check.py")).arg(dir);
-    let output = run_with_input(check, b"", Duration::from_secs(60));
-    assert!(
-        output.status.success(),
-        "ros2_bag_check.py failed: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    serde_json::from_slice(&output.stdout).expect("a JSON report")
+    script_report("ros2_bag_check.py", &[dir])
 }
 
 #[test]
@@ -495,20 +494,11 @@ fn live_view(name: &str, args: &[&str]) -> (Background, String) {
 }
 
 fn ws_client(url: &str, seconds: &str, calls: &[(&str, &str)]) -> Value {
-    let mut client = Command::new(python());
-    client
-        .arg(script("foxglove_ws_client.py"))
-        .args([url, seconds]);
+    let mut args = vec![url, seconds];
     for (service, request) in calls {
-        client.args(["--call", service, request]);
+        args.extend(["--call", *service, *request]);
     }
-    let output = run_with_input(client, b"", Duration::from_secs(60));
-    assert!(
-        output.status.success(),
-        "foxglove_ws_client.py failed: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    serde_json::from_slice(&output.stdout).expect("a JSON report")
+    script_report("foxglove_ws_client.py", &args)
 }
 
 #[test]
