@@ -11,6 +11,7 @@
 //! - [`gs_usb`]: the host protocol of candleLight-style USB-CAN adapters.
 //! - [`candump`]: candump's text formats.
 //! - [`model`]: the SCOUT models' limits and geometry.
+//! - [`battery`]: the models' batteries and the rest-voltage curve.
 //! - [`units`]: m/s and rad/s to whole percent and back.
 //! - [`sequence`]: rolling counters and gap tracking.
 //! - [`v2`]: protocol v2 (SCOUT 2.0, SCOUT MINI) CAN frames.
@@ -25,6 +26,7 @@
 #[macro_use]
 mod listed;
 
+pub mod battery;
 pub mod can;
 pub mod candump;
 pub mod fault;

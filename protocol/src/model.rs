@@ -133,6 +133,14 @@ impl Model {
             },
         }
     }
+
+    /// The battery ([`crate::battery`]).
+    pub const fn battery(self) -> crate::battery::BatterySpec {
+        match self {
+            Self::Scout | Self::Scout2 => crate::battery::SCOUT_BATTERY,
+            Self::ScoutMini | Self::ScoutMiniOmni => crate::battery::SCOUT_MINI_BATTERY,
+        }
+    }
 }
 
 /// A name that is no model's ([`Model::parse`]).
