@@ -7,6 +7,7 @@
 
 use std::time::Duration;
 
+use scout_protocol::battery;
 use scout_protocol::sequence::RollingCounter;
 use scout_protocol::{
     ChassisState, ControlMode, Counted, Fault, FaultBits, FaultClear, Light, LightCommand,
@@ -41,10 +42,17 @@ pub struct SimParams {
     pub linear_acceleration: f64,
     /// Angular acceleration limit, rad/s².
     pub angular_acceleration: f64,
-    /// Battery voltage at start, V.
+    /// Battery voltage at rest at start, V (its charge is the curve's at that voltage).
     pub battery_voltage: f64,
-    /// Battery capacity, Ah (sets how fast the voltage falls with load).
+    /// Battery capacity, Ah (sets how fast the charge falls with load: a small one discharges
+    /// in a test's time).
     pub battery_capacity_ah: f64,
+    /// The pack's resistance, ohm: the voltage sags by the current through it.
+    pub battery_resistance_ohm: f64,
+    /// Protocol v2: the chassis has a smart battery, reported in 0x361 and 0x362.
+    pub bms: bool,
+    /// The smart battery's state of health, %.
+    pub battery_health_percent: f64,
     /// Ambient temperature, deg C.
     pub ambient_temperature: f64,
     /// Feedback period.
@@ -75,6 +83,9 @@ impl Default for SimParams {
             angular_acceleration: 1.5,
             battery_voltage: 26.0,
             battery_capacity_ah: 30.0,
+            battery_resistance_ohm: 0.06,
+            bms: false,
+            battery_health_percent: 96.0,
             ambient_temperature: 25.0,
             feedback_period: Duration::from_millis(20),
             command_timeout: Duration::from_millis(500),
@@ -120,6 +131,73 @@ mod millis {
 
     pub fn deserialize<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Duration, D::Error> {
         Ok(Duration::from_millis(serde::Deserialize::deserialize(d)?))
+    }
+}
+
+/// The pack: its true charge against the model's rest-voltage curve
+/// ([`scout_protocol::battery`]), a voltage sag through its resistance, a charger in constant
+/// current up to the charge voltage.
+#[derive(Debug, Clone, Copy)]
+struct Battery {
+    /// The true charge, %.
+    charge_percent: f64,
+    /// Rest voltage beyond the curve (an injected voltage outside its range), V.
+    offset_volts: f64,
+    /// The charger's current, A (0: none).
+    charger_amps: f64,
+    /// The pack's current at the last step, A (positive charging).
+    current: f64,
+}
+
+impl Battery {
+    fn new(params: &SimParams) -> Self {
+        let curve = battery::SCOUT_BATTERY.curve;
+        let charge_percent = battery::percent_at(curve, params.battery_voltage);
+        Self {
+            charge_percent,
+            offset_volts: params.battery_voltage - battery::volts_at(curve, charge_percent),
+            charger_amps: 0.0,
+            current: 0.0,
+        }
+    }
+
+    /// The rest voltage, V.
+    fn rest(&self) -> f64 {
+        battery::volts_at(battery::SCOUT_BATTERY.curve, self.charge_percent) + self.offset_volts
+    }
+
+    /// Moves the charge so that the pack rests at `rest` V.
+    fn set_rest(&mut self, rest: f64) {
+        let curve = battery::SCOUT_BATTERY.curve;
+        self.charge_percent = battery::percent_at(curve, rest);
+        self.offset_volts = rest - battery::volts_at(curve, self.charge_percent);
+    }
+
+    /// `dt` s at a load of `load` A: the charge moves, and the terminal voltage is returned.
+    fn step(&mut self, load: f64, dt: f64, params: &SimParams) -> f64 {
+        let full = battery::SCOUT_BATTERY.full_charge_volts;
+        let charging = self.charger_amps > 0.0 && self.charge_percent < 100.0;
+        let charger = if charging {
+            self.charger_amps
+        } else if self.charger_amps > 0.0 {
+            // Full: the charger holds its voltage and feeds the load, nothing flows in or out.
+            load.min(self.charger_amps)
+        } else {
+            0.0
+        };
+        self.current = charger - load;
+        let percent_per_amp_second = 100.0 / (params.battery_capacity_ah * 3600.0);
+        self.charge_percent =
+            (self.charge_percent + self.current * dt * percent_per_amp_second).clamp(0.0, 100.0);
+        let terminal = self.rest() + self.current * params.battery_resistance_ohm;
+        if self.charger_amps > 0.0 && !charging {
+            // Charged: the charger holds its voltage, nothing flows.
+            full
+        } else {
+            // Charging in constant current the pack's voltage rises above its rest by the
+            // drop across it, up to the charge voltage; discharging it sags below.
+            terminal.min(full.max(self.rest()))
+        }
     }
 }
 
@@ -202,8 +280,11 @@ pub enum Injection {
     Warn(Warning, bool),
     /// Motor communication fault on or off.
     MotorCommFault(Motor, bool),
-    /// Set the battery voltage.
+    /// Set the battery's voltage at rest (the charge moves to where the curve puts it; beyond
+    /// the curve's ends, the pack is out of its range: an injected fault). Under load it sags.
     Battery(f64),
+    /// A charger feeding this many amps (0: unplugged); it stops at full charge.
+    Charger(f64),
     /// Pin one of a motor's values.
     PinMotor(Motor, MotorValue, f64),
     /// Unpin all of a motor's values.
@@ -299,6 +380,10 @@ pub struct SimStats {
     pub pose: Pose,
     /// Battery voltage, V.
     pub battery_voltage: f64,
+    /// The pack's true charge, %.
+    pub battery_percent: f64,
+    /// The pack's current, A (positive charging).
+    pub battery_current: f64,
     /// The 0x151 fault names now set.
     pub faults: Vec<&'static str>,
     /// Who controls the chassis, as its status frame reports it (`can`, `rc`; v2 also
@@ -367,6 +452,9 @@ pub struct Chassis {
     actual: Speeds,
     pose: Pose,
     motors: [MotorState; 4],
+    /// The pack: its charge and what the chassis measures of it.
+    battery: Battery,
+    /// The terminal voltage the chassis measures, V.
     battery_voltage: f64,
     estop: bool,
     rc: bool,
@@ -427,6 +515,7 @@ impl Chassis {
             ..MotorState::default()
         };
         Self {
+            battery: Battery::new(&params),
             battery_voltage: params.battery_voltage,
             params,
             transport,
@@ -582,7 +671,12 @@ impl Chassis {
             Injection::MotorCommFault(motor, on) => {
                 self.latched = self.latched.with(motor_comm_fault(motor), on);
             }
-            Injection::Battery(volts) => self.battery_voltage = volts,
+            Injection::Battery(volts) => {
+                self.battery.set_rest(volts);
+                self.battery_voltage =
+                    volts + self.battery.current * self.params.battery_resistance_ohm;
+            }
+            Injection::Charger(amps) => self.battery.charger_amps = amps.max(0.0),
             Injection::PinMotor(motor, value, to) => self.motors[motor.index()].pin(value, to),
             Injection::UnpinMotor(motor) => self.motors[motor.index()].unpin(),
             Injection::Standby => {
@@ -702,6 +796,8 @@ impl Chassis {
         stats.actual = self.actual;
         stats.pose = self.pose;
         stats.battery_voltage = self.battery_voltage;
+        stats.battery_percent = self.battery.charge_percent;
+        stats.battery_current = self.battery.current;
         stats.faults = self.faults().iter().map(Fault::name).collect();
         stats
     }
@@ -840,8 +936,7 @@ impl Chassis {
             state.motor_temperature +=
                 (ambient + 1.5 * heat - state.motor_temperature) * dt / 120.0;
         }
-        let volts_per_amp_second = 8.0 / (self.params.battery_capacity_ah * 3600.0);
-        self.battery_voltage -= total_current * volts_per_amp_second * dt;
+        self.battery_voltage = self.battery.step(total_current, dt, &self.params);
     }
 
     fn motor_feedback(&self, motor: Motor) -> MotorFeedback {

@@ -472,3 +472,42 @@ fn a_deliberate_odometry_error_is_in_the_reports_not_in_the_motion() {
     assert!((f64::from(reported.linear_mm_s) / 1000.0 - actual.linear * 0.95).abs() < 0.002);
     assert!((f64::from(reported.angular_mrad_s) / 1000.0 - actual.angular * 1.26).abs() < 0.002);
 }
+
+#[test]
+fn the_pack_follows_its_curve_down_with_load_and_up_on_a_charger_until_full() {
+    let params = SimParams {
+        battery_capacity_ah: 0.05,
+        ..SimParams::default()
+    };
+    let mut chassis = Chassis::new(params, Transport::Can);
+    let start = chassis.stats();
+    assert!(
+        (start.battery_percent - 80.0).abs() < 1e-9,
+        "26.0 V at rest is 80 %"
+    );
+    let at = drive(
+        &mut chassis,
+        motion(ControlMode::Can, 100, 0),
+        ms(0),
+        ms(30_000),
+    );
+    let driven = chassis.stats();
+    assert!(driven.battery_percent < 70.0, "{}", driven.battery_percent);
+    assert!(driven.battery_current < 0.0, "{}", driven.battery_current);
+    chassis.inject(at, Injection::Charger(10.0));
+    let at = drive(&mut chassis, motion(ControlMode::Can, 0, 0), at, ms(60_000));
+    let charged = chassis.stats();
+    assert_eq!(charged.battery_percent, 100.0);
+    assert_eq!(
+        charged.battery_voltage, 29.2,
+        "the charger holds its voltage when full"
+    );
+    chassis.inject(at, Injection::Charger(0.0));
+    drive(&mut chassis, motion(ControlMode::Can, 0, 0), at, ms(1_000));
+    let rested = chassis.stats();
+    assert!(
+        (26.5..26.7).contains(&rested.battery_voltage),
+        "{}",
+        rested.battery_voltage
+    );
+}

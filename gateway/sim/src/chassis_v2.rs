@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use scout_protocol::sequence::RollingCounter;
 use scout_protocol::v2::{
-    ActuatorHighV2, ActuatorLowV2, ControlModeV2, DriverStateV2, ErrorBitsV2, ErrorClearV2,
+    ActuatorHighV2, ActuatorLowV2, BmsV2, ControlModeV2, DriverStateV2, ErrorBitsV2, ErrorClearV2,
     LightsV2, MessageV2, MotionV2, OdometerV2, RcStateV2, SwitchPosition, SystemStateV2,
     VersionRequestForm, VersionV2,
 };
@@ -291,6 +291,23 @@ impl Chassis {
         DriverStateV2(bits)
     }
 
+    /// A smart battery's frames: 0x361 (charge, health, voltage, current positive charging,
+    /// temperature) and 0x362 (no alarms).
+    fn bms_v2(&self) -> [MessageV2; 2] {
+        let tenths = |value: f64| super::to_i16(value * 10.0);
+        let battery = &self.battery;
+        [
+            MessageV2::Bms(BmsV2 {
+                charge_percent: battery.charge_percent.round().clamp(0.0, 100.0) as u8,
+                health_percent: self.params.battery_health_percent.round().clamp(0.0, 100.0) as u8,
+                decivolts: tenths(self.battery_voltage),
+                deciamps: tenths(battery.current),
+                decidegrees: tenths(self.params.ambient_temperature),
+            }),
+            MessageV2::BmsAlarm([0; 8]),
+        ]
+    }
+
     /// The v2 frames of one feedback period (and any replies due), oldest first.
     pub(super) fn feedback_v2(&mut self) -> Vec<MessageV2> {
         let system = self.system_state_v2();
@@ -324,6 +341,7 @@ impl Chassis {
             self.params.reported_distance_scale,
             self.params.reported_yaw_scale,
         );
+        let bms = self.params.bms.then(|| self.bms_v2()).into_iter().flatten();
         let Some(firmware) = self.v2.as_mut() else {
             return Vec::new();
         };
@@ -361,6 +379,7 @@ impl Chassis {
             right_mm: mm(right * distance_scale),
         }));
         if firmware.tick.is_multiple_of(SLOW_EVERY) {
+            frames.extend(bms);
             if let Some(system) = system {
                 frames.push(MessageV2::SystemState(SystemStateV2 {
                     count: firmware.system_count.next_count(),

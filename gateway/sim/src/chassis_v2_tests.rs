@@ -4,7 +4,7 @@ use std::time::Duration;
 
 use scout_protocol::model::Model;
 use scout_protocol::v2::{
-    ControlModeV2, ErrorClearV2, MessageV2, MotionV2, SwitchPosition, VersionRequestForm,
+    BmsV2, ControlModeV2, ErrorClearV2, MessageV2, MotionV2, SwitchPosition, VersionRequestForm,
 };
 use scout_protocol::{ChassisState, Transport};
 
@@ -120,7 +120,11 @@ fn feedback_is_v2_frames_with_the_system_state_every_100_ms() {
             .all(|w| w[1].count == w[0].count.wrapping_add(1))
     );
     assert_eq!(states[9].control_mode, ControlModeV2::Can);
-    assert_eq!(states[9].battery_voltage(), 26.0);
+    let volts = states[9].battery_voltage();
+    assert!(
+        (25.5..26.0).contains(&volts),
+        "26.0 V at rest, sagging under load: {volts}"
+    );
     assert_eq!(count(0x241), 0, "no RC frames with the transmitter off");
     // Every frame the chassis sends decodes as itself.
     for frame in &frames {
@@ -224,4 +228,41 @@ fn version_requests_are_answered_in_the_form_asked() {
         f.v2()
             .is_some_and(|frames| !frames.iter().any(|f| matches!(f, MessageV2::Version(_))))
     }));
+}
+
+#[test]
+fn a_smart_battery_reports_its_charge_and_a_charger_every_100_ms() {
+    let params = SimParams {
+        bms: true,
+        battery_capacity_ah: 0.1,
+        ..SimParams::for_model(Model::Scout2)
+    };
+    let mut chassis = Chassis::new(params, Transport::Can).with_protocol_v2();
+    chassis.inject(ms(0), Injection::Charger(10.0));
+    let (_, frames) = drive(&mut chassis, go(0.0, 0.0), ms(0), ms(1000));
+    let reports: Vec<BmsV2> = frames
+        .iter()
+        .filter_map(|frame| match frame {
+            MessageV2::Bms(bms) => Some(*bms),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(reports.len(), 10, "0x361 every 100 ms");
+    assert_eq!(frames.iter().filter(|f| f.can_id() == 0x362).count(), 10);
+    let last = reports[9];
+    assert!(last.charge_percent > 80, "charging from 80 %: {last:?}");
+    assert!(last.deciamps > 90, "10 A in, the electronics out: {last:?}");
+    assert_eq!((last.health_percent, last.decidegrees), (96, 250));
+    // Without a BMS, none.
+    let mut plain = chassis_v2_plain();
+    let (_, frames) = drive(&mut plain, go(0.0, 0.0), ms(0), ms(500));
+    assert!(
+        frames
+            .iter()
+            .all(|f| !matches!(f, MessageV2::Bms(_) | MessageV2::BmsAlarm(_)))
+    );
+}
+
+fn chassis_v2_plain() -> Chassis {
+    chassis(Model::Scout2)
 }

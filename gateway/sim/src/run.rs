@@ -604,6 +604,7 @@ fn describe(injection: Injection) -> String {
             if on { "on" } else { "off" }
         ),
         Injection::Battery(volts) => format!("battery at {volts:.1} V"),
+        Injection::Charger(amps) => format!("charger at {amps:.1} A"),
         Injection::PinMotor(motor, value, to) => {
             format!("motor {} {value:?} pinned at {to}", motor.number())
         }

@@ -15,7 +15,9 @@ commands (one a line; # starts a comment):
   protect overtemp|overcurrent latch a protection (cleared by the fault-clear code)
   warn overtemp|overcurrent on|off   force a warning / back to automatic
   motor-fault N on|off         motor N (1..4) communication fault
-  battery VOLTS                set the battery voltage (22.5 V warning, 22 V cut-off)
+  battery VOLTS                set the battery's voltage at rest; it sags under load
+                               (22.5 V warning, 22 V cut-off)
+  charger AMPS                 a charger feeding AMPS (0: unplugged); it stops when full
   motor N current|rpm|driver-temp|motor-temp VALUE   pin a motor value
   motor N auto                 unpin motor N's values
   garbage N                    write N random bytes onto the link
@@ -112,6 +114,7 @@ fn parse_words(words: &[&str]) -> Result<SimCommand, Reason> {
         }
         ["motor-fault", n, state] => Inject(Injection::MotorCommFault(motor(n)?, on_off(state)?)),
         ["battery", volts] => Inject(Injection::Battery(finite(volts)?)),
+        ["charger", amps] => Inject(Injection::Charger(finite(amps)?)),
         ["motor", n, "auto"] => Inject(Injection::UnpinMotor(motor(n)?)),
         ["motor", n, field, value] => {
             let field = match *field {
@@ -190,6 +193,7 @@ mod tests {
                 SimCommand::Inject(Injection::MotorCommFault(motor2, true)),
             ),
             ("battery 21.9", SimCommand::Inject(Injection::Battery(21.9))),
+            ("charger 10", SimCommand::Inject(Injection::Charger(10.0))),
             (
                 "motor 2 current -3.5",
                 SimCommand::Inject(Injection::PinMotor(motor2, MotorValue::Current, -3.5)),
