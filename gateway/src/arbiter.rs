@@ -401,6 +401,8 @@ pub struct Arbiter {
     released: Option<Duration>,
     next_lease: u64,
     history: VecDeque<(Duration, String)>,
+    /// Why autonomy may not take control now (a critical battery), if it may not.
+    autonomy_barred: Option<String>,
 }
 
 impl Arbiter {
@@ -423,7 +425,27 @@ impl Arbiter {
             released: None,
             next_lease: (u64::from(instance) << 32) | 1,
             history: VecDeque::with_capacity(HISTORY),
+            autonomy_barred: None,
         }
+    }
+
+    /// Bars autonomy from taking control while `why` holds (a critical battery), or lifts the
+    /// bar. A bar ends no lease and lifting it starts nothing: a running autonomy drives on
+    /// (see [`Arbiter::end_autonomy`]), a refused one must take control again.
+    pub fn bar_autonomy(&mut self, now: Duration, why: Option<String>) {
+        if self.autonomy_barred == why {
+            return;
+        }
+        match &why {
+            Some(why) => self.audit(now, format!("autonomy may not take control: {why}")),
+            None => self.audit(now, "autonomy may take control again".into()),
+        }
+        self.autonomy_barred = why;
+    }
+
+    /// Ends autonomy's control (its output ramps to zero; it must take control again).
+    pub fn end_autonomy(&mut self, now: Duration, why: &str) {
+        self.revoke(now, Some(Class::Autonomy), why);
     }
 
     /// The stops that hold the robot, oldest first.
@@ -726,6 +748,11 @@ impl Arbiter {
         }
         if class == Class::Autonomy && !self.autonomy_armed {
             return Err(Rejection::AutonomyDisarmed);
+        }
+        if class == Class::Autonomy
+            && let Some(why) = &self.autonomy_barred
+        {
+            return Err(Rejection::NotAllowed { why: why.clone() });
         }
         // Autonomy never waits behind a teleop holder to drive the moment teleop lets go.
         if class == Class::Autonomy

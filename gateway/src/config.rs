@@ -45,6 +45,8 @@ pub struct GatewayConfig {
     pub safety: SafetyConfig,
     /// The odometry's calibration: what the chassis reports, scaled to what the robot does.
     pub odometry: OdometryConfig,
+    /// The battery: thresholds, what a critical one does, the estimate's curve.
+    pub battery: BatteryConfig,
     /// Remote peers through zenoh.
     pub zenoh: ZenohConfig,
     /// The simulated chassis (`transport = "sim"`): keys of the simulator's parameters
@@ -182,6 +184,89 @@ impl Default for OdometryConfig {
     }
 }
 
+/// What the gateway does while the battery is critical (docs/chassis.md, "Battery"). None of
+/// them stops a teleop: an operator driving the robot to its charger keeps driving.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum OnCritical {
+    /// Warn only (status, log, `/diagnostics`, Foxglove).
+    Warn,
+    /// Warn, and refuse autonomy a new take of control; a running autonomy drives on.
+    RefuseAutonomy,
+    /// Warn, refuse autonomy a take, and end autonomy's control (its output ramps to zero; it
+    /// must take control again once the battery is above critical).
+    StopAutonomy,
+}
+
+/// The battery's thresholds and estimate.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct BatteryConfig {
+    /// At or below this charge the battery is `low`: a warning, %.
+    pub low_percent: f64,
+    /// At or below this charge the battery is `critical`: an error, and `on_critical`, %.
+    pub critical_percent: f64,
+    /// What a critical battery does.
+    pub on_critical: OnCritical,
+    /// The pack's resistance with its wiring, ohm: the voltage estimate adds back the drop at
+    /// the motors' current (an assumption for the SCOUT's pack: measure yours, docs/chassis.md).
+    pub internal_resistance_ohm: f64,
+    /// The pack's rest voltage against charge, `[[volts, percent], ...]` rising (default: the
+    /// model's, scout-protocol `battery`).
+    pub curve: Option<Vec<(f64, f64)>>,
+    /// Rated capacity, Ah (default: the model's, where known).
+    pub capacity_ah: Option<f64>,
+}
+
+impl Default for BatteryConfig {
+    fn default() -> Self {
+        Self {
+            low_percent: 20.0,
+            critical_percent: 10.0,
+            on_critical: OnCritical::RefuseAutonomy,
+            internal_resistance_ohm: 0.06,
+            curve: None,
+            capacity_ah: None,
+        }
+    }
+}
+
+impl BatteryConfig {
+    /// Why the settings cannot be used, if they cannot.
+    fn validate(&self) -> Result<(), String> {
+        let (low, critical) = (self.low_percent, self.critical_percent);
+        if !(0.0..=100.0).contains(&critical) || !(0.0..=100.0).contains(&low) || critical > low {
+            return Err(format!(
+                "battery.critical_percent ({critical}) and battery.low_percent ({low}) must be \
+                 percentages with critical at most low"
+            ));
+        }
+        if !(0.0..=1.0).contains(&self.internal_resistance_ohm) {
+            return Err(format!(
+                "battery.internal_resistance_ohm must be within 0..=1 ohm, found {}",
+                self.internal_resistance_ohm
+            ));
+        }
+        if let Some(curve) = &self.curve
+            && !scout_protocol::battery::curve_is_valid(curve)
+        {
+            return Err(
+                "battery.curve must be at least two [volts, percent] pairs, both rising, \
+                        the percent within 0..=100"
+                    .into(),
+            );
+        }
+        if let Some(capacity) = self.capacity_ah
+            && !(capacity.is_finite() && capacity > 0.0)
+        {
+            return Err(format!(
+                "battery.capacity_ah must be positive, found {capacity}"
+            ));
+        }
+        Ok(())
+    }
+}
+
 impl Default for GatewayConfig {
     fn default() -> Self {
         Self {
@@ -196,6 +281,7 @@ impl Default for GatewayConfig {
             arbiter: ArbiterConfig::default(),
             safety: SafetyConfig::default(),
             odometry: OdometryConfig::default(),
+            battery: BatteryConfig::default(),
             zenoh: ZenohConfig::default(),
             sim: toml::Table::new(),
         }
@@ -306,6 +392,7 @@ impl GatewayConfig {
                 )));
             }
         }
+        self.battery.validate().map_err(ConfigError::Invalid)?;
         self.zenoh
             .validate()
             .map_err(|error| ConfigError::Invalid(error.to_string()))?;
@@ -418,6 +505,49 @@ mod tests {
             let read: File = toml::from_str(&text).expect("parses");
             assert_eq!(read.protocol, setting);
             assert_eq!(ProtocolSetting::parse(name), Ok(setting));
+        }
+    }
+
+    #[test]
+    fn the_battery_section_reads_and_bad_settings_say_which() {
+        let config: GatewayConfig = toml::from_str(
+            "transport = \"sim\"\n[battery]\nlow_percent = 30\ncritical_percent = 15\n\
+             on_critical = \"stop-autonomy\"\ncurve = [[20.0, 0.0], [28.0, 100.0]]\n",
+        )
+        .expect("a battery section");
+        assert_eq!(config.battery.on_critical, OnCritical::StopAutonomy);
+        assert_eq!(config.battery.curve, Some(vec![(20.0, 0.0), (28.0, 100.0)]));
+        assert!(config.validate().is_ok());
+        for (battery, says) in [
+            (
+                BatteryConfig {
+                    critical_percent: 40.0,
+                    ..BatteryConfig::default()
+                },
+                "critical at most low",
+            ),
+            (
+                BatteryConfig {
+                    curve: Some(vec![(28.0, 0.0), (20.0, 100.0)]),
+                    ..BatteryConfig::default()
+                },
+                "both rising",
+            ),
+            (
+                BatteryConfig {
+                    internal_resistance_ohm: f64::NAN,
+                    ..BatteryConfig::default()
+                },
+                "internal_resistance_ohm",
+            ),
+        ] {
+            let config = GatewayConfig {
+                transport: Some(Transport::Sim),
+                battery,
+                ..GatewayConfig::default()
+            };
+            let error = config.validate().expect_err(says).to_string();
+            assert!(error.contains(says), "{error}");
         }
     }
 

@@ -17,7 +17,7 @@ use scout_interface::control::{
 use scout_interface::remote::REMOTE_PREFIX;
 use scout_interface::robot::RobotName;
 use scout_interface::services::Way;
-use scout_interface::state::{ChassisPayload, LinkState, StatePayload};
+use scout_interface::state::{BatteryLevel, ChassisPayload, LinkState, StatePayload};
 use scout_interface::stop_socket;
 use scout_interface::{FixedText, Transport};
 use scout_protocol::link::{Outgoing, RxEvent};
@@ -35,7 +35,7 @@ use tracing::{debug, info, warn};
 
 use crate::arbiter::{Accepted, Answer, Arbiter, Caps, LightsSetting, Origin, Output};
 use crate::command_mode::CommandMode;
-use crate::config::{GatewayConfig, SafetyConfig};
+use crate::config::{GatewayConfig, OnCritical, SafetyConfig};
 use crate::state::{PortCounters, Publish, StateTracker};
 
 /// The state is published at least this often, frames or not: a subscriber sees that the
@@ -150,6 +150,10 @@ pub struct Core {
     /// Frames that follow the one just handed out (v2's error clear after its motion
     /// command, standby after the last zero, the second version request).
     follow_up: VecDeque<Outgoing>,
+    /// What a critical battery does.
+    on_critical: OnCritical,
+    /// The battery level last acted on.
+    battery_level: BatteryLevel,
 }
 
 /// Watching the chassis move or turn faster than commanded.
@@ -218,7 +222,8 @@ impl Core {
             stop_cycles: timing.stop_cycles,
             reconnect_max: Duration::from_millis(timing.reconnect_max_ms),
             tracker: StateTracker::new(&config.name, transport, device, fixed, chassis)
-                .with_calibration(config.odometry),
+                .with_calibration(config.odometry)
+                .with_battery(config.battery.clone()),
             arbiter: Self::new_arbiter(config, now, start, instance),
             link: Link::Closed {
                 reopen_at: now,
@@ -247,6 +252,37 @@ impl Core {
             command_mode: CommandMode::new(),
             version_asked: false,
             follow_up: VecDeque::new(),
+            on_critical: config.battery.on_critical,
+            battery_level: BatteryLevel::Unknown,
+        }
+    }
+
+    /// Acts on a change of the battery's level as configured: at critical, autonomy may be
+    /// barred from taking control and its control ended; above it, the bar lifts (nothing
+    /// restarts). Never touches a teleop.
+    fn observe_battery(&mut self, now: Duration) {
+        let battery = self.tracker.state().battery;
+        let level = battery.level();
+        if level == self.battery_level {
+            return;
+        }
+        self.battery_level = level;
+        self.status_due = true;
+        let critical = level == BatteryLevel::Critical;
+        let why = crate::battery::describe(&battery);
+        match self.on_critical {
+            OnCritical::Warn => {}
+            OnCritical::RefuseAutonomy => {
+                self.arbiter
+                    .bar_autonomy(now, critical.then(|| why.clone()));
+            }
+            OnCritical::StopAutonomy => {
+                self.arbiter
+                    .bar_autonomy(now, critical.then(|| why.clone()));
+                if critical {
+                    self.arbiter.end_autonomy(now, &why);
+                }
+            }
         }
     }
 
@@ -501,6 +537,7 @@ impl Core {
         ] {
             self.set_condition(now, cause, false, "");
         }
+        self.observe_battery(now);
         match event {
             RxEvent::Message(counted) => match &counted.message {
                 Message::SystemStatus(status) => self.observe_system(now, status),
@@ -1020,6 +1057,10 @@ impl Core {
         status.output_fault_clear = output.fault_clear.raw();
         status.limited = output.limited;
         status.autonomy_armed = arbiter.autonomy_armed();
+        let battery = self.tracker.state().battery;
+        status.battery_level = battery.level;
+        // Whole percent: the estimate's every wiggle is no change of the status.
+        status.battery_percent = battery.percent.round();
         status.lights = LightsControl::of(arbiter.lights()).raw();
         for (slot, source) in status.sources.iter_mut().zip(arbiter.sources()) {
             *slot = SourcePayload {

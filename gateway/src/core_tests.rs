@@ -12,7 +12,7 @@ use scout_interface::control::{
     Accepted, ControlRequest, Rejected, RejectionKind, ReleaseTarget, Request, StopCause,
 };
 use scout_interface::services::Way;
-use scout_interface::state::LinkState;
+use scout_interface::state::{BatteryLevel, LinkState};
 use scout_interface::{Class, LightsSetting, StatePayload, StatusPayload, Transport};
 use scout_protocol::link::{Outgoing, RxEvent};
 use scout_protocol::model::Model;
@@ -24,7 +24,7 @@ use scout_sim::chassis::{Injection, Protection};
 use scout_sim::{Chassis, Feedback, SimParams};
 
 use crate::arbiter::{ClientKey, Origin};
-use crate::config::{GatewayConfig, ProtocolSetting};
+use crate::config::{GatewayConfig, OnCritical, ProtocolSetting};
 use crate::core::{
     CHASSIS_TIMEOUT, Core, FIRST_BACKOFF, Publication, STATE_HEARTBEAT, STATUS_HEARTBEAT, Start,
     WIRE_GAP_LIMIT,
@@ -633,7 +633,12 @@ fn state_is_published_per_feedback_on_link_changes_and_every_100_ms_while_silent
 fn status_is_published_on_change_and_once_a_second(protocol: Protocol) {
     let mut pair = Pair::of(protocol);
     pair.run(Duration::from_secs(5));
-    let idle = pair.statuses();
+    // From the first feedback on (the battery is known then: a change).
+    let idle: Vec<_> = pair
+        .statuses()
+        .into_iter()
+        .skip_while(|(_, status)| status.battery_level == BatteryLevel::Unknown.raw())
+        .collect();
     let times: Vec<Duration> = idle.iter().map(|(at, _)| *at).collect();
     assert!((5..=7).contains(&times.len()), "{}", times.len());
     assert!(
@@ -1647,6 +1652,87 @@ fn with_auto_a_chassis_that_says_nothing_is_a_stop_that_says_so() {
 }
 
 /// Runs each scenario against a chassis of each protocol: `on_v1::NAME` and `on_v2::NAME`.
+/// A critical battery under each policy: a teleop is never touched; autonomy is refused a take
+/// (and with `stop-autonomy` loses control); a recharged battery restarts nothing.
+fn a_critical_battery_bars_autonomy_and_never_teleop(protocol: Protocol) {
+    for policy in [OnCritical::RefuseAutonomy, OnCritical::StopAutonomy] {
+        let mut config = config(protocol);
+        config.battery.on_critical = policy;
+        let mut pair = Pair::with_config(Transport::Can, &config);
+        pair.request(AUTONOMY, &Request::Resume).expect("resume");
+        pair.stream(AUTONOMY, Class::Autonomy, 0.4, Duration::from_secs(1));
+        // The pack runs down to 24.2 V at rest (7 %): critical once the estimate has
+        // followed it down.
+        let at = pair.now - pair.epoch;
+        pair.chassis.inject(at, Injection::Battery(24.2));
+        let mut refused = None;
+        for _ in 0..(60 * 50) {
+            if pair.last_state().battery.level() == BatteryLevel::Critical {
+                break;
+            }
+            if let Err(rejected) = pair.drive(AUTONOMY, Class::Autonomy, 0.4) {
+                refused = Some(rejected);
+                break;
+            }
+            pair.run(TICK);
+        }
+        for _ in 0..5 {
+            if let Err(rejected) = pair.drive(AUTONOMY, Class::Autonomy, 0.4) {
+                refused.get_or_insert(rejected);
+            }
+        }
+        assert_eq!(pair.last_state().battery.level(), BatteryLevel::Critical);
+        match policy {
+            OnCritical::StopAutonomy => {
+                let refused = refused.expect("autonomy lost control");
+                assert!(refused.reason.contains("battery critical"), "{refused:?}");
+                pair.run(Duration::from_secs(2));
+                assert_eq!(
+                    pair.chassis.actual().linear,
+                    0.0,
+                    "autonomy's output ramped to zero"
+                );
+            }
+            OnCritical::RefuseAutonomy | OnCritical::Warn => {
+                assert!(
+                    refused.is_none(),
+                    "a running autonomy drives on: {refused:?}"
+                );
+                pair.request(AUTONOMY, &Request::Relinquish)
+                    .expect("relinquish");
+                pair.leases.remove(&AUTONOMY.1);
+            }
+        }
+        let barred = pair
+            .take(AUTONOMY, Class::Autonomy)
+            .expect_err("no new autonomy on a critical battery");
+        assert_eq!(barred.kind, Some(RejectionKind::NotAllowed), "{barred:?}");
+        assert!(barred.reason.contains("battery critical"), "{barred:?}");
+        let status = pair.statuses().last().expect("status").1;
+        assert_eq!(status.battery_level, BatteryLevel::Critical.raw());
+        // The teleop drives it home.
+        pair.stream(TELEOP, Class::Teleop, 0.3, Duration::from_secs(1));
+        assert!(
+            pair.chassis.actual().linear > 0.2,
+            "{:?}",
+            pair.chassis.actual()
+        );
+        pair.request(TELEOP, &Request::Relinquish)
+            .expect("relinquish");
+        pair.leases.remove(&TELEOP.1);
+        // Charged: the bar lifts, nothing moves until autonomy takes control again.
+        let at = pair.now - pair.epoch;
+        pair.chassis.inject(at, Injection::Battery(26.0));
+        pair.run(Duration::from_secs(90));
+        assert_eq!(pair.last_state().battery.level(), BatteryLevel::Ok);
+        assert_eq!(pair.chassis.actual().linear, 0.0, "nothing restarted");
+        // (The teleop's take disarmed autonomy, as any teleop takeover does.)
+        pair.request(AUTONOMY, &Request::Resume).expect("resume");
+        pair.take(AUTONOMY, Class::Autonomy)
+            .expect("autonomy may take again");
+    }
+}
+
 macro_rules! both_protocols {
     ($($name:ident),+ $(,)?) => {
         mod on_v1 {
@@ -1670,6 +1756,7 @@ both_protocols!(
     a_stop_goes_on_the_wire_at_once_not_at_the_next_tick,
     teleop_drives_the_chassis_and_a_stale_stream_ramps_to_zero,
     a_dead_client_loses_control_at_once,
+    a_critical_battery_bars_autonomy_and_never_teleop,
     state_is_published_per_feedback_on_link_changes_and_every_100_ms_while_silent,
     status_is_published_on_change_and_once_a_second,
     odometry_reset_is_answered_and_published,

@@ -5,6 +5,7 @@
 //! - [`core`]: the sans-IO core: frames, requests, deaths and time in; frames to send, state and
 //!   status to publish and the next deadline out. It holds:
 //!   - [`state`]: the chassis state tracker (protocol, link state, statistics, odometry);
+//!   - [`battery`]: the battery's charge, charging and level, from a smart battery or the voltage;
 //!   - [`arbiter`]: who drives: safety stop > teleop > autonomy;
 //!   - [`command_mode`]: a protocol v2 chassis' command mode, taken with 0x421 and watched.
 //! - [`driver`]: the one thread that does I/O around the core: port, iceoryx2, clock, `ppoll`.
@@ -20,6 +21,7 @@
 //! starts beside the driver; the contract with every client is `scout-interface`.
 
 pub mod arbiter;
+pub mod battery;
 pub mod command_mode;
 pub mod config;
 pub mod core;

@@ -5,7 +5,8 @@
 use std::time::Duration;
 
 use scout_interface::state::{
-    ChassisPayload, CommandPayload, LinkState, OdometryPayload, Received, StatePayload,
+    BatteryLevel, ChassisPayload, CommandPayload, LinkState, OdometryPayload, Received,
+    StatePayload,
 };
 use scout_interface::{FixedText, Transport};
 use scout_protocol::kinematics::{Pose, wrap_angle};
@@ -18,7 +19,8 @@ use scout_protocol::version::{Detection, IdsSeen, Protocol, ProtocolDetector};
 use scout_protocol::{Counted, Direction, Message};
 use tracing::{error, info, warn};
 
-use crate::config::OdometryConfig;
+use crate::battery::BatteryMonitor;
+use crate::config::{BatteryConfig, OdometryConfig};
 
 /// No valid feedback for this long: the link is `silent`.
 pub const SILENT_AFTER: Duration = Duration::from_millis(100);
@@ -94,6 +96,8 @@ pub struct StateTracker {
     adapter_errors: (u64, Option<Duration>),
     /// The odometry's calibration, applied as the pose is integrated.
     calibration: OdometryConfig,
+    /// The battery's judge.
+    battery: BatteryMonitor,
 }
 
 impl StateTracker {
@@ -117,6 +121,11 @@ impl StateTracker {
         state.link.state = LinkState::Disconnected.raw();
         state.link.protocol = fixed.map_or(0, Protocol::raw);
         let model = chassis.model();
+        let battery = BatteryMonitor::new(
+            BatteryConfig::default(),
+            model.unwrap_or(Model::Scout).battery(),
+        );
+        state.battery = battery.payload();
         if let (None, Some(protocol)) = (model, fixed) {
             state.chassis.model = Model::default_for(protocol).raw();
         }
@@ -141,7 +150,16 @@ impl StateTracker {
             sections_from: fixed,
             adapter_errors: (0, None),
             calibration: OdometryConfig::default(),
+            battery,
         }
+    }
+
+    /// This tracker, judging the battery by `config`.
+    pub fn with_battery(mut self, config: BatteryConfig) -> Self {
+        let model = self.model.unwrap_or(Model::Scout);
+        self.battery = BatteryMonitor::new(config, model.battery());
+        self.state.battery = self.battery.payload();
+        self
     }
 
     /// This tracker, integrating the odometry with `calibration`.
@@ -366,6 +384,8 @@ impl StateTracker {
             state.rc = Default::default();
             state.bms = Default::default();
             state.firmware = Default::default();
+            self.battery.reset();
+            state.battery = self.battery.payload();
         }
         self.sections_from = Some(protocol);
         if self.model.is_none() {
@@ -501,8 +521,27 @@ impl StateTracker {
             at_ns: nanos(now),
         };
         self.state.store(&counted.message, received);
+        if let Message::SystemStatus(_) = &counted.message {
+            self.judge_battery(now);
+        }
         self.set_link_state(LinkState::Ok);
         Publish::Yes
+    }
+
+    /// Judges the battery after a system state or a smart battery's report, and says a change
+    /// of its level.
+    fn judge_battery(&mut self, now: Duration) {
+        let change = self.battery.update(&self.state, now);
+        self.state.battery = self.battery.payload();
+        if let Some(change) = change {
+            let said = self.battery.describe();
+            match change.to {
+                BatteryLevel::Low | BatteryLevel::Critical if change.to > change.from => {
+                    warn!("{said}: charge the battery")
+                }
+                _ => info!("{said}"),
+            }
+        }
     }
 
     fn handle_v2(&mut self, message: &MessageV2, now: Duration) -> Publish {
@@ -548,6 +587,9 @@ impl StateTracker {
             at_ns: nanos(now),
         };
         self.state.store_v2(message, received);
+        if let MessageV2::SystemState(_) | MessageV2::Bms(_) = message {
+            self.judge_battery(now);
+        }
         self.set_link_state(LinkState::Ok);
         Publish::Yes
     }

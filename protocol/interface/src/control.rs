@@ -676,7 +676,7 @@ pub struct LightsRequest {
 
 /// A request from a client to the gateway's arbiter.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::ControlRequest.v7")]
+#[type_name("scout::ControlRequest.v8")]
 #[repr(C)]
 pub struct ControlRequest {
     /// [`RequestKind`] as `u8`.
@@ -718,7 +718,7 @@ pub struct ControlRequest {
 
 /// The gateway's answer to one request.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("scout::ControlResponse.v7")]
+#[type_name("scout::ControlResponse.v8")]
 #[repr(C)]
 pub struct ControlResponse {
     /// The request's `seq`.
@@ -815,7 +815,7 @@ pub struct SourcePayload {
 
 /// The arbiter's status, published on every change and at least once a second.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::StatusPayload.v7")]
+#[type_name("scout::StatusPayload.v8")]
 #[repr(C)]
 pub struct StatusPayload {
     /// Rises by one with every publication.
@@ -845,6 +845,10 @@ pub struct StatusPayload {
     pub limited: bool,
     /// Autonomy may drive.
     pub autonomy_armed: bool,
+    /// [`crate::state::BatteryLevel`] byte.
+    pub battery_level: u8,
+    /// The battery's charge, % (NaN: unknown).
+    pub battery_percent: f64,
     /// [`LightsControl`] byte.
     pub lights: u8,
     /// How many entries of `sources` are used.
@@ -875,6 +879,10 @@ impl StatusPayload {
             s.tick_lateness_ms = 0.0;
             s.tick_max_lateness_ms = 0.0;
             s.ticks_missed = 0;
+            // Unknown is unknown, not a change (NaN equals nothing).
+            if s.battery_percent.is_nan() {
+                s.battery_percent = -1.0;
+            }
             for stop in &mut s.stops {
                 stop.age_ms = 0.0;
             }

@@ -10,7 +10,7 @@ use scout_protocol::{ChassisState, FaultClear, Light, Message};
 use serde_json::{Map, Value, json};
 
 use crate::control::{Class, LightsControl, RejectionKind, StatusPayload, StopCause};
-use crate::state::{Received, StatePayload};
+use crate::state::{BatteryLevel, Received, StatePayload};
 
 fn age_ms(at_ns: u64, now_ns: u64) -> f64 {
     now_ns.saturating_sub(at_ns) as f64 / 1e6
@@ -194,9 +194,9 @@ fn motor_json(state: &StatePayload, index: usize, now_ns: u64) -> Value {
 }
 
 /// The state JSON's top-level keys, in the order docs/operating.md documents them.
-pub const STATE_KEYS: [&str; 15] = [
+pub const STATE_KEYS: [&str; 16] = [
     "robot", "seq", "age_ms", "link", "chassis", "system", "motion", "lights", "motors",
-    "odometer", "rc", "bms", "firmware", "odometry", "command",
+    "odometer", "rc", "bms", "battery", "firmware", "odometry", "command",
 ];
 
 /// One top-level field of the state JSON ([`STATE_KEYS`]), or `None` for a key the schema does
@@ -320,6 +320,23 @@ pub fn state_field(state: &StatePayload, key: &str, now_ns: u64) -> Option<Value
                 })
             })
         }
+        "battery" => {
+            let battery = &state.battery;
+            let known = |value: f64| value.is_finite().then_some(value);
+            json!({
+                "source": battery.source().name(),
+                "percent": battery.percent(),
+                "status": battery.status().name(),
+                "level": battery.level().name(),
+                "voltage": known(battery.voltage),
+                "current": known(battery.current),
+                "health_percent": known(battery.health_percent),
+                "temperature": known(battery.temperature),
+                "capacity_ah": known(battery.capacity_ah),
+                "low_percent": known(battery.low_percent),
+                "critical_percent": known(battery.critical_percent),
+            })
+        }
         "firmware" => {
             let firmware = &state.firmware;
             section(
@@ -417,6 +434,12 @@ pub fn status_json(status: &StatusPayload, now_ns: u64) -> Value {
             "limited": status.limited,
         },
         "autonomy_armed": status.autonomy_armed,
+        "battery": {
+            "level": BatteryLevel::from_raw(status.battery_level)
+                .unwrap_or(BatteryLevel::Unknown)
+                .name(),
+            "percent": status.battery_percent.is_finite().then_some(status.battery_percent),
+        },
         "lights": lights.name(),
         "sources": sources,
         "rejections": rejections,

@@ -32,9 +32,9 @@ pub mod state;
 pub mod stop_socket;
 pub mod text;
 
-/// The layout version in every payload's iceoryx2 type name (`scout::StatePayload.v7`). Raise it
+/// The layout version in every payload's iceoryx2 type name (`scout::StatePayload.v8`). Raise it
 /// when a payload changes: the sizes pinned below stop the build until it is raised.
-pub const LAYOUT_VERSION: u32 = 7;
+pub const LAYOUT_VERSION: u32 = 8;
 
 pub use control::{
     Accepted, Class, ControlRequest, ControlResponse, LightsSetting, Rejection, RejectionKind,
@@ -61,7 +61,7 @@ macro_rules! pin_layout {
     };
 }
 
-pin_layout!(state::StatePayload, 896, 8);
-pin_layout!(control::StatusPayload, 6432, 8);
+pin_layout!(state::StatePayload, 968, 8);
+pin_layout!(control::StatusPayload, 6448, 8);
 pin_layout!(control::ControlRequest, 208, 8);
 pin_layout!(control::ControlResponse, 200, 8);

@@ -275,6 +275,118 @@ pub struct BmsPayload {
     pub alarms: [u8; 8],
 }
 
+wire_enum! {
+    /// Where the battery's state of charge comes from.
+    BatterySource {
+        /// Nothing reported yet.
+        None = 0 => "none",
+        /// A smart battery's own report (v2's 0x361).
+        Bms = 1 => "bms",
+        /// Estimated by the gateway from the pack voltage under the measured load.
+        Voltage = 2 => "voltage",
+    }
+}
+
+wire_enum! {
+    /// Whether the battery charges: the values of ROS's `sensor_msgs/BatteryState`
+    /// `power_supply_status`.
+    PowerStatus {
+        /// Not known.
+        Unknown = 0 => "unknown",
+        /// A charger feeds it.
+        Charging = 1 => "charging",
+        /// The robot runs on it.
+        Discharging = 2 => "discharging",
+        /// Neither charging nor feeding a load (a smart battery at rest).
+        NotCharging = 3 => "not_charging",
+        /// Charged, the charger still connected.
+        Full = 4 => "full",
+    }
+}
+
+wire_enum! {
+    /// The state of charge against the configured thresholds.
+    BatteryLevel {
+        /// No state of charge known.
+        Unknown = 0 => "unknown",
+        /// Above the low threshold.
+        Ok = 1 => "ok",
+        /// At or below the low threshold (or the chassis warns of under-voltage): charge soon.
+        Low = 2 => "low",
+        /// At or below the critical threshold (or the chassis cut the drives off): what the
+        /// gateway does then is configured (`[battery] on_critical`).
+        Critical = 3 => "critical",
+    }
+}
+
+/// The battery as the gateway judges it, from whatever the chassis offers: a smart battery's
+/// report, else an estimate from the voltage. The unknown is NaN.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+pub struct BatteryPayload {
+    /// [`BatterySource`] as `u8`.
+    pub source: u8,
+    /// [`PowerStatus`] as `u8`.
+    pub status: u8,
+    /// [`BatteryLevel`] as `u8`.
+    pub level: u8,
+    /// State of charge, 0..=100 %.
+    pub percent: f64,
+    /// Pack voltage, V.
+    pub voltage: f64,
+    /// Pack current, A: positive charging, negative discharging.
+    pub current: f64,
+    /// State of health, %.
+    pub health_percent: f64,
+    /// Temperature, deg C.
+    pub temperature: f64,
+    /// Rated capacity, Ah.
+    pub capacity_ah: f64,
+    /// The low threshold in force, %.
+    pub low_percent: f64,
+    /// The critical threshold in force, %.
+    pub critical_percent: f64,
+}
+
+impl BatteryPayload {
+    /// Nothing known yet: every number NaN, the thresholds as given.
+    pub fn unknown(low_percent: f64, critical_percent: f64) -> Self {
+        Self {
+            source: BatterySource::None.raw(),
+            status: PowerStatus::Unknown.raw(),
+            level: BatteryLevel::Unknown.raw(),
+            percent: f64::NAN,
+            voltage: f64::NAN,
+            current: f64::NAN,
+            health_percent: f64::NAN,
+            temperature: f64::NAN,
+            capacity_ah: f64::NAN,
+            low_percent,
+            critical_percent,
+        }
+    }
+
+    /// The charge, %, if anything reported one.
+    pub fn percent(&self) -> Option<f64> {
+        (self.source() != BatterySource::None && self.percent.is_finite()).then_some(self.percent)
+    }
+
+    /// Where the charge comes from (`none` for a byte this version does not know).
+    pub fn source(&self) -> BatterySource {
+        BatterySource::from_raw(self.source).unwrap_or(BatterySource::None)
+    }
+
+    /// Whether it charges.
+    pub fn status(&self) -> PowerStatus {
+        PowerStatus::from_raw(self.status).unwrap_or(PowerStatus::Unknown)
+    }
+
+    /// The level against the thresholds.
+    pub fn level(&self) -> BatteryLevel {
+        BatteryLevel::from_raw(self.level).unwrap_or(BatteryLevel::Unknown)
+    }
+}
+
 /// The chassis' firmware versions, as its replies to the version requests said them (v2): the
 /// older binary form (0x41A) and the current text form (0x4A1), whichever it answers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
@@ -319,7 +431,7 @@ pub struct CommandPayload {
 
 /// The chassis state a gateway publishes on every decoded feedback frame and link change.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::StatePayload.v7")]
+#[type_name("scout::StatePayload.v8")]
 #[repr(C)]
 pub struct StatePayload {
     /// Increases by one with every publication.
@@ -346,6 +458,8 @@ pub struct StatePayload {
     pub rc: RcPayload,
     /// The smart battery (v2, when fitted).
     pub bms: BmsPayload,
+    /// The battery as the gateway judges it (charge, charging, level).
+    pub battery: BatteryPayload,
     /// The firmware versions (v2).
     pub firmware: FirmwarePayload,
     /// Odometry.
@@ -677,6 +791,22 @@ mod tests {
     fn link_state_round_trips() {
         for state in LinkState::ALL {
             assert_eq!(LinkState::from_raw(state.raw()), Some(*state));
+        }
+    }
+
+    #[test]
+    fn power_status_is_ros_battery_state_numbering() {
+        // sensor_msgs/BatteryState POWER_SUPPLY_STATUS_*.
+        let ros = [
+            (PowerStatus::Unknown, 0),
+            (PowerStatus::Charging, 1),
+            (PowerStatus::Discharging, 2),
+            (PowerStatus::NotCharging, 3),
+            (PowerStatus::Full, 4),
+        ];
+        assert_eq!(ros.len(), PowerStatus::ALL.len());
+        for (status, raw) in ros {
+            assert_eq!(status.raw(), raw);
         }
     }
 
