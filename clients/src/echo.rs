@@ -178,6 +178,15 @@ fn draw(state: &StatePayload, out: &mut dyn Write) -> std::io::Result<()> {
         text(&system["control_mode"]),
         number(&system["battery_voltage"], 1),
     )?;
+    let battery = &json["battery"];
+    writeln!(
+        out,
+        "battery  {} %  {}  {} (from {})",
+        number(&battery["percent"], 0),
+        text(&battery["status"]),
+        text(&battery["level"]),
+        text(&battery["source"]),
+    )?;
     writeln!(
         out,
         "motion   linear {} m/s  angular {} rad/s   (commanded {} m/s, {} rad/s)",

@@ -83,6 +83,22 @@ fn remote(robot: &str, settings: &SessionSettings, endpoint: &str) -> anyhow::Re
 const EVENTS_SHOWN: usize = 5;
 
 /// The status for people, one `label    text` line each, from the JSON object of `--json`.
+/// `low: 18 %, charge soon` (nothing before a gateway that reports the battery).
+fn battery(battery: &Value) -> Option<String> {
+    let level = battery["level"].as_str()?;
+    let charge = battery["percent"]
+        .as_f64()
+        .map_or_else(|| "charge unknown".to_owned(), |p| format!("{p:.0} %"));
+    Some(match level {
+        "low" => format!("LOW: {charge}, charge soon"),
+        "critical" => format!(
+            "CRITICAL: {charge}, charge now (what the gateway does: docs/chassis.md, Battery)"
+        ),
+        "unknown" => "not reported yet".to_owned(),
+        _ => format!("{level}: {charge}"),
+    })
+}
+
 fn render(json: &Value) -> String {
     let mut lines = Lines::default();
     lines.push("robot", text(&json["robot"]));
@@ -119,6 +135,9 @@ fn render(json: &Value) -> String {
         None => "?".into(),
     };
     lines.push("autonomy", autonomy);
+    if let Some(battery) = battery(&json["battery"]) {
+        lines.push("battery", battery);
+    }
     if !json["lights"].is_null() {
         lines.push("lights", text(&json["lights"]));
     }
@@ -575,6 +594,35 @@ mod tests {
     }
 
     #[test]
+    fn the_battery_line_says_what_to_do_when_low() {
+        let mut json = idle();
+        assert!(
+            !render(&json).contains("battery"),
+            "an older gateway: no line"
+        );
+        for (battery, line) in [
+            (
+                json!({"level": "ok", "percent": 64.4}),
+                "battery   ok: 64 %\n",
+            ),
+            (
+                json!({"level": "low", "percent": 18.0}),
+                "battery   LOW: 18 %, charge soon\n",
+            ),
+            (
+                json!({"level": "unknown", "percent": null}),
+                "battery   not reported yet\n",
+            ),
+        ] {
+            json["battery"] = battery;
+            let text = render(&json);
+            assert!(text.contains(line), "{text}");
+        }
+        json["battery"] = json!({"level": "critical", "percent": 7.0});
+        assert!(render(&json).contains("battery   CRITICAL: 7 %, charge now"));
+    }
+
+    #[test]
     fn remote_links_one_line_per_peer() {
         let mut json = idle();
         assert!(labelled(&render(&json), "link").is_empty());
@@ -689,8 +737,9 @@ mod tests {
     }
 
     /// Every top-level key the text reads.
-    const KEYS: [&str; 13] = [
+    const KEYS: [&str; 14] = [
         "robot",
+        "battery",
         "latched",
         "stop_total",
         "stops",

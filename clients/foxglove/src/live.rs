@@ -248,10 +248,26 @@ fn services(
     Ok(services)
 }
 
-/// The stops in a status JSON as server status messages, keyed by their ids.
-fn stop_statuses(status: &Value) -> Vec<(String, Status)> {
+/// The problems in a status JSON as server status messages, keyed by their ids: the stops,
+/// and a low or critical battery.
+fn problem_statuses(status: &Value) -> Vec<(String, Status)> {
+    let battery = &status["battery"];
+    let charge = battery["percent"]
+        .as_f64()
+        .map_or_else(|| "charge unknown".to_owned(), |p| format!("{p:.0} %"));
+    let key = "scout-battery".to_owned();
+    let battery = match battery["level"].as_str() {
+        Some("low") => Some(Status::warning(format!(
+            "battery low: {charge}, charge soon"
+        ))),
+        Some("critical") => Some(Status::error(format!(
+            "battery critical: {charge}, charge now"
+        ))),
+        _ => None,
+    }
+    .map(|status| (key.clone(), status.with_id(key)));
     let Some(stops) = status["stops"].as_array() else {
-        return Vec::new();
+        return battery.into_iter().collect();
     };
     stops
         .iter()
@@ -271,6 +287,7 @@ fn stop_statuses(status: &Value) -> Vec<(String, Status)> {
             let key = format!("scout-stop-{id}");
             (key.clone(), Status::error(message).with_id(key))
         })
+        .chain(battery)
         .collect()
 }
 
@@ -377,7 +394,7 @@ impl Live {
         if let Some(newest) = status["newest_stop"].as_u64() {
             self.newest_stop.store(newest, Ordering::Relaxed);
         }
-        let now = stop_statuses(status);
+        let now = problem_statuses(status);
         let keys: BTreeSet<String> = now.iter().map(|(key, _)| key.clone()).collect();
         let gone: Vec<String> = self.shown.difference(&keys).cloned().collect();
         if !gone.is_empty() {
@@ -395,6 +412,30 @@ impl Live {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_low_or_critical_battery_is_a_problem_beside_the_stops() {
+        let keys = |status: &Value| -> Vec<String> {
+            problem_statuses(status)
+                .into_iter()
+                .map(|(key, _)| key)
+                .collect()
+        };
+        let stop = json!({ "id": 3, "owner": "safety", "cause": "client", "reason": "x" });
+        assert_eq!(
+            keys(&json!({ "stops": [stop], "battery": { "level": "ok", "percent": 60.0 } })),
+            ["scout-stop-3"]
+        );
+        assert_eq!(
+            keys(&json!({ "stops": [stop], "battery": { "level": "low", "percent": 18.0 } })),
+            ["scout-stop-3", "scout-battery"]
+        );
+        let problems =
+            problem_statuses(&json!({ "battery": { "level": "critical", "percent": 7.0 } }));
+        let (_, status) = &problems[0];
+        let text = format!("{status:?}");
+        assert!(text.contains("battery critical: 7 %, charge now"), "{text}");
+    }
 
     #[test]
     fn a_stop_request_that_is_not_json_still_has_a_reason_to_stop_with() {
@@ -440,7 +481,7 @@ mod tests {
             { "id": 4, "owner": "lidar", "cause": "client", "reason": "obstacle", "persists": false },
             { "id": 5, "owner": "gateway", "cause": "chassis_estop", "reason": "pressed", "persists": true },
         ]});
-        let statuses = stop_statuses(&status);
+        let statuses = problem_statuses(&status);
         assert_eq!(statuses.len(), 2);
         assert_eq!(statuses[0].0, "scout-stop-4");
         assert_eq!(statuses[0].1.message, "STOP #4 by lidar (client): obstacle");
@@ -448,6 +489,6 @@ mod tests {
             statuses[1].1.message,
             "STOP #5 by gateway (chassis_estop): pressed (its cause persists)"
         );
-        assert!(stop_statuses(&json!({})).is_empty());
+        assert!(problem_statuses(&json!({})).is_empty());
     }
 }

@@ -80,6 +80,13 @@ pub fn state() -> Value {
         "current": number(), "temperature": number(),
         "alarms": { "type": ["array", "null"], "items": integer() }, "age_ms": number(),
     }));
+    let battery = object(json!({
+        "source": string(), "percent": nullable_of("number"), "status": string(),
+        "level": string(), "voltage": nullable_of("number"), "current": nullable_of("number"),
+        "health_percent": nullable_of("number"), "temperature": nullable_of("number"),
+        "capacity_ah": nullable_of("number"), "low_percent": nullable_of("number"),
+        "critical_percent": nullable_of("number"),
+    }));
     let firmware = nullable(json!({ "text": string(), "age_ms": number() }));
     let odometry = object(json!({
         "x": number(), "y": number(), "yaw": number(), "distance": number(),
@@ -93,7 +100,7 @@ pub fn state() -> Value {
             "robot": string(), "seq": integer(), "age_ms": number(), "link": link,
             "chassis": chassis, "system": system, "motion": motion, "lights": lights,
             "motors": { "type": "array", "items": motor }, "odometer": odometer, "rc": rc,
-            "bms": bms, "firmware": firmware, "odometry": odometry, "command": command(),
+            "bms": bms, "battery": battery, "firmware": firmware, "odometry": odometry, "command": command(),
         },
     })
 }
@@ -132,7 +139,9 @@ pub fn status() -> Value {
                 "linear": number(), "angular": number(), "fault_clear": string(),
                 "limited": boolean(),
             })),
-            "autonomy_armed": boolean(), "lights": string(),
+            "autonomy_armed": boolean(),
+            "battery": object(json!({ "level": string(), "percent": nullable_of("number") })),
+            "lights": string(),
             "sources": { "type": "array", "items": source },
             "rejections": { "type": "object", "additionalProperties": integer() },
             "tick": object(json!({

@@ -54,6 +54,11 @@ def test_latest_and_next(robot: scout.Robot) -> None:
     assert first.odometry.x == 0.0
     assert first.command.linear == 0.0
     assert "link=ok" in repr(first)
+    # The simulated pack rests at 26.0 V: 80 % by the curve, estimated from the voltage.
+    battery = robot.next(timeout=1.0).battery
+    assert battery.source == "voltage" and battery.level == "ok", battery
+    assert battery.percent is not None and 70.0 < battery.percent <= 81.0, battery
+    assert battery.status == "discharging" and battery.current is None, battery
 
 
 def test_to_dict_is_the_scout_echo_json_schema(robot: scout.Robot) -> None:

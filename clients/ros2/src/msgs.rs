@@ -160,9 +160,11 @@ pub struct Battery<'a> {
     pub temperature: f32,
     /// A, negative while discharging; NaN when unknown.
     pub current: f32,
+    /// Ah; NaN when unknown.
+    pub design_capacity: f32,
     /// 0..1; NaN when unknown.
     pub percentage: f32,
-    /// POWER_SUPPLY_STATUS_* (0 unknown, 2 discharging).
+    /// POWER_SUPPLY_STATUS_* (0 unknown, 1 charging, 2 discharging, 3 not charging, 4 full).
     pub status: u8,
     /// POWER_SUPPLY_HEALTH_* (0 unknown, 1 good, 3 dead, 4 overvoltage...).
     pub health: u8,
@@ -181,7 +183,7 @@ impl Battery<'_> {
             .f32(self.current)
             .f32(f32::NAN) // charge
             .f32(f32::NAN) // capacity
-            .f32(f32::NAN) // design_capacity
+            .f32(self.design_capacity)
             .f32(self.percentage)
             .u8(self.status)
             .u8(self.health)
@@ -360,6 +362,7 @@ mod tests {
             voltage: 25.5,
             temperature: f32::NAN,
             current: f32::NAN,
+            design_capacity: f32::NAN,
             percentage: 0.8,
             status: 2,
             health: 1,

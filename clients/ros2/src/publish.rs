@@ -8,7 +8,7 @@ use std::time::Duration;
 use scout_interface::StatePayload;
 use scout_interface::control::StatusPayload;
 use scout_interface::json::{state_json, status_json};
-use scout_interface::state::{LinkState, Received};
+use scout_interface::state::{BatteryLevel, BatteryPayload, BatterySource, LinkState, Received};
 use scout_protocol::{ChassisState, Severity};
 use serde_json::Value;
 
@@ -91,7 +91,6 @@ const HEALTH_UNKNOWN: u8 = 0;
 const HEALTH_GOOD: u8 = 1;
 const HEALTH_DEAD: u8 = 3;
 const HEALTH_OVERVOLTAGE: u8 = 4;
-const STATUS_UNKNOWN: u8 = 0;
 
 /// Makes the messages, remembering what it already sent.
 #[derive(Debug)]
@@ -102,7 +101,7 @@ pub struct Messages {
     /// Wheel angles integrated from the motors' speeds, rad.
     wheel_angles: [f64; 4],
     last_motors: [Option<u64>; 4],
-    last_diagnostics: Option<(u64, [u8; 3])>,
+    last_diagnostics: Option<(u64, [u8; 4])>,
     /// What makes them, the name of its own diagnostic status (`<node>: <maker>`).
     maker: &'static str,
 }
@@ -187,7 +186,12 @@ impl Messages {
             hardware_id: robot.to_owned(),
             values: Vec::new(),
         };
-        let statuses = [gateway, stale("chassis"), stale("arbiter")];
+        let statuses = [
+            gateway,
+            stale("chassis"),
+            stale("battery"),
+            stale("arbiter"),
+        ];
         let mut out = Vec::new();
         self.publish_diagnostics(statuses, robot, clocks, bridge, &mut out);
         out
@@ -287,9 +291,10 @@ impl Messages {
         });
     }
 
-    /// The voltage the chassis reports; the charge, current and temperature from a smart
-    /// battery where one reports them (protocol v2's BMS), else unmeasured (NaN), as the
-    /// message defines.
+    /// The battery as the gateway judges it (`state.battery`): the charge as `percentage`
+    /// 0..1 (a smart battery's, or the gateway's estimate from the voltage), charging or not;
+    /// the current and temperature where a smart battery measures them; NaN only for what
+    /// nothing measures or estimates.
     fn battery(&self, state: &StatePayload, stamp: Duration, out: &mut Vec<Outgoing>) {
         let faults = state.faults();
         let has = |name: &str| faults.iter().any(|fault| fault.name == name);
@@ -302,15 +307,14 @@ impl Messages {
         } else {
             HEALTH_UNKNOWN
         };
-        let bms = &state.bms;
-        let (temperature, current, percentage) = if bms.received.valid {
-            (
-                f32::from(bms.decidegrees) / 10.0,
-                f32::from(bms.deciamps) / 10.0,
-                f32::from(bms.charge_percent.min(100)) / 100.0,
-            )
+        let battery = match state.battery.source() {
+            BatterySource::None => BatteryPayload::unknown(f64::NAN, f64::NAN),
+            BatterySource::Bms | BatterySource::Voltage => state.battery,
+        };
+        let voltage = if battery.voltage.is_finite() {
+            battery.voltage
         } else {
-            (f32::NAN, f32::NAN, f32::NAN)
+            state.system.battery_voltage()
         };
         out.push(Outgoing {
             topic: Topic::BatteryState,
@@ -319,11 +323,12 @@ impl Messages {
                     stamp,
                     frame_id: &self.config.frames.base,
                 },
-                voltage: f32::from(state.system.battery_decivolts) / 10.0,
-                temperature,
-                current,
-                percentage,
-                status: STATUS_UNKNOWN,
+                voltage: voltage as f32,
+                temperature: battery.temperature as f32,
+                current: battery.current as f32,
+                design_capacity: battery.capacity_ah as f32,
+                percentage: battery.percent().map_or(f32::NAN, |p| (p / 100.0) as f32),
+                status: battery.status,
                 health,
                 present: state.system.received.valid,
             }
@@ -347,7 +352,7 @@ impl Messages {
     /// changed.
     fn publish_diagnostics(
         &mut self,
-        statuses: [Status; 3],
+        statuses: [Status; 4],
         robot: &str,
         clocks: Clocks,
         bridge: Counted<'_>,
@@ -394,13 +399,14 @@ fn fresh(received: Received, last: &mut Option<u64>) -> Option<u64> {
     Some(received.at_ns)
 }
 
-/// The link, the chassis and the arbiter, each a DiagnosticStatus named `<node>: <part>`.
+/// The link, the chassis, the battery and the arbiter, each a DiagnosticStatus named
+/// `<node>: <part>`.
 pub fn diagnostic_statuses(
     node: &str,
     state: &StatePayload,
     status: Option<&StatusPayload>,
     now_ns: u64,
-) -> [Status; 3] {
+) -> [Status; 4] {
     let robot = state.robot.as_str().to_owned();
     let json = state_json(state, now_ns);
     let link_state = state.link.state();
@@ -449,6 +455,41 @@ pub fn diagnostic_statuses(
         hardware_id: robot.clone(),
         values: chassis_values,
     };
+    let battery_state = &state.battery;
+    let (level, message) = match battery_state.level() {
+        BatteryLevel::Unknown => (STALE, "no battery report yet".to_owned()),
+        level => {
+            let charge = battery_state
+                .percent()
+                .map_or_else(|| "charge unknown".to_owned(), |p| format!("{p:.0} %"));
+            let source = match battery_state.source() {
+                BatterySource::Bms => "smart battery",
+                BatterySource::Voltage | BatterySource::None => "estimated from the voltage",
+            };
+            let message = format!(
+                "{}: {charge} ({source}), {}",
+                level.name(),
+                battery_state.status().name()
+            );
+            match level {
+                _ if link_state != LinkState::Ok => {
+                    (STALE, format!("no report from the chassis; last {message}"))
+                }
+                BatteryLevel::Ok => (OK, message),
+                BatteryLevel::Low => (WARN, format!("{message}: charge soon")),
+                BatteryLevel::Critical | BatteryLevel::Unknown => {
+                    (ERROR, format!("{message}: charge now"))
+                }
+            }
+        }
+    };
+    let battery = Status {
+        level,
+        name: format!("{node}: battery"),
+        message,
+        hardware_id: robot.clone(),
+        values: flatten(&json["battery"]),
+    };
     let arbiter = match status {
         Some(status) => {
             let json = status_json(status, now_ns);
@@ -490,7 +531,7 @@ pub fn diagnostic_statuses(
             values: Vec::new(),
         },
     };
-    [link, chassis, arbiter]
+    [link, chassis, battery, arbiter]
 }
 
 /// `{"a": {"b": 1}}` as `[("a.b", "1")]`; strings without their quotes.
@@ -521,6 +562,7 @@ mod tests {
     use super::*;
     use crate::cdr::Reader;
     use scout_interface::state::ChassisPayload;
+    use scout_interface::state::PowerStatus;
     use scout_protocol::model::Model;
     use scout_protocol::version::Protocol;
 
@@ -631,7 +673,7 @@ mod tests {
     fn diagnostics_say_what_is_wrong() {
         let mut chassis = state(SECOND);
         chassis.system.fault_bits = 0x0800 | 0x0001; // under-voltage warning and fault
-        let [link, system, arbiter] = diagnostic_statuses("scout", &chassis, None, SECOND);
+        let [link, system, _, arbiter] = diagnostic_statuses("scout", &chassis, None, SECOND);
         assert_eq!((link.level, link.message.as_str()), (OK, "ok"));
         assert!(link.values.contains(&("rx_frames".into(), "0".into())));
         assert_eq!(system.level, ERROR);
@@ -648,8 +690,60 @@ mod tests {
         assert_eq!(arbiter.level, STALE);
         let mut silent = state(SECOND);
         silent.link.state = LinkState::Silent.raw();
-        let [link, system, _] = diagnostic_statuses("scout", &silent, None, SECOND);
-        assert_eq!((link.level, system.level), (ERROR, STALE));
+        let [link, system, battery, _] = diagnostic_statuses("scout", &silent, None, SECOND);
+        assert_eq!(
+            (link.level, system.level, battery.level),
+            (ERROR, STALE, STALE)
+        );
+    }
+
+    #[test]
+    fn the_battery_is_ok_low_critical_or_stale_in_diagnostics() {
+        let mut chassis = state(SECOND);
+        let [_, _, battery, _] = diagnostic_statuses("scout", &chassis, None, SECOND);
+        assert_eq!(
+            (battery.level, battery.message.as_str()),
+            (STALE, "no battery report yet")
+        );
+        for (level, percent, expected, says) in [
+            (
+                BatteryLevel::Ok,
+                64.0,
+                OK,
+                "ok: 64 % (estimated from the voltage), discharging",
+            ),
+            (
+                BatteryLevel::Low,
+                18.0,
+                WARN,
+                "low: 18 % (estimated from the voltage), discharging: charge soon",
+            ),
+            (
+                BatteryLevel::Critical,
+                7.0,
+                ERROR,
+                "critical: 7 % (estimated from the voltage), discharging: charge now",
+            ),
+        ] {
+            chassis.battery = BatteryPayload {
+                source: BatterySource::Voltage.raw(),
+                status: PowerStatus::Discharging.raw(),
+                level: level.raw(),
+                percent,
+                voltage: 24.5,
+                ..BatteryPayload::unknown(20.0, 10.0)
+            };
+            let [_, _, battery, _] = diagnostic_statuses("scout", &chassis, None, SECOND);
+            assert_eq!((battery.level, battery.message.as_str()), (expected, says));
+            assert_eq!(battery.name, "scout: battery");
+            assert!(
+                battery
+                    .values
+                    .contains(&("level".into(), level.name().into())),
+                "{:?}",
+                battery.values
+            );
+        }
     }
 
     #[test]
@@ -741,15 +835,9 @@ mod tests {
         }
     }
 
-    #[test]
-    fn a_smart_battery_fills_the_charge_current_and_temperature() {
-        let mut messages = Messages::new(Ros2Config::default());
-        let mut state = mini(SECOND, 0, 0, 0);
-        state.bms.received = received(SECOND);
-        state.bms.charge_percent = 87;
-        state.bms.deciamps = -35;
-        state.bms.decidegrees = 312;
-        let out = messages.handle_state(&state, None, clocks(SECOND), &Vec::new);
+    /// Reads a BatteryState's numbers: voltage, temperature, current, charge, capacity,
+    /// design capacity, percentage; then status and health.
+    fn battery_fields(out: &[Outgoing]) -> ([f32; 7], u8, u8) {
         let battery = out
             .iter()
             .find(|o| o.topic == Topic::BatteryState)
@@ -757,15 +845,53 @@ mod tests {
         let mut reader = Reader::new(&battery.payload).expect("CDR");
         reader.i32().and_then(|_| reader.u32()).expect("stamp");
         reader.skip_string().expect("frame id");
-        assert_eq!(reader.f32(), Ok(25.5), "voltage");
-        assert_eq!(reader.f32(), Ok(31.2), "temperature");
-        assert_eq!(reader.f32(), Ok(-3.5), "current");
-        for _ in 0..3 {
-            assert!(
-                reader.f32().expect("NaN").is_nan(),
-                "charge and capacities unknown"
-            );
-        }
-        assert_eq!(reader.f32(), Ok(0.87), "percentage");
+        let numbers = [(); 7].map(|_| reader.f32().expect("f32"));
+        (
+            numbers,
+            reader.u8().expect("status"),
+            reader.u8().expect("health"),
+        )
+    }
+
+    #[test]
+    fn the_gateways_battery_fills_battery_state_as_ros_users_expect() {
+        let mut messages = Messages::new(Ros2Config::default());
+        let mut state = mini(SECOND, 0, 0, 0);
+        state.battery = BatteryPayload {
+            source: BatterySource::Bms.raw(),
+            status: PowerStatus::Charging.raw(),
+            level: BatteryLevel::Ok.raw(),
+            percent: 87.0,
+            voltage: 26.2,
+            current: 5.2,
+            temperature: 31.2,
+            capacity_ah: 30.0,
+            ..BatteryPayload::unknown(20.0, 10.0)
+        };
+        let out = messages.handle_state(&state, None, clocks(SECOND), &Vec::new);
+        let (
+            [
+                voltage,
+                temperature,
+                current,
+                charge,
+                capacity,
+                design,
+                percentage,
+            ],
+            status,
+            _,
+        ) = battery_fields(&out);
+        assert_eq!((voltage, temperature, current), (26.2, 31.2, 5.2));
+        assert!(charge.is_nan() && capacity.is_nan(), "not measured");
+        assert_eq!((design, percentage), (30.0, 0.87));
+        assert_eq!(status, 1, "POWER_SUPPLY_STATUS_CHARGING");
+        // Nothing known: NaN and unknown, the voltage the chassis reports.
+        let state = mini(2 * SECOND, 0, 0, 0);
+        let out = messages.handle_state(&state, None, clocks(2 * SECOND), &Vec::new);
+        let ([voltage, .., percentage], status, _) = battery_fields(&out);
+        assert_eq!(voltage, 25.5);
+        assert!(percentage.is_nan());
+        assert_eq!(status, 0, "POWER_SUPPLY_STATUS_UNKNOWN");
     }
 }

@@ -2,6 +2,7 @@
 //! deadline, on its own pseudo-terminals and names.
 
 mod arbiter;
+mod battery;
 mod bench;
 mod decode;
 mod doctor;

@@ -306,6 +306,9 @@ fn a_ros_2_node_sees_the_graph_reads_odometry_and_drives_through_the_arbiter() {
     }
     let battery = node.echo("/battery_state", "sensor_msgs/msg/BatteryState", 1);
     assert!(battery[0]["voltage"].as_f64() > Some(20.0), "{battery:?}");
+    let percentage = battery[0]["percentage"].as_f64().expect("a percentage");
+    assert!((0.7..=0.81).contains(&percentage), "{battery:?}");
+    assert_eq!(battery[0]["status"], 2, "DISCHARGING: {battery:?}");
     let joints = node.echo("/joint_states", "sensor_msgs/msg/JointState", 1);
     assert_eq!(joints[0]["name"][0], "front_right_wheel");
     let tf = node.echo("/tf", "tf2_msgs/msg/TFMessage", 1);

@@ -362,6 +362,14 @@ fn graph_topics_and_driving(
             .map(|v| (v * 10.0).round()),
         "{battery:?} vs {reported}"
     );
+    // The charge as ROS users read it: 0..1, discharging (the simulated pack rests at 80 %).
+    let percentage = battery[0]["percentage"].as_f64().expect("a percentage");
+    assert!((0.7..=0.81).contains(&percentage), "{battery:?}");
+    assert_eq!(
+        battery[0]["power_supply_status"], 2,
+        "DISCHARGING: {battery:?}"
+    );
+    assert_eq!(battery[0]["design_capacity"], 30.0, "{battery:?}");
     let joints = node.echo("/joint_states", "sensor_msgs/msg/JointState", 1, "default");
     assert_eq!(joints[0]["name"][0], "front_right_wheel", "{joints:?}");
     let counters = node.counters();

@@ -59,7 +59,9 @@ def summary(message):
             "angular": message.twist.twist.angular.z,
         }
     if isinstance(message, BatteryState):
-        return {"voltage": message.voltage, "stamp": stamp(message.header)}
+        return {"voltage": message.voltage, "percentage": message.percentage,
+                "power_supply_status": message.power_supply_status,
+                "design_capacity": message.design_capacity, "stamp": stamp(message.header)}
     if isinstance(message, JointState):
         return {
             "name": list(message.name),

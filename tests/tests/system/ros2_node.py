@@ -229,7 +229,8 @@ def summary(message, type_name):
                                 "x": t.transform.translation.x} for t in message.transforms]}
     if type_name == "sensor_msgs/msg/BatteryState":
         return {"voltage": message.voltage, "present": message.present,
-                "health": message.power_supply_health, "frame_id": message.header.frame_id}
+                "health": message.power_supply_health, "frame_id": message.header.frame_id,
+                "percentage": message.percentage, "status": message.power_supply_status}
     if type_name == "sensor_msgs/msg/JointState":
         return {"name": list(message.name), "position": list(message.position),
                 "velocity": list(message.velocity), "effort": list(message.effort)}

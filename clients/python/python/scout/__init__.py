@@ -36,6 +36,7 @@ from ._errors import (
     VersionError,
 )
 from ._state import (
+    Battery,
     Bms,
     Chassis,
     Command,
@@ -55,6 +56,7 @@ from ._state import (
 __all__ = [
     "LAYOUT_VERSION",
     "Answer",
+    "Battery",
     "Bms",
     "Chassis",
     "Class",

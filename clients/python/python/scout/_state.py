@@ -142,6 +142,26 @@ class Bms:
 
 
 @dataclass(frozen=True)
+class Battery:
+    """The battery as the gateway judges it, on either protocol: the charge (a smart battery's
+    report, or the gateway's estimate from the voltage: `source`), whether it charges (`status`:
+    charging, discharging, not_charging, full, unknown), its `level` against the thresholds
+    (ok, low, critical, unknown). None where nothing measures or estimates a value."""
+
+    source: str
+    percent: Optional[float]
+    status: str
+    level: str
+    voltage: Optional[float]
+    current: Optional[float]
+    health_percent: Optional[float]
+    temperature: Optional[float]
+    capacity_ah: Optional[float]
+    low_percent: Optional[float]
+    critical_percent: Optional[float]
+
+
+@dataclass(frozen=True)
 class Firmware:
     """A v2 chassis' firmware versions, as its answer to the version request says them."""
 
@@ -270,6 +290,12 @@ class State:
         return bms
 
     @property
+    def battery(self) -> Battery:
+        """The battery's charge, charging and level (docs/chassis.md, Battery)."""
+        battery: Battery = self._field("battery", lambda fields: Battery(**fields))
+        return battery
+
+    @property
     def firmware(self) -> Optional[Firmware]:
         """The firmware versions (protocol v2), or None before the answer."""
         firmware: Optional[Firmware] = self._field(
@@ -298,6 +324,9 @@ class State:
         motion, system = self.motion, self.system
         speed = "-" if motion is None else f"{motion.linear:+.2f} m/s"
         battery = "-" if system is None else f"{system.battery_voltage:.1f} V"
+        charge = self.battery.percent
+        if charge is not None:
+            battery += f" {charge:.0f} %"
         return f"<State {self.robot} #{self.seq} link={self.link.state} {speed} {battery}>"
 
 
