@@ -171,9 +171,7 @@ pub struct OdometryConfig {
     pub yaw_scale: f64,
 }
 
-/// The range a calibration factor may take: beyond it, something else is wrong (a model, a
-/// gear ratio), not a calibration.
-pub const ODOMETRY_SCALE_RANGE: std::ops::RangeInclusive<f64> = 0.5..=2.0;
+pub use scout_interface::state::ODOMETRY_SCALE_RANGE;
 
 impl Default for OdometryConfig {
     fn default() -> Self {

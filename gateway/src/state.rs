@@ -152,6 +152,7 @@ impl StateTracker {
             calibration: OdometryConfig::default(),
             battery,
         }
+        .with_calibration(OdometryConfig::default())
     }
 
     /// This tracker, judging the battery by `config`.
@@ -165,6 +166,8 @@ impl StateTracker {
     /// This tracker, integrating the odometry with `calibration`.
     pub fn with_calibration(mut self, calibration: OdometryConfig) -> Self {
         self.calibration = calibration;
+        self.state.odometry.distance_scale = calibration.distance_scale;
+        self.state.odometry.yaw_scale = calibration.yaw_scale;
         self
     }
 
@@ -273,6 +276,8 @@ impl StateTracker {
         let resets = self.state.odometry.resets + 1;
         self.state.odometry = OdometryPayload {
             resets,
+            distance_scale: self.calibration.distance_scale,
+            yaw_scale: self.calibration.yaw_scale,
             ..OdometryPayload::default()
         };
         self.yaw_at_odometer = 0.0;

@@ -132,7 +132,7 @@ pub fn drive(args: &DriveArgs) -> anyhow::Result<ExitCode> {
 }
 
 /// A flag Ctrl-C (and SIGTERM) raises: the drive loops end on it, stopping the robot first.
-fn ctrl_c() -> anyhow::Result<Arc<AtomicBool>> {
+pub(crate) fn ctrl_c() -> anyhow::Result<Arc<AtomicBool>> {
     let stop = Arc::new(AtomicBool::new(false));
     let on_signal = Arc::clone(&stop);
     ctrlc::set_handler(move || on_signal.store(true, Ordering::Relaxed))

@@ -5,6 +5,7 @@
 //! `scout-foxglove` program, `scout doctor` the `scout-doctor` program; each exits with that
 //! program's code.
 
+mod calibrate;
 mod companion;
 mod control;
 mod decode;
@@ -58,6 +59,9 @@ enum Command {
     Status(status::StatusArgs),
     /// Reset the gateway's odometry to the origin.
     ResetOdometry(control::ClientArgs),
+    /// Calibrate the odometry: the robot drives a straight distance and turns in place, you
+    /// say what you measured, and the factors go into the gateway's configuration.
+    Calibrate(calibrate::CalibrateArgs),
     /// Run a zenoh router for a fleet: gateways connect to it, remote readers read through it.
     Router(router::RouterArgs),
     /// Make the chassis a ROS 2 node: /odom, /tf, /battery_state, /joint_states, /diagnostics
@@ -140,6 +144,7 @@ fn main() -> ExitCode {
         Command::ClearFault(args) => control::clear_fault(&args),
         Command::Status(args) => status::run(&args),
         Command::ResetOdometry(args) => control::one_shot(&args, |c| c.reset_odometry()),
+        Command::Calibrate(args) => calibrate::run(&args),
         Command::Router(args) => router::run(&args),
         Command::Ros2(args) => companion::run(companion::ROS2, &[], &args),
         Command::Record(args) => companion::run(companion::FOXGLOVE, &["record"], &args),

@@ -90,7 +90,7 @@ pub fn state() -> Value {
     let firmware = nullable(json!({ "text": string(), "age_ms": number() }));
     let odometry = object(json!({
         "x": number(), "y": number(), "yaw": number(), "distance": number(),
-        "resets": integer(),
+        "resets": integer(), "distance_scale": number(), "yaw_scale": number(),
     }));
     json!({
         "title": "scout.State",

@@ -74,11 +74,55 @@ pub const SILENT_AFTER: Duration = Duration::from_secs(1);
 /// Diagnostics go out at least this often (ROS' diagnostic_updater's rate).
 pub const DIAGNOSTICS_PERIOD: Duration = Duration::from_secs(1);
 
-/// Odometry's covariance diagonals (x, y, z, roll, pitch, yaw): planar, so z, roll and pitch
-/// are unknown (1e6, robot_localization ignores them); wheel slip makes skid-steer yaw the
-/// weakest.
-const POSE_COVARIANCE: [f64; 6] = [1e-3, 1e-3, 1e6, 1e6, 1e6, 1e-2];
-const TWIST_COVARIANCE: [f64; 6] = [1e-3, 1e-3, 1e6, 1e6, 1e6, 1e-2];
+/// The relative errors of skid-steer odometry (1 sigma) behind its covariance: distance and
+/// turn, calibrated (`scout calibrate`: what remains is slip and floors) or not (tyres and
+/// firmware: scout_ros#5 saw a turn 26 % off).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct OdometryErrors {
+    /// Of a distance (and a speed).
+    distance: f64,
+    /// Of a turn (and a turn rate).
+    turn: f64,
+    /// Heading lost per metre driven, rad/m (skid-steer slips turning and on uneven floors).
+    heading_per_metre: f64,
+}
+
+const CALIBRATED: OdometryErrors = OdometryErrors {
+    distance: 0.02,
+    turn: 0.03,
+    heading_per_metre: 0.02,
+};
+const UNCALIBRATED: OdometryErrors = OdometryErrors {
+    distance: 0.05,
+    turn: 0.25,
+    heading_per_metre: 0.1,
+};
+/// What the odometry is never better than: 1 cm, 0.01 rad, 1 cm/s, 0.01 rad/s (1 sigma).
+const FLOOR: f64 = 0.01;
+/// Planar: z, roll and pitch unknown (robot_localization ignores them).
+const UNKNOWN: f64 = 1e6;
+
+/// /odom's covariance diagonals (x, y, z, roll, pitch, yaw), pose then twist: the pose's
+/// uncertainty grows with the distance since the last reset, the twist's with the speed, both
+/// smaller once the odometry is calibrated (either factor off 1.0).
+fn odometry_covariance(state: &StatePayload, linear: f64, angular: f64) -> ([f64; 6], [f64; 6]) {
+    let odometry = &state.odometry;
+    let errors = if odometry.distance_scale != 1.0 || odometry.yaw_scale != 1.0 {
+        CALIBRATED
+    } else {
+        UNCALIBRATED
+    };
+    let variance = |sigma: f64| (sigma + FLOOR).powi(2);
+    let distance = odometry.distance.abs();
+    let position = variance(errors.distance * distance);
+    let heading = variance(errors.heading_per_metre * distance);
+    let speed = variance(errors.distance * linear.abs());
+    let rate = variance(errors.turn * angular.abs());
+    (
+        [position, position, UNKNOWN, UNKNOWN, UNKNOWN, heading],
+        [speed, speed, UNKNOWN, UNKNOWN, UNKNOWN, rate],
+    )
+}
 
 /// diagnostic_msgs/DiagnosticStatus levels.
 const OK: u8 = 0;
@@ -204,6 +248,12 @@ impl Messages {
             frame_id: &frames.odom,
         };
         let odometry = &state.odometry;
+        // The speeds the chassis reports, calibrated as the pose is (the factors are 1.0 in a
+        // state from before they were published).
+        let scale = |factor: f64| if factor > 0.0 { factor } else { 1.0 };
+        let linear = state.motion.linear() * scale(odometry.distance_scale);
+        let angular = state.motion.angular() * scale(odometry.yaw_scale);
+        let (pose_covariance, twist_covariance) = odometry_covariance(state, linear, angular);
         out.push(Outgoing {
             topic: Topic::Odom,
             payload: Odometry {
@@ -212,10 +262,10 @@ impl Messages {
                 x: odometry.x,
                 y: odometry.y,
                 yaw: odometry.yaw,
-                linear: f64::from(state.motion.linear_mm_s) / 1000.0,
-                angular: f64::from(state.motion.angular_mrad_s) / 1000.0,
-                pose_covariance: POSE_COVARIANCE,
-                twist_covariance: TWIST_COVARIANCE,
+                linear,
+                angular,
+                pose_covariance,
+                twist_covariance,
             }
             .encode(),
         });
@@ -695,6 +745,55 @@ mod tests {
             (link.level, system.level, battery.level),
             (ERROR, STALE, STALE)
         );
+    }
+
+    #[test]
+    fn the_odometry_is_calibrated_and_its_covariance_says_what_is_known() {
+        let mut state = state(SECOND);
+        state.odometry.distance_scale = 1.0;
+        state.odometry.yaw_scale = 1.0;
+        let (pose, twist) = odometry_covariance(&state, 0.5, 0.0);
+        assert_eq!(pose[0], 0.01f64.powi(2), "at the origin: the floor");
+        assert!(
+            twist[0] > 0.01f64.powi(2),
+            "a speed is uncertain in proportion"
+        );
+        assert_eq!((pose[2], twist[3]), (UNKNOWN, UNKNOWN));
+        state.odometry.distance = 10.0;
+        let (far, _) = odometry_covariance(&state, 0.5, 0.0);
+        assert!(
+            far[0] > pose[0] && far[5] > pose[5],
+            "it grows with the distance"
+        );
+        state.odometry.yaw_scale = 0.7937;
+        let (calibrated, calibrated_twist) = odometry_covariance(&state, 0.5, 0.4);
+        let (_, uncalibrated_twist) = {
+            let mut raw = state;
+            raw.odometry.yaw_scale = 1.0;
+            odometry_covariance(&raw, 0.5, 0.4)
+        };
+        assert!(
+            calibrated[0] < far[0] && calibrated[5] < far[5],
+            "smaller once calibrated"
+        );
+        assert!(calibrated_twist[5] < uncalibrated_twist[5]);
+        // The twist /odom carries is the calibrated one: 1 rad/s reported is 0.7937 turned.
+        state.motion.linear_mm_s = 0;
+        state.motion.angular_mrad_s = 1000;
+        let mut messages = Messages::new(Ros2Config::default());
+        let out = messages.handle_state(&state, None, clocks(SECOND), &Vec::new);
+        let odom = out.iter().find(|o| o.topic == Topic::Odom).expect("/odom");
+        let mut reader = Reader::new(&odom.payload).expect("CDR");
+        reader.i32().and_then(|_| reader.u32()).expect("stamp");
+        reader
+            .skip_string()
+            .and_then(|()| reader.skip_string())
+            .expect("frames");
+        // Pose (7), its covariance (36), the twist's linear (3), then its angular z.
+        for _ in 0..(7 + 36 + 3 + 2) {
+            reader.f64().expect("f64");
+        }
+        assert_eq!(reader.f64(), Ok(0.7937), "the calibrated turn rate");
     }
 
     #[test]

@@ -351,6 +351,8 @@ pub fn state_field(state: &StatePayload, key: &str, now_ns: u64) -> Option<Value
             "yaw": state.odometry.yaw,
             "distance": state.odometry.distance,
             "resets": state.odometry.resets,
+            "distance_scale": state.odometry.distance_scale,
+            "yaw_scale": state.odometry.yaw_scale,
         }),
         "command" => json!({ "linear": state.command.linear, "angular": state.command.angular }),
         _ => return None,

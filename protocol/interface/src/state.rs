@@ -415,7 +415,15 @@ pub struct OdometryPayload {
     pub distance: f64,
     /// How many times it was reset.
     pub resets: u32,
+    /// The distance calibration in force (the gateway's `[odometry] distance_scale`).
+    pub distance_scale: f64,
+    /// The turn calibration in force (`[odometry] yaw_scale`).
+    pub yaw_scale: f64,
 }
+
+/// The range a calibration factor may take: beyond it, something else is wrong (a model, a
+/// gear ratio), not a calibration.
+pub const ODOMETRY_SCALE_RANGE: std::ops::RangeInclusive<f64> = 0.5..=2.0;
 
 /// The motion command the gateway last sent.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]

@@ -178,6 +178,8 @@ class Odometry:
     yaw: float
     distance: float
     resets: int
+    distance_scale: float
+    yaw_scale: float
 
 
 @dataclass(frozen=True)
