@@ -389,6 +389,11 @@ impl Controller {
     pub fn reset_odometry(&mut self) -> Result<Accepted, ControlError> {
         self.request(&Request::ResetOdometry)
     }
+
+    /// Asks the gateway to save its black box of the bus to disk (its log names the file).
+    pub fn save_black_box(&mut self) -> Result<Accepted, ControlError> {
+        self.request(&Request::SaveBlackBox)
+    }
 }
 
 /// Reads the arbiter's status.

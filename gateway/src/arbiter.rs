@@ -642,8 +642,9 @@ impl Arbiter {
                 let index = self.admit(now, origin)?;
                 self.heartbeat(now, index, period)
             }
-            // The state tracker resets the odometry; to the arbiter it is a beat.
-            Request::ResetOdometry => {
+            // The state tracker resets the odometry, the driver saves the black box; to the
+            // arbiter they are beats.
+            Request::ResetOdometry | Request::SaveBlackBox => {
                 self.admit(now, origin)?;
                 accepted
             }

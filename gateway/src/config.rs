@@ -47,6 +47,8 @@ pub struct GatewayConfig {
     pub odometry: OdometryConfig,
     /// The battery: thresholds, what a critical one does, the estimate's curve.
     pub battery: BatteryConfig,
+    /// The black box of the bus.
+    pub blackbox: BlackBoxConfig,
     /// Remote peers through zenoh.
     pub zenoh: ZenohConfig,
     /// The simulated chassis (`transport = "sim"`): keys of the simulator's parameters
@@ -196,6 +198,53 @@ pub enum OnCritical {
     StopAutonomy,
 }
 
+/// The black box of the bus (docs/chassis.md, "The black box").
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct BlackBoxConfig {
+    /// How many minutes of frames it keeps (0: no black box).
+    pub minutes: f64,
+    /// At most this many frames (about 40 bytes each in memory), whatever the minutes.
+    pub max_frames: usize,
+    /// Where the files go (default: `blackbox` in the run directory, `$SCOUT_RUN_DIR`).
+    pub dir: Option<PathBuf>,
+    /// How many of the robot's files to keep (the oldest go).
+    pub keep: usize,
+}
+
+impl Default for BlackBoxConfig {
+    fn default() -> Self {
+        Self {
+            minutes: 5.0,
+            max_frames: 400_000,
+            dir: None,
+            keep: 20,
+        }
+    }
+}
+
+impl BlackBoxConfig {
+    /// The directory of the files.
+    pub fn dir(&self) -> PathBuf {
+        self.dir
+            .clone()
+            .unwrap_or_else(|| crate::lock::lock_dir().join("blackbox"))
+    }
+
+    fn validate(&self) -> Result<(), String> {
+        if !(0.0..=60.0).contains(&self.minutes) {
+            return Err(format!(
+                "blackbox.minutes must be within 0..=60 (0: off), found {}",
+                self.minutes
+            ));
+        }
+        if self.max_frames == 0 || self.keep == 0 {
+            return Err("blackbox.max_frames and blackbox.keep must be positive".into());
+        }
+        Ok(())
+    }
+}
+
 /// The battery's thresholds and estimate.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -280,6 +329,7 @@ impl Default for GatewayConfig {
             safety: SafetyConfig::default(),
             odometry: OdometryConfig::default(),
             battery: BatteryConfig::default(),
+            blackbox: BlackBoxConfig::default(),
             zenoh: ZenohConfig::default(),
             sim: toml::Table::new(),
         }
@@ -391,6 +441,7 @@ impl GatewayConfig {
             }
         }
         self.battery.validate().map_err(ConfigError::Invalid)?;
+        self.blackbox.validate().map_err(ConfigError::Invalid)?;
         self.zenoh
             .validate()
             .map_err(|error| ConfigError::Invalid(error.to_string()))?;

@@ -154,6 +154,10 @@ pub struct Core {
     on_critical: OnCritical,
     /// The battery level last acted on.
     battery_level: BatteryLevel,
+    /// Why the black box is to be saved, oldest first (a stop, a client's request).
+    black_box_due: VecDeque<String>,
+    /// The newest stop the black box was told of.
+    black_box_stop_seen: u64,
 }
 
 /// Watching the chassis move or turn faster than commanded.
@@ -254,7 +258,31 @@ impl Core {
             follow_up: VecDeque::new(),
             on_critical: config.battery.on_critical,
             battery_level: BatteryLevel::Unknown,
+            black_box_due: VecDeque::new(),
+            black_box_stop_seen: 0,
         }
+    }
+
+    /// Why the black box is to be saved now, if it is: a stop that latched (all but the start
+    /// after an unclean exit, which holds nothing of this run yet), or a client asked.
+    pub fn poll_black_box(&mut self) -> Option<String> {
+        let newest = self.arbiter.newest_stop();
+        if newest > self.black_box_stop_seen {
+            let seen = self.black_box_stop_seen;
+            self.black_box_stop_seen = newest;
+            for stop in self.arbiter.stops() {
+                if stop.id > seen && stop.cause != StopCause::GatewayStart {
+                    self.black_box_due.push_back(format!(
+                        "stop #{} by {} ({}): {}",
+                        stop.id,
+                        stop.owner,
+                        stop.cause.name(),
+                        stop.reason
+                    ));
+                }
+            }
+        }
+        self.black_box_due.pop_front()
     }
 
     /// Acts on a change of the battery's level as configured: at critical, autonomy may be
@@ -612,7 +640,13 @@ impl Core {
         let answer = match decoded {
             Ok(request) => {
                 let reset_odometry = request == Request::ResetOdometry;
+                let save_black_box = request == Request::SaveBlackBox;
                 let answer = self.arbiter.handle_request(now, origin, request, sent);
+                if save_black_box && answer.is_ok() {
+                    info!("black box save asked by {}", client.name);
+                    self.black_box_due
+                        .push_back(format!("asked by {}", client.name));
+                }
                 if reset_odometry && answer.is_ok() {
                     info!("odometry reset by {}", client.name);
                     let publish = self.tracker.reset_odometry();

@@ -1733,6 +1733,32 @@ fn a_critical_battery_bars_autonomy_and_never_teleop(protocol: Protocol) {
     }
 }
 
+/// The black box is due on every stop that latches and on a client's request, once each.
+fn the_black_box_is_due_on_a_stop_and_on_request(protocol: Protocol) {
+    let mut pair = Pair::of(protocol);
+    pair.run(ms(200));
+    assert_eq!(pair.core.poll_black_box(), None, "nothing yet");
+    pair.request(
+        OFFICER,
+        &Request::Stop {
+            reason: "a test".into(),
+        },
+    )
+    .expect("stop");
+    let due = pair.core.poll_black_box().expect("due on the stop");
+    assert!(
+        due.starts_with("stop #1 by officer (client): a test"),
+        "{due}"
+    );
+    assert_eq!(pair.core.poll_black_box(), None, "once");
+    pair.request(TELEOP, &Request::SaveBlackBox).expect("save");
+    assert_eq!(
+        pair.core.poll_black_box().as_deref(),
+        Some("asked by joystick")
+    );
+    assert_eq!(pair.core.poll_black_box(), None);
+}
+
 macro_rules! both_protocols {
     ($($name:ident),+ $(,)?) => {
         mod on_v1 {
@@ -1757,6 +1783,7 @@ both_protocols!(
     teleop_drives_the_chassis_and_a_stale_stream_ramps_to_zero,
     a_dead_client_loses_control_at_once,
     a_critical_battery_bars_autonomy_and_never_teleop,
+    the_black_box_is_due_on_a_stop_and_on_request,
     state_is_published_per_feedback_on_link_changes_and_every_100_ms_while_silent,
     status_is_published_on_change_and_once_a_second,
     odometry_reset_is_answered_and_published,

@@ -21,9 +21,12 @@ use scout_interface::robot::{Program, RobotName};
 use scout_interface::services::{self, ControlService, Ipc, Role, Way, monotonic};
 use scout_interface::state::{LinkState, StatePayload};
 use scout_interface::stop_socket::{Ask, ParseError, StopReply};
+use scout_protocol::can;
+use scout_protocol::link::RxEvent;
 use tracing::{debug, error, info, warn};
 
 use crate::arbiter::{Answer, ClientKey, GATEWAY, OPERATOR, OTHERS, Origin};
+use crate::blackbox::{Direction, Recorder};
 use crate::config::GatewayConfig;
 use crate::core::{Core, Publication, Start};
 use crate::device::{Device, DeviceSpec, OpenError};
@@ -274,6 +277,8 @@ pub struct Driver {
     backlog: bool,
     realtime_priority: u8,
     service_manager: scout_io::notify::ServiceManager,
+    /// The black box of the bus (none when configured off).
+    black_box: Option<Recorder>,
 }
 
 impl std::fmt::Debug for Driver {
@@ -313,6 +318,8 @@ impl Driver {
             backlog: false,
             realtime_priority: config.timing.realtime_priority,
             service_manager: scout_io::notify::ServiceManager::from_env(),
+            black_box: Recorder::start(&config.blackbox, &config.name.to_string())
+                .context("starting the black box thread")?,
         })
     }
 
@@ -323,6 +330,14 @@ impl Driver {
 
     /// Runs until `stop` is set, then sends zero speed for the configured cycles and returns.
     pub fn run(&mut self, stop: &AtomicBool) -> anyhow::Result<()> {
+        let result = self.run_loop(stop);
+        if let (Err(error), Some(black_box)) = (&result, &self.black_box) {
+            black_box.save(format!("the gateway failed: {error:#}"));
+        }
+        result
+    }
+
+    fn run_loop(&mut self, stop: &AtomicBool) -> anyhow::Result<()> {
         scout_io::raise_priority(self.realtime_priority, "control thread");
         let mut ready = Ready::default();
         loop {
@@ -346,6 +361,11 @@ impl Driver {
             }
             self.transmit();
             self.publish(now);
+            while let Some(why) = self.core.poll_black_box() {
+                if let Some(black_box) = &self.black_box {
+                    black_box.save(why);
+                }
+            }
             if self.core.is_finished() {
                 break;
             }
@@ -392,7 +412,18 @@ impl Driver {
             return;
         };
         let core = &mut self.core;
+        let black_box = self.black_box.as_ref();
         let result = device.receive(now, readable, &mut self.buffer[..], |event| {
+            if let Some(black_box) = black_box {
+                let frame = match &event {
+                    RxEvent::Message(counted) => Some(can::encode(&counted.message, counted.count)),
+                    RxEvent::V2(message) => Some(message.encode()),
+                    RxEvent::Rejected(_) | RxEvent::Slcan(_) => None,
+                };
+                if let Some(frame) = frame {
+                    black_box.record(Direction::Rx, frame, now);
+                }
+            }
             core.handle_rx(now, &event);
         });
         core.handle_port_counters(PortCounters {
@@ -561,6 +592,9 @@ impl Driver {
             let Some(device) = self.device.as_mut() else {
                 return;
             };
+            if let Some(black_box) = &self.black_box {
+                black_box.record(Direction::Tx, frame.can_frame(), now);
+            }
             if let Err(error) = device.send(&frame, now) {
                 self.device = None;
                 let what = format!("writing: {error}");

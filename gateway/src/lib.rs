@@ -9,6 +9,7 @@
 //!   - [`arbiter`]: who drives: safety stop > teleop > autonomy;
 //!   - [`command_mode`]: a protocol v2 chassis' command mode, taken with 0x421 and watched.
 //! - [`driver`]: the one thread that does I/O around the core: port, iceoryx2, clock, `ppoll`.
+//! - [`blackbox`]: the last minutes of frames, kept on a thread of its own, saved on a stop.
 //! - [`wait`]: waiting on the port and the clients' wake-up event at once.
 //! - [`monitor`]: dead-process detection for clients.
 //! - [`stop_endpoint`]: the stop socket beside iceoryx2, which is also the robot name's lock.
@@ -22,6 +23,7 @@
 
 pub mod arbiter;
 pub mod battery;
+pub mod blackbox;
 pub mod command_mode;
 pub mod config;
 pub mod core;

@@ -44,7 +44,8 @@ pub fn run(args: &DecodeArgs) -> anyhow::Result<ExitCode> {
     let mut out = BufWriter::new(stdout.lock());
     let mut bad_lines = 0usize;
     let mut decode_one = |number: usize, line: &str| -> anyhow::Result<()> {
-        if line.trim().is_empty() {
+        // Blank lines, and `#` comments (a black box's header).
+        if line.trim().is_empty() || line.trim_start().starts_with('#') {
             return Ok(());
         }
         match decode_line(line, protocol) {

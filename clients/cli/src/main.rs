@@ -62,6 +62,9 @@ enum Command {
     /// Calibrate the odometry: the robot drives a straight distance and turns in place, you
     /// say what you measured, and the factors go into the gateway's configuration.
     Calibrate(calibrate::CalibrateArgs),
+    /// The gateway's black box of the bus: `scout blackbox save` writes the last minutes of
+    /// frames to disk now (the gateway's log names the file; `scout decode FILE` reads it).
+    Blackbox(BlackboxArgs),
     /// Run a zenoh router for a fleet: gateways connect to it, remote readers read through it.
     Router(router::RouterArgs),
     /// Make the chassis a ROS 2 node: /odom, /tf, /battery_state, /joint_states, /diagnostics
@@ -95,6 +98,18 @@ enum Command {
     /// Runs the `scout-doctor` program (found beside `scout`, else on PATH).
     #[command(disable_help_flag = true)]
     Doctor(companion::CompanionArgs),
+}
+
+#[derive(Debug, Args)]
+struct BlackboxArgs {
+    #[command(subcommand)]
+    action: BlackboxAction,
+}
+
+#[derive(Debug, Subcommand)]
+enum BlackboxAction {
+    /// Save the black box now (also done by the gateway on every stop it latches).
+    Save(control::ClientArgs),
 }
 
 /// The robot to talk to.
@@ -145,6 +160,9 @@ fn main() -> ExitCode {
         Command::Status(args) => status::run(&args),
         Command::ResetOdometry(args) => control::one_shot(&args, |c| c.reset_odometry()),
         Command::Calibrate(args) => calibrate::run(&args),
+        Command::Blackbox(BlackboxArgs {
+            action: BlackboxAction::Save(args),
+        }) => control::one_shot(&args, |c| c.save_black_box()),
         Command::Router(args) => router::run(&args),
         Command::Ros2(args) => companion::run(companion::ROS2, &[], &args),
         Command::Record(args) => companion::run(companion::FOXGLOVE, &["record"], &args),

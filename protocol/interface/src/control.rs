@@ -55,6 +55,8 @@ wire_enum! {
         Relinquish = 9 => "relinquish",
         /// Take control as `class`: the answer carries the lease that drive commands name.
         TakeControl = 10 => "take_control",
+        /// Save the gateway's black box of the bus to disk now.
+        SaveBlackBox = 11 => "save_black_box",
     }
 }
 
@@ -186,6 +188,8 @@ pub enum Request {
     },
     /// Reset the gateway's odometry to the origin.
     ResetOdometry,
+    /// Save the black box of the bus (the last minutes of frames) to disk.
+    SaveBlackBox,
 }
 
 impl Request {
@@ -202,6 +206,7 @@ impl Request {
             Self::ClearFault(_) => RequestKind::ClearFault,
             Self::Heartbeat { .. } => RequestKind::Heartbeat,
             Self::ResetOdometry => RequestKind::ResetOdometry,
+            Self::SaveBlackBox => RequestKind::SaveBlackBox,
         }
     }
 
@@ -251,7 +256,7 @@ impl Request {
             Self::Heartbeat { period } => {
                 wire.heartbeat_ms = period.as_millis().min(u128::from(u32::MAX)) as u32;
             }
-            Self::Relinquish | Self::Resume | Self::ResetOdometry => {}
+            Self::Relinquish | Self::Resume | Self::ResetOdometry | Self::SaveBlackBox => {}
         }
         wire
     }
@@ -309,6 +314,7 @@ impl Request {
                 period: Duration::from_millis(u64::from(wire.heartbeat_ms)),
             },
             RequestKind::ResetOdometry => Self::ResetOdometry,
+            RequestKind::SaveBlackBox => Self::SaveBlackBox,
         })
     }
 }
@@ -1023,6 +1029,7 @@ mod tests {
                 period: Duration::from_millis(ms)
             }),
             Just(Request::ResetOdometry),
+            Just(Request::SaveBlackBox),
         ]
     }
 
@@ -1077,6 +1084,7 @@ mod tests {
                 period: Duration::ZERO,
             },
             Request::ResetOdometry,
+            Request::SaveBlackBox,
         ]
         .iter()
         .map(Request::kind)
