@@ -15,6 +15,7 @@ use serialport::{SerialPort, TTYPort};
 use tracing::{info, warn};
 
 use crate::chassis::{Chassis, Feedback, Injection, SimParams};
+use crate::replay::Replay;
 use crate::script::{HELP, SimCommand};
 use scout_io::{Incoming, Port};
 use scout_protocol::Transport;
@@ -41,6 +42,8 @@ pub struct SimOptions {
     /// SCHED_FIFO priority of the simulator's loop (0: normal), so that what it measures is
     /// the gateway's timing, not its own scheduling.
     pub realtime_priority: u8,
+    /// A gateway's black box to replay in place of the model's feedback.
+    pub replay: Option<Replay>,
 }
 
 /// The wire as the chassis saw it, one line an event, times in CLOCK_BOOTTIME ns (shared by
@@ -167,6 +170,8 @@ struct Simulator<'a> {
     write_errors_reported: u64,
     trace: Option<Trace>,
     out: &'a mut dyn Write,
+    /// The black box being replayed, and when it began (at the first port).
+    replay: Option<(Replay, Option<Duration>)>,
 }
 
 /// Runs the simulator until `stop` is set or a `quit` command arrives; prints the port line first
@@ -202,6 +207,7 @@ pub fn run(
         write_errors_reported: 0,
         trace: options.trace.as_deref().map(Trace::create).transpose()?,
         out,
+        replay: options.replay.clone().map(|replay| (replay, None)),
         options,
     };
     simulator.plug_in()?;
@@ -241,6 +247,8 @@ impl Simulator<'_> {
             }
             let now = self.now();
             match self.chassis.poll_feedback(now) {
+                // A replay speaks instead of the model (which still hears the commands).
+                _ if self.replay.is_some() => self.send_replayed(now)?,
                 Some(Feedback::V1(batch)) => self.send_feedback(&batch, now)?,
                 Some(Feedback::V2(frames)) => self.send_feedback_v2(&frames, now)?,
                 None => {}
@@ -543,6 +551,47 @@ impl Simulator<'_> {
         }
         self.write_bytes(&bytes)?;
         self.trace_feedback(written_ns);
+        Ok(())
+    }
+
+    /// The replayed frames due now, from when the port first opened; silence after the last.
+    fn send_replayed(&mut self, now: Duration) -> anyhow::Result<()> {
+        let Some((written_ns, timestamp)) = self.feedback_slot(now) else {
+            return Ok(());
+        };
+        let Some((replay, started)) = self.replay.as_mut() else {
+            return Ok(());
+        };
+        let started = *started.get_or_insert(now);
+        let due: Vec<CanFrame> = replay
+            .due(now.saturating_sub(started))
+            .iter()
+            .map(|(_, frame)| *frame)
+            .collect();
+        let finished = replay.finished();
+        if due.is_empty() {
+            return Ok(());
+        }
+        let mut bytes = Vec::new();
+        for frame in &due {
+            self.stats.frames_sent += 1;
+            match self.options.transport {
+                Transport::Serial => match can::decode(frame) {
+                    Ok(counted) => {
+                        bytes.extend_from_slice(&serial::encode(&counted.message, counted.count))
+                    }
+                    Err(error) => warn!("frame 0x{:03X} cannot go on RS232: {error}", frame.id()),
+                },
+                Transport::Slcan | Transport::Can | Transport::GsUsb | Transport::Sim => {
+                    self.put_frame(frame, timestamp, &mut bytes);
+                }
+            }
+        }
+        self.write_bytes(&bytes)?;
+        self.trace_feedback(written_ns);
+        if finished {
+            info!("replay done: the chassis falls silent");
+        }
         Ok(())
     }
 

@@ -4,6 +4,7 @@
 mod arbiter;
 mod battery;
 mod bench;
+mod blackbox;
 mod decode;
 mod doctor;
 mod examples;

@@ -16,6 +16,7 @@ use clap::{ArgGroup, Parser, ValueEnum};
 use scout_protocol::Transport;
 use scout_protocol::model::Model;
 use scout_sim::SimParams;
+use scout_sim::replay::Replay;
 use scout_sim::run::{Protocol, SimOptions, run};
 use scout_sim::script::{self, SimCommand};
 
@@ -68,6 +69,11 @@ struct Cli {
     /// Seed for `garbage`.
     #[arg(long, default_value_t = 0x5C07)]
     seed: u64,
+    /// Replay a gateway's black box (`scout blackbox save`, or saved on a stop): the frames it
+    /// read from the chassis go out again with their spacing, instead of the model's feedback;
+    /// the chassis falls silent after the last.
+    #[arg(long, value_name = "FILE")]
+    replay: Option<PathBuf>,
 }
 
 /// `--protocol`.
@@ -134,7 +140,23 @@ fn simulate(cli: Cli) -> anyhow::Result<()> {
             std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
         std::thread::spawn(move || feed(std::io::BufReader::new(file), &commands));
     }
+    let replay = match &cli.replay {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            let replay = Replay::parse(&text).with_context(|| format!("in {}", path.display()))?;
+            eprintln!(
+                "scout-sim: replaying {} frames ({:.1} s) from {}",
+                replay.len(),
+                replay.length().as_secs_f64(),
+                path.display()
+            );
+            Some(replay)
+        }
+        None => None,
+    };
     let options = SimOptions {
+        replay,
         transport,
         protocol,
         can_interface: cli.can,
