@@ -251,7 +251,17 @@ impl Bench {
 
     /// Starts a gateway and waits until it publishes a state with the link up.
     fn start_gateway(&mut self, zenoh: bool) -> anyhow::Result<StateSubscriber> {
-        let args = self.gateway_args(zenoh);
+        self.start_gateway_with(zenoh, &[])
+    }
+
+    /// [`Bench::start_gateway`] with `extra` arguments.
+    fn start_gateway_with(
+        &mut self,
+        zenoh: bool,
+        extra: &[String],
+    ) -> anyhow::Result<StateSubscriber> {
+        let mut args = self.gateway_args(zenoh);
+        args.extend_from_slice(extra);
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
         let log = self.scratch.path("gateway.log");
         self.gateway = Some(Gateway::start(&args, &log)?);
@@ -321,6 +331,8 @@ pub fn run(options: &Options) -> anyhow::Result<()> {
     for rig in [Rig::SlcanV1, Rig::SlcanV2] {
         protocol(rig, plan, options.client_priority, &mut report)?;
     }
+    black_box(plan, options.client_priority, &mut report)?;
+    black_box_write(&mut report)?;
     decode_throughput(&mut report);
 
     finish(options, report)
@@ -399,6 +411,57 @@ fn protocol(rig: Rig, plan: Plan, priority: u8, report: &mut Report) -> anyhow::
     insert(&mut report.json, key, Value::Object(figures.json));
     if let Some(gateway) = bench.gateway.take() {
         gateway.kill();
+    }
+    Ok(())
+}
+
+/// What the black box costs the tick: the motion command's interval at the chassis with the
+/// black box off, and on while `scout blackbox save` writes it every 2 s (the main run's idle
+/// figure is with it on, not saving). In the JSON under `black_box`.
+fn black_box(plan: Plan, priority: u8, report: &mut Report) -> anyhow::Result<()> {
+    for (key, label, minutes, saving) in [
+        ("off", "black box off", 0, false),
+        ("saving", "black box on, saved every 2 s", 5, true),
+    ] {
+        progress(&format!("tick jitter: {label}"));
+        let name = format!("bench-blackbox-{key}-{}", std::process::id());
+        let mut bench = Bench::start(Rig::SerialV1, name, String::new(), plan, priority)?;
+        let config = bench.scratch.path("gateway.toml");
+        let dir = bench.scratch.path("blackbox");
+        std::fs::write(
+            &config,
+            format!(
+                "[blackbox]\nminutes = {minutes}\ndir = \"{}\"\n",
+                dir.display()
+            ),
+        )?;
+        let extra = ["--config".to_owned(), config.display().to_string()];
+        bench.start_gateway_with(false, &extra)?;
+        let from = monotonic_ns();
+        let end = std::time::Instant::now() + Duration::from_secs_f64(bench.plan.window);
+        while std::time::Instant::now() < end {
+            if saving {
+                let status = command("scout")?
+                    .args(["blackbox", "save", "--name", &bench.name])
+                    .stdout(std::process::Stdio::null())
+                    .status()?;
+                anyhow::ensure!(status.success(), "scout blackbox save failed");
+            }
+            std::thread::sleep(Duration::from_secs(2).min(end - std::time::Instant::now()));
+        }
+        let ticks = trace(&bench)?.ticks(from, monotonic_ns());
+        let json = ticks.json();
+        report.rows.push((
+            format!("0x130 interval, {label} (ms)"),
+            format!(
+                "mean {} / p99 dev {} / max {} / >25 ms {} ({})",
+                json["mean"], json["p99_dev"], json["max"], json["over_25"], json["n"]
+            ),
+        ));
+        insert(&mut report.json, &format!("black_box.{key}"), json);
+        if let Some(gateway) = bench.gateway.take() {
+            gateway.kill();
+        }
     }
     Ok(())
 }
@@ -1435,6 +1498,50 @@ fn cost(bench: &mut Bench, report: &mut Report) -> anyhow::Result<()> {
 }
 
 /// The protocol crate's CAN decode over the bundled capture of a real chassis.
+/// How long the black box's thread works to save a full default box (5 minutes of a v1
+/// chassis: 7 frames read and one written every 20 ms) and how big it is: the thread's work,
+/// never the tick's.
+fn black_box_write(report: &mut Report) -> anyhow::Result<()> {
+    use scout_gateway::blackbox::{Direction, Recorded, Ring};
+    let span = Duration::from_secs(300);
+    let mut ring = Ring::new(span, 400_000);
+    let frame =
+        scout_protocol::CanFrame::new(0x151, &[0, 1, 0, 0xF5, 0, 0, 7, 0x5A]).context("a frame")?;
+    let periods = span.as_millis() as u64 / 20;
+    for period in 0..periods {
+        for index in 0..8u64 {
+            let at = Duration::from_millis(period * 20) + Duration::from_micros(index * 100);
+            ring.push(Recorded {
+                boot: at,
+                wall: Duration::from_secs(1_764_280_000) + at,
+                direction: if index == 7 {
+                    Direction::Tx
+                } else {
+                    Direction::Rx
+                },
+                frame,
+            });
+        }
+    }
+    let path = std::env::temp_dir().join(format!("scout-bench-box-{}.log", std::process::id()));
+    let start = Instant::now();
+    let text = ring.render(&["a bench".to_owned()]);
+    std::fs::write(&path, &text)?;
+    let elapsed = start.elapsed();
+    let _ = std::fs::remove_file(&path);
+    report.value(
+        "black_box_save_ms",
+        "black box, a full 5 min saved: the thread's time (ms)",
+        elapsed.as_secs_f64() * 1000.0,
+    );
+    report.value(
+        "black_box_file_mb",
+        "black box, a full 5 min saved: the file (MB)",
+        text.len() as f64 / 1e6,
+    );
+    Ok(())
+}
+
 fn decode_throughput(report: &mut Report) {
     use scout_protocol::{can, candump};
     const CAPTURE: &str =

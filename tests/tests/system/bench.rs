@@ -46,6 +46,12 @@ fn the_quick_bench_runs_and_writes_its_figures() {
             &["mean", "p99_dev", "max", "over_25", "over_40"],
         ));
     }
+    for black_box in ["off", "saving"] {
+        expected.push((
+            format!("/black_box/{black_box}"),
+            &["mean", "p99_dev", "max", "over_25"],
+        ));
+    }
     for (pointer, fields) in expected {
         for field in fields {
             let value = figures.pointer(&format!("{pointer}/{field}"));
@@ -68,6 +74,8 @@ fn the_quick_bench_runs_and_writes_its_figures() {
         "/recovery_ms/reconnect",
         "/gateway_cpu_percent",
         "/gateway_rss_mb",
+        "/black_box_save_ms",
+        "/black_box_file_mb",
     ] {
         assert!(
             figures
