@@ -1,15 +1,16 @@
 //! The black box of the bus: the last minutes of every frame the gateway read and wrote, kept
 //! on a thread of its own and written to disk (candump's log format, with both clocks) when a
-//! stop latches, when a client asks (`scout blackbox save`), and when the gateway fails. The
+//! stop latches, when a client asks (`scout blackbox save`), and when the gateway fails (its
+//! loop ends with an error, or it panics). The
 //! control loop only hands each frame over a bounded channel: it never waits on the black box
 //! or the disk.
 
 use std::collections::VecDeque;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime};
 
 use scout_protocol::CanFrame;
@@ -132,13 +133,17 @@ impl Ring {
 
 enum Message {
     Frame(Recorded),
-    Save(String),
+    /// A wake-up: reasons to save wait in [`Recorder::reasons`].
+    Save,
 }
 
 /// The black box's thread and the control loop's end of its channel.
 #[derive(Debug)]
 pub struct Recorder {
     sender: Option<SyncSender<Message>>,
+    /// Why to save, waiting for the thread (a lock held only to push or take: a save is
+    /// never lost to a full channel, and never waits for room in it).
+    reasons: Arc<Mutex<Vec<String>>>,
     /// Frames the channel had no room for (the thread fell behind), counted and said.
     lost: Arc<AtomicU64>,
     thread: Option<std::thread::JoinHandle<()>>,
@@ -154,7 +159,9 @@ impl Recorder {
         let dir = config.dir();
         let (sender, receiver) = std::sync::mpsc::sync_channel(CHANNEL);
         let lost = Arc::new(AtomicU64::new(0));
+        let reasons = Arc::new(Mutex::new(Vec::new()));
         let keeper = Keeper {
+            reasons: Arc::clone(&reasons),
             ring: Ring::new(
                 Duration::from_secs_f64(config.minutes * 60.0),
                 config.max_frames,
@@ -167,6 +174,16 @@ impl Recorder {
         let thread = std::thread::Builder::new()
             .name("black box".into())
             .spawn(move || keeper.run(&receiver))?;
+        // A panic anywhere asks for a save; the unwinding drops the recorder, whose thread
+        // then writes before the process ends.
+        let on_panic = Arc::clone(&reasons);
+        let previous = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if let Ok(mut reasons) = on_panic.lock() {
+                reasons.push(format!("the gateway panicked: {info}"));
+            }
+            previous(info);
+        }));
         info!(
             "black box: the last {} min of frames (at most {}), saved to {} on a stop, a failure \
              or `scout blackbox save`",
@@ -176,6 +193,7 @@ impl Recorder {
         );
         Ok(Some(Self {
             sender: Some(sender),
+            reasons,
             lost,
             thread: Some(thread),
         }))
@@ -199,11 +217,16 @@ impl Recorder {
         }
     }
 
-    /// Asks for the black box on disk, `why`, [`SAVE_AFTER`] from now.
+    /// Asks for the black box on disk, `why`, [`SAVE_AFTER`] from now. Never waits on the
+    /// thread: the reason waits in a list, and a wake-up that finds the channel full is not
+    /// needed (the thread looks at the list after every frame).
     pub fn save(&self, why: String) {
+        self.reasons
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .push(why);
         if let Some(sender) = &self.sender {
-            // A save must not be lost to a full channel: it waits for room, briefly.
-            let _ = sender.send(Message::Save(why));
+            let _ = sender.try_send(Message::Save);
         }
     }
 }
@@ -220,6 +243,7 @@ impl Drop for Recorder {
 
 /// The thread's side: the ring, and where and how many files to keep.
 struct Keeper {
+    reasons: Arc<Mutex<Vec<String>>>,
     ring: Ring,
     dir: PathBuf,
     keep: usize,
@@ -236,19 +260,27 @@ impl Keeper {
                 .map_or(Duration::from_secs(3600), |(at, _)| {
                     at.saturating_duration_since(Instant::now())
                 });
-            match receiver.recv_timeout(wait) {
-                Ok(Message::Frame(frame)) => self.ring.push(frame),
-                Ok(Message::Save(why)) => match pending.as_mut() {
-                    Some((_, reasons)) => reasons.push(why),
-                    None => pending = Some((Instant::now() + SAVE_AFTER, vec![why])),
-                },
-                Err(RecvTimeoutError::Timeout) => {}
-                Err(RecvTimeoutError::Disconnected) => {
-                    if let Some((_, reasons)) = pending.take() {
-                        self.write(&reasons);
-                    }
-                    return;
+            let received = receiver.recv_timeout(wait);
+            if let Ok(Message::Frame(frame)) = received {
+                self.ring.push(frame);
+            }
+            let asked = std::mem::take(
+                &mut *self
+                    .reasons
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner),
+            );
+            if !asked.is_empty() {
+                match pending.as_mut() {
+                    Some((_, reasons)) => reasons.extend(asked),
+                    None => pending = Some((Instant::now() + SAVE_AFTER, asked)),
                 }
+            }
+            if let Err(RecvTimeoutError::Disconnected) = received {
+                if let Some((_, reasons)) = pending.take() {
+                    self.write(&reasons);
+                }
+                return;
             }
             if pending
                 .as_ref()
@@ -373,6 +405,33 @@ mod tests {
         let text = small.render(&["saved for: a test".into()]);
         assert!(text.starts_with("# saved for: a test\n("), "{text}");
         assert_eq!(text.lines().count(), 11);
+    }
+
+    #[test]
+    fn a_panic_saves_the_black_box_as_the_recorder_unwinds() {
+        let dir = std::env::temp_dir().join(format!("scout-blackbox-panic-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let config = BlackBoxConfig {
+            dir: Some(dir.clone()),
+            ..BlackBoxConfig::default()
+        };
+        let recorder = Recorder::start(&config, "r2").expect("start").expect("on");
+        recorder.record(Direction::Tx, frame(0, Direction::Tx).frame, Duration::ZERO);
+        let unwound = std::panic::catch_unwind(std::panic::AssertUnwindSafe(move || {
+            let _recorder = recorder;
+            panic!("a test's own panic");
+        }));
+        assert!(unwound.is_err());
+        let files: Vec<_> = std::fs::read_dir(&dir).expect("a box").collect();
+        assert_eq!(files.len(), 1);
+        let path = files[0].as_ref().expect("entry").path();
+        let saved = std::fs::read_to_string(path).expect("read");
+        assert!(
+            saved.contains("# saved for: the gateway panicked: "),
+            "{saved}"
+        );
+        assert!(saved.contains("a test's own panic"), "{saved}");
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
