@@ -750,11 +750,6 @@ impl Arbiter {
         if class == Class::Autonomy && !self.autonomy_armed {
             return Err(Rejection::AutonomyDisarmed);
         }
-        if class == Class::Autonomy
-            && let Some(why) = &self.autonomy_barred
-        {
-            return Err(Rejection::NotAllowed { why: why.clone() });
-        }
         // Autonomy never waits behind a teleop holder to drive the moment teleop lets go.
         if class == Class::Autonomy
             && let Some(teleop) = self
@@ -786,6 +781,12 @@ impl Arbiter {
                 lease: Some(lease.id),
                 ..Accepted::default()
             });
+        }
+        // A new autonomy take only: one that holds control keeps it (and its take again).
+        if class == Class::Autonomy
+            && let Some(why) = &self.autonomy_barred
+        {
+            return Err(Rejection::NotAllowed { why: why.clone() });
         }
         let ends = [
             (self.released, "the stops were released"),

@@ -34,6 +34,9 @@ const ON_CHARGER_BELOW_FULL: f64 = 0.4;
 const BMS_IDLE_AMPS: f64 = 0.5;
 /// A level is left upward only this far above its threshold, %.
 const HYSTERESIS_PERCENT: f64 = 2.0;
+/// A level the chassis' own under-voltage bits raised holds this long after they clear (a pack
+/// sagging under load sets and clears them with every surge).
+const CHASSIS_HOLD: Duration = Duration::from_secs(30);
 
 /// What changed in the battery that is worth saying.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -54,6 +57,8 @@ pub struct BatteryMonitor {
     rest: Option<(f64, Duration)>,
     /// The rest voltage every [`TREND_STEP`] over [`TREND_SPAN`].
     trend: VecDeque<(Duration, f64)>,
+    /// The level the chassis' bits last raised, and until when it holds.
+    chassis_hold: Option<(BatteryLevel, Duration)>,
     payload: BatteryPayload,
 }
 
@@ -72,6 +77,7 @@ impl BatteryMonitor {
             curve,
             rest: None,
             trend: VecDeque::new(),
+            chassis_hold: None,
             payload,
         }
     }
@@ -120,7 +126,7 @@ impl BatteryMonitor {
         } else if state.system.received.valid {
             self.estimate(state, now);
         }
-        self.judge(chassis_warns, chassis_cut)
+        self.judge(chassis_warns, chassis_cut, now)
     }
 
     /// The estimate from the voltage: the pack's rest voltage is the measured one plus the
@@ -178,7 +184,12 @@ impl BatteryMonitor {
     }
 
     /// The level from the charge (with hysteresis) and the chassis' own under-voltage bits.
-    fn judge(&mut self, chassis_warns: bool, chassis_cut: bool) -> Option<LevelChange> {
+    fn judge(
+        &mut self,
+        chassis_warns: bool,
+        chassis_cut: bool,
+        now: Duration,
+    ) -> Option<LevelChange> {
         let from = self.payload.level();
         let percent = self.payload.percent;
         let (low, critical) = (self.config.low_percent, self.config.critical_percent);
@@ -201,13 +212,24 @@ impl BatteryMonitor {
                 BatteryLevel::Ok
             }
         };
-        let by_chassis = if chassis_cut {
+        let raised = if chassis_cut {
             BatteryLevel::Critical
         } else if chassis_warns {
             BatteryLevel::Low
         } else {
             BatteryLevel::Unknown
         };
+        if raised != BatteryLevel::Unknown {
+            let held = self
+                .chassis_hold
+                .filter(|(_, until)| now < *until)
+                .map_or(raised, |(level, _)| level.max(raised));
+            self.chassis_hold = Some((held, now + CHASSIS_HOLD));
+        }
+        let by_chassis = self
+            .chassis_hold
+            .filter(|(_, until)| now < *until)
+            .map_or(BatteryLevel::Unknown, |(level, _)| level);
         let to = by_charge.max(by_chassis);
         self.payload.level = to.raw();
         (to != from).then_some(LevelChange { from, to })
@@ -371,15 +393,28 @@ mod tests {
     }
 
     #[test]
-    fn the_chassis_bits_raise_the_level() {
+    fn the_chassis_bits_raise_the_level_and_hold_it_through_a_flicker() {
         let mut monitor = monitor();
         let mut state = v1_state(26.0, 0.0, secs(0.0));
         state.system.fault_bits = scout_protocol::Fault::BatteryUndervoltageWarning.mask();
         monitor.update(&state, secs(0.0));
         assert_eq!(monitor.payload().level(), BatteryLevel::Low);
+        // The warning flickers off under a surge's end: the level holds.
+        state.system.fault_bits = 0;
+        let changes: Vec<_> = (1..100)
+            .filter_map(|i| monitor.update(&state, secs(f64::from(i) * 0.2)))
+            .collect();
+        assert!(changes.is_empty(), "{changes:?}");
+        assert_eq!(monitor.payload().level(), BatteryLevel::Low);
         state.system.fault_bits = scout_protocol::Fault::BatteryUndervoltageFault.mask();
-        monitor.update(&state, secs(0.02));
+        monitor.update(&state, secs(20.0));
         assert_eq!(monitor.payload().level(), BatteryLevel::Critical);
+        // 30 s after the bits clear, the charge alone judges again.
+        state.system.fault_bits = 0;
+        monitor.update(&state, secs(49.0));
+        assert_eq!(monitor.payload().level(), BatteryLevel::Critical);
+        monitor.update(&state, secs(51.0));
+        assert_eq!(monitor.payload().level(), BatteryLevel::Ok);
     }
 
     #[test]
@@ -453,8 +488,8 @@ mod tests {
     }
 
     proptest::proptest! {
-        /// Whatever the chassis reports, the charge stays a percentage and the level follows
-        /// it.
+        /// Whatever the chassis reports, the charge stays a percentage and a critical charge
+        /// is a critical level (the chassis' bits may raise a level, never lower one).
         #[test]
         fn the_charge_is_a_percentage_and_the_level_consistent(
             reports in proptest::collection::vec(
@@ -483,9 +518,6 @@ mod tests {
                 proptest::prop_assert!(battery.level() != BatteryLevel::Unknown);
                 if battery.percent <= battery.critical_percent {
                     proptest::prop_assert_eq!(battery.level(), BatteryLevel::Critical);
-                }
-                if battery.percent > battery.low_percent + HYSTERESIS_PERCENT {
-                    proptest::prop_assert!(battery.level() != BatteryLevel::Low || bits != 0);
                 }
             }
         }

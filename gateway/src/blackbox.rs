@@ -9,7 +9,7 @@ use std::collections::VecDeque;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError};
+use std::sync::mpsc::{Receiver, SyncSender, TryRecvError, TrySendError};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime};
 
@@ -23,6 +23,9 @@ use crate::config::BlackBoxConfig;
 pub const SAVE_AFTER: Duration = Duration::from_secs(2);
 /// Frames in flight between the control loop and the black box's thread.
 const CHANNEL: usize = 8192;
+/// The thread wakes this often to take what came: the control loop never has a sleeper to
+/// wake (sending then takes no lock).
+const POLL: Duration = Duration::from_millis(20);
 
 /// Which way a frame went.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -131,19 +134,17 @@ impl Ring {
     }
 }
 
-enum Message {
-    Frame(Recorded),
-    /// A wake-up: reasons to save wait in [`Recorder::reasons`].
-    Save,
-}
+/// What the control loop hands over.
+type Message = Recorded;
 
 /// The black box's thread and the control loop's end of its channel.
 #[derive(Debug)]
 pub struct Recorder {
     sender: Option<SyncSender<Message>>,
-    /// Why to save, waiting for the thread (a lock held only to push or take: a save is
-    /// never lost to a full channel, and never waits for room in it).
+    /// Why to save, for the thread to take (the control loop only ever `try_lock`s it).
     reasons: Arc<Mutex<Vec<String>>>,
+    /// Reasons the control loop could not hand over yet (the thread held the lock).
+    unsent: Vec<String>,
     /// Frames the channel had no room for (the thread fell behind), counted and said.
     lost: Arc<AtomicU64>,
     thread: Option<std::thread::JoinHandle<()>>,
@@ -162,6 +163,7 @@ impl Recorder {
         let reasons = Arc::new(Mutex::new(Vec::new()));
         let keeper = Keeper {
             reasons: Arc::clone(&reasons),
+            min_interval: Duration::from_secs_f64(config.min_interval_s),
             ring: Ring::new(
                 Duration::from_secs_f64(config.minutes * 60.0),
                 config.max_frames,
@@ -194,6 +196,7 @@ impl Recorder {
         Ok(Some(Self {
             sender: Some(sender),
             reasons,
+            unsent: Vec::new(),
             lost,
             thread: Some(thread),
         }))
@@ -211,22 +214,29 @@ impl Recorder {
             frame,
         };
         if let Some(sender) = &self.sender
-            && let Err(TrySendError::Full(_)) = sender.try_send(Message::Frame(recorded))
+            && let Err(TrySendError::Full(_)) = sender.try_send(recorded)
         {
             self.lost.fetch_add(1, Ordering::Relaxed);
         }
     }
 
-    /// Asks for the black box on disk, `why`, [`SAVE_AFTER`] from now. Never waits on the
-    /// thread: the reason waits in a list, and a wake-up that finds the channel full is not
-    /// needed (the thread looks at the list after every frame).
-    pub fn save(&self, why: String) {
-        self.reasons
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
-            .push(why);
-        if let Some(sender) = &self.sender {
-            let _ = sender.try_send(Message::Save);
+    /// Asks for the black box on disk, `why`, [`SAVE_AFTER`] from now (or `[blackbox]
+    /// min_interval_s` after the last file: a burst of stops, a flapping link, a client asking
+    /// again and again, neither rewrites the ring every few seconds nor pushes the incident's
+    /// own file out; later causes share the next file, which still holds the minutes before). Never waits on the thread: a reason the
+    /// lock is busy for waits here for [`Recorder::hand_over`].
+    pub fn save(&mut self, why: String) {
+        self.unsent.push(why);
+        self.hand_over();
+    }
+
+    /// Hands waiting reasons to the thread if its lock is free (called every iteration).
+    pub fn hand_over(&mut self) {
+        if self.unsent.is_empty() {
+            return;
+        }
+        if let Ok(mut reasons) = self.reasons.try_lock() {
+            reasons.append(&mut self.unsent);
         }
     }
 }
@@ -234,6 +244,12 @@ impl Recorder {
 impl Drop for Recorder {
     /// Ends the thread once a pending save is written.
     fn drop(&mut self) {
+        if !self.unsent.is_empty() {
+            self.reasons
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .append(&mut self.unsent);
+        }
         drop(self.sender.take());
         if let Some(thread) = self.thread.take() {
             let _ = thread.join();
@@ -244,6 +260,7 @@ impl Drop for Recorder {
 /// The thread's side: the ring, and where and how many files to keep.
 struct Keeper {
     reasons: Arc<Mutex<Vec<String>>>,
+    min_interval: Duration,
     ring: Ring,
     dir: PathBuf,
     keep: usize,
@@ -254,15 +271,19 @@ struct Keeper {
 impl Keeper {
     fn run(mut self, receiver: &Receiver<Message>) {
         let mut pending: Option<(Instant, Vec<String>)> = None;
+        let mut last_file: Option<Instant> = None;
         loop {
-            let wait = pending
-                .as_ref()
-                .map_or(Duration::from_secs(3600), |(at, _)| {
-                    at.saturating_duration_since(Instant::now())
-                });
-            let received = receiver.recv_timeout(wait);
-            if let Ok(Message::Frame(frame)) = received {
-                self.ring.push(frame);
+            std::thread::sleep(POLL);
+            let mut gone = false;
+            loop {
+                match receiver.try_recv() {
+                    Ok(frame) => self.ring.push(frame),
+                    Err(TryRecvError::Empty) => break,
+                    Err(TryRecvError::Disconnected) => {
+                        gone = true;
+                        break;
+                    }
+                }
             }
             let asked = std::mem::take(
                 &mut *self
@@ -273,21 +294,22 @@ impl Keeper {
             if !asked.is_empty() {
                 match pending.as_mut() {
                     Some((_, reasons)) => reasons.extend(asked),
-                    None => pending = Some((Instant::now() + SAVE_AFTER, asked)),
+                    None => {
+                        let soonest = Instant::now() + SAVE_AFTER;
+                        let allowed = last_file.map_or(soonest, |at| at + self.min_interval);
+                        pending = Some((soonest.max(allowed), asked));
+                    }
                 }
             }
-            if let Err(RecvTimeoutError::Disconnected) = received {
-                if let Some((_, reasons)) = pending.take() {
-                    self.write(&reasons);
-                }
-                return;
-            }
-            if pending
+            let due = pending
                 .as_ref()
-                .is_some_and(|(at, _)| Instant::now() >= *at)
-                && let Some((_, reasons)) = pending.take()
-            {
+                .is_some_and(|(at, _)| gone || Instant::now() >= *at);
+            if due && let Some((_, reasons)) = pending.take() {
                 self.write(&reasons);
+                last_file = Some(Instant::now());
+            }
+            if gone {
+                return;
             }
         }
     }
@@ -339,24 +361,42 @@ fn write_file(dir: &Path, path: &Path, text: &str) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Removes the oldest of the robot's black boxes beyond `keep` (their names sort by time).
+/// Whether `name` is a black box of `robot`: `ROBOT-YYYY-MM-DDTHH-MM-SS.mmmZ.log` exactly (so
+/// robot `scout` never takes robot `scout-2`'s files for its own).
+fn is_box_of(name: &str, robot: &str) -> bool {
+    let Some(stamp) = name
+        .strip_prefix(robot)
+        .and_then(|rest| rest.strip_prefix('-'))
+    else {
+        return false;
+    };
+    let bytes = stamp.as_bytes();
+    bytes.len() == "2026-11-27T21-55-12.345Z.log".len()
+        && stamp.ends_with("Z.log")
+        && bytes[4] == b'-'
+        && bytes[10] == b'T'
+        && bytes[..4].iter().all(u8::is_ascii_digit)
+}
+
+/// Removes the oldest of the robot's black boxes beyond `keep`, oldest by modification time
+/// (a stepped wall clock does not reorder them).
 fn prune(dir: &Path, robot: &str, keep: usize) {
     let Ok(entries) = std::fs::read_dir(dir) else {
         return;
     };
-    let prefix = format!("{robot}-");
-    let mut files: Vec<PathBuf> = entries
+    let mut files: Vec<(SystemTime, PathBuf)> = entries
         .filter_map(Result::ok)
-        .map(|entry| entry.path())
-        .filter(|path| {
-            path.file_name()
-                .and_then(|name| name.to_str())
-                .is_some_and(|name| name.starts_with(&prefix) && name.ends_with(".log"))
+        .filter(|entry| {
+            entry
+                .file_name()
+                .to_str()
+                .is_some_and(|name| is_box_of(name, robot))
         })
+        .filter_map(|entry| Some((entry.metadata().ok()?.modified().ok()?, entry.path())))
         .collect();
     files.sort();
     let excess = files.len().saturating_sub(keep);
-    for old in &files[..excess] {
+    for (_, old) in &files[..excess] {
         if let Err(error) = std::fs::remove_file(old) {
             warn!("removing the old black box {}: {error}", old.display());
         }
@@ -408,6 +448,18 @@ mod tests {
     }
 
     #[test]
+    fn a_box_is_its_robots_by_the_whole_name() {
+        assert!(is_box_of("scout-2026-11-27T21-55-12.345Z.log", "scout"));
+        assert!(!is_box_of("scout-2-2026-11-27T21-55-12.345Z.log", "scout"));
+        assert!(is_box_of("scout-2-2026-11-27T21-55-12.345Z.log", "scout-2"));
+        assert!(!is_box_of(
+            "scout-2026-11-27T21-55-12.345Z.log.partial",
+            "scout"
+        ));
+        assert!(!is_box_of("notes.log", "scout"));
+    }
+
+    #[test]
     fn a_panic_saves_the_black_box_as_the_recorder_unwinds() {
         let dir = std::env::temp_dir().join(format!("scout-blackbox-panic-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
@@ -438,17 +490,21 @@ mod tests {
     fn a_save_writes_the_file_after_its_delay_and_old_ones_go() {
         let dir = std::env::temp_dir().join(format!("scout-blackbox-test-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
-        for old in ["r1-2000-01-01T00-00-00Z.log", "r1-2000-01-02T00-00-00Z.log"] {
+        for old in [
+            "r1-2000-01-01T00-00-00.000Z.log",
+            "r1-2000-01-02T00-00-00.000Z.log",
+        ] {
             std::fs::create_dir_all(&dir).expect("dir");
             std::fs::write(dir.join(old), "old").expect("an old box");
+            std::thread::sleep(Duration::from_millis(20));
         }
-        std::fs::write(dir.join("other-2000-01-01T00-00-00Z.log"), "").expect("another robot's");
+        std::fs::write(dir.join("r1-2-2000-01-01T00-00-00.000Z.log"), "").expect("robot r1-2's");
         let config = BlackBoxConfig {
             dir: Some(dir.clone()),
             keep: 2,
             ..BlackBoxConfig::default()
         };
-        let recorder = Recorder::start(&config, "r1").expect("start").expect("on");
+        let mut recorder = Recorder::start(&config, "r1").expect("start").expect("on");
         for ms in 0..100 {
             recorder.record(
                 Direction::Rx,
@@ -471,11 +527,11 @@ mod tests {
         names.sort();
         assert_eq!(names.len(), 3, "{names:?}");
         assert_eq!(
-            names[0], "other-2000-01-01T00-00-00Z.log",
-            "another robot's kept"
+            names[0], "r1-2-2000-01-01T00-00-00.000Z.log",
+            "robot r1-2's kept"
         );
         assert_eq!(
-            names[1], "r1-2000-01-02T00-00-00Z.log",
+            names[1], "r1-2000-01-02T00-00-00.000Z.log",
             "the oldest of r1 went"
         );
         let saved = std::fs::read_to_string(dir.join(&names[2])).expect("the box");

@@ -204,21 +204,24 @@ pub enum OnCritical {
 pub struct BlackBoxConfig {
     /// How many minutes of frames it keeps (0: no black box).
     pub minutes: f64,
-    /// At most this many frames (about 40 bytes each in memory), whatever the minutes.
+    /// At most this many frames (48 bytes each in memory), whatever the minutes.
     pub max_frames: usize,
     /// Where the files go (default: `blackbox` in the run directory, `$SCOUT_RUN_DIR`).
     pub dir: Option<PathBuf>,
     /// How many of the robot's files to keep (the oldest go).
     pub keep: usize,
+    /// At most one file this often, s: later causes wait and share the next file.
+    pub min_interval_s: f64,
 }
 
 impl Default for BlackBoxConfig {
     fn default() -> Self {
         Self {
             minutes: 5.0,
-            max_frames: 400_000,
+            max_frames: 250_000,
             dir: None,
             keep: 20,
+            min_interval_s: 60.0,
         }
     }
 }
@@ -236,6 +239,12 @@ impl BlackBoxConfig {
             return Err(format!(
                 "blackbox.minutes must be within 0..=60 (0: off), found {}",
                 self.minutes
+            ));
+        }
+        if !(0.0..=3600.0).contains(&self.min_interval_s) {
+            return Err(format!(
+                "blackbox.min_interval_s must be within 0..=3600, found {}",
+                self.min_interval_s
             ));
         }
         if self.max_frames == 0 || self.keep == 0 {

@@ -158,6 +158,8 @@ pub struct Core {
     black_box_due: VecDeque<String>,
     /// The newest stop the black box was told of.
     black_box_stop_seen: u64,
+    /// Whether there is a black box (`[blackbox] minutes` > 0).
+    black_box_on: bool,
 }
 
 /// Watching the chassis move or turn faster than commanded.
@@ -260,6 +262,7 @@ impl Core {
             battery_level: BatteryLevel::Unknown,
             black_box_due: VecDeque::new(),
             black_box_stop_seen: 0,
+            black_box_on: config.blackbox.minutes > 0.0,
         }
     }
 
@@ -267,7 +270,7 @@ impl Core {
     /// after an unclean exit, which holds nothing of this run yet), or a client asked.
     pub fn poll_black_box(&mut self) -> Option<String> {
         let newest = self.arbiter.newest_stop();
-        if newest > self.black_box_stop_seen {
+        if newest > self.black_box_stop_seen && self.black_box_on {
             let seen = self.black_box_stop_seen;
             self.black_box_stop_seen = newest;
             for stop in self.arbiter.stops() {
@@ -638,6 +641,13 @@ impl Core {
         };
         let sent = Duration::from_nanos(wire.sent_ns);
         let answer = match decoded {
+            Ok(Request::SaveBlackBox) if !self.black_box_on => {
+                let rejection = Rejection::NotAllowed {
+                    why: "this gateway keeps no black box ([blackbox] minutes = 0)".into(),
+                };
+                self.arbiter.count_rejection(&rejection);
+                Err(rejection)
+            }
             Ok(request) => {
                 let reset_odometry = request == Request::ResetOdometry;
                 let save_black_box = request == Request::SaveBlackBox;

@@ -1698,6 +1698,9 @@ fn a_critical_battery_bars_autonomy_and_never_teleop(protocol: Protocol) {
                     refused.is_none(),
                     "a running autonomy drives on: {refused:?}"
                 );
+                // Its take again (a client reconnecting) keeps the control it holds.
+                pair.take(AUTONOMY, Class::Autonomy)
+                    .expect("a held lease is no new take");
                 pair.request(AUTONOMY, &Request::Relinquish)
                     .expect("relinquish");
                 pair.leases.remove(&AUTONOMY.1);

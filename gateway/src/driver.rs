@@ -331,7 +331,7 @@ impl Driver {
     /// Runs until `stop` is set, then sends zero speed for the configured cycles and returns.
     pub fn run(&mut self, stop: &AtomicBool) -> anyhow::Result<()> {
         let result = self.run_loop(stop);
-        if let (Err(error), Some(black_box)) = (&result, &self.black_box) {
+        if let (Err(error), Some(black_box)) = (&result, &mut self.black_box) {
             black_box.save(format!("the gateway failed: {error:#}"));
         }
         result
@@ -361,10 +361,11 @@ impl Driver {
             }
             self.transmit();
             self.publish(now);
-            while let Some(why) = self.core.poll_black_box() {
-                if let Some(black_box) = &self.black_box {
+            if let Some(black_box) = &mut self.black_box {
+                while let Some(why) = self.core.poll_black_box() {
                     black_box.save(why);
                 }
+                black_box.hand_over();
             }
             if self.core.is_finished() {
                 break;
@@ -592,10 +593,11 @@ impl Driver {
             let Some(device) = self.device.as_mut() else {
                 return;
             };
-            if let Some(black_box) = &self.black_box {
+            let sent = device.send(&frame, now);
+            if let (Ok(()), Some(black_box)) = (&sent, &self.black_box) {
                 black_box.record(Direction::Tx, frame.can_frame(), now);
             }
-            if let Err(error) = device.send(&frame, now) {
+            if let Err(error) = sent {
                 self.device = None;
                 let what = format!("writing: {error}");
                 // A full CAN transmit queue, a downed interface, frames nothing acknowledges:

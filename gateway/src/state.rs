@@ -620,6 +620,7 @@ impl StateTracker {
         let v = (previous.linear() + linear) / 2.0 * self.calibration.distance_scale;
         let w = (previous.angular() + angular) / 2.0 * self.calibration.yaw_scale;
         let odometry = &mut self.state.odometry;
+        odometry.rotation += (w * dt).abs();
         if !translate {
             odometry.yaw = wrap_angle(odometry.yaw + w * dt);
             return;

@@ -141,7 +141,8 @@ fn newest(
 
 /// One leg: drives (linear, angular) until `progress` (from the odometry) reaches `target`,
 /// then zero until the robot stands still; returns the progress then. Ends on a lost control
-/// (`scout estop`) or Ctrl-C with an error, the robot stopped.
+/// (`scout estop`), Ctrl-C, an odometry reset, or twice the time the leg should take, with an
+/// error, the robot stopped.
 fn leg(
     controller: &mut Controller,
     states: &StateSubscriber,
@@ -151,7 +152,10 @@ fn leg(
     stop: &AtomicBool,
 ) -> anyhow::Result<f64> {
     let mut last = None;
-    let limit = Instant::now() + Duration::from_secs(120);
+    let speed = speeds.0.abs().max(speeds.1.abs());
+    let expected = Duration::from_secs_f64(target / speed);
+    let limit = Instant::now() + expected * 2 + Duration::from_secs(5);
+    let resets = newest(states, &mut last)?.odometry.resets;
     let mut next = Instant::now();
     let mut driving = true;
     let mut still_since: Option<Instant> = None;
@@ -164,7 +168,15 @@ fn leg(
         let (linear, angular) = if driving { speeds } else { (0.0, 0.0) };
         if stop.load(Ordering::Relaxed) || Instant::now() > limit {
             let _ = controller.drive(0.0, 0.0);
-            bail!("stopped (Ctrl-C, or two minutes without reaching the mark): nothing written");
+            bail!(
+                "stopped (Ctrl-C, or not at the mark after {:.0} s, twice the time it should \
+                 take: is the robot stuck?): nothing written",
+                (expected * 2 + Duration::from_secs(5)).as_secs_f64()
+            );
+        }
+        if state.odometry.resets != resets {
+            let _ = controller.drive(0.0, 0.0);
+            bail!("the odometry was reset during the leg (scout reset-odometry?): nothing written");
         }
         match controller.drive(linear, angular) {
             Err(error @ ControlError::Rejected(_)) if error.lost_control() => {

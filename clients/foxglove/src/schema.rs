@@ -91,6 +91,7 @@ pub fn state() -> Value {
     let odometry = object(json!({
         "x": number(), "y": number(), "yaw": number(), "distance": number(),
         "resets": integer(), "distance_scale": number(), "yaw_scale": number(),
+        "rotation": number(),
     }));
     json!({
         "title": "scout.State",

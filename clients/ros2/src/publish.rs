@@ -74,50 +74,33 @@ pub const SILENT_AFTER: Duration = Duration::from_secs(1);
 /// Diagnostics go out at least this often (ROS' diagnostic_updater's rate).
 pub const DIAGNOSTICS_PERIOD: Duration = Duration::from_secs(1);
 
-/// The relative errors of skid-steer odometry (1 sigma) behind its covariance: distance and
-/// turn, calibrated (`scout calibrate`: what remains is slip and floors) or not (tyres and
-/// firmware: scout_ros#5 saw a turn 26 % off).
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct OdometryErrors {
-    /// Of a distance (and a speed).
-    distance: f64,
-    /// Of a turn (and a turn rate).
-    turn: f64,
-    /// Heading lost per metre driven, rad/m (skid-steer slips turning and on uneven floors).
-    heading_per_metre: f64,
-}
-
-const CALIBRATED: OdometryErrors = OdometryErrors {
-    distance: 0.02,
-    turn: 0.03,
-    heading_per_metre: 0.02,
-};
-const UNCALIBRATED: OdometryErrors = OdometryErrors {
-    distance: 0.05,
-    turn: 0.25,
-    heading_per_metre: 0.1,
-};
+/// The relative errors of skid-steer odometry (1 sigma) behind its covariance, each axis
+/// calibrated (`scout calibrate`: what remains is slip and floors) or not (tyres and firmware:
+/// scout_ros#5 saw a turn 26 % off).
+const DISTANCE_ERROR: [f64; 2] = [0.02, 0.05];
+const TURN_ERROR: [f64; 2] = [0.03, 0.25];
+/// Heading lost per metre driven, rad/m (skid-steer slips on uneven floors).
+const HEADING_PER_METRE: f64 = 0.02;
 /// What the odometry is never better than: 1 cm, 0.01 rad, 1 cm/s, 0.01 rad/s (1 sigma).
 const FLOOR: f64 = 0.01;
 /// Planar: z, roll and pitch unknown (robot_localization ignores them).
 const UNKNOWN: f64 = 1e6;
 
-/// /odom's covariance diagonals (x, y, z, roll, pitch, yaw), pose then twist: the pose's
-/// uncertainty grows with the distance since the last reset, the twist's with the speed, both
-/// smaller once the odometry is calibrated (either factor off 1.0).
+/// /odom's covariance diagonals (x, y, z, roll, pitch, yaw), pose then twist: the position's
+/// uncertainty grows with the distance since the last reset, the heading's with the turning
+/// and the distance, the twist's with the speeds; each axis smaller once its factor is
+/// calibrated (off 1.0).
 fn odometry_covariance(state: &StatePayload, linear: f64, angular: f64) -> ([f64; 6], [f64; 6]) {
     let odometry = &state.odometry;
-    let errors = if odometry.distance_scale != 1.0 || odometry.yaw_scale != 1.0 {
-        CALIBRATED
-    } else {
-        UNCALIBRATED
-    };
+    let error = |errors: [f64; 2], factor: f64| errors[usize::from(factor == 1.0)];
+    let distance_error = error(DISTANCE_ERROR, odometry.distance_scale);
+    let turn_error = error(TURN_ERROR, odometry.yaw_scale);
     let variance = |sigma: f64| (sigma + FLOOR).powi(2);
     let distance = odometry.distance.abs();
-    let position = variance(errors.distance * distance);
-    let heading = variance(errors.heading_per_metre * distance);
-    let speed = variance(errors.distance * linear.abs());
-    let rate = variance(errors.turn * angular.abs());
+    let position = variance(distance_error * distance);
+    let heading = variance(turn_error * odometry.rotation.abs() + HEADING_PER_METRE * distance);
+    let speed = variance(distance_error * linear.abs());
+    let rate = variance(turn_error * angular.abs());
     (
         [position, position, UNKNOWN, UNKNOWN, UNKNOWN, heading],
         [speed, speed, UNKNOWN, UNKNOWN, UNKNOWN, rate],
@@ -765,6 +748,12 @@ mod tests {
             far[0] > pose[0] && far[5] > pose[5],
             "it grows with the distance"
         );
+        state.odometry.rotation = 20.0;
+        let (spun, _) = odometry_covariance(&state, 0.0, 0.0);
+        assert!(
+            spun[5] > 4.0 * far[5],
+            "and the heading with the turning: {spun:?}"
+        );
         state.odometry.yaw_scale = 0.7937;
         let (calibrated, calibrated_twist) = odometry_covariance(&state, 0.5, 0.4);
         let (_, uncalibrated_twist) = {
@@ -773,9 +762,10 @@ mod tests {
             odometry_covariance(&raw, 0.5, 0.4)
         };
         assert!(
-            calibrated[0] < far[0] && calibrated[5] < far[5],
-            "smaller once calibrated"
+            calibrated[5] < spun[5],
+            "the heading: smaller once the turn is calibrated"
         );
+        assert_eq!(calibrated[0], spun[0], "the distance is not calibrated yet");
         assert!(calibrated_twist[5] < uncalibrated_twist[5]);
         // The twist /odom carries is the calibrated one: 1 rad/s reported is 0.7937 turned.
         state.motion.linear_mm_s = 0;

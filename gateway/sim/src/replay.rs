@@ -23,6 +23,17 @@ pub enum ReplayError {
     Empty,
 }
 
+/// `SECONDS.MICROS` as a time.
+fn seconds(text: &str) -> Option<Duration> {
+    let (whole, fraction) = text.split_once('.')?;
+    let digits = |s: &str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit());
+    if !digits(whole) || !digits(fraction) || fraction.len() > 9 {
+        return None;
+    }
+    let nanos: u32 = format!("{fraction:0<9}").parse().ok()?;
+    Some(Duration::new(whole.parse().ok()?, nanos))
+}
+
 /// The chassis' side of a black box, and how far it has been played.
 #[derive(Debug, Clone)]
 pub struct Replay {
@@ -55,8 +66,18 @@ impl Replay {
                 Some("tx") => continue,
                 other => return Err(bad(format!("interface {other:?} is neither rx nor tx"))),
             }
-            let at = Duration::from_secs(timestamp.seconds)
-                .saturating_add(Duration::from_micros(u64::from(timestamp.micros)));
+            // The boot clock where the line has it (a stepped wall clock would stall or burst
+            // the replay), else the wall clock.
+            let at = match trimmed
+                .split_ascii_whitespace()
+                .find_map(|token| token.strip_prefix("boot="))
+            {
+                Some(boot) => {
+                    seconds(boot).ok_or_else(|| bad(format!("boot={boot} is no time")))?
+                }
+                None => Duration::from_secs(timestamp.seconds)
+                    .saturating_add(Duration::from_micros(u64::from(timestamp.micros))),
+            };
             let first = *first.get_or_insert(at);
             frames.push((at.saturating_sub(first), record.frame));
         }
@@ -127,6 +148,17 @@ mod tests {
         assert_eq!(due[0].1.id(), 0x131);
         assert!(replay.finished());
         assert!(replay.due(Duration::from_secs(9)).is_empty());
+    }
+
+    #[test]
+    fn the_boot_clock_spaces_the_frames_when_the_wall_clock_stepped() {
+        let text = "(1764280000.000000) rx 151#00 boot=10.000000\n\
+                    (1700000000.000000) rx 131#00 boot=10.020000\n";
+        let mut replay = Replay::parse(text).expect("a black box");
+        assert_eq!(replay.length(), Duration::from_millis(20));
+        assert_eq!(replay.due(Duration::from_millis(20)).len(), 2);
+        let error = Replay::parse("(1.000000) rx 151#00 boot=x\n").expect_err("bad boot");
+        assert!(error.to_string().contains("boot=x is no time"), "{error}");
     }
 
     #[test]

@@ -170,8 +170,10 @@ struct Simulator<'a> {
     write_errors_reported: u64,
     trace: Option<Trace>,
     out: &'a mut dyn Write,
-    /// The black box being replayed, and when it began (at the first port).
+    /// The black box being replayed, and when it began (when the host first spoke).
     replay: Option<(Replay, Option<Duration>)>,
+    /// Whether anything came from the host yet (a replay waits for it).
+    host_heard: bool,
 }
 
 /// Runs the simulator until `stop` is set or a `quit` command arrives; prints the port line first
@@ -208,6 +210,7 @@ pub fn run(
         trace: options.trace.as_deref().map(Trace::create).transpose()?,
         out,
         replay: options.replay.clone().map(|replay| (replay, None)),
+        host_heard: false,
         options,
     };
     simulator.plug_in()?;
@@ -377,6 +380,7 @@ impl Simulator<'_> {
     }
 
     fn receive(&mut self, event: RxEvent) -> anyhow::Result<()> {
+        self.host_heard = true;
         let now = self.now();
         let slcan = self.options.transport == Transport::Slcan;
         match event {
@@ -554,8 +558,12 @@ impl Simulator<'_> {
         Ok(())
     }
 
-    /// The replayed frames due now, from when the port first opened; silence after the last.
+    /// The replayed frames due now, from when the host first spoke (a gateway's first command
+    /// or an adapter's set-up); silence after the last.
     fn send_replayed(&mut self, now: Duration) -> anyhow::Result<()> {
+        if !self.host_heard {
+            return Ok(());
+        }
         let Some((written_ns, timestamp)) = self.feedback_slot(now) else {
             return Ok(());
         };

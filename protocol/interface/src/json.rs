@@ -350,6 +350,7 @@ pub fn state_field(state: &StatePayload, key: &str, now_ns: u64) -> Option<Value
             "y": state.odometry.y,
             "yaw": state.odometry.yaw,
             "distance": state.odometry.distance,
+            "rotation": state.odometry.rotation,
             "resets": state.odometry.resets,
             "distance_scale": state.odometry.distance_scale,
             "yaw_scale": state.odometry.yaw_scale,

@@ -61,7 +61,7 @@ macro_rules! pin_layout {
     };
 }
 
-pin_layout!(state::StatePayload, 984, 8);
+pin_layout!(state::StatePayload, 992, 8);
 pin_layout!(control::StatusPayload, 6448, 8);
 pin_layout!(control::ControlRequest, 208, 8);
 pin_layout!(control::ControlResponse, 200, 8);

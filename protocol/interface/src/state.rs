@@ -419,6 +419,8 @@ pub struct OdometryPayload {
     pub distance_scale: f64,
     /// The turn calibration in force (`[odometry] yaw_scale`).
     pub yaw_scale: f64,
+    /// How much it turned in all, either way, rad.
+    pub rotation: f64,
 }
 
 /// The range a calibration factor may take: beyond it, something else is wrong (a model, a

@@ -51,7 +51,7 @@ fn a_stop_saves_the_black_box_decode_reads_it_and_the_sim_replays_it() {
     std::fs::write(
         &config,
         format!(
-            "[blackbox]\nminutes = 1\ndir = \"{}\"\n",
+            "[blackbox]\nminutes = 1\nmin_interval_s = 1\ndir = \"{}\"\n",
             boxes_dir.display()
         ),
     )

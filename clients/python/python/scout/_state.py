@@ -180,6 +180,7 @@ class Odometry:
     resets: int
     distance_scale: float
     yaw_scale: float
+    rotation: float
 
 
 @dataclass(frozen=True)
