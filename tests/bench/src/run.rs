@@ -431,7 +431,7 @@ fn black_box(plan: Plan, priority: u8, report: &mut Report) -> anyhow::Result<()
         std::fs::write(
             &config,
             format!(
-                "[blackbox]\nminutes = {minutes}\ndir = \"{}\"\n",
+                "[blackbox]\nminutes = {minutes}\nmin_interval_s = 0\ndir = \"{}\"\n",
                 dir.display()
             ),
         )?;
