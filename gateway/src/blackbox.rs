@@ -134,13 +134,10 @@ impl Ring {
     }
 }
 
-/// What the control loop hands over.
-type Message = Recorded;
-
 /// The black box's thread and the control loop's end of its channel.
 #[derive(Debug)]
 pub struct Recorder {
-    sender: Option<SyncSender<Message>>,
+    sender: Option<SyncSender<Recorded>>,
     /// Why to save, for the thread to take (the control loop only ever `try_lock`s it).
     reasons: Arc<Mutex<Vec<String>>>,
     /// Reasons the control loop could not hand over yet (the thread held the lock).
@@ -153,7 +150,7 @@ pub struct Recorder {
 impl Recorder {
     /// Starts the black box of `robot` as `config` says, or none when it is off.
     pub fn start(config: &BlackBoxConfig, robot: &str) -> anyhow::Result<Option<Self>> {
-        if config.minutes <= 0.0 {
+        if !config.enabled() {
             info!("black box off ([blackbox] minutes = 0)");
             return Ok(None);
         }
@@ -269,7 +266,7 @@ struct Keeper {
 }
 
 impl Keeper {
-    fn run(mut self, receiver: &Receiver<Message>) {
+    fn run(mut self, receiver: &Receiver<Recorded>) {
         let mut pending: Option<(Instant, Vec<String>)> = None;
         let mut last_file: Option<Instant> = None;
         loop {

@@ -227,6 +227,11 @@ impl Default for BlackBoxConfig {
 }
 
 impl BlackBoxConfig {
+    /// Whether there is a black box (`minutes` > 0).
+    pub fn enabled(&self) -> bool {
+        self.minutes > 0.0
+    }
+
     /// The directory of the files.
     pub fn dir(&self) -> PathBuf {
         self.dir

@@ -262,7 +262,7 @@ impl Core {
             battery_level: BatteryLevel::Unknown,
             black_box_due: VecDeque::new(),
             black_box_stop_seen: 0,
-            black_box_on: config.blackbox.minutes > 0.0,
+            black_box_on: config.blackbox.enabled(),
         }
     }
 

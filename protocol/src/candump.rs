@@ -12,6 +12,14 @@ pub struct Timestamp {
     pub micros: u32,
 }
 
+impl Timestamp {
+    /// As a time since the clock's epoch (saturating).
+    pub fn as_duration(self) -> core::time::Duration {
+        core::time::Duration::from_secs(self.seconds)
+            .saturating_add(core::time::Duration::from_micros(u64::from(self.micros)))
+    }
+}
+
 /// One parsed candump line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Record<'a> {
@@ -132,7 +140,9 @@ pub fn parse(line: &str) -> Result<Record<'_>, CandumpError> {
     })
 }
 
-fn parse_timestamp(text: &str) -> Result<Timestamp, CandumpError> {
+/// `SECONDS.MICROS` (up to six fraction digits), as in candump's log prefix without its
+/// parentheses.
+pub fn parse_timestamp(text: &str) -> Result<Timestamp, CandumpError> {
     let (seconds, fraction) = text
         .trim()
         .split_once('.')

@@ -20,10 +20,8 @@ use scout_clients::interface::state::ODOMETRY_SCALE_RANGE;
 use scout_protocol::kinematics::wrap_angle;
 
 use crate::RobotArgs;
-use crate::control::ctrl_c;
+use crate::control::{DRIVE_PERIOD, ctrl_c};
 
-/// The drive loop's period: 50 Hz.
-const PERIOD: Duration = Duration::from_millis(20);
 /// Speeds below these are standing still.
 const STILL_LINEAR: f64 = 0.005;
 const STILL_ANGULAR: f64 = 0.005;
@@ -196,7 +194,7 @@ fn leg(
         } else {
             still_since = None;
         }
-        next += PERIOD;
+        next += DRIVE_PERIOD;
         std::thread::sleep(next.saturating_duration_since(Instant::now()));
     }
 }

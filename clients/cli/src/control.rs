@@ -19,7 +19,7 @@ use scout_clients::remote::{RemoteController, RemoteError, SessionSettings, peer
 use crate::{RemoteArgs, RobotArgs};
 
 /// The drive loop's period: 50 Hz.
-const DRIVE_PERIOD: Duration = Duration::from_millis(20);
+pub(crate) const DRIVE_PERIOD: Duration = Duration::from_millis(20);
 
 /// A robot and this client's name.
 #[derive(Debug, Args)]

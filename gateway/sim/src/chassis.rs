@@ -202,8 +202,8 @@ impl Battery {
 }
 
 /// Battery thresholds of the manual (section 2.1).
-const BATTERY_WARNING_VOLTS: f64 = 22.5;
-const BATTERY_CUTOFF_VOLTS: f64 = 22.0;
+const BATTERY_WARNING_VOLTS: f64 = battery::SCOUT_BATTERY.warning_volts;
+const BATTERY_CUTOFF_VOLTS: f64 = battery::SCOUT_BATTERY.cutoff_volts;
 const BATTERY_OVERVOLTAGE_VOLTS: f64 = 30.0;
 /// Driver temperature thresholds (fault table of 0x151).
 const OVERTEMP_WARNING_C: f64 = 55.0;

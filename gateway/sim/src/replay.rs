@@ -23,17 +23,6 @@ pub enum ReplayError {
     Empty,
 }
 
-/// `SECONDS.MICROS` as a time.
-fn seconds(text: &str) -> Option<Duration> {
-    let (whole, fraction) = text.split_once('.')?;
-    let digits = |s: &str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit());
-    if !digits(whole) || !digits(fraction) || fraction.len() > 9 {
-        return None;
-    }
-    let nanos: u32 = format!("{fraction:0<9}").parse().ok()?;
-    Some(Duration::new(whole.parse().ok()?, nanos))
-}
-
 /// The chassis' side of a black box, and how far it has been played.
 #[derive(Debug, Clone)]
 pub struct Replay {
@@ -72,12 +61,11 @@ impl Replay {
                 .split_ascii_whitespace()
                 .find_map(|token| token.strip_prefix("boot="))
             {
-                Some(boot) => {
-                    seconds(boot).ok_or_else(|| bad(format!("boot={boot} is no time")))?
-                }
-                None => Duration::from_secs(timestamp.seconds)
-                    .saturating_add(Duration::from_micros(u64::from(timestamp.micros))),
-            };
+                Some(boot) => candump::parse_timestamp(boot)
+                    .map_err(|_| bad(format!("boot={boot} is no time")))?,
+                None => timestamp,
+            }
+            .as_duration();
             let first = *first.get_or_insert(at);
             frames.push((at.saturating_sub(first), record.frame));
         }

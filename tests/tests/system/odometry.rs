@@ -175,6 +175,16 @@ fn square(prefix: &str, chassis: &[&str], transport: &[&str], gateway_config: &s
 /// The bound the issue sets: 2 % of the path.
 const WITHIN: f64 = 0.02;
 
+/// The square's position and yaw errors are within [`WITHIN`] of the path.
+fn assert_within(position: f64, yaw: f64) {
+    assert!(
+        position < WITHIN && yaw < WITHIN,
+        "position error {:.2} %, yaw error {:.2} % of the path",
+        position * 100.0,
+        yaw * 100.0
+    );
+}
+
 #[test]
 fn a_calibrated_v1_chassis_drives_a_square_its_odometry_follows() {
     let (position, yaw) = square(
@@ -183,12 +193,7 @@ fn a_calibrated_v1_chassis_drives_a_square_its_odometry_follows() {
         &["--serial"],
         &exact_factors(),
     );
-    assert!(
-        position < WITHIN && yaw < WITHIN,
-        "position error {:.2} %, yaw error {:.2} % of the path",
-        position * 100.0,
-        yaw * 100.0
-    );
+    assert_within(position, yaw);
 }
 
 #[test]
@@ -199,12 +204,7 @@ fn a_calibrated_v2_chassis_drives_a_square_its_odometers_follow() {
         &["--slcan"],
         &exact_factors(),
     );
-    assert!(
-        position < WITHIN && yaw < WITHIN,
-        "position error {:.2} %, yaw error {:.2} % of the path",
-        position * 100.0,
-        yaw * 100.0
-    );
+    assert_within(position, yaw);
 }
 
 /// `scout calibrate` on the erring chassis, the operator's measurements being the simulator's
@@ -319,10 +319,5 @@ fn scout_calibrate_measures_the_error_and_its_factors_drive_a_square() {
     );
     assert!((yaw_scale * REPORTED_YAW - 1.0).abs() < WITHIN, "{written}");
     let (position, yaw) = square("calibrated", &["--serial"], &["--serial"], &written);
-    assert!(
-        position < WITHIN && yaw < WITHIN,
-        "position error {:.2} %, yaw error {:.2} % of the path",
-        position * 100.0,
-        yaw * 100.0
-    );
+    assert_within(position, yaw);
 }
