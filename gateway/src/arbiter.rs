@@ -327,7 +327,8 @@ struct Command {
 struct Lease {
     id: u64,
     class: Class,
-    granted: Duration,
+    /// When it was granted or last took a command: it ends its class's age after that.
+    heard: Duration,
     command: Option<Command>,
 }
 
@@ -392,6 +393,9 @@ pub struct Arbiter {
     autonomy_armed: bool,
     sources: Vec<Source>,
     output: Output,
+    /// When the last command that drove the output ends its life: past it the output is zero
+    /// at once, not ramped (nothing moves on a command longer than it asked).
+    motion_until: Duration,
     fault_clears: VecDeque<(FaultClear, u8)>,
     lights: Option<LightsSetting>,
     rejections: [u64; REJECTION_COUNTERS],
@@ -417,6 +421,7 @@ impl Arbiter {
             autonomy_armed: false,
             sources: Vec::new(),
             output: Output::STOP,
+            motion_until: Duration::ZERO,
             fault_clears: VecDeque::new(),
             lights: None,
             rejections: [0; REJECTION_COUNTERS],
@@ -811,7 +816,7 @@ impl Arbiter {
         source.lease = Some(Lease {
             id,
             class,
-            granted: now,
+            heard: now,
             command: None,
         });
         source.revoked = None;
@@ -873,6 +878,7 @@ impl Arbiter {
         let clamped_angular = angular.clamp(-angular_cap, angular_cap);
         let clamped = clamped_linear != linear || clamped_angular != angular;
         if let Some(lease) = self.sources[index].lease.as_mut() {
+            lease.heard = now;
             lease.command = Some(Command {
                 linear: clamped_linear,
                 angular: clamped_angular,
@@ -1183,12 +1189,10 @@ impl Arbiter {
         let mut missed = Vec::new();
         for (index, source) in self.sources.iter_mut().enumerate() {
             if let Some(lease) = source.lease {
-                let life = self.config.max_age(lease.class);
-                let quiet = match lease.command {
-                    Some(command) => now >= command.expires,
-                    None => now >= lease.granted + life,
-                };
-                if quiet {
+                // Control lasts the class's age from the last command's arrival, however old
+                // the command was when it came: a link whose every command comes late but
+                // within its life drives on; the command itself still stops at its own life.
+                if now >= lease.heard + self.config.max_age(lease.class) {
                     stale.push(index);
                 }
             }
@@ -1201,7 +1205,7 @@ impl Arbiter {
             }
         }
         for index in stale {
-            self.end_lease(now, index, "stale: no command within its life");
+            self.end_lease(now, index, "stale: no command within its class's age");
             self.sources[index].lost_control = Some(now);
         }
         for (name, port, period) in missed {
@@ -1233,16 +1237,23 @@ impl Arbiter {
             }
             None => FaultClear::None,
         };
-        if !self.stops.is_empty() {
+        // Nothing is selected while a stop holds.
+        let target = self
+            .selected(now)
+            .and_then(|(source, _)| source.fresh_command(now));
+        if let Some(command) = target {
+            self.motion_until = command.expires;
+        }
+        // A stop skips the ramp; so does the end of the life of the command that last drove
+        // the output (its sender went silent, or let go and the ramp outlasted it): nothing
+        // moves on a command longer than its sender asked.
+        if !self.stops.is_empty() || (target.is_none() && now >= self.motion_until) {
             self.output = Output {
                 fault_clear,
                 ..Output::STOP
             };
             return self.output;
         }
-        let target = self
-            .selected(now)
-            .and_then(|(source, _)| source.fresh_command(now));
         let (linear, angular, clamped) =
             target.map_or((0.0, 0.0, false), |c| (c.linear, c.angular, c.clamped));
         let dt = period.as_secs_f64();

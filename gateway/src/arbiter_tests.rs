@@ -697,6 +697,79 @@ fn a_missed_heartbeat_latches_and_holds_while_the_source_is_silent() {
     assert_eq!(bench.arbiter.stops()[0].reason, "heartbeat source died");
 }
 
+/// A drive sent `ago` before now.
+fn drive_sent(bench: &mut Bench, who: &Origin, lease: u64, linear: f64, ago: Duration) -> Answer {
+    let drive = Request::Drive {
+        lease,
+        linear,
+        angular: 0.0,
+        ttl: None,
+    };
+    bench
+        .arbiter
+        .handle_request(bench.now, who, drive, bench.now - ago)
+}
+
+#[test]
+fn a_silent_senders_output_is_zero_at_its_commands_life_not_ramped_after() {
+    let mut bench = Bench::new();
+    let joy = client("joy", 1);
+    let lease = bench.take(&joy, Class::Teleop);
+    bench.run(&joy, lease, 1.0, Duration::from_secs(2));
+    // The last drive was sent one tick ago; it lives 250 ms (the teleop age) from then.
+    let last = bench.now - TICK;
+    let mut outputs = Vec::new();
+    while bench.now < last + ms(300) {
+        outputs.push((bench.now, bench.tick().linear));
+    }
+    for (at, linear) in outputs {
+        if at < last + ms(250) {
+            assert_eq!(linear, 1.0, "the command holds within its life (at {at:?})");
+        } else {
+            assert_eq!(linear, 0.0, "zero at once past its life (at {at:?})");
+        }
+    }
+}
+
+#[test]
+fn a_ramp_after_letting_go_ends_at_the_last_commands_life() {
+    let mut bench = Bench::new();
+    let joy = client("joy", 1);
+    let lease = bench.take(&joy, Class::Teleop);
+    bench.run(&joy, lease, 1.5, Duration::from_secs(3));
+    let last = bench.now - TICK;
+    bench.request(&joy, Request::Relinquish).expect("let go");
+    let mut previous = 1.5;
+    while bench.now < last + ms(250) {
+        let linear = bench.tick().linear;
+        assert!(linear < previous && linear > 0.0, "ramps down at the limit");
+        previous = linear;
+    }
+    assert!(previous > 0.5, "2 m/s² takes 750 ms from 1.5 m/s");
+    assert_eq!(bench.tick().linear, 0.0, "but not past the command's life");
+}
+
+#[test]
+fn control_lasts_the_class_age_from_the_last_arrival_however_late_the_commands() {
+    let mut bench = Bench::new();
+    let joy = client("joy", 1);
+    let lease = bench.take(&joy, Class::Teleop);
+    // Every drive arrives 100 ms after it was sent: each lives 150 ms more.
+    for _ in 0..50 {
+        drive_sent(&mut bench, &joy, lease, 0.3, ms(100)).expect("in its life");
+        bench.tick();
+    }
+    assert_eq!(bench.arbiter.output().linear, 0.3);
+    // 200 ms without a drive: the last one's life ends, the output is zero, control holds.
+    assert_eq!(bench.idle(ms(200)).linear, 0.0);
+    drive_sent(&mut bench, &joy, lease, 0.3, ms(100)).expect("control held");
+    assert!(bench.tick().linear > 0.0, "drives again, ramping up");
+    // Silent for the teleop age after the last arrival: control ends.
+    bench.idle(ms(260));
+    let refused = drive_sent(&mut bench, &joy, lease, 0.3, ms(0)).expect_err("lapsed");
+    assert_eq!(refused.kind(), RejectionKind::Revoked, "{refused}");
+}
+
 #[test]
 fn a_dead_driving_client_loses_control_at_once() {
     let mut bench = Bench::new();
@@ -893,8 +966,9 @@ fn any_step() -> impl Strategy<Value = Step> {
 proptest! {
     /// After any gap, stop or release, nothing moves until no stop is left and a client has
     /// taken control again, with a take-control sent after it; while a stop holds, the output
-    /// is exactly zero; the output is always finite and within the caps, and changes per tick
-    /// within the ramp outside a stop.
+    /// is exactly zero; the output is always finite and within the caps, changes per tick
+    /// within the ramp outside a stop (or drops to zero at once), and is zero once every
+    /// command accepted has lived its life.
     #[test]
     fn no_motion_after_a_gap_stop_or_release_without_a_new_take(steps in prop::collection::vec(any_step(), 1..120)) {
         let mut bench = Bench::new();
@@ -905,6 +979,9 @@ proptest! {
         let mut blocked_at = 0usize;
         let mut blocked_time = Duration::ZERO;
         let mut taken_at: [Option<usize>; 4] = [None; 4];
+        let mut classes = [Class::Teleop; 4];
+        // The end of the life of the longest-lived command accepted so far.
+        let mut newest_life = Duration::ZERO;
         for (index, step) in steps.into_iter().enumerate() {
             let index = index + 1;
             match step {
@@ -916,10 +993,15 @@ proptest! {
                             prop_assert!(sent + OUTDATED_TOLERANCE >= blocked_time, "a take-control sent before the last gap, stop or release granted control");
                         }
                         leases[w] = lease;
+                        classes[w] = class;
                         taken_at[w] = Some(index);
                     }
                 }
-                Step::Drive(w, v) => { let _ = bench.drive(&clients[w], leases[w], v); }
+                Step::Drive(w, v) => {
+                    if bench.drive(&clients[w], leases[w], v).is_ok() {
+                        newest_life = newest_life.max(bench.now + bench.arbiter.config.max_age(classes[w]));
+                    }
+                }
                 Step::Stop(w) => {
                     bench.stop(&clients[w], "p");
                     (blocked_at, blocked_time) = (index, bench.now);
@@ -943,6 +1025,7 @@ proptest! {
                     for _ in 0..n {
                         let before = bench.arbiter.output();
                         let stopped = !bench.arbiter.stops().is_empty();
+                        let at = bench.now;
                         let output = bench.tick();
                         prop_assert!(output.linear.is_finite() && output.angular.is_finite());
                         prop_assert!(output.linear.abs() <= MAX_LINEAR_SPEED);
@@ -950,9 +1033,11 @@ proptest! {
                             prop_assert_eq!(output.linear, 0.0);
                             prop_assert_eq!(output.angular, 0.0);
                         } else {
-                            prop_assert!((output.linear - before.linear).abs() <= 2.0 * 0.02 + 1e-9);
+                            let cut = output.linear == 0.0 && output.angular == 0.0;
+                            prop_assert!(cut || (output.linear - before.linear).abs() <= 2.0 * 0.02 + 1e-9);
                         }
                         if output.linear != 0.0 || output.angular != 0.0 {
+                            prop_assert!(at < newest_life, "moving past the life of every command accepted");
                             let retaken = taken_at.iter().flatten().any(|at| *at > blocked_at)
                                 || output.linear.abs() < before.linear.abs();
                             prop_assert!(retaken, "moving with no take of control since the last gap, stop or release");
