@@ -53,6 +53,10 @@ pub const FUTURE_TOLERANCE: Duration = Duration::from_millis(20);
 /// take-control sent just after a release but delivered slower than that (jitter, a
 /// millisecond stamp) seems sent before it. Beyond this it was sent before, and is outdated.
 pub const OUTDATED_TOLERANCE: Duration = Duration::from_millis(100);
+/// How long a new lease waits for its first command (at least its class's age): a client
+/// drives once the answer reaches it, so over a slow link the first command comes a round
+/// trip after the grant (600 ms on a 300 ms 4G link). A lease without a command moves nothing.
+pub const FIRST_COMMAND_WITHIN: Duration = Duration::from_secs(1);
 
 /// The most clients the arbiter tracks at once.
 pub use scout_interface::control::MAX_CLIENTS as MAX_SOURCES;
@@ -327,7 +331,8 @@ struct Command {
 struct Lease {
     id: u64,
     class: Class,
-    /// When it was granted or last took a command: it ends its class's age after that.
+    /// When it was granted or last took a command: it ends its class's age after that (the
+    /// first command may take [`FIRST_COMMAND_WITHIN`]).
     heard: Duration,
     command: Option<Command>,
 }
@@ -1192,7 +1197,12 @@ impl Arbiter {
                 // Control lasts the class's age from the last command's arrival, however old
                 // the command was when it came: a link whose every command comes late but
                 // within its life drives on; the command itself still stops at its own life.
-                if now >= lease.heard + self.config.max_age(lease.class) {
+                let age = self.config.max_age(lease.class);
+                let quiet = match lease.command {
+                    Some(_) => age,
+                    None => age.max(FIRST_COMMAND_WITHIN),
+                };
+                if now >= lease.heard + quiet {
                     stale.push(index);
                 }
             }

@@ -771,6 +771,29 @@ fn control_lasts_the_class_age_from_the_last_arrival_however_late_the_commands()
 }
 
 #[test]
+fn a_new_lease_waits_a_slow_links_round_trip_for_its_first_command() {
+    let mut bench = Bench::new();
+    let (slow, idle) = (client("slow", 1), client("idle", 2));
+    let lease = bench.take(&slow, Class::Teleop);
+    // The answer travels back 300 ms, the first drive 300 ms forward (aged against the
+    // fastest delivery, so younger than that).
+    bench.idle(ms(600));
+    drive_sent(&mut bench, &slow, lease, 0.3, ms(50)).expect("still held");
+    // From then on the teleop age counts.
+    bench.idle(ms(260));
+    assert_eq!(
+        bench.drive(&slow, lease, 0.3).map_err(|r| r.kind()),
+        Err(RejectionKind::Revoked)
+    );
+    // A lease that never drives ends after FIRST_COMMAND_WITHIN, having moved nothing.
+    bench.take(&idle, Class::Teleop);
+    assert_eq!(bench.idle(FIRST_COMMAND_WITHIN - TICK).linear, 0.0);
+    assert!(bench.arbiter.sources.iter().any(|s| s.class().is_some()));
+    bench.idle(TICK * 2);
+    assert!(bench.arbiter.sources.iter().all(|s| s.class().is_none()));
+}
+
+#[test]
 fn a_dead_driving_client_loses_control_at_once() {
     let mut bench = Bench::new();
     let joy = client("joy", 1);
