@@ -511,17 +511,38 @@ fn a_stop_goes_on_the_wire_at_once_not_at_the_next_tick(protocol: Protocol) {
     assert_eq!(status.stops()[0].owner.as_str(), "officer");
 }
 
-fn teleop_drives_the_chassis_and_a_stale_stream_ramps_to_zero(protocol: Protocol) {
+fn teleop_drives_the_chassis_and_a_stale_stream_stops_at_its_life(protocol: Protocol) {
     let mut pair = Pair::of(protocol);
     pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(3));
     let moving = pair.chassis.actual().linear;
     assert!((moving - 0.5).abs() < 0.02, "{moving}");
     assert!((pair.last_state().motion.linear() - 0.5).abs() < 0.02);
-    // No more commands: the command ages out (teleop 250 ms) and the output ramps down.
+    // The last command (a lost link): it holds for its life (teleop 250 ms), then zero goes
+    // on the wire at the next tick, not ramped.
+    let last = pair.now;
+    pair.drive(TELEOP, Class::Teleop, 0.5)
+        .expect("drive accepted");
     pair.run(Duration::from_secs(2));
     assert_eq!(pair.chassis.actual().linear, 0.0);
-    let (_, last) = *pair.motion_commands().last().expect("commands");
-    assert_eq!(last.linear, 0.0);
+    let after: Vec<_> = (pair.motion_commands().into_iter())
+        .filter(|(at, _)| *at >= last)
+        .collect();
+    let (zero_at, _) = *after
+        .iter()
+        .find(|(_, command)| command.linear == 0.0)
+        .expect("a zero");
+    assert!(
+        zero_at >= last + ms(250) && zero_at <= last + ms(250) + TICK,
+        "zero {:?} after the last command",
+        zero_at - last
+    );
+    for (at, command) in after {
+        let expected = if at < zero_at { 0.5 } else { 0.0 };
+        assert!(
+            (command.linear - expected).abs() < 0.01,
+            "{command:?} at {at:?}"
+        );
+    }
 }
 
 fn a_dead_client_loses_control_at_once(protocol: Protocol) {
@@ -1783,7 +1804,7 @@ both_protocols!(
     motion_commands_go_out_on_the_20_ms_grid_for_ten_minutes,
     a_late_tick_is_sent_once_and_the_missed_ones_are_skipped,
     a_stop_goes_on_the_wire_at_once_not_at_the_next_tick,
-    teleop_drives_the_chassis_and_a_stale_stream_ramps_to_zero,
+    teleop_drives_the_chassis_and_a_stale_stream_stops_at_its_life,
     a_dead_client_loses_control_at_once,
     a_critical_battery_bars_autonomy_and_never_teleop,
     the_black_box_is_due_on_a_stop_and_on_request,

@@ -71,7 +71,7 @@ pub struct DriveArgs {
     remote: RemoteArgs,
 }
 
-/// A remote drive's life: after a partition, the output ramps to zero from its end.
+/// A remote drive's life: after a partition, the output is zero once it ends.
 pub const REMOTE_DRIVE_LIFE: Duration = Duration::from_millis(300);
 
 /// The gateway's answer in words (`scout drive` prints it once per change, not per message).

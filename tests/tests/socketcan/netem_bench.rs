@@ -25,13 +25,35 @@ const ESTOPS: usize = 10;
 /// A drive's life: the same on both paths, so that only the transport differs.
 const LIFE: Duration = Duration::from_millis(300);
 
-/// The network profiles: a name and the netem rule.
-const PROFILES: [(&str, &[&str]); 2] = [
-    ("100 ms, 10 % loss", &["delay", "100ms", "loss", "10%"]),
-    (
-        "4G: 300 ± 50 ms, 20 % loss",
-        &["delay", "300ms", "50ms", "loss", "20%"],
-    ),
+/// A network profile: a name, the netem rule, and whether control is taken through it.
+struct Profile {
+    name: &'static str,
+    rule: &'static [&'static str],
+    /// Control taken (and so the peer's clock offset learned) through the link, as by a
+    /// teleop that connects over it; otherwise before the loss, so that the ages are the
+    /// true one-way delays.
+    taken_through: bool,
+}
+
+/// The network profiles.
+const PROFILES: [Profile; 3] = [
+    Profile {
+        name: "100 ms, 10 % loss",
+        rule: &["delay", "100ms", "loss", "10%"],
+        taken_through: false,
+    },
+    Profile {
+        name: "4G: 300 ± 50 ms, 20 % loss",
+        rule: &["delay", "300ms", "50ms", "loss", "20%"],
+        taken_through: false,
+    },
+    // netem's jitter reorders packets, which zenoh drops; an LTE link delivers in order (its
+    // RLC layer reorders), which netem's `rate` keeps. Control is taken over the link.
+    Profile {
+        name: "4G in order, taken over it: 300 ± 50 ms, 20 % loss",
+        rule: &["delay", "300ms", "50ms", "loss", "20%", "rate", "20mbit"],
+        taken_through: true,
+    },
 ];
 
 /// How drives travel.
@@ -81,16 +103,16 @@ fn netem_bench_remote_drive() {
         .ok()
         .map(|runs| runs.split(',').map(str::to_owned).collect());
     let mut rows = Vec::new();
-    for (p, (profile, rule)) in PROFILES.into_iter().enumerate() {
+    for (p, profile) in PROFILES.iter().enumerate() {
         for (r, (link, path)) in RUNS.into_iter().enumerate() {
             let label = format!("{link}-{path:?}").to_lowercase();
             if only.as_ref().is_some_and(|only| !only.contains(&label)) {
                 continue;
             }
             let name = robot_name(&format!("bench-{p}-{r}"));
-            let figures = run(&loopback, &pki, &name, link, path, rule);
-            eprintln!("{link} {path:?} {profile}: {figures:?}");
-            rows.push((profile, link, path, figures));
+            let figures = run(&loopback, &pki, &name, link, path, profile);
+            eprintln!("{link} {path:?} {}: {figures:?}", profile.name);
+            rows.push((profile.name, link, path, figures));
         }
     }
     println!(
@@ -131,7 +153,7 @@ fn run(
     name: &str,
     link: &str,
     path: Path,
-    rule: &[&str],
+    profile: &Profile,
 ) -> Figures {
     loopback.change(&["delay", "0ms"]);
     let endpoint = match link {
@@ -154,7 +176,7 @@ fn run(
     } else {
         args.extend(["--zenoh-listen", &endpoint]);
     }
-    let _gateway = Gateway::start(&args);
+    let gateway = Gateway::start(&args);
     let robot = connect_within(name, LIMIT);
     let status = robot.status().expect("status");
     let settings = SessionSettings {
@@ -184,9 +206,13 @@ fn run(
     // purpose, as an operator would after checking the robot.
     release_all(name);
     let mut controller = RemoteController::connect(&settings, name, "operator").expect("connect");
-    controller
-        .take_control(scout_clients::Class::Teleop)
-        .expect("take control");
+    if profile.taken_through {
+        loopback.change(profile.rule);
+    }
+    let deadline = Instant::now() + LIMIT;
+    while let Err(error) = controller.take_control(scout_clients::Class::Teleop) {
+        assert!(Instant::now() < deadline, "no take-control: {error}");
+    }
     let figures = Arc::new(Mutex::new(Figures::default()));
     let running = Arc::new(AtomicBool::new(true));
     let sent = Arc::new(AtomicU64::new(0));
@@ -203,7 +229,7 @@ fn run(
             Path::Queried => drive_queried(&session, &name, &running, &sent, &figures),
         })
     };
-    loopback.change(rule);
+    loopback.change(profile.rule);
     std::thread::sleep(DRIVING);
     running.store(false, Ordering::Relaxed);
     teleop.join().expect("teleop");
@@ -228,7 +254,7 @@ fn run(
                 let _ = copies.put(r#"{"reason":"bench"}"#).wait();
             }
         }
-        let _answer = session
+        let answer = session
             .get(&estop_key)
             .payload(r#"{"reason":"bench"}"#)
             .timeout(LIMIT)
@@ -248,6 +274,20 @@ fn run(
             }
             std::thread::sleep(Duration::from_millis(1));
         };
+        if latched.is_none() {
+            let info = zenoh_query(&session, &format!("scout/{name}/info"), None, LIMIT);
+            eprintln!(
+                "{name}: an e-stop did not latch within {LIMIT:?}: its answer {:?}; counters {}; \
+                 the gateway's log:\n{}",
+                answer
+                    .try_recv()
+                    .map(|reply| reply.map(|reply| reply.result().is_ok())),
+                info.first()
+                    .map(|info| info["counters"].to_string())
+                    .unwrap_or_default(),
+                gateway.log()
+            );
+        }
         if let Some(latched) = latched {
             figures.estops_ms.push(latched.as_millis() as u64);
             release_all(name);

@@ -7,7 +7,7 @@ use nix::sys::signal::Signal;
 use scout_clients::control::ControlError;
 use scout_clients::{Class, RejectionKind};
 use scout_system_tests::{
-    Driver, Gateway, Sim, connect, robot_name, scout, wait_for_state, wait_for_status,
+    Driver, Gateway, Sim, connect, robot_name, scout, status_now, wait_for_state, wait_for_status,
 };
 
 const LIMIT: Duration = Duration::from_secs(10);
@@ -224,21 +224,29 @@ fn nan_and_huge_values_are_rejected_or_clamped() {
         }
     }
     let state = robot.subscribe().expect("state");
-    for _ in 0..150 {
+    let status = robot.status().expect("status");
+    // Driven (the command lives only while it is sent) until the status shows the cap holding.
+    let deadline = std::time::Instant::now() + LIMIT;
+    let counted = loop {
         let accepted = teleop
             .drive(1e9, -1e9)
             .expect("huge values are clamped, not refused");
         assert!(accepted.clamped);
         std::thread::sleep(Duration::from_millis(20));
-    }
+        let shown = status_now(&status, Duration::ZERO).unwrap_or_default();
+        let capped = shown["rejections"]["not_finite"] == 3
+            && shown["output"]["linear"].as_f64() > Some(1.4);
+        if capped || std::time::Instant::now() > deadline {
+            break shown;
+        }
+    };
+    assert_eq!(counted["rejections"]["not_finite"], 3, "{counted}");
+    assert_eq!(counted["output"]["limited"], true, "{counted}");
     let capped = wait_for_state(&state, LIMIT, |s| {
         s["command"]["linear"].as_f64() > Some(1.4)
     });
     assert!(capped["command"]["linear"].as_f64() <= Some(1.5));
     assert!(capped["command"]["angular"].as_f64() >= Some(-0.53));
-    let status = robot.status().expect("status");
-    let counted = wait_for_status(&status, LIMIT, |s| s["rejections"]["not_finite"] == 3);
-    assert_eq!(counted["output"]["limited"], true);
 }
 
 #[test]

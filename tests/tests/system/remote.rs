@@ -466,7 +466,7 @@ fn drives_put_on_the_fast_lane(endpoint: &str) {
     }));
     put(1);
     counters_when(&session, &name, |c| rejected(c) > before);
-    // The puts stop (a lost link): the command ramps to zero within its life, and control
+    // The puts stop (a lost link): the command is zero once its life ends, and control
     // ends; a later put is refused until the peer takes control again.
     wait_for_state(&state, LIMIT, |s| s["command"]["linear"] == 0.0);
     wait_for_status(&status, LIMIT, |s| s["selected"].is_null());
