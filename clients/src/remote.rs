@@ -128,8 +128,6 @@ pub struct RemoteController {
     robot: String,
     peer: String,
     seq: u64,
-    drives: zenoh::pubsub::Publisher<'static>,
-    estops: zenoh::pubsub::Publisher<'static>,
     pending: Vec<zenoh::handlers::FifoChannelHandler<zenoh::query::Reply>>,
     /// How long a query waits for its answer.
     answer_timeout: Duration,
@@ -153,25 +151,11 @@ impl RemoteController {
         peer: &str,
     ) -> Result<Self, RemoteError> {
         let session = settings.open("client")?;
-        let lane = |kind: RemoteKind| {
-            session
-                .declare_publisher(command_key(robot, kind, peer))
-                .encoding(zenoh::bytes::Encoding::APPLICATION_JSON)
-                .congestion_control(zenoh::qos::CongestionControl::Drop)
-                .reliability(zenoh::qos::Reliability::BestEffort)
-                .priority(zenoh::qos::Priority::RealTime)
-                .express(true)
-                .wait()
-                .map_err(|e| RemoteError::Zenoh(e.to_string()))
-        };
-        let (drives, estops) = (lane(RemoteKind::Drive)?, lane(RemoteKind::Estop)?);
         Ok(Self {
             session,
             robot: robot.to_owned(),
             peer: peer.to_owned(),
             seq: 0,
-            drives,
-            estops,
             pending: Vec::new(),
             answer_timeout: ANSWER_TIMEOUT,
         })
@@ -227,10 +211,7 @@ impl RemoteController {
                 .map_err(|e| RemoteError::Zenoh(e.to_string()))?;
             self.pending.push(replies);
         } else {
-            self.drives
-                .put(payload)
-                .wait()
-                .map_err(|e| RemoteError::Zenoh(e.to_string()))?;
+            self.put(RemoteKind::Drive, payload)?;
         }
         let mut newest = None;
         let mut error = None;
@@ -268,7 +249,7 @@ impl RemoteController {
         let payload = to_json(&command);
         for _ in 0..ESTOP_COPIES {
             // A copy that cannot be sent leaves the query to carry the stop.
-            let _ = self.estops.put(payload.clone()).wait();
+            let _ = self.put(RemoteKind::Estop, payload.clone());
         }
         self.ask(RemoteKind::Estop, &command)
     }
@@ -287,6 +268,25 @@ impl RemoteController {
     pub fn relinquish(&mut self) -> Result<RemoteAnswer, RemoteError> {
         self.pending.clear();
         self.ask(RemoteKind::Relinquish, &RemoteCommand::default())
+    }
+
+    /// Puts `payload` on the fast lane: best effort, express, dropped rather than queued.
+    ///
+    /// Each put names its key in full. A declared publisher would make zenoh send the key once
+    /// as a declaration and then a number for it, in every put and in every query on that key
+    /// too; over a lossy link the declaration can be lost (plain UDP) or overtaken (QUIC's
+    /// streams), and the gateway's zenoh then drops those messages ("unknown scope"): the
+    /// netem bench lost an e-stop, query and copies, that way.
+    fn put(&self, kind: RemoteKind, payload: String) -> Result<(), RemoteError> {
+        self.session
+            .put(command_key(&self.robot, kind, &self.peer), payload)
+            .encoding(zenoh::bytes::Encoding::APPLICATION_JSON)
+            .congestion_control(zenoh::qos::CongestionControl::Drop)
+            .reliability(zenoh::qos::Reliability::BestEffort)
+            .priority(zenoh::qos::Priority::RealTime)
+            .express(true)
+            .wait()
+            .map_err(|e| RemoteError::Zenoh(e.to_string()))
     }
 
     /// Sends `command` as a query and waits for the answer: accepted, or

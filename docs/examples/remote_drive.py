@@ -71,14 +71,20 @@ def main() -> int:
             return 4
         print(f"control taken as remote:{args.peer}")
 
-        drives = session.declare_publisher(
-            key("drive"),
-            encoding=zenoh.Encoding.APPLICATION_JSON,
-            congestion_control=zenoh.CongestionControl.DROP,
-            priority=zenoh.Priority.REAL_TIME,
-            express=True,
-            reliability=zenoh.Reliability.BEST_EFFORT,
-        )
+        def put_drive(drive: str) -> None:
+            # Put with the key in full, not through a declared publisher: a publisher's key is
+            # declared once and then sent as a number, and over a lossy link that declaration
+            # can be lost or overtaken, after which the gateway drops the puts. (Python's
+            # session.put has no reliability option: over `udp/` everything is best effort.)
+            session.put(
+                key("drive"),
+                drive,
+                encoding=zenoh.Encoding.APPLICATION_JSON,
+                congestion_control=zenoh.CongestionControl.DROP,
+                priority=zenoh.Priority.REAL_TIME,
+                express=True,
+            )
+
         ended = threading.Event()
         reason: list[str] = []
 
@@ -110,7 +116,7 @@ def main() -> int:
                 if seq % ANSWERED_EVERY == 1:
                     session.get(key("drive"), payload=drive, handler=on_answer, timeout=TIMEOUT)
                 else:
-                    drives.put(drive)
+                    put_drive(drive)
                 next_send += PERIOD
                 time.sleep(max(0.0, next_send - time.monotonic()))
         except KeyboardInterrupt:
@@ -120,7 +126,7 @@ def main() -> int:
             return 4
         seq += 1
         stop = {"seq": seq, "sent_ms": now_ms(), "linear": 0.0, "angular": 0.0}
-        drives.put(json.dumps(stop))
+        put_drive(json.dumps(stop))
         answer = ask("relinquish", {})
         if answer is None or not answer["accepted"]:
             print(f"giving up control: {answer}", file=sys.stderr)

@@ -238,20 +238,19 @@ fn run(
 
     // E-stops through the same loss: put and queried on the fast lane, queried on the old.
     let estop_key = format!("scout/{name}/cmd/estop/operator");
-    let copies = session
-        .declare_publisher(estop_key.clone())
-        .congestion_control(zenoh::qos::CongestionControl::Drop)
-        .reliability(zenoh::qos::Reliability::BestEffort)
-        .express(true)
-        .wait()
-        .expect("e-stop publisher");
+
     for _ in 0..ESTOPS {
         // The statuses so far are not this stop's.
         while status.try_next().expect("status").is_some() {}
         let asked = Instant::now();
         if path == Path::Put {
+            // As `RemoteController::stop` does: copies put in full (no declared publisher).
             for _ in 0..3 {
-                let _ = copies.put(r#"{"reason":"bench"}"#).wait();
+                let _ = (session.put(&estop_key, r#"{"reason":"bench"}"#))
+                    .congestion_control(zenoh::qos::CongestionControl::Drop)
+                    .reliability(zenoh::qos::Reliability::BestEffort)
+                    .express(true)
+                    .wait();
             }
         }
         let answer = session
