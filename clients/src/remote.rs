@@ -108,11 +108,11 @@ const MAX_PENDING_ANSWERS: usize = 8;
 /// Best-effort copies an e-stop is put as, beside its query.
 const ESTOP_COPIES: usize = 3;
 
-/// An e-stop or take-control query not answered this soon is asked again...
-const REPEAT_QUERY_AFTER: Duration = Duration::from_millis(150);
+/// An e-stop query not answered this soon is asked again...
+const ESTOP_QUERY_AFTER: Duration = Duration::from_millis(150);
 
-/// ... up to this many queries in all (the last within a take-control's 500 ms life).
-const REPEATED_QUERIES: usize = 3;
+/// ... up to this many queries in all.
+const ESTOP_QUERIES: usize = 3;
 
 /// Drives a robot through zenoh as remote peer `peer`, as a remote operator's program would:
 /// take control (a query, answered), drive (samples put on the fast lane: best effort,
@@ -290,21 +290,22 @@ impl RemoteController {
     }
 
     /// Sends `command` as a query and waits for the answer: accepted, or
-    /// [`RemoteError::Refused`]. An e-stop or a take-control not answered within
-    /// [`REPEAT_QUERY_AFTER`] is asked again, the same bytes, up to [`REPEATED_QUERIES`] in all
-    /// (over plain UDP a query or its answer can be lost): the first answer is the answer. A
-    /// repeated stop only refreshes the same stop. A repeated take-control carries the first
-    /// one's `sent_ms`, so the gateway judges every copy as that one act held up in the
-    /// network: refused as outdated if a release or a lapse came after it, as stale past its
-    /// life, and a lease already granted is only returned. Nothing else is repeated.
+    /// [`RemoteError::Refused`]. An e-stop not answered within [`ESTOP_QUERY_AFTER`] is asked
+    /// again, the same bytes, up to [`ESTOP_QUERIES`] in all (over plain UDP a query or its
+    /// answer can be lost; a repeated stop only refreshes the same stop): the first answer is
+    /// the answer. Nothing else is repeated: a copy of a take-control that arrives after the
+    /// first was answered could grant control after that control was used and given up, or
+    /// after the take was refused, and the bridge would then attach it to drives still
+    /// streaming.
     fn ask(
         &mut self,
         kind: RemoteKind,
         command: &RemoteCommand,
     ) -> Result<RemoteAnswer, RemoteError> {
         let queries = match kind {
-            RemoteKind::Estop | RemoteKind::TakeControl => REPEATED_QUERIES,
+            RemoteKind::Estop => ESTOP_QUERIES,
             RemoteKind::Drive
+            | RemoteKind::TakeControl
             | RemoteKind::Relinquish
             | RemoteKind::Release
             | RemoteKind::Resume
@@ -315,7 +316,7 @@ impl RemoteController {
         let start = std::time::Instant::now();
         let mut asked = Vec::new();
         let reply = loop {
-            if asked.len() < queries && start.elapsed() >= REPEAT_QUERY_AFTER * asked.len() as u32 {
+            if asked.len() < queries && start.elapsed() >= ESTOP_QUERY_AFTER * asked.len() as u32 {
                 let replies = self
                     .session
                     .get(command_key(&self.robot, kind, &self.peer))
