@@ -238,6 +238,9 @@ pub struct ClientKey {
     pub node: u128,
     /// The port's name: the client's name in the status, the audit log and on its stops.
     pub name: String,
+    /// Its user, as the kernel vouched for it (a datagram's credentials, a port's process's
+    /// real uid; `None`: unknown): a stop belongs to its name and this user.
+    pub uid: Option<u32>,
 }
 
 /// A request's sender and what it may do.
@@ -292,8 +295,20 @@ pub struct Stop {
     /// Latched by an operator: only an operator releases it, whatever name another client
     /// takes.
     pub by_operator: bool,
+    /// The user that latched it, as the kernel vouched (`None`: unknown, or the gateway's own):
+    /// besides an operator, only a client of this user under the owner's name releases it.
+    pub uid: Option<u32>,
     /// For a heartbeat stop: the source's port, while the cause is its silence.
     source: Option<u128>,
+}
+
+impl Stop {
+    /// Whether a non-operator going by its owner's name, of user `uid`, may release it: only a
+    /// stop no operator latched, latched by that very user, known (a stop of a user the kernel
+    /// did not name is an operator's to release). An operator releases any.
+    fn releasable_by(&self, uid: Option<u32>) -> bool {
+        !self.by_operator && uid.is_some() && self.uid == uid
+    }
 }
 
 impl std::fmt::Display for Stop {
@@ -315,6 +330,7 @@ struct Latch<'a> {
     /// For a heartbeat stop: the source's port, while the cause is its silence.
     source: Option<u128>,
     by_operator: bool,
+    uid: Option<u32>,
 }
 
 /// A command a client sent under its lease.
@@ -709,6 +725,7 @@ impl Arbiter {
                 reason,
                 source: None,
                 by_operator: origin.operator,
+                uid: origin.key.uid,
             },
         );
         Ok(Accepted {
@@ -931,10 +948,12 @@ impl Arbiter {
             ReleaseTarget::Owner(owner) => owner.as_str(),
             ReleaseTarget::Own | ReleaseTarget::All => name.as_str(),
         };
-        // Whose stops the target names, at any time.
+        // Whose stops the target names, at any time: a non-operator's own are those of its
+        // name that its user latched.
+        let uid = origin.key.uid;
         let targeted = |stop: &Stop| match target {
             ReleaseTarget::Own | ReleaseTarget::Owner(_) => {
-                stop.owner == owner && (origin.operator || !stop.by_operator)
+                stop.owner == owner && (origin.operator || stop.releasable_by(uid))
             }
             ReleaseTarget::All => true,
         };
@@ -946,9 +965,16 @@ impl Arbiter {
                      (newest seen: #{through}): look again, then release",
                     newer.id
                 )
-            } else if self.stops.iter().any(|stop| stop.owner == owner) {
+            } else if let Some(theirs) = self.stops.iter().find(|stop| stop.owner == owner) {
+                let by = match theirs.uid {
+                    _ if theirs.by_operator => "an operator".to_owned(),
+                    Some(latcher) => format!("another user (uid {latcher})"),
+                    None => "a user the kernel did not name".to_owned(),
+                };
                 format!(
-                    "the stops of {owner} were latched by an operator: only an operator releases them"
+                    "the stops of {owner} were latched by {by}: only that user or an operator \
+                     releases them (this is uid {})",
+                    uid.map_or_else(|| "unknown".to_owned(), |uid| uid.to_string())
                 )
             } else {
                 format!(
@@ -1030,14 +1056,19 @@ impl Arbiter {
             reason,
             source,
             by_operator,
+            uid,
         } = latch;
         let why = format!("{owner} ({cause}): {reason}");
         // Past MAX_STOPS, a new owner's stop merges into one entry. A stop an operator latched
         // is latched again only by an operator: anyone else under that name gets a stop of
         // its own, and the operator's keeps its reason.
+        // A stop of another user under this name is not this one's either: it gets its own
+        // (merged stops are an operator's to release whoever latched them: one entry).
         let known = |stops: &[Stop], owner: &str| {
             stops.iter().position(|stop| {
-                stop.owner == owner && stop.cause == cause && (by_operator || !stop.by_operator)
+                stop.owner == owner
+                    && stop.cause == cause
+                    && (by_operator || (!stop.by_operator && (stop.uid == uid || owner == OTHERS)))
             })
         };
         let owner = match known(&self.stops, owner) {
@@ -1050,7 +1081,10 @@ impl Arbiter {
                 stop.id = id;
                 stop.reason = reason.to_owned();
                 stop.source = source;
-                stop.by_operator |= by_operator;
+                if by_operator && !stop.by_operator {
+                    stop.by_operator = true;
+                    stop.uid = uid;
+                }
                 self.audit(now, format!("STOP #{id} latched again by {why}"));
             }
             None => {
@@ -1061,6 +1095,7 @@ impl Arbiter {
                     reason: reason.to_owned(),
                     at: now,
                     by_operator,
+                    uid,
                     source,
                 });
                 self.audit(now, format!("STOP #{id} latched by {why}"));
@@ -1086,6 +1121,7 @@ impl Arbiter {
                 reason: detail,
                 source: None,
                 by_operator: false,
+                uid: None,
             },
         );
     }
@@ -1182,6 +1218,7 @@ impl Arbiter {
                         reason: "heartbeat source died",
                         source: None,
                         by_operator: false,
+                        uid: source.key.uid,
                     },
                 );
             }
@@ -1211,23 +1248,24 @@ impl Arbiter {
                 && now.saturating_sub(source.last_seen) > heartbeat.period
             {
                 heartbeat.silent = true;
-                missed.push((source.key.name.clone(), source.key.port, heartbeat.period));
+                missed.push((source.key.clone(), heartbeat.period));
             }
         }
         for index in stale {
             self.end_lease(now, index, "stale: no command within its class's age");
             self.sources[index].lost_control = Some(now);
         }
-        for (name, port, period) in missed {
+        for (key, period) in missed {
             let reason = format!("heartbeat missed (period {} ms)", period.as_millis());
             self.latch(
                 now,
                 Latch {
-                    owner: &name,
+                    owner: &key.name,
                     cause: StopCause::Heartbeat,
                     reason: &reason,
-                    source: Some(port),
+                    source: Some(key.port),
                     by_operator: false,
+                    uid: key.uid,
                 },
             );
         }

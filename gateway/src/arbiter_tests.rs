@@ -15,12 +15,19 @@ const fn ms(millis: u64) -> Duration {
     Duration::from_millis(millis)
 }
 
+/// A client of user 1000.
 fn client(name: &str, port: u128) -> Origin {
+    user_client(name, port, Some(1000))
+}
+
+/// A client of user `uid`, as the kernel vouched for it (`None`: it could not say).
+fn user_client(name: &str, port: u128, uid: Option<u32>) -> Origin {
     Origin {
         key: ClientKey {
             port,
             node: port,
             name: name.into(),
+            uid,
         },
         operator: false,
         bridge: false,
@@ -606,6 +613,75 @@ fn an_operators_stop_keeps_its_reason_and_owner_against_anyone_of_its_name() {
 }
 
 #[test]
+fn a_stop_belongs_to_its_name_and_the_user_that_latched_it() {
+    let mut bench = Bench::new();
+    // A monitor running as root latches as `guard`; another user takes the same name.
+    let root_guard = user_client("guard", 1, Some(0));
+    let other = user_client("guard", 2, Some(1001));
+    let monitors = bench.stop(&root_guard, "person ahead");
+    for target in [ReleaseTarget::Own, ReleaseTarget::Owner("guard".into())] {
+        let refused = bench
+            .release(&other, target)
+            .expect_err("another user's stop under the same name");
+        assert_eq!(refused.kind(), RejectionKind::NotAllowed);
+        assert!(
+            refused.to_string().contains("another user (uid 0)"),
+            "{refused}"
+        );
+    }
+    assert_eq!(bench.arbiter.stops().len(), 1);
+    // Its own stop under that name is a stop of its own, which it releases alone.
+    let others = bench.stop(&other, "its own");
+    assert_ne!(others, monitors);
+    let stops = bench.arbiter.stops();
+    assert_eq!(stops.len(), 2);
+    assert_eq!(
+        stops
+            .iter()
+            .find(|s| s.id == monitors)
+            .map(|s| s.reason.as_str()),
+        Some("person ahead"),
+        "the root monitor's stop keeps its reason"
+    );
+    bench.release(&other, ReleaseTarget::Own).expect("its own");
+    let left: Vec<(u64, Option<u32>)> = bench
+        .arbiter
+        .stops()
+        .iter()
+        .map(|s| (s.id, s.uid))
+        .collect();
+    assert_eq!(left, [(monitors, Some(0))]);
+    // The monitor itself, restarted (another port, the same user), releases it.
+    bench
+        .release(&user_client("guard", 3, Some(0)), ReleaseTarget::Own)
+        .expect("the monitor's own stop");
+    assert!(bench.arbiter.stops().is_empty());
+    // An operator releases anyone's, of any user.
+    bench.stop(&root_guard, "again");
+    bench
+        .release(
+            &operator("operator", 4),
+            ReleaseTarget::Owner("guard".into()),
+        )
+        .expect("an operator");
+}
+
+#[test]
+fn a_stop_of_a_user_the_kernel_did_not_name_is_an_operators_to_release() {
+    let mut bench = Bench::new();
+    let unknown = user_client("guard", 1, None);
+    bench.stop(&unknown, "from a process whose user could not be read");
+    for who in [unknown, user_client("guard", 2, None), client("guard", 3)] {
+        bench
+            .release(&who, ReleaseTarget::Own)
+            .expect_err("nobody can show it is theirs");
+    }
+    bench
+        .release(&operator("operator", 4), ReleaseTarget::All)
+        .expect("an operator");
+}
+
+#[test]
 fn a_command_stamped_in_the_future_is_refused_and_counted() {
     let mut bench = Bench::new();
     let joy = client("joy", 1);
@@ -1124,8 +1200,8 @@ enum Act {
 
 fn any_act() -> impl Strategy<Value = Act> {
     prop_oneof![
-        (0usize..6).prop_map(Act::Stop),
-        (0usize..6, 0u8..3, 0u64..4).prop_map(|(who, target, lag)| Act::Release(who, target, lag)),
+        (0usize..8).prop_map(Act::Stop),
+        (0usize..8, 0u8..3, 0u64..4).prop_map(|(who, target, lag)| Act::Release(who, target, lag)),
     ]
 }
 
@@ -1141,6 +1217,7 @@ proptest! {
             operator("operator", 1), client("operator", 2),
             operator("guard", 3), client("guard", 4),
             client("planner", 5), client("gateway", 6),
+            user_client("guard", 7, Some(1001)), user_client("guard", 8, None),
         ];
         for act in acts {
             bench.now += ms(1);
@@ -1149,8 +1226,10 @@ proptest! {
                     let before: Vec<Stop> = bench.arbiter.stops().to_vec();
                     bench.stop(&who[w], &format!("by {w}"));
                     if !who[w].operator {
-                        // An operator's stop keeps its id, owner and reason against anyone else.
-                        for stop in before.iter().filter(|s| s.by_operator) {
+                        // An operator's stop, and another user's, keeps its id, owner and reason
+                        // against anyone else.
+                        let others = |s: &&Stop| s.by_operator || s.uid != who[w].key.uid;
+                        for stop in before.iter().filter(others) {
                             prop_assert!(bench.arbiter.stops().contains(stop), "{stop} was rewritten");
                         }
                     }
@@ -1171,6 +1250,7 @@ proptest! {
                         if !origin.operator {
                             prop_assert!(!stop.by_operator, "a non-operator released an operator's stop");
                             prop_assert_eq!(&stop.owner, &origin.key.name, "a non-operator released another's stop");
+                            prop_assert!(stop.uid.is_some() && stop.uid == origin.key.uid, "a non-operator released another user's stop");
                         }
                     }
                 }

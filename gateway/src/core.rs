@@ -12,7 +12,7 @@ use std::time::Duration;
 
 use scout_interface::control::{
     ControlRequest, ControlResponse, EventPayload, LightsControl, MAX_STATUS_STOPS, Rejection,
-    Request, RequestKind, SourcePayload, StatusPayload, StopCause, StopPayload,
+    Request, RequestKind, SourcePayload, StatusPayload, StopCause, StopPayload, UNKNOWN_UID,
 };
 use scout_interface::remote::REMOTE_PREFIX;
 use scout_interface::robot::RobotName;
@@ -1078,6 +1078,8 @@ impl Core {
                 persists: arbiter.persists(stop),
                 reason: FixedText::new(&stop.reason),
                 age_ms: millis(now.saturating_sub(stop.at)),
+                uid: stop.uid.unwrap_or(UNKNOWN_UID),
+                by_operator: stop.by_operator,
             };
         }
         debug_assert!(status.stops().len() <= MAX_STATUS_STOPS);
@@ -1115,6 +1117,7 @@ impl Core {
                 heartbeat_ms: source.heartbeat().map_or(0, |p| p.as_millis() as u32),
                 requests: source.requests,
                 age_ms: millis(now.saturating_sub(source.last_seen)),
+                uid: source.key.uid.unwrap_or(UNKNOWN_UID),
             };
             status.source_count += 1;
         }

@@ -47,6 +47,7 @@ impl Client {
                 port: self.1,
                 node: self.1,
                 name: self.0.to_owned(),
+                uid: Some(1000),
             },
             operator: self.2,
             bridge: false,

@@ -167,6 +167,7 @@ impl RequestServer {
             port,
             node: 0,
             name: String::new(),
+            uid: None,
         };
         let mut pid = None;
         self.service.dynamic_config().list_clients(|client| {
@@ -185,14 +186,21 @@ impl RequestServer {
         let operator = identity
             .as_ref()
             .is_some_and(|identity| operators.is_operator(identity));
+        // The bridge in this process is of the gateway's own user.
+        let uid = match identity {
+            _ if in_this_process => Some(nix::unistd::getuid().as_raw()),
+            Some(identity) => identity.uids.first().copied(),
+            None => None,
+        };
         let claim = Claim {
             pid,
             node: key.node,
-            uid: identity.and_then(|identity| identity.uids.first().copied()),
+            uid,
             in_this_process,
             operator,
         };
         key.name = client_name(&key.name, &claim);
+        key.uid = uid;
         Origin {
             key,
             operator,
@@ -528,6 +536,7 @@ impl Driver {
                 port: DATAGRAM_PORT | u128::from(received.pid),
                 node: 0,
                 name: client_name(chosen, &claim),
+                uid: claim.uid,
             },
             operator,
             bridge: false,

@@ -121,11 +121,12 @@ pub fn status() -> Value {
     let stop = object(json!({
         "id": integer(), "owner": string(), "cause": string(), "reason": string(),
         "age_ms": number(), "persists": boolean(),
+        "uid": { "type": ["integer", "null"] }, "by_operator": boolean(),
     }));
     let source = object(json!({
         "client": string(), "class": { "type": ["string", "null"] }, "holding": boolean(),
         "lease": { "type": ["integer", "null"] }, "heartbeat_ms": { "type": ["number", "null"] },
-        "requests": integer(), "age_ms": number(),
+        "requests": integer(), "age_ms": number(), "uid": { "type": ["integer", "null"] },
     }));
     json!({
         "title": "scout.Status",

@@ -682,7 +682,7 @@ pub struct LightsRequest {
 
 /// A request from a client to the gateway's arbiter.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::ControlRequest.v8")]
+#[type_name("scout::ControlRequest.v9")]
 #[repr(C)]
 pub struct ControlRequest {
     /// [`RequestKind`] as `u8`.
@@ -724,7 +724,7 @@ pub struct ControlRequest {
 
 /// The gateway's answer to one request.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("scout::ControlResponse.v8")]
+#[type_name("scout::ControlResponse.v9")]
 #[repr(C)]
 pub struct ControlResponse {
     /// The request's `seq`.
@@ -787,7 +787,15 @@ pub struct StopPayload {
     pub reason: FixedText<MAX_REASON>,
     /// How long ago, ms.
     pub age_ms: f64,
+    /// The user that latched it, as the kernel vouched ([`UNKNOWN_UID`]: unknown, or the
+    /// gateway): besides an operator, only that user, under the owner's name, releases it.
+    pub uid: u32,
+    /// An operator latched it: only an operator releases it.
+    pub by_operator: bool,
 }
+
+/// A user id the kernel did not give (the overflow uid's value).
+pub const UNKNOWN_UID: u32 = u32::MAX;
 
 /// One entry of the status' recent history.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
@@ -817,11 +825,13 @@ pub struct SourcePayload {
     pub requests: u64,
     /// How long ago it last sent a request, ms.
     pub age_ms: f64,
+    /// Its user, as the kernel vouched ([`UNKNOWN_UID`]: unknown).
+    pub uid: u32,
 }
 
 /// The arbiter's status, published on every change and at least once a second.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::StatusPayload.v8")]
+#[type_name("scout::StatusPayload.v9")]
 #[repr(C)]
 pub struct StatusPayload {
     /// Rises by one with every publication.

@@ -9,7 +9,7 @@ use scout_protocol::version::Protocol;
 use scout_protocol::{ChassisState, FaultClear, Light, Message};
 use serde_json::{Map, Value, json};
 
-use crate::control::{Class, LightsControl, RejectionKind, StatusPayload, StopCause};
+use crate::control::{Class, LightsControl, RejectionKind, StatusPayload, StopCause, UNKNOWN_UID};
 use crate::state::{BatteryLevel, Received, StatePayload};
 
 fn age_ms(at_ns: u64, now_ns: u64) -> f64 {
@@ -386,6 +386,8 @@ pub fn status_json(status: &StatusPayload, now_ns: u64) -> Value {
                 "reason": stop.reason.as_str(),
                 "age_ms": stop.age_ms,
                 "persists": stop.persists,
+                "uid": (stop.uid != UNKNOWN_UID).then_some(stop.uid),
+                "by_operator": stop.by_operator,
             })
         })
         .collect();
@@ -410,6 +412,7 @@ pub fn status_json(status: &StatusPayload, now_ns: u64) -> Value {
                 "heartbeat_ms": (source.heartbeat_ms > 0).then_some(source.heartbeat_ms),
                 "requests": source.requests,
                 "age_ms": source.age_ms,
+                "uid": (source.uid != UNKNOWN_UID).then_some(source.uid),
             })
         })
         .collect();

@@ -32,9 +32,9 @@ pub mod state;
 pub mod stop_socket;
 pub mod text;
 
-/// The layout version in every payload's iceoryx2 type name (`scout::StatePayload.v8`). Raise it
+/// The layout version in every payload's iceoryx2 type name (`scout::StatePayload.v9`). Raise it
 /// when a payload changes: the sizes pinned below stop the build until it is raised.
-pub const LAYOUT_VERSION: u32 = 8;
+pub const LAYOUT_VERSION: u32 = 9;
 
 pub use control::{
     Accepted, Class, ControlRequest, ControlResponse, LightsSetting, Rejection, RejectionKind,
@@ -62,6 +62,6 @@ macro_rules! pin_layout {
 }
 
 pin_layout!(state::StatePayload, 992, 8);
-pin_layout!(control::StatusPayload, 6448, 8);
+pin_layout!(control::StatusPayload, 6832, 8);
 pin_layout!(control::ControlRequest, 208, 8);
 pin_layout!(control::ControlResponse, 200, 8);
