@@ -234,7 +234,7 @@ impl Device {
         now: Duration,
         deadline: Duration,
         wake: &Listener<Ipc>,
-        stops: std::os::fd::BorrowedFd<'_>,
+        stops: Option<std::os::fd::BorrowedFd<'_>>,
     ) -> io::Result<Ready> {
         match self {
             Self::Sim { chassis, epoch } => {

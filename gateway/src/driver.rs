@@ -258,13 +258,18 @@ fn client_name(chosen: &str, claim: &Claim) -> String {
 const MAX_REQUESTS_PER_ITERATION: usize = 64;
 
 /// Stop-endpoint datagrams handled per iteration at most, and the time they may take: the rest
-/// wait for the next iteration, after the tick. Each costs a few tens of µs (its sender's
-/// identity is read from procfs, bounded: [`crate::identity`]); a flood costs the tick at most
-/// this, and one user's flood is refused at its share ([`UserShares`]) while the others' stops
-/// are read.
+/// wait until the endpoint has rested ([`DATAGRAM_REST`]). Each costs a few tens of µs within
+/// its user's share (its sender's identity is read from procfs, bounded: [`crate::identity`]),
+/// a few µs past it (refused unread and unanswered, unless a stop); one user's flood is
+/// refused at its share ([`UserShares`]) while the others' stops are read.
 const MAX_DATAGRAMS_PER_ITERATION: usize = 64;
 /// See [`MAX_DATAGRAMS_PER_ITERATION`].
-const DATAGRAM_BUDGET: Duration = Duration::from_millis(2);
+const DATAGRAM_BUDGET: Duration = Duration::from_millis(1);
+/// How long the stop endpoint rests after a full budget: a flood costs the control thread (a
+/// real-time thread under the unit) at most [`DATAGRAM_BUDGET`] in every budget and rest, 20 %
+/// of a core, whoever floods; a stop queued meanwhile latches after at most this, within a
+/// tick. Senders wait in the kernel's queue for the endpoint (first come, first served).
+const DATAGRAM_REST: Duration = Duration::from_millis(4);
 
 /// The client key of a stop-endpoint sender: no iceoryx2 port, so a number of its own.
 const DATAGRAM_PORT: u128 = 1 << 127;
@@ -283,6 +288,8 @@ pub struct Driver {
     shares: UserShares,
     origins: std::collections::HashMap<u128, Origin>,
     backlog: bool,
+    /// Until when the stop endpoint rests after a full budget of datagrams.
+    datagrams_rest_until: Option<Duration>,
     realtime_priority: u8,
     service_manager: scout_io::notify::ServiceManager,
     /// The black box of the bus (none when configured off).
@@ -324,6 +331,7 @@ impl Driver {
             shares: UserShares::new(config.arbiter.request_rate_hz, config.arbiter.request_burst),
             origins: std::collections::HashMap::new(),
             backlog: false,
+            datagrams_rest_until: None,
             realtime_priority: config.timing.realtime_priority,
             service_manager: scout_io::notify::ServiceManager::from_env(),
             black_box: Recorder::start(&config.blackbox, &config.name.to_string())
@@ -378,10 +386,10 @@ impl Driver {
             if self.core.is_finished() {
                 break;
             }
-            let deadline = if self.backlog {
-                now
-            } else {
-                self.core.poll_timeout()
+            let deadline = match self.datagrams_rest_until {
+                _ if self.backlog => now,
+                Some(until) => until.min(self.core.poll_timeout()),
+                None => self.core.poll_timeout(),
             };
             ready = self.wait(now, deadline);
         }
@@ -461,7 +469,10 @@ impl Driver {
         if let Err(error) = self.endpoints.wake.try_wait(|_| {}) {
             debug!("draining the wake-up event failed: {error:?}");
         }
-        let datagrams_waiting = self.serve_datagrams(now);
+        if self.datagrams_rest_until.is_none_or(|until| now >= until) {
+            let more = self.serve_datagrams(now);
+            self.datagrams_rest_until = more.then(|| monotonic() + DATAGRAM_REST);
+        }
         let mut stops_waiting = self.serve_stops(now);
         let mut requests_waiting = false;
         for _ in 0..MAX_REQUESTS_PER_ITERATION {
@@ -471,7 +482,7 @@ impl Driver {
             }
             stops_waiting = self.serve_stops(now);
         }
-        self.backlog = datagrams_waiting || stops_waiting || requests_waiting;
+        self.backlog = stops_waiting || requests_waiting;
     }
 
     /// Answers the datagrams waiting on the stop endpoint (bounded in number and time), each
@@ -485,19 +496,30 @@ impl Driver {
             let Some(received) = self.stop_endpoint.try_receive() else {
                 return false;
             };
-            let (seq, answer) = self.serve_datagram(now, &received);
-            let reply = StopReply::new(seq, &answer, std::process::id());
-            self.stop_endpoint.reply(received.from.as_ref(), &reply);
+            if let Some((seq, answer)) = self.serve_datagram(now, &received) {
+                let reply = StopReply::new(seq, &answer, std::process::id());
+                self.stop_endpoint.reply(received.from.as_ref(), &reply);
+            }
         }
         true
     }
 
-    /// One datagram. Within its user's share the sender's identity is read (the operator role,
-    /// and so the name `operator`); past it, a stop still latches, as a non-operator's (named
-    /// `uid-UID` if it claimed `operator`), and anything else is refused as rate limited.
-    fn serve_datagram(&mut self, now: Duration, received: &Received) -> (u64, Answer) {
+    /// One datagram, and its answer (none: past its user's share). Every datagram, garbage
+    /// included, is taken from its user's share first. Within it the sender's identity is read
+    /// (the operator role, and so the name `operator`); past it, a stop still latches, as a
+    /// non-operator's (named `uid-UID` if it claimed `operator`), and anything else is counted
+    /// as rate limited and dropped unanswered: a flood costs no identity and no reply.
+    fn serve_datagram(&mut self, now: Duration, received: &Received) -> Option<(u64, Answer)> {
+        let within_share = self.shares.admit(now, received.uid);
+        let rate_limited = || Rejection::RateLimited {
+            rate: self.shares.rate(),
+        };
         let request = match &received.request {
             Ok(request) => request,
+            Err(_) if !within_share => {
+                self.core.count_datagram_rejection(&rate_limited());
+                return None;
+            }
             Err(error) => {
                 let seq = match error {
                     ParseError::Malformed { seq, .. } => seq.unwrap_or(0),
@@ -505,17 +527,13 @@ impl Driver {
                 };
                 let rejection = Rejection::Malformed(error.to_string());
                 self.core.count_datagram_rejection(&rejection);
-                return (seq, Err(rejection));
+                return Some((seq, Err(rejection)));
             }
         };
         let is_stop = matches!(request.ask, Ask::Stop { .. });
-        let within_share = self.shares.admit(now, received.uid);
         if !within_share && !is_stop {
-            let rejection = Rejection::RateLimited {
-                rate: self.shares.rate(),
-            };
-            self.core.count_datagram_rejection(&rejection);
-            return (request.seq, Err(rejection));
+            self.core.count_datagram_rejection(&rate_limited());
+            return None;
         }
         let pid = (received.pid != 0).then_some(received.pid);
         let needs_identity = within_share && !matches!(request.ask, Ask::Ping);
@@ -545,7 +563,7 @@ impl Driver {
         if is_stop {
             self.transmit();
         }
-        (request.seq, answer)
+        Some((request.seq, answer))
     }
 
     /// Answers the waiting stops, bounded (a flood of stops cannot hold up the zero frame), and
@@ -636,14 +654,14 @@ impl Driver {
 
     /// Waits for input or a wake-up until `deadline` (`now` is this iteration's clock).
     fn wait(&mut self, now: Duration, deadline: Duration) -> Ready {
+        // A resting endpoint is not watched: its queue would wake the wait at once.
+        let stops = (self.datagrams_rest_until.is_none()).then(|| self.stop_endpoint.fd());
         let result = match self.device.as_ref() {
-            Some(device) => {
-                device.wait(now, deadline, &self.endpoints.wake, self.stop_endpoint.fd())
-            }
+            Some(device) => device.wait(now, deadline, &self.endpoints.wake, stops),
             None => crate::wait::wait(
                 None,
                 &self.endpoints.wake,
-                self.stop_endpoint.fd(),
+                stops,
                 deadline.saturating_sub(now),
             ),
         };

@@ -25,12 +25,12 @@ pub struct Ready {
     pub port: bool,
 }
 
-/// Waits at most `timeout` until `port` (if any), `wake` or the stop endpoint `stops` is
-/// readable. A signal ends the wait early with nothing ready.
+/// Waits at most `timeout` until `port` (if any), `wake` or the stop endpoint `stops` (unless
+/// it rests) is readable. A signal ends the wait early with nothing ready.
 pub fn wait(
     port: Option<&dyn AsRawFd>,
     wake: &Listener<Ipc>,
-    stops: BorrowedFd<'_>,
+    stops: Option<BorrowedFd<'_>>,
     timeout: Duration,
 ) -> io::Result<Ready> {
     // SAFETY: `native_handle` returns the descriptor the listener owns; `wake` is borrowed for
@@ -39,20 +39,14 @@ pub fn wait(
     let port_fd = port.map(AsRawFd::as_raw_fd);
     // SAFETY: both descriptors belong to objects borrowed for this whole function (above).
     let borrow = |fd: RawFd| unsafe { BorrowedFd::borrow_raw(fd) };
+    // A slot without a descriptor polls the wake-up event for nothing.
+    let unused = || PollFd::new(borrow(wake_fd), PollFlags::empty());
     let mut fds = [
         PollFd::new(borrow(wake_fd), PollFlags::POLLIN),
-        PollFd::new(stops, PollFlags::POLLIN),
-        PollFd::new(borrow(wake_fd), PollFlags::empty()),
+        stops.map_or_else(unused, |fd| PollFd::new(fd, PollFlags::POLLIN)),
+        port_fd.map_or_else(unused, |fd| PollFd::new(borrow(fd), PollFlags::POLLIN)),
     ];
-    if let Some(fd) = port_fd {
-        fds[2] = PollFd::new(borrow(fd), PollFlags::POLLIN);
-    }
-    let used = if port_fd.is_some() { 3 } else { 2 };
-    match ppoll(
-        &mut fds[..used],
-        Some(TimeSpec::from_duration(timeout)),
-        None,
-    ) {
+    match ppoll(&mut fds, Some(TimeSpec::from_duration(timeout)), None) {
         Ok(_) => {}
         Err(nix::errno::Errno::EINTR) => return Ok(Ready::default()),
         Err(errno) => return Err(errno.into()),

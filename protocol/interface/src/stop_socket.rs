@@ -14,7 +14,8 @@ use std::time::{Duration, Instant};
 use nix::errno::Errno;
 use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
 use nix::sys::socket::{
-    AddressFamily, MsgFlags, SockFlag, SockType, UnixAddr, bind, recvfrom, sendto, socket,
+    AddressFamily, MsgFlags, SockFlag, SockType, UnixAddr, bind, recv, sendto, setsockopt, socket,
+    sockopt,
 };
 
 use crate::LAYOUT_VERSION;
@@ -457,10 +458,12 @@ impl StopClient {
         if name.is_empty() || name.len() > MAX_CLIENT_NAME {
             return Err(io(Errno::EINVAL));
         }
+        // Blocking, so that a send to a full endpoint waits in the kernel's queue of senders
+        // (served in turn: a flood's senders wait in it too) for at most the request's timeout.
         let socket = socket(
             AddressFamily::Unix,
             SockType::Datagram,
-            SockFlag::SOCK_CLOEXEC | SockFlag::SOCK_NONBLOCK,
+            SockFlag::SOCK_CLOEXEC,
             None,
         )
         .map_err(io)?;
@@ -488,7 +491,7 @@ impl StopClient {
     }
 
     /// Sends `ask` and waits at most `timeout` for the answer. A full queue at the gateway is
-    /// tried again until the deadline.
+    /// waited on, in turn with every other sender, until the deadline.
     pub fn request(&mut self, ask: Ask, timeout: Duration) -> Result<StopReply, StopSocketError> {
         let robot = self.robot.clone();
         let io = |errno| StopSocketError::Io {
@@ -505,15 +508,17 @@ impl StopClient {
         let deadline = Instant::now() + timeout;
         let fd = self.socket.as_raw_fd();
         loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            let wait =
+                nix::sys::time::TimeVal::new(left.as_secs() as _, left.subsec_micros().max(1) as _);
+            setsockopt(&self.socket, sockopt::SendTimeout, &wait).map_err(io)?;
             match sendto(fd, &datagram, &self.gateway, MsgFlags::empty()) {
                 Ok(_) => break,
                 Err(Errno::ECONNREFUSED | Errno::ENOENT) => {
                     return Err(StopSocketError::NoGateway { robot });
                 }
-                Err(Errno::EAGAIN | Errno::EINTR) if Instant::now() < deadline => {
-                    std::thread::sleep(Duration::from_micros(200));
-                }
-                Err(Errno::EAGAIN) => return Err(self.no_answer(timeout)),
+                Err(Errno::EINTR) if Instant::now() < deadline => {}
+                Err(Errno::EAGAIN | Errno::EINTR) => return Err(self.no_answer(timeout)),
                 Err(errno) => return Err(io(errno)),
             }
         }
@@ -533,8 +538,9 @@ impl StopClient {
                 Ok(_) | Err(Errno::EINTR) => {}
                 Err(errno) => return Err(io(errno)),
             }
-            match recvfrom::<UnixAddr>(fd, &mut buffer) {
-                Ok((len, _)) => match StopReply::parse(&buffer[..len]) {
+            // Without waiting: the socket blocks for sends only.
+            match recv(fd, &mut buffer, MsgFlags::MSG_DONTWAIT) {
+                Ok(len) => match StopReply::parse(&buffer[..len]) {
                     Ok(reply) if reply.seq == self.seq => return Ok(reply),
                     // An answer to an earlier request that timed out.
                     Ok(_) | Err(ParseError::NotOurs(_)) => {}
