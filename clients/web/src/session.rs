@@ -5,7 +5,7 @@
 
 use std::time::Duration;
 
-use scout_interface::remote::SenderClock;
+use scout_interface::remote::{SenderTiming, TimingError};
 use serde::Deserialize;
 
 use crate::access::{Role, User};
@@ -131,22 +131,10 @@ pub enum Refused {
         /// The user's role.
         role: Role,
     },
-    /// A drive not newer than the last.
-    #[error("drive {seq} is not newer than {last}")]
-    OutOfOrder {
-        /// Its number.
-        seq: u64,
-        /// The last one's.
-        last: u64,
-    },
-    /// Held up past its life.
-    #[error("drive arrived {late_ms} ms late, past its life of {life_ms} ms: not applied")]
-    Late {
-        /// How late.
-        late_ms: u128,
-        /// Its life.
-        life_ms: u128,
-    },
+    /// Its order or its timing: a drive not newer than the last, a number or a stamp that
+    /// leaps ahead, one held up past its life.
+    #[error("drive not applied: {0}")]
+    Timing(TimingError),
     /// Speeds not finite.
     #[error("speeds must be finite numbers")]
     NotFinite,
@@ -162,8 +150,7 @@ impl Refused {
             Refused::Malformed(_) => "malformed",
             Refused::TooLarge(_) => "too_large",
             Refused::NotAllowed { .. } => "not_allowed",
-            Refused::OutOfOrder { .. } => "out_of_order",
-            Refused::Late { .. } => "late",
+            Refused::Timing(timing) => timing.kind(),
             Refused::NotFinite => "not_finite",
             Refused::RateLimited => "rate_limited",
         }
@@ -174,8 +161,8 @@ impl Refused {
 #[derive(Debug)]
 pub struct Session {
     user: User,
-    clock: SenderClock,
-    last_seq: Option<u64>,
+    /// Its drives' order and its clock.
+    timing: SenderTiming,
     /// Messages left, in thousandths, and when last refilled.
     budget: (u64, Duration),
     /// It took control and has not given it up.
@@ -189,8 +176,7 @@ impl Session {
     pub fn new(user: User, now: Duration) -> Session {
         Session {
             user,
-            clock: SenderClock::default(),
-            last_seq: None,
+            timing: SenderTiming::default(),
             budget: (u64::from(RATE_BURST) * 1000, now),
             holding: false,
             refused: std::collections::BTreeMap::new(),
@@ -248,6 +234,7 @@ impl Session {
             Message::Take {} => {
                 self.spend(now)?;
                 self.holding = true;
+                self.timing.new_session();
                 return Ok(Action::TakeControl);
             }
             Message::Relinquish {} => {
@@ -265,29 +252,20 @@ impl Session {
         };
         self.spend(now)?;
         let (seq, sent_ms, linear, angular, ttl_ms) = drive;
-        if let Some(last) = self.last_seq
-            && seq <= last
-        {
-            return Err(Refused::OutOfOrder { seq, last });
-        }
-        self.last_seq = Some(seq);
         if !(linear.is_finite() && angular.is_finite()) {
             return Err(Refused::NotFinite);
         }
-        let late = self.clock.late(now, sent_ms);
         let ttl = ttl_ms.map_or(MAX_WEB_LIFE, |ms| {
             Duration::from_millis(u64::from(ms)).min(MAX_WEB_LIFE)
         });
-        if late > ttl {
-            return Err(Refused::Late {
-                late_ms: late.as_millis(),
-                life_ms: ttl.as_millis(),
-            });
-        }
+        let checked = (self.timing)
+            .check(now, Some(seq), sent_ms, ttl)
+            .map_err(Refused::Timing)?;
+        self.timing.accept(checked);
         Ok(Action::Drive {
             linear,
             angular,
-            sent: now.saturating_sub(late),
+            sent: checked.sent,
             ttl,
         })
     }
@@ -370,15 +348,20 @@ mod tests {
             }
             other => panic!("{other:?}"),
         }
-        // Held up 260 ms: past its 250 ms life.
+        // Held up 260 ms: past its 250 ms life, and not learned.
         assert!(matches!(
             page.handle_message(now + 410 * MS, &drive(4, 15_150)),
-            Err(Refused::Late { life_ms: 250, .. })
+            Err(Refused::Timing(TimingError::Late { life, .. })) if life == 250 * MS
         ));
         // Repeated or older: refused.
         assert_eq!(
-            page.handle_message(now + 420 * MS, &drive(4, 15_160)),
-            Err(Refused::OutOfOrder { seq: 4, last: 4 })
+            page.handle_message(now + 420 * MS, &drive(3, 15_160)),
+            Err(Refused::Timing(TimingError::OutOfOrder { seq: 3, last: 3 }))
+        );
+        // The refused 4 moved nothing: a fresh 4 drives.
+        assert!(
+            page.handle_message(now + 430 * MS, &drive(4, 15_420))
+                .is_ok()
         );
     }
 

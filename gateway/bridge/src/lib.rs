@@ -4,8 +4,8 @@
 //! on the network can slow the control thread: it reads the latest state when it publishes, and
 //! older states are dropped.
 
-use std::collections::HashMap;
 use std::collections::hash_map::Entry;
+use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -349,7 +349,7 @@ fn serve_queries(
             })?;
         let node = services::node(&robot_name.node(Program::BridgeCommands))
             .map_err(|e| anyhow::anyhow!("creating the bridge's iceoryx2 node: {e:?}"))?;
-        let mut commands = RemoteControl::new(&node, robot_name, config)?;
+        let mut commands = RemoteControl::new(&node, robot_name, config, Arc::clone(&drives))?;
         let mut counters = Counters::default();
         let links = session
             .declare_publisher(remote::links_key(robot_name))
@@ -431,45 +431,80 @@ enum Work {
 }
 
 /// Drives put on the fast lane, the newest per key (so per peer) only, with their arrival on
-/// this host's clock; and what the lane counted.
+/// this host's clock; and what the lane counted. The keys of peers that hold control always
+/// find a place, and go first: peers that hold nothing (a flood of names) never hold up or
+/// push out the drives of the one that drives.
 #[derive(Debug, Default)]
 struct DriveSlots {
-    waiting: std::sync::Mutex<HashMap<String, (Duration, Vec<u8>)>>,
+    waiting: std::sync::Mutex<Waiting>,
+    /// The drive keys of the peers that hold control, as the command thread last saw them.
+    holders: std::sync::Mutex<HashSet<String>>,
     superseded: std::sync::atomic::AtomicU64,
     ignored: std::sync::atomic::AtomicU64,
 }
 
-/// Keys waiting at once; a drive from yet another key is dropped (and counted as superseded):
-/// that many peers at once is a flood, not a teleop.
+/// The drives waiting, newest per key: of peers that hold control, and of the others.
+#[derive(Debug, Default)]
+struct Waiting {
+    holders: HashMap<String, (Duration, Vec<u8>)>,
+    others: HashMap<String, (Duration, Vec<u8>)>,
+}
+
+/// Keys of peers without control waiting at once; a drive from yet another such key is
+/// dropped (and counted as superseded): that many peers at once is a flood, not a teleop.
 const MAX_WAITING_DRIVES: usize = 64;
 
 impl DriveSlots {
     /// Keeps `payload` as the newest drive on `key`; whether the thread must be woken (no
     /// drive was waiting).
     fn put(&self, key: &str, arrived: Duration, payload: Vec<u8>) -> bool {
+        let holder = self
+            .holders
+            .lock()
+            .is_ok_and(|holders| holders.contains(key));
         let Ok(mut waiting) = self.waiting.lock() else {
             return false;
         };
-        let wake = waiting.is_empty();
-        if waiting.len() >= MAX_WAITING_DRIVES && !waiting.contains_key(key) {
+        let wake = waiting.holders.is_empty() && waiting.others.is_empty();
+        let slots = if holder {
+            &mut waiting.holders
+        } else {
+            &mut waiting.others
+        };
+        if !holder && slots.len() >= MAX_WAITING_DRIVES && !slots.contains_key(key) {
             self.superseded.fetch_add(1, Ordering::Relaxed);
             return wake;
         }
-        if waiting.insert(key.to_owned(), (arrived, payload)).is_some() {
+        if slots.insert(key.to_owned(), (arrived, payload)).is_some() {
             self.superseded.fetch_add(1, Ordering::Relaxed);
         }
         wake
     }
 
-    /// The drives waiting, oldest arrival first.
+    /// The drives waiting: the holders' first, each part oldest arrival first.
     fn take(&self) -> Vec<(String, (Duration, Vec<u8>))> {
-        let mut taken: Vec<_> = self
-            .waiting
-            .lock()
-            .map(|mut waiting| waiting.drain().collect())
-            .unwrap_or_default();
-        taken.sort_by_key(|(_, (arrived, _))| *arrived);
+        let Ok(mut waiting) = self.waiting.lock() else {
+            return Vec::new();
+        };
+        let by_arrival = |part: &mut HashMap<String, (Duration, Vec<u8>)>| {
+            let mut taken: Vec<_> = part.drain().collect();
+            taken.sort_by_key(|(_, (arrived, _))| *arrived);
+            taken
+        };
+        let mut taken = by_arrival(&mut waiting.holders);
+        taken.extend(by_arrival(&mut waiting.others));
         taken
+    }
+
+    /// Whether the peer of drive key `key` holds control now.
+    fn set_holder(&self, key: String, holds: bool) {
+        if let Ok(mut holders) = self.holders.lock() {
+            if holds {
+                holders.insert(key);
+            } else {
+                holders.remove(&key);
+            }
+        }
     }
 }
 
@@ -637,6 +672,8 @@ struct RemoteControl<'a> {
     safety: ControlPort,
     /// The control ports of the peers the rules keep, by client name.
     ports: HashMap<String, ControlPort>,
+    /// The fast lane, told which peers hold control.
+    drives: Arc<DriveSlots>,
 }
 
 impl<'a> RemoteControl<'a> {
@@ -644,6 +681,7 @@ impl<'a> RemoteControl<'a> {
         node: &'a iceoryx2::node::Node<services::Ipc>,
         robot: &'a str,
         config: &'a ZenohConfig,
+        drives: Arc<DriveSlots>,
     ) -> anyhow::Result<Self> {
         Ok(Self {
             node,
@@ -653,6 +691,7 @@ impl<'a> RemoteControl<'a> {
             safety: ControlPort::open(node, robot, Way::Stop, REMOTE_PREFIX)
                 .map_err(|e| anyhow::anyhow!("opening the bridge's stop port: {e}"))?,
             ports: HashMap::new(),
+            drives,
         })
     }
 
@@ -728,6 +767,11 @@ impl<'a> RemoteControl<'a> {
             }
         };
         self.rules.handle_answer(&send.peer, &send.request, &answer);
+        if let Ok((_, peer)) = remote::parse_command_key(key) {
+            let drive_key = remote::command_key(self.robot, RemoteKind::Drive, peer);
+            self.drives
+                .set_holder(drive_key, self.rules.holds(&send.peer));
+        }
         Ok(answer?)
     }
 }
@@ -770,6 +814,32 @@ mod tests {
         }
         assert_eq!(slots.take().len(), MAX_WAITING_DRIVES);
         assert_eq!(slots.superseded.load(Ordering::Relaxed), 1 + 11);
+    }
+
+    #[test]
+    fn the_driving_peers_drives_find_a_place_and_go_first_whatever_floods_the_lane() {
+        let slots = DriveSlots::default();
+        let ms = Duration::from_millis;
+        slots.set_holder("scout/r/cmd/drive/op".into(), true);
+        for peer in 0..MAX_WAITING_DRIVES + 100 {
+            slots.put(&format!("scout/r/cmd/drive/p{peer}"), ms(10), Vec::new());
+        }
+        slots.put("scout/r/cmd/drive/op", ms(20), b"drive".to_vec());
+        let taken = slots.take();
+        assert_eq!(taken.len(), MAX_WAITING_DRIVES + 1);
+        assert_eq!(taken[0].0, "scout/r/cmd/drive/op", "the driver first");
+        // Once it lets go, it is one of the others again.
+        slots.set_holder("scout/r/cmd/drive/op".into(), false);
+        for peer in 0..MAX_WAITING_DRIVES {
+            slots.put(&format!("scout/r/cmd/drive/p{peer}"), ms(30), Vec::new());
+        }
+        slots.put("scout/r/cmd/drive/op", ms(40), b"drive".to_vec());
+        assert!(
+            slots
+                .take()
+                .iter()
+                .all(|(key, _)| key != "scout/r/cmd/drive/op")
+        );
     }
 
     #[test]

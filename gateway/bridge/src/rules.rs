@@ -10,7 +10,7 @@ use std::time::Duration;
 use scout_interface::control::{Accepted, Class, Request};
 use scout_interface::remote::{
     self, CommandError, LINK_AGES, LinkQuality, MAX_COMMAND_BYTES, Permission, RemoteCommand,
-    RemoteCommands, RemoteKind, SenderClock, peer_client_name,
+    RemoteCommands, RemoteKind, SenderTiming, TimingError, peer_client_name,
 };
 use scout_interface::services::RequestError;
 
@@ -40,10 +40,8 @@ struct Peer {
     name: String,
     /// The lease it took and its class.
     lease: Option<(u64, Class)>,
-    /// Its last drive's number.
-    seq: Option<u64>,
-    /// Its clock as this host sees it: how late its commands arrive.
-    clock: SenderClock,
+    /// Its drives' order and its clock as this host sees them: how late its commands arrive.
+    timing: SenderTiming,
     used: u64,
     /// When its last command arrived.
     seen: Duration,
@@ -136,7 +134,7 @@ impl Rules {
                 evicted: None,
             });
         }
-        let (peer, evicted) = self.peer(&name, now);
+        let (peer, evicted) = self.peer(&name, now)?;
         let sent = match kind {
             RemoteKind::TakeControl | RemoteKind::Drive => peer.on_time(now, kind, &command)?,
             RemoteKind::Relinquish
@@ -176,19 +174,26 @@ impl Rules {
             // each time it runs); the offset stays, so drives held up from before still age.
             (Request::TakeControl { class }, Ok(accepted)) => {
                 peer.lease = accepted.lease.map(|lease| (lease, *class));
-                peer.seq = None;
+                peer.timing.new_session();
             }
             // Given up on purpose: the next session may come from another clock (a reboot,
             // another machine under this name), and its take-control seeds the age check.
             (Request::Relinquish, Ok(_)) => {
                 peer.lease = None;
-                peer.seq = None;
-                peer.clock = SenderClock::default();
+                peer.timing = SenderTiming::default();
             }
             // Revoked or not held: the peer must take control again.
             _ if lost_control => peer.lease = None,
             _ => {}
         }
+    }
+
+    /// Whether the peer named `name` (a client name) holds control, as far as the answers
+    /// told.
+    pub fn holds(&self, name: &str) -> bool {
+        self.peers
+            .iter()
+            .any(|peer| peer.name == name && peer.lease.is_some())
     }
 
     /// Whether the gateway grants `permission` to remote peers.
@@ -204,24 +209,33 @@ impl Rules {
     }
 
     /// The peer named `name` (a client name), seen at `now` and kept from now on; past
-    /// [`MAX_REMOTE_PEERS`] the least recently used is forgotten (its name returned).
-    fn peer(&mut self, name: &str, now: Duration) -> (&mut Peer, Option<String>) {
+    /// [`MAX_REMOTE_PEERS`] the least recently used that holds no control is forgotten (its
+    /// name returned): peers that hold nothing never push out one that drives. With every
+    /// kept peer holding control, a new one is refused.
+    fn peer(
+        &mut self,
+        name: &str,
+        now: Duration,
+    ) -> Result<(&mut Peer, Option<String>), CommandError> {
         self.used += 1;
         let used = self.used;
         let mut evicted = None;
         let index = match self.peers.iter().position(|peer| peer.name == name) {
             Some(index) => index,
             None => {
-                if self.peers.len() >= MAX_REMOTE_PEERS
-                    && let Some(oldest) = (0..self.peers.len()).min_by_key(|&i| self.peers[i].used)
-                {
-                    evicted = Some(self.peers.swap_remove(oldest).name);
+                if self.peers.len() >= MAX_REMOTE_PEERS {
+                    let idle = (0..self.peers.len())
+                        .filter(|&i| self.peers[i].lease.is_none())
+                        .min_by_key(|&i| self.peers[i].used)
+                        .ok_or(CommandError::TooManyPeers {
+                            max: MAX_REMOTE_PEERS,
+                        })?;
+                    evicted = Some(self.peers.swap_remove(idle).name);
                 }
                 self.peers.push(Peer {
                     name: name.to_owned(),
                     lease: None,
-                    seq: None,
-                    clock: SenderClock::default(),
+                    timing: SenderTiming::default(),
                     used,
                     seen: now,
                     link: LinkQuality::default(),
@@ -237,12 +251,11 @@ impl Rules {
         // so: a client that died without giving control up.
         if now.saturating_sub(peer.seen) > FORGET_TIMING_AFTER {
             peer.lease = None;
-            peer.seq = None;
-            peer.clock = SenderClock::default();
+            peer.timing = SenderTiming::default();
         }
         peer.used = used;
         peer.seen = now;
-        (peer, evicted)
+        Ok((peer, evicted))
     }
 }
 
@@ -259,19 +272,25 @@ pub fn allowed(commands: &RemoteCommands, permission: Permission) -> Result<(), 
 
 impl Peer {
     /// Checks a take-control's or drive command's age (and a drive's order) at `now`; returns
-    /// when it was sent, on this host's clock. A repeated or older drive `seq` is refused; so
-    /// is a command the network held up for longer than its life, measured against the fastest
-    /// delivery seen from this peer (so no common clock is needed). A take-control carries
-    /// `sent_ms` too: it seeds that measure, so the first drive is aged like every later one.
+    /// when it was sent, on this host's clock ([`SenderTiming::check`]: a drive's `seq` rises
+    /// by a plausible step, a stamp is neither from the future nor older than its life,
+    /// measured against the fastest delivery seen from this peer, so no common clock is
+    /// needed). A take-control carries `sent_ms` too: it seeds that measure, so the first
+    /// drive is aged like every later one. A refused command teaches nothing.
     fn on_time(
         &mut self,
         now: Duration,
         kind: RemoteKind,
         command: &RemoteCommand,
     ) -> Result<Duration, CommandError> {
+        let drive = kind == RemoteKind::Drive;
         let (Some(sent_ms), Some(seq)) = (
             command.sent_ms,
-            command.seq.or((kind != RemoteKind::Drive).then_some(0)),
+            if drive {
+                command.seq.map(Some)
+            } else {
+                Some(None)
+            },
         ) else {
             return Err(CommandError::Missing(match kind {
                 RemoteKind::Drive => {
@@ -282,39 +301,41 @@ impl Peer {
                 }
             }));
         };
-        let drive = kind == RemoteKind::Drive;
-        if drive {
-            self.link.received += 1;
-            match self.seq {
-                Some(last) if seq <= last => {
-                    self.link.reordered += 1;
-                    return Err(CommandError::OutOfOrder { seq, last });
-                }
-                Some(last) => self.link.lost = self.link.lost.saturating_add(seq - last - 1),
-                None => {}
-            }
-            self.seq = Some(seq);
-        }
-        let late = self.clock.late(now, sent_ms);
-        if drive {
-            if self.ages.len() == LINK_AGES {
-                self.ages.pop_front();
-            }
-            // To the nearest ms.
-            self.ages
-                .push_back(late.saturating_add(Duration::from_micros(500)).as_millis() as u64);
-        }
         let life = command.ttl_ms.map_or(MAX_REMOTE_LIFE, |ms| {
             Duration::from_millis(u64::from(ms)).min(MAX_REMOTE_LIFE)
         });
-        if late > life {
-            self.link.late += u64::from(drive);
-            return Err(CommandError::Late {
-                late_ms: late.as_millis(),
-                life_ms: life.as_millis(),
-            });
+        let checked = self.timing.check(now, seq, sent_ms, life);
+        if drive {
+            self.link.received += 1;
+            match &checked {
+                Ok(checked) => {
+                    if let (Some(seq), Some(last)) = (seq, self.timing.last_seq()) {
+                        self.link.lost = self.link.lost.saturating_add(seq - last - 1);
+                    }
+                    self.record_age(now.saturating_sub(checked.sent));
+                }
+                Err(TimingError::OutOfOrder { .. } | TimingError::Leap { .. }) => {
+                    self.link.reordered += 1;
+                }
+                Err(TimingError::Late { late, .. }) => {
+                    self.link.late += 1;
+                    self.record_age(*late);
+                }
+                Err(TimingError::Ahead { .. }) => {}
+            }
         }
-        Ok(now.saturating_sub(late))
+        let checked = checked?;
+        self.timing.accept(checked);
+        Ok(checked.sent)
+    }
+
+    /// Keeps a drive's age, to the nearest ms, among the last [`LINK_AGES`].
+    fn record_age(&mut self, late: Duration) {
+        if self.ages.len() == LINK_AGES {
+            self.ages.pop_front();
+        }
+        self.ages
+            .push_back(late.saturating_add(Duration::from_micros(500)).as_millis() as u64);
     }
 
     /// Its link quality as of `now`.
@@ -403,7 +424,10 @@ mod tests {
         drive(&mut rules, 1010 * MS, "op", 5, 10).expect("first");
         for seq in [5, 4, 0] {
             let refused = drive(&mut rules, 1020 * MS, "op", seq, 20).expect_err("not newer");
-            assert!(matches!(refused, CommandError::OutOfOrder { last: 5, .. }));
+            assert!(matches!(
+                refused,
+                CommandError::Timing(TimingError::OutOfOrder { last: 5, .. })
+            ));
         }
         drive(&mut rules, 1030 * MS, "op", 9, 30).expect("a gap is fine");
     }
@@ -425,10 +449,8 @@ mod tests {
         assert!(
             matches!(
                 late,
-                CommandError::Late {
-                    late_ms: 800,
-                    life_ms: 500
-                }
+                CommandError::Timing(TimingError::Late { late, life })
+                    if late.as_millis() == 800 && life == MAX_REMOTE_LIFE
             ),
             "{late}"
         );
@@ -437,7 +459,7 @@ mod tests {
         let short = rules.handle_command(10_621 * MS, &key("drive", "op"), Some(payload));
         assert!(matches!(
             short,
-            Err(CommandError::Late { life_ms: 100, .. })
+            Err(CommandError::Timing(TimingError::Late { life, .. })) if life == 100 * MS
         ));
     }
 
@@ -587,11 +609,13 @@ mod tests {
             let now = Duration::from_millis(2000 + seq);
             drive(&mut rules, now, "op", 10 + seq, 1000 + seq).expect("on time");
         }
-        drive(&mut rules, 3000 * MS, "op", u64::MAX, 2000).expect("a gap");
+        // The largest number there is: a leap no sender counts to, refused and not counted.
+        drive(&mut rules, 3000 * MS, "op", u64::MAX, 2000).expect_err("a leap");
+        drive(&mut rules, 3000 * MS, "op", 700, 2000).expect("a gap");
         let link = &rules.links(3000 * MS)[0];
         assert_eq!((link.age_p50_ms, link.age_p99_ms), (Some(0), Some(0)));
         // 3 and 4, then (the take-control started the numbers anew) everything past 265.
-        assert_eq!(link.lost, 2 + (u64::MAX - 265 - 1));
+        assert_eq!(link.lost, 2 + (700 - 265 - 1));
     }
 
     #[test]
@@ -621,7 +645,10 @@ mod tests {
             let sent = seq * 100;
             let now = Duration::from_millis(sent + 525);
             let refused = drive(&mut rules, now, "op", seq, peer_ms(sent)).expect_err("held up");
-            assert!(matches!(refused, CommandError::Late { .. }), "{refused}");
+            assert!(
+                matches!(refused, CommandError::Timing(TimingError::Late { .. })),
+                "{refused}"
+            );
         }
     }
 
@@ -678,6 +705,113 @@ mod tests {
         let later = 30_000 * MS + FORGET_TIMING_AFTER + MS;
         behind(&mut rules, later).expect("forgotten after a silent minute");
         assert_eq!(rules.peers[0].lease, None);
+    }
+
+    #[test]
+    fn a_forged_or_stray_drive_changes_nothing_and_the_real_driver_drives_on() {
+        let mut rules = teleop();
+        take(&mut rules, 1000 * MS, "op", 0);
+        let real = |rules: &mut Rules, seq: u64| {
+            let now = Duration::from_millis(1000 + seq * 20);
+            drive(rules, now, "op", seq, seq * 20)
+        };
+        for seq in 1..=5 {
+            real(&mut rules, seq).expect("the real driver");
+        }
+        // The largest number there is: a leap no sender counts to.
+        let refused = drive(&mut rules, 1101 * MS, "op", u64::MAX, 101).expect_err("a leap");
+        assert!(
+            matches!(
+                refused,
+                CommandError::Timing(TimingError::Leap { last: 5, .. })
+            ),
+            "{refused}"
+        );
+        // A stamp an hour ahead: from the future, never learned.
+        let refused = drive(&mut rules, 1102 * MS, "op", 6, 3_600_000).expect_err("ahead");
+        assert!(
+            matches!(refused, CommandError::Timing(TimingError::Ahead { .. })),
+            "{refused}"
+        );
+        // Held up past its (short) life: refused, and its number not taken.
+        let payload = br#"{"seq":7,"sent_ms":0,"ttl_ms":50,"linear":0.5,"angular":0}"#;
+        let refused = rules
+            .handle_command(1103 * MS, &key("drive", "op"), Some(payload))
+            .expect_err("late");
+        assert!(
+            matches!(refused, CommandError::Timing(TimingError::Late { .. })),
+            "{refused}"
+        );
+        for seq in 6..=20 {
+            let send = real(&mut rules, seq).expect("the real driver drives on");
+            assert_eq!(
+                send.via,
+                Via::Control {
+                    sent: Duration::from_millis(1000 + seq * 20)
+                },
+                "aged as before"
+            );
+        }
+        // A leap within what the time since allows is a lost stretch, not a forgery.
+        drive(&mut rules, 2420 * MS, "op", 500, 1420).expect("a second of drives lost");
+    }
+
+    #[test]
+    fn a_take_control_from_a_jumped_clock_starts_the_clock_anew() {
+        let mut rules = teleop();
+        take(&mut rules, 1000 * MS, "op", 0);
+        drive(&mut rules, 1020 * MS, "op", 1, 20).expect("on time");
+        // The sender rebooted with a clock 50 s ahead: its drives are from the future...
+        drive(&mut rules, 1040 * MS, "op", 2, 50_040).expect_err("ahead");
+        // ... until it takes control again, which learns the new clock.
+        take(&mut rules, 1060 * MS, "op", 50_060);
+        for seq in 1..=5u64 {
+            let now = Duration::from_millis(1060 + seq * 20);
+            let send = drive(&mut rules, now, "op", seq, 50_060 + seq * 20).expect("anew");
+            assert_eq!(send.via, Via::Control { sent: now });
+        }
+    }
+
+    #[test]
+    fn peers_that_hold_nothing_never_push_out_one_that_drives() {
+        let mut rules = teleop();
+        take(&mut rules, 1000 * MS, "op", 0);
+        // Take-controls under many names, none granted (the class is held).
+        let held = Err(RequestError::Rejected(Rejected {
+            kind: Some(RejectionKind::Held),
+            reason: "held".into(),
+        }));
+        for (i, peer) in (0..100).map(|i| (i, format!("flood{i}"))) {
+            let now = Duration::from_millis(1001 + i);
+            let payload = format!(r#"{{"class":"teleop","sent_ms":{i}}}"#);
+            let send = rules
+                .handle_command(now, &key("take-control", &peer), Some(payload.as_bytes()))
+                .expect("passes the rules");
+            assert_ne!(
+                send.evicted.as_deref(),
+                Some("remote:op"),
+                "the driver kept"
+            );
+            rules.handle_answer(&send.peer, &send.request, &held);
+        }
+        assert!(rules.holds("remote:op"));
+        drive(&mut rules, 1120 * MS, "op", 1, 120).expect("drives on");
+        // With every kept peer holding control, a new one is refused, not let in by eviction.
+        let mut rules = teleop();
+        for i in 0..MAX_REMOTE_PEERS {
+            take(&mut rules, 1000 * MS, &format!("p{i}"), 0);
+        }
+        let refused = rules
+            .handle_command(
+                1001 * MS,
+                &key("take-control", "late"),
+                Some(br#"{"class":"teleop","sent_ms":1}"#),
+            )
+            .expect_err("no room");
+        assert!(
+            matches!(refused, CommandError::TooManyPeers { .. }),
+            "{refused}"
+        );
     }
 
     proptest! {

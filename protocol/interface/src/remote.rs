@@ -65,11 +65,26 @@ pub const MAX_CLOCK_DRIFT_PPM: u64 = 200;
 /// forgotten by its owner (who makes a new clock for its next session).
 const MAX_DRIFT_SPAN: Duration = Duration::from_secs(60);
 
+/// How far below the fastest delivery seen a command's delay may be and still be learned: the
+/// link got faster, or the sender's clock ran ahead. A stamp further ahead is from the future
+/// (forged, or from another clock): refused and never learned, so that it cannot make the real
+/// sender's commands seem late. A take-control that far ahead starts the clock anew.
+pub const AHEAD_TOLERANCE: Duration = Duration::from_millis(100);
+
+/// How far a drive's `seq` may jump past the last accepted one at once, besides one every
+/// [`MIN_SEQ_PERIOD`] since that one arrived: a sender counts one a command, so a larger leap
+/// is forged or stray, and would silence the real sender's next numbers.
+pub const MAX_SEQ_LEAP: u64 = 64;
+
+/// The shortest time between a sender's commands, as far as `seq` goes: the arbiter takes at
+/// most 500 requests a second from one client (its default `request_rate_hz`).
+pub const MIN_SEQ_PERIOD: Duration = Duration::from_millis(2);
+
 /// A remote sender's clock as seen from this host, without a common clock: the least
 /// (arrival - sent) seen is its offset plus the fastest delivery, and a command's age is how
-/// much later than that it arrived. Sans-IO: times are passed in. The zenoh bridge and
-/// `scout web` age commands with it.
-#[derive(Debug, Clone, Copy, Default)]
+/// much later than that it arrived. Sans-IO: times are passed in; nothing is learned until a
+/// caller keeps what [`SenderClock::age`] returns.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct SenderClock {
     /// The least (arrival - sent) seen, µs, allowed to rise by [`MAX_CLOCK_DRIFT_PPM`] since,
     /// and when it was last updated.
@@ -78,22 +93,179 @@ pub struct SenderClock {
 
 impl SenderClock {
     /// How much longer than the fastest delivery seen a command sent at `sent_ms` (the
-    /// sender's clock, ms) and arriving at `now` (this host's clock) took: its age. The first
-    /// command is age zero: it seeds the measure.
-    pub fn late(&mut self, now: Duration, sent_ms: u64) -> Duration {
+    /// sender's clock, ms) and arriving at `now` (this host's clock) took, its age, and the
+    /// clock once it is learned. The first command is age zero: it seeds the measure. A command
+    /// that arrived faster than the fastest delivery by more than [`AHEAD_TOLERANCE`] is
+    /// `Err(how far ahead)`.
+    pub fn age(&self, now: Duration, sent_ms: u64) -> Result<(Duration, SenderClock), Duration> {
         let delay = now.as_micros() as i128 - i128::from(sent_ms) * 1000;
         let offset = match self.offset {
             Some((offset, at)) => {
                 let since = now.saturating_sub(at).min(MAX_DRIFT_SPAN);
                 let drift = since.as_micros() * u128::from(MAX_CLOCK_DRIFT_PPM) / 1_000_000;
-                offset
-                    .saturating_add(i128::try_from(drift).unwrap_or(i128::MAX))
-                    .min(delay)
+                let offset = offset.saturating_add(i128::try_from(drift).unwrap_or(i128::MAX));
+                let ahead = offset.saturating_sub(delay);
+                if ahead > AHEAD_TOLERANCE.as_micros() as i128 {
+                    return Err(Duration::from_micros(
+                        u64::try_from(ahead).unwrap_or(u64::MAX),
+                    ));
+                }
+                offset.min(delay)
             }
             None => delay,
         };
-        self.offset = Some((offset, now));
-        Duration::from_micros(u64::try_from(delay - offset).unwrap_or(u64::MAX))
+        let late = Duration::from_micros(u64::try_from(delay - offset).unwrap_or(u64::MAX));
+        let learned = SenderClock {
+            offset: Some((offset, now)),
+        };
+        Ok((late, learned))
+    }
+}
+
+/// Why a remote sender's command is refused for its order or its timing.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum TimingError {
+    /// A drive whose `seq` is not above the last one's.
+    #[error("out of order: seq {seq} after {last} (duplicated or reordered)")]
+    OutOfOrder {
+        /// Its seq.
+        seq: u64,
+        /// The last seq accepted.
+        last: u64,
+    },
+    /// A drive whose `seq` leaps further ahead than the sender can have counted.
+    #[error(
+        "seq {seq} leaps too far past {last} (at most {allowed} by now): forged or from another \
+         sender; take control again to count anew"
+    )]
+    Leap {
+        /// Its seq.
+        seq: u64,
+        /// The last seq accepted.
+        last: u64,
+        /// The most it could be.
+        allowed: u64,
+    },
+    /// A stamp ahead of the sender's clock as learned: from the future.
+    #[error(
+        "sent_ms is {ahead_ms} ms ahead of this sender's clock as learned: forged, or the \
+         sender's clock jumped; take control again to learn it anew"
+    )]
+    Ahead {
+        /// How far ahead, ms.
+        ahead_ms: u128,
+    },
+    /// A command the network held up past its life.
+    #[error(
+        "held up {} ms on the way, past its life of {} ms",
+        late.as_millis(),
+        life.as_millis()
+    )]
+    Late {
+        /// How much longer than the fastest delivery it took.
+        late: Duration,
+        /// Its life.
+        life: Duration,
+    },
+}
+
+impl TimingError {
+    /// Its name in counters.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            TimingError::OutOfOrder { .. } => "out_of_order",
+            TimingError::Leap { .. } => "leap",
+            TimingError::Ahead { .. } => "ahead",
+            TimingError::Late { .. } => "late",
+        }
+    }
+}
+
+/// A remote sender's commands as this host sees them: their order (`seq`) and their clock.
+/// Sans-IO. Nothing is learned from a command until it is accepted ([`SenderTiming::accept`]):
+/// a refused one, forged or stray, changes nothing. The zenoh bridge and `scout web` check
+/// remote drives with it.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SenderTiming {
+    clock: SenderClock,
+    /// The last drive accepted in this session: its `seq`, and when it arrived.
+    last: Option<(u64, Duration)>,
+}
+
+/// A command that passed [`SenderTiming::check`]: when it was sent, and what accepting it
+/// teaches.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[must_use = "a checked command teaches nothing until it is accepted"]
+pub struct Checked {
+    /// When it was sent, on this host's clock (its arrival less its age).
+    pub sent: Duration,
+    next: SenderTiming,
+}
+
+impl SenderTiming {
+    /// Checks a command sent at `sent_ms` (the sender's clock) that arrived at `now`: a drive
+    /// with its `seq`, a take-control without. Refused: a `seq` not above the last accepted
+    /// one, or leaping past it by more than [`MAX_SEQ_LEAP`] plus one a [`MIN_SEQ_PERIOD`]; a
+    /// stamp from the future ([`AHEAD_TOLERANCE`]); a command older than `life`. A
+    /// take-control from the future is no error: it starts the clock anew (the sender's
+    /// clock jumped: a reboot, another machine). Nothing is learned here.
+    pub fn check(
+        &self,
+        now: Duration,
+        seq: Option<u64>,
+        sent_ms: u64,
+        life: Duration,
+    ) -> Result<Checked, TimingError> {
+        let mut next = *self;
+        if let Some(seq) = seq {
+            if let Some((last, at)) = self.last {
+                if seq <= last {
+                    return Err(TimingError::OutOfOrder { seq, last });
+                }
+                let since = now.saturating_sub(at).as_nanos() / MIN_SEQ_PERIOD.as_nanos();
+                let since = u64::try_from(since).unwrap_or(u64::MAX);
+                let allowed = last.saturating_add(MAX_SEQ_LEAP).saturating_add(since);
+                if seq > allowed {
+                    return Err(TimingError::Leap { seq, last, allowed });
+                }
+            }
+            next.last = Some((seq, now));
+        }
+        let (late, clock) = match self.clock.age(now, sent_ms) {
+            Ok(aged) => aged,
+            Err(_) if seq.is_none() => SenderClock::default()
+                .age(now, sent_ms)
+                .unwrap_or((Duration::ZERO, SenderClock::default())),
+            Err(ahead) => {
+                return Err(TimingError::Ahead {
+                    ahead_ms: ahead.as_millis(),
+                });
+            }
+        };
+        if late > life {
+            return Err(TimingError::Late { late, life });
+        }
+        next.clock = clock;
+        Ok(Checked {
+            sent: now.saturating_sub(late),
+            next,
+        })
+    }
+
+    /// Learns what a command accepted teaches: its `seq` and its clock.
+    pub fn accept(&mut self, checked: Checked) {
+        *self = checked.next;
+    }
+
+    /// The `seq` of the last drive accepted in this session.
+    pub fn last_seq(&self) -> Option<u64> {
+        self.last.map(|(seq, _)| seq)
+    }
+
+    /// A new control session: its drives count anew (the clock stays: the same sender; a
+    /// take-control's stamp was already checked against it).
+    pub fn new_session(&mut self) {
+        self.last = None;
     }
 }
 
@@ -219,22 +391,15 @@ pub enum CommandError {
         /// What the gateway grants, in words.
         allowed: String,
     },
-    /// A drive whose `seq` is not above the last one's.
-    #[error("out of order: seq {seq} after {last} (duplicated or reordered)")]
-    OutOfOrder {
-        /// Its seq.
-        seq: u64,
-        /// The last seq accepted.
-        last: u64,
+    /// Every remote peer the gateway keeps holds control: a new one waits until one lets go.
+    #[error("{max} remote peers hold control already: try again once one lets go")]
+    TooManyPeers {
+        /// The most peers kept.
+        max: usize,
     },
-    /// A command the network held up past its life.
-    #[error("held up {late_ms} ms on the way, past its life of {life_ms} ms")]
-    Late {
-        /// How much longer than the fastest delivery it took, ms.
-        late_ms: u128,
-        /// Its life, ms.
-        life_ms: u128,
-    },
+    /// Its order or its timing (a drive's `seq`, a stamp ahead or held up).
+    #[error(transparent)]
+    Timing(#[from] TimingError),
     /// The peer's control port could not be opened.
     #[error(transparent)]
     Port(#[from] ControlPortError),
@@ -786,6 +951,49 @@ mod tests {
             if let Ok(command) = serde_json::from_str::<RemoteCommand>(&payload) {
                 for kind in RemoteKind::ALL {
                     let _ = command.request(*kind, lease.map(|l| (l, Class::Teleop)));
+                }
+            }
+        }
+    }
+
+    proptest::proptest! {
+        /// Whatever a sender (or a forger beside it) sends: what is accepted rises by a
+        /// plausible step, is neither from the future nor older than its life, and what is
+        /// refused teaches nothing.
+        #[test]
+        fn accepted_commands_rise_plausibly_and_refused_ones_teach_nothing(
+            commands in proptest::collection::vec(
+                (0u64..200, proptest::option::of(0u64..400), 0u64..10_000), 1..80)
+        ) {
+            let life = Duration::from_millis(250);
+            let mut timing = SenderTiming::default();
+            let mut now = Duration::from_secs(100);
+            let mut last: Option<(u64, Duration)> = None;
+            let mut fastest: Option<i128> = None;
+            for (step, seq, sent_ms) in commands {
+                now += Duration::from_millis(step);
+                let before = timing;
+                match timing.check(now, seq, sent_ms, life) {
+                    Ok(checked) => {
+                        proptest::prop_assert!(checked.sent <= now && now - checked.sent <= life);
+                        let delay = now.as_millis() as i128 - i128::from(sent_ms);
+                        if let (Some(seq), Some((last_seq, at))) = (seq, last) {
+                            proptest::prop_assert!(seq > last_seq);
+                            let since = ((now - at).as_millis() / MIN_SEQ_PERIOD.as_millis()) as u64;
+                            proptest::prop_assert!(seq <= last_seq + MAX_SEQ_LEAP + since);
+                        }
+                        if let (Some(_), Some(fastest)) = (seq, fastest) {
+                            proptest::prop_assert!(delay + AHEAD_TOLERANCE.as_millis() as i128 + 1 >= fastest, "learned a stamp from the future");
+                        }
+                        timing.accept(checked);
+                        if let Some(seq) = seq {
+                            last = Some((seq, now));
+                        } else {
+                            last = None;
+                        }
+                        fastest = Some(fastest.map_or(delay, |f: i128| f.min(delay)));
+                    }
+                    Err(_) => proptest::prop_assert_eq!(timing, before, "a refusal taught something"),
                 }
             }
         }

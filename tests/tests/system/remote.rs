@@ -204,6 +204,9 @@ fn enabled_remote_commands_go_through_the_arbiter_and_bad_input_is_rejected() {
         )["accepted"],
         true
     );
+    // The peer's clock: 1000 ms at the take-control (a stamp ahead of it is refused).
+    let took = std::time::Instant::now();
+    let peer_now = || 1000 + took.elapsed().as_millis() as u64;
     assert_eq!(
         command("drive", "laptop", &drive(2, 1000))["accepted"],
         true
@@ -298,7 +301,7 @@ fn enabled_remote_commands_go_through_the_arbiter_and_bad_input_is_rejected() {
         "the officer's stop holds"
     );
     // The lease ended with the stop: the old stream is refused until it takes control again.
-    let revoked = command("drive", "laptop", &drive(20, 2000));
+    let revoked = command("drive", "laptop", &drive(20, peer_now()));
     assert!(
         revoked["reason"]
             .as_str()
