@@ -13,6 +13,7 @@ use std::sync::mpsc::{Receiver, SyncSender, TryRecvError, TrySendError};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime};
 
+use anyhow::Context;
 use scout_protocol::CanFrame;
 use tracing::{info, warn};
 
@@ -154,7 +155,9 @@ impl Recorder {
             info!("black box off ([blackbox] minutes = 0)");
             return Ok(None);
         }
-        let dir = config.dir();
+        let dir = config
+            .dir()
+            .context("the black box's directory ([blackbox] dir)")?;
         let (sender, receiver) = std::sync::mpsc::sync_channel(CHANNEL);
         let lost = Arc::new(AtomicU64::new(0));
         let reasons = Arc::new(Mutex::new(Vec::new()));
@@ -349,9 +352,11 @@ impl Keeper {
 /// Writes `text` to `path` through a file beside it, synced, so that a crash leaves no half.
 fn write_file(dir: &Path, path: &Path, text: &str) -> anyhow::Result<()> {
     use std::io::Write;
-    std::fs::create_dir_all(dir)?;
+    crate::run_dir::private(dir)?;
     let partial = path.with_extension("log.partial");
-    let mut file = std::fs::File::create(&partial)?;
+    // Anything left there (a crash's leftover, a planted link) goes; the file is made anew.
+    let _ = std::fs::remove_file(&partial);
+    let mut file = crate::run_dir::create_new(&partial)?;
     file.write_all(text.as_bytes())?;
     file.sync_all()?;
     std::fs::rename(&partial, path)?;

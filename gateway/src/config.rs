@@ -232,11 +232,15 @@ impl BlackBoxConfig {
         self.minutes > 0.0
     }
 
-    /// The directory of the files.
-    pub fn dir(&self) -> PathBuf {
-        self.dir
-            .clone()
-            .unwrap_or_else(|| crate::lock::lock_dir().join("blackbox"))
+    /// The directory of the files, made if missing and checked as the run directory is
+    /// ([`crate::run_dir::private`]).
+    pub fn dir(&self) -> Result<PathBuf, crate::run_dir::RunDirError> {
+        let dir = match &self.dir {
+            Some(dir) => dir.clone(),
+            None => crate::run_dir::prepare()?.join("blackbox"),
+        };
+        crate::run_dir::private(&dir)?;
+        Ok(dir)
     }
 
     fn validate(&self) -> Result<(), String> {

@@ -17,6 +17,8 @@
 //! - [`share`]: request budgets: a token bucket per client, a share of the stop endpoint per user.
 //! - [`config`]: the configuration file and its lookup.
 //! - [`lock`]: one gateway per device.
+//! - [`run_dir`]: where the locks, the unclean-exit marker and the black box live, trusted only
+//!   when nobody else can change it.
 //!
 //! The zenoh bridge (`scout-bridge`) is an ordinary local client that the `scout-gateway` binary
 //! starts beside the driver; the contract with every client is `scout-interface`.
@@ -32,6 +34,7 @@ pub mod driver;
 pub mod identity;
 pub mod lock;
 pub mod monitor;
+pub mod run_dir;
 pub mod share;
 pub mod state;
 pub mod stop_endpoint;

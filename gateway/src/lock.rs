@@ -2,21 +2,11 @@
 //! that the kernel releases when the process dies (even by SIGKILL). The robot name's lock is the
 //! stop endpoint's abstract socket ([`crate::stop_endpoint`]), global whatever the run directory.
 
-use std::fs::{File, OpenOptions, TryLockError};
+use std::fs::{File, TryLockError};
 use std::io::{Read, Seek, Write};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-/// Where the lock files live: `$SCOUT_RUN_DIR`, else `$XDG_RUNTIME_DIR/scout`, else
-/// `/tmp/scout-gateway`.
-pub fn lock_dir() -> PathBuf {
-    if let Some(dir) = std::env::var_os("SCOUT_RUN_DIR") {
-        return dir.into();
-    }
-    match std::env::var_os("XDG_RUNTIME_DIR") {
-        Some(runtime) => Path::new(&runtime).join("scout"),
-        None => PathBuf::from("/tmp/scout-gateway"),
-    }
-}
+use crate::run_dir::{self, RunDirError};
 
 /// Why a lock was not taken.
 #[derive(Debug, thiserror::Error)]
@@ -31,6 +21,9 @@ pub enum LockError {
         /// What else to do.
         hint: &'static str,
     },
+    /// The run directory cannot be trusted or made.
+    #[error(transparent)]
+    RunDir(#[from] RunDirError),
     /// The lock file could not be used.
     #[error("lock file {path}: {source}")]
     Io {
@@ -48,22 +41,16 @@ pub struct Lock {
 }
 
 impl Lock {
-    /// Takes the lock called `key` in [`lock_dir`], describing it as `what` in errors.
+    /// Takes the lock called `key` in the run directory ([`run_dir::prepare`]), describing it
+    /// as `what` in errors. The file is opened without following links.
     pub fn acquire(key: &str, what: &str, hint: &'static str) -> Result<Lock, LockError> {
-        let dir = lock_dir();
+        let dir = run_dir::prepare()?;
         let path = dir.join(format!("{}.lock", sanitize(key)));
         let io = |source| LockError::Io {
             path: path.clone(),
             source,
         };
-        std::fs::create_dir_all(&dir).map_err(io)?;
-        let mut file = OpenOptions::new()
-            .read(true)
-            .write(true)
-            .create(true)
-            .truncate(false)
-            .open(&path)
-            .map_err(io)?;
+        let mut file = run_dir::open_file(&path).map_err(io)?;
         match file.try_lock() {
             Ok(()) => {}
             Err(TryLockError::WouldBlock) => {
@@ -117,7 +104,9 @@ mod tests {
         );
         drop(first);
         Lock::acquire(&key, "robot 'x'", "").expect("free again after the first is dropped");
-        let _ = std::fs::remove_file(lock_dir().join(format!("{}.lock", sanitize(&key))));
+        if let Ok(dir) = run_dir::locate() {
+            let _ = std::fs::remove_file(dir.join(format!("{}.lock", sanitize(&key))));
+        }
     }
 
     #[test]

@@ -88,7 +88,7 @@ pub fn listen(spec: &DeviceSpec, window: Duration, checks: &mut Vec<Check>) -> O
     let mut device = match spec.open(Duration::ZERO) {
         Ok(device) => device,
         Err(OpenError::Owned(LockError::Held { holder, .. })) => return Opened::Held(holder),
-        Err(OpenError::Owned(error @ LockError::Io { .. })) => {
+        Err(OpenError::Owned(error @ (LockError::Io { .. } | LockError::RunDir(_)))) => {
             checks.push(Check::fail(
                 "port",
                 error.to_string(),

@@ -19,6 +19,7 @@ use scout_gateway::core::Start;
 use scout_gateway::device::DeviceSpec;
 use scout_gateway::driver::Driver;
 use scout_gateway::lock::LockError;
+use scout_gateway::run_dir::RunDirError;
 use scout_gateway::stop_endpoint::StopEndpoint;
 use scout_interface::Transport;
 use scout_interface::failure::Failure;
@@ -117,7 +118,10 @@ fn main() -> ExitCode {
     };
     match serve(config, spec, endpoint) {
         Ok(()) => ExitCode::SUCCESS,
-        Err(error) if error.downcast_ref::<LockError>().is_some() => {
+        Err(error)
+            if error.downcast_ref::<LockError>().is_some()
+                || error.downcast_ref::<RunDirError>().is_some() =>
+        {
             eprintln!("scout-gateway: {error:#}");
             ExitCode::from(USAGE)
         }
@@ -210,7 +214,7 @@ fn serve(config: GatewayConfig, spec: DeviceSpec, endpoint: StopEndpoint) -> any
     let bridge_config = config.zenoh.clone();
     let info = config.info(spec.transport(), &spec.name());
     let robot = config.name.clone();
-    let marker = RunningMarker::new(&config.name);
+    let marker = RunningMarker::new(&config.name)?;
     let start = marker.start()?;
     if start == Start::AfterUncleanExit {
         tracing::warn!(
@@ -238,30 +242,38 @@ fn serve(config: GatewayConfig, spec: DeviceSpec, endpoint: StopEndpoint) -> any
 }
 
 /// A file that exists while a gateway of the robot runs: found at start, it tells that the
-/// previous one did not exit cleanly (crash, kill, power loss of the host).
+/// previous one did not exit cleanly (crash, kill, power loss of the host). It lives in the run
+/// directory, which only the gateway's user can change, and is made exclusively, never through
+/// a link.
 struct RunningMarker {
     path: PathBuf,
 }
 
 impl RunningMarker {
-    fn new(robot: &RobotName) -> Self {
-        Self {
-            path: scout_gateway::lock::lock_dir().join(robot.running_marker()),
-        }
+    fn new(robot: &RobotName) -> anyhow::Result<Self> {
+        let dir = scout_gateway::run_dir::prepare()?;
+        Ok(Self {
+            path: dir.join(robot.running_marker()),
+        })
     }
 
     /// How the previous gateway ended; marks this one as running.
     fn start(&self) -> anyhow::Result<Start> {
-        let start = if self.path.exists() {
-            Start::AfterUncleanExit
-        } else {
-            Start::Clean
+        use std::io::Write;
+        let start = match std::fs::symlink_metadata(&self.path) {
+            Ok(_) => Start::AfterUncleanExit,
+            Err(error) if error.kind() == std::io::ErrorKind::NotFound => Start::Clean,
+            Err(error) => {
+                return Err(error).with_context(|| format!("reading {}", self.path.display()));
+            }
         };
-        if let Some(dir) = self.path.parent() {
-            std::fs::create_dir_all(dir)
-                .with_context(|| format!("creating the run directory {}", dir.display()))?;
+        if start == Start::AfterUncleanExit {
+            // Removed, not followed, whatever it is.
+            std::fs::remove_file(&self.path)
+                .with_context(|| format!("removing {}", self.path.display()))?;
         }
-        std::fs::write(&self.path, std::process::id().to_string())
+        scout_gateway::run_dir::create_new(&self.path)
+            .and_then(|mut file| write!(file, "{}", std::process::id()))
             .with_context(|| format!("writing {}", self.path.display()))?;
         Ok(start)
     }
