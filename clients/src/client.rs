@@ -3,7 +3,7 @@
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use iceoryx2::node::{Node, NodeCreationFailure};
+use iceoryx2::node::Node;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::subscriber::Subscriber;
 use scout_interface::StatePayload;
@@ -23,9 +23,10 @@ pub enum ClientError {
     /// The gateway's services could not be opened.
     #[error(transparent)]
     Service(#[from] ServiceError),
-    /// This process's iceoryx2 node could not be created.
-    #[error("creating this process's iceoryx2 node: {0:?} (is /dev/shm a writable tmpfs?)")]
-    Node(NodeCreationFailure),
+    /// This process's iceoryx2 node could not be created (the shared-memory directory is not
+    /// this user's to use, or iceoryx2 refused).
+    #[error(transparent)]
+    Node(#[from] services::NodeError),
     /// A subscriber could not be created.
     #[error("subscribing: {0:?}")]
     Subscribe(iceoryx2::port::subscriber::SubscriberCreateError),
@@ -43,11 +44,11 @@ pub enum ClientError {
     ControlPort(#[from] services::ControlPortError),
     /// Shared memory is (nearly) full: iceoryx2 would die of SIGBUS writing into it.
     #[error(
-        "{path} has {free} bytes free, less than the {needed} a client needs: free some (a full /dev/shm kills iceoryx2 programs with SIGBUS){largest}; `scout estop` and `scout release` still work, they need no shared memory"
+        "{path} has {free} bytes free, less than the {needed} a client needs: free some (a full tmpfs kills iceoryx2 programs with SIGBUS){largest}; `scout estop` and `scout release` still work, they need no shared memory"
     )]
     SharedMemoryFull {
-        /// The shared-memory file system.
-        path: &'static str,
+        /// The shared-memory directory.
+        path: String,
         /// Bytes free there.
         free: u64,
         /// Bytes a client needs at least.
@@ -61,6 +62,15 @@ pub enum ClientError {
 }
 
 impl ClientError {
+    /// Whether it means this process has no shared memory to use (full, or not this user's):
+    /// the stop endpoint still works.
+    pub fn no_shared_memory(&self) -> bool {
+        matches!(
+            self,
+            Self::SharedMemoryFull { .. } | Self::Node(services::NodeError::Dir(_))
+        )
+    }
+
     /// What kind of failure this is.
     pub fn kind(&self) -> Failure {
         match self {
@@ -78,22 +88,28 @@ impl ClientError {
     }
 }
 
-/// Where iceoryx2 keeps its shared memory, and the least free space a client needs there.
-const SHARED_MEMORY: &str = "/dev/shm";
+/// The least free space a client needs in the shared-memory directory.
 const SHARED_MEMORY_NEEDED: u64 = 1 << 20;
 
 /// Refuses, with an error, to map shared memory that is already full: writing into a page a
 /// full tmpfs cannot back kills the process with SIGBUS, where an error says what to do.
 fn check_shared_memory() -> Result<(), ClientError> {
-    match nix::sys::statvfs::statvfs(SHARED_MEMORY) {
+    let dir = scout_interface::ipc::ipc_dir().map_err(services::NodeError::from)?;
+    match nix::sys::statvfs::statvfs(&dir) {
         Ok(stat) => {
             let free = stat.blocks_available() * stat.fragment_size();
             if free < SHARED_MEMORY_NEEDED {
+                // What fills the file system: the directory's own files, or its neighbours.
+                let fs = if dir.starts_with("/dev/shm") {
+                    Path::new("/dev/shm")
+                } else {
+                    dir.as_path()
+                };
                 return Err(ClientError::SharedMemoryFull {
-                    path: SHARED_MEMORY,
+                    path: dir.display().to_string(),
                     free,
                     needed: SHARED_MEMORY_NEEDED,
-                    largest: largest_files(Path::new(SHARED_MEMORY)),
+                    largest: largest_files(fs),
                 });
             }
             Ok(())
@@ -147,7 +163,7 @@ impl Robot {
         services::quiet_iceoryx2_logs();
         // Best effort: a failed clean-up of dead processes' leftovers does not stop a client.
         let _ = services::remove_dead_nodes();
-        let node = services::node(&robot.node(Program::Client)).map_err(ClientError::Node)?;
+        let node = services::node(&robot.node(Program::Client))?;
         services::state_services(&node, name, Role::Client)?;
         Ok(Self {
             name: name.to_owned(),

@@ -135,7 +135,7 @@ impl StopService {
             Some(port) => port,
             None => {
                 let node = services::node(&self.robot.node(Program::Client))
-                    .map_err(|error| ControlError::Client(ClientError::Node(error)))?;
+                    .map_err(|error| ControlError::Client(error.into()))?;
                 let port = ControlPort::open(&node, &self.robot, Way::Stop, &self.name)
                     .map_err(|error| ControlError::Client(error.into()))?;
                 self.node = Some(node);

@@ -59,10 +59,10 @@ impl Endpoints {
                 removed.len(),
                 removed.join(", ")
             ),
-            Err(error) => warn!("listing iceoryx2 nodes to clean up failed: {error:?}"),
+            Err(error) => warn!("cleaning up after dead processes failed: {error}"),
         }
-        let node =
-            services::node(&robot.node(Program::Gateway)).context("creating the iceoryx2 node")?;
+        let node = services::gateway_node(&robot.node(Program::Gateway))
+            .context("creating the iceoryx2 node")?;
         // The state service last: once it exists, clients find every service.
         let status = services::status_services(&node, robot, Role::Gateway)?
             .publisher_builder()

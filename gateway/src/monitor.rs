@@ -7,7 +7,7 @@ use std::sync::mpsc::{Receiver, Sender, channel};
 use std::time::Duration;
 
 use iceoryx2::node::{Node, NodeState, NodeView};
-use iceoryx2::prelude::{CallbackProgression, Config};
+use iceoryx2::prelude::CallbackProgression;
 use scout_interface::Ipc;
 use tracing::{debug, error, warn};
 
@@ -83,7 +83,14 @@ fn scan_loop(watched: &Receiver<u128>, report: &Sender<u128>) {
 /// the nodes could not be listed: then nobody is declared dead.
 fn alive_nodes() -> Option<HashSet<u128>> {
     let mut alive = HashSet::new();
-    let listed = Node::<Ipc>::list(Config::global_config(), |state| {
+    let config = match scout_interface::services::config() {
+        Ok(config) => config,
+        Err(error) => {
+            warn!("{error}: no client is declared dead this scan");
+            return None;
+        }
+    };
+    let listed = Node::<Ipc>::list(&config, |state| {
         match state {
             NodeState::Alive(view) => {
                 alive.insert(view.id().value());

@@ -359,56 +359,29 @@ pub fn robot_name(test: &str) -> String {
 #[derive(Debug)]
 pub struct TempDir(PathBuf);
 
-/// A working directory whose `config/iceoryx2.toml` (iceoryx2 reads it first, from the
-/// working directory) gives the processes started there a resource prefix of their own: what
-/// they leave in shared memory is seen by them alone, not cleaned up by the other tests'
-/// clients running beside them.
+/// A shared-memory directory of one test's own (`SCOUT_IPC_DIR`): what the processes started
+/// with it leave in shared memory is seen by them alone, not cleaned up by the other tests'
+/// clients running beside them. Removed when dropped.
 #[derive(Debug)]
-pub struct Iceoryx2Domain {
+pub struct IpcDomain {
     dir: TempDir,
-    prefix: String,
 }
 
-impl Iceoryx2Domain {
-    /// A new domain for `test`.
+impl IpcDomain {
+    /// A new domain for `test`: a directory only this user may enter.
     pub fn new(test: &str) -> Self {
-        let dir = TempDir::new(test);
-        let config = dir.path().join("config");
-        std::fs::create_dir_all(&config).expect("create the iceoryx2 config directory");
-        let prefix = format!("iox2t{}_", std::process::id() % 100_000);
-        std::fs::write(
-            config.join("iceoryx2.toml"),
-            format!("[global]\nprefix = \"{prefix}\"\n"),
+        let dir = TempDir::new(&format!("ipc-{test}"));
+        std::fs::set_permissions(
+            dir.path(),
+            std::os::unix::fs::PermissionsExt::from_mode(0o700),
         )
-        .expect("write the iceoryx2 config");
-        Self { dir, prefix }
+        .expect("make the shared-memory directory private");
+        Self { dir }
     }
 
-    /// The working directory to start processes in.
-    pub fn dir(&self) -> &std::path::Path {
-        self.dir.path()
-    }
-}
-
-impl Drop for Iceoryx2Domain {
-    /// Removes what is left of the domain's resources (iceoryx2 keeps a small management file
-    /// per prefix) under iceoryx2's default root and in `/dev/shm`.
-    fn drop(&mut self) {
-        let mut dirs = vec![PathBuf::from("/dev/shm"), PathBuf::from("/tmp/iceoryx2")];
-        while let Some(dir) = dirs.pop() {
-            for entry in std::fs::read_dir(&dir).into_iter().flatten().flatten() {
-                let path = entry.path();
-                if path.is_dir() {
-                    dirs.push(path);
-                } else if entry
-                    .file_name()
-                    .to_string_lossy()
-                    .starts_with(&self.prefix)
-                {
-                    let _ = std::fs::remove_file(path);
-                }
-            }
-        }
+    /// The environment a process needs to use it.
+    pub fn env(&self) -> (&'static str, &std::path::Path) {
+        ("SCOUT_IPC_DIR", self.dir.path())
     }
 }
 
@@ -472,19 +445,10 @@ impl Gateway {
 
     /// Starts `scout-gateway` with `args` and the environment variables `env` set.
     pub fn start_with_env(args: &[&str], env: &[(&str, &str)]) -> Gateway {
-        Self::start_at(None, args, env)
-    }
-
-    /// [`Gateway::start_with_env`] in the working directory `dir` (where an
-    /// `config/iceoryx2.toml` gives it iceoryx2 resources of its own: see [`Iceoryx2Domain`]).
-    pub fn start_at(dir: Option<&std::path::Path>, args: &[&str], env: &[(&str, &str)]) -> Gateway {
         let zenoh = args
             .iter()
             .any(|a| a.starts_with("--zenoh") || *a == "--remote-commands");
         let mut command = command("scout-gateway");
-        if let Some(dir) = dir {
-            command.current_dir(dir);
-        }
         let mut child = command
             .env("RUST_LOG", "info")
             .envs(env.iter().copied())
@@ -763,9 +727,20 @@ pub fn free_port() -> u16 {
 }
 
 /// A zenoh session of this test process in `mode` (`router`, `peer`, `client`), multicast
-/// scouting off, listening on / connecting to loopback endpoints only.
+/// scouting off, listening on / connecting to loopback endpoints only. A gateway started a
+/// moment ago may not listen yet (its iceoryx2 services come first): connecting is tried
+/// again for up to 30 s.
 pub fn zenoh_session(mode: &str, listen: &[String], connect: &[String]) -> zenoh::Session {
-    try_zenoh_session(mode, listen, connect).expect("open a zenoh session")
+    let deadline = Instant::now() + Duration::from_secs(30);
+    loop {
+        match try_zenoh_session(mode, listen, connect) {
+            Ok(session) => return session,
+            Err(_) if Instant::now() < deadline && !connect.is_empty() => {
+                std::thread::sleep(Duration::from_millis(50));
+            }
+            Err(error) => panic!("open a zenoh session: {error}"),
+        }
+    }
 }
 
 /// [`zenoh_session`], or why it could not open (nobody listening on `connect` yet).
@@ -863,17 +838,18 @@ pub fn drive_until_moving(sim: &mut Sim, name: &str, args: &[&str], limit: Durat
 /// `scout doctor ARGS --json` (ARGS giving `--listen` too), run to its end: the exit code and
 /// the checks, one JSON object each.
 pub fn doctor(args: &[&str]) -> (Option<i32>, Vec<serde_json::Value>) {
-    doctor_at(None, args)
+    doctor_in(None, args)
 }
 
-/// [`doctor`] in the working directory `dir` (see [`Iceoryx2Domain`]).
-pub fn doctor_at(
-    dir: Option<&std::path::Path>,
+/// [`doctor`] in the shared-memory directory of `domain` (see [`IpcDomain`]).
+pub fn doctor_in(
+    domain: Option<&IpcDomain>,
     args: &[&str],
 ) -> (Option<i32>, Vec<serde_json::Value>) {
     let mut doctor = command("scout");
-    if let Some(dir) = dir {
-        doctor.current_dir(dir);
+    if let Some(domain) = domain {
+        let (key, dir) = domain.env();
+        doctor.env(key, dir);
     }
     doctor.arg("doctor").args(args).arg("--json");
     let output = run_with_input(doctor, b"", Duration::from_secs(120));
@@ -1145,5 +1121,165 @@ impl Drop for GapStopReleaser {
         if let Some(thread) = self.thread.take() {
             let _ = thread.join();
         }
+    }
+}
+
+/// The Unix users of the multi-user tests, made once and kept (the names are the tests' own):
+/// the gateway's user, a member of the clients' group, and an outsider; and that group. Their
+/// commands run the workspace's binaries from a directory every user can enter.
+#[derive(Debug)]
+pub struct TestUsers {
+    /// The gateway's user (a member of the group, as the Debian package makes it).
+    pub gateway: u32,
+    /// A client: a member of the group.
+    pub member: u32,
+    /// A user outside the group.
+    pub outsider: u32,
+    /// The clients' group.
+    pub group: u32,
+    /// The group's name.
+    pub group_name: &'static str,
+    bin_dir: PathBuf,
+}
+
+impl TestUsers {
+    /// The users and the group, made if missing; `Err(why not)` where they cannot be (not root,
+    /// no `useradd` or `setpriv`).
+    pub fn ensure() -> Result<TestUsers, String> {
+        if !nix::unistd::geteuid().is_root() {
+            return Err("not root: it makes Unix users and runs processes as them".into());
+        }
+        for tool in ["useradd", "groupadd", "usermod", "setpriv"] {
+            let found = Command::new("sh")
+                .args(["-c", &format!("command -v {tool}")])
+                .output()
+                .is_ok_and(|o| o.status.success());
+            if !found {
+                return Err(format!("{tool} missing (Debian's passwd and util-linux)"));
+            }
+        }
+        static MADE: std::sync::Mutex<()> = std::sync::Mutex::new(());
+        let _made = MADE.lock().unwrap_or_else(|e| e.into_inner());
+        let group_name = "scout-test";
+        let run = |program: &str, args: &[&str]| {
+            let output = Command::new(program)
+                .args(args)
+                .output()
+                .map_err(|e| format!("{program}: {e}"))?;
+            if output.status.success() {
+                Ok(())
+            } else {
+                Err(format!(
+                    "{program} {}: {}",
+                    args.join(" "),
+                    String::from_utf8_lossy(&output.stderr).trim()
+                ))
+            }
+        };
+        if nix::unistd::Group::from_name(group_name)
+            .ok()
+            .flatten()
+            .is_none()
+        {
+            run("groupadd", &["--system", group_name])?;
+        }
+        let user = |name: &str, member: bool| -> Result<u32, String> {
+            if nix::unistd::User::from_name(name).ok().flatten().is_none() {
+                run(
+                    "useradd",
+                    &[
+                        "--system",
+                        "--no-create-home",
+                        "--shell",
+                        "/usr/sbin/nologin",
+                        name,
+                    ],
+                )?;
+            }
+            if member {
+                run("usermod", &["-aG", group_name, name])?;
+            }
+            nix::unistd::User::from_name(name)
+                .ok()
+                .flatten()
+                .map(|user| user.uid.as_raw())
+                .ok_or_else(|| format!("user {name} not found after useradd"))
+        };
+        let users = TestUsers {
+            gateway: user("scout-test-gw", true)?,
+            member: user("scout-test-member", true)?,
+            outsider: user("scout-test-outsider", false)?,
+            group: nix::unistd::Group::from_name(group_name)
+                .ok()
+                .flatten()
+                .map(|group| group.gid.as_raw())
+                .ok_or("the group vanished")?,
+            group_name,
+            bin_dir: Self::shared_bin_dir()?,
+        };
+        Ok(users)
+    }
+
+    /// The workspace's binaries where every user can run them: where they are built if every
+    /// directory above lets others in, else a copy of those the tests run.
+    fn shared_bin_dir() -> Result<PathBuf, String> {
+        let built = built_bin_dir();
+        let open = built.ancestors().all(|dir| {
+            std::fs::metadata(dir).is_ok_and(|m| {
+                std::os::unix::fs::PermissionsExt::mode(&m.permissions()) & 0o001 != 0
+            })
+        });
+        if open {
+            return Ok(built);
+        }
+        let copy =
+            std::env::temp_dir().join(format!("scout-test-users-bin-{}", std::process::id()));
+        std::fs::create_dir_all(&copy).map_err(|e| e.to_string())?;
+        for name in ["scout", "scout-gateway"] {
+            std::fs::copy(built.join(name), copy.join(name)).map_err(|e| e.to_string())?;
+        }
+        std::fs::set_permissions(&copy, std::os::unix::fs::PermissionsExt::from_mode(0o755))
+            .map_err(|e| e.to_string())?;
+        Ok(copy)
+    }
+
+    /// A command running workspace binary `name` as user `uid`, with that user's groups.
+    pub fn command(&self, uid: u32, name: &str) -> Command {
+        let user = nix::unistd::User::from_uid(nix::unistd::Uid::from_raw(uid))
+            .ok()
+            .flatten()
+            .expect("a test user");
+        let mut command = Command::new("setpriv");
+        command
+            .args([
+                "--reuid",
+                &uid.to_string(),
+                "--regid",
+                &user.gid.as_raw().to_string(),
+            ])
+            .arg("--init-groups")
+            .arg("--")
+            .arg(self.bin_dir.join(name))
+            .env("RUST_LOG", "warn")
+            .env_remove("RUST_BACKTRACE")
+            .env_remove("NOTIFY_SOCKET")
+            .env_remove("WATCHDOG_USEC")
+            .env_remove("WATCHDOG_PID");
+        command
+    }
+
+    /// A directory of the gateway's user with `mode` (and the clients' group), removed when
+    /// dropped: a shared-memory directory as the package makes `/run/scout` (0o2770), or a
+    /// run directory (0o700).
+    pub fn gateway_dir(&self, tag: &str, mode: u32) -> TempDir {
+        let dir = TempDir::new(tag);
+        std::os::unix::fs::chown(dir.path(), Some(self.gateway), Some(self.group))
+            .expect("chown the directory to the gateway's user");
+        std::fs::set_permissions(
+            dir.path(),
+            std::os::unix::fs::PermissionsExt::from_mode(mode),
+        )
+        .expect("chmod the directory");
+        dir
     }
 }

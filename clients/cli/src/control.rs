@@ -9,6 +9,7 @@ use anyhow::Context;
 use clap::Args;
 use scout_clients::client::{ClientError, Robot};
 use scout_clients::control::{ControlError, Controller, Lights, Stopper};
+use scout_clients::interface::control::{StopPayload, UNKNOWN_UID};
 use scout_clients::interface::control::{parse_fault_clear, parse_light_text};
 use scout_clients::interface::stop_socket::StopSocketError;
 use scout_clients::{Accepted, Class, ReleaseTarget, StopCause};
@@ -275,7 +276,7 @@ pub fn release(args: &ReleaseArgs) -> anyhow::Result<ExitCode> {
     let connected = Robot::connect(robot_name).and_then(|robot| Ok((robot.status()?, robot)));
     let (statuses, robot) = match connected {
         Ok(connected) => connected,
-        Err(error @ ClientError::SharedMemoryFull { .. }) => {
+        Err(error) if error.no_shared_memory() => {
             return release_without_shared_memory(args, target, &name, &error);
         }
         Err(error) => return Err(error.into()),
@@ -292,19 +293,61 @@ pub fn release(args: &ReleaseArgs) -> anyhow::Result<ExitCode> {
     if unlisted > 0 {
         println!("{unlisted} more stops than the status lists: all up to #{through} are named");
     }
-    for stop in status.stops().iter().filter(|stop| stop.id <= through) {
-        println!(
-            "releasing #{} {} ({}): {}",
-            stop.id,
-            stop.owner.as_str(),
-            StopCause::from_raw(stop.cause).map_or("unknown", StopCause::name),
-            stop.reason.as_str()
-        );
-    }
+    let named: Vec<StopPayload> = (status.stops().iter())
+        .filter(|stop| stop.id <= through)
+        .filter(|stop| match &target {
+            ReleaseTarget::Own => stop.owner.as_str() == name,
+            ReleaseTarget::Owner(owner) => stop.owner.as_str() == owner,
+            ReleaseTarget::All => true,
+        })
+        .copied()
+        .collect();
     let answer = robot.stopper(&name)?.release(target, through);
+    if answer.is_ok() {
+        // What the gateway did, from its next status: one name may hold stops of several users,
+        // and a release takes only those its sender may release.
+        match statuses.latest(Duration::from_secs(2))? {
+            Some(after) => {
+                for stop in &named {
+                    let kept = after.stops().iter().any(|left| left.id == stop.id);
+                    println!("{}", stop_line(stop, kept));
+                }
+            }
+            None => println!("(no status since: `scout status` shows what holds)"),
+        }
+    }
     println!("{}", describe(&answer));
     answer?;
     Ok(ExitCode::SUCCESS)
+}
+
+/// This process's user (the owner of `/proc/self`).
+fn own_uid() -> Option<u32> {
+    use std::os::unix::fs::MetadataExt;
+    std::fs::metadata("/proc/self").ok().map(|m| m.uid())
+}
+
+/// A stop a release named: released, or kept and why (another user's, an operator's).
+fn stop_line(stop: &StopPayload, kept: bool) -> String {
+    let cause = StopCause::from_raw(stop.cause).map_or("unknown", StopCause::name);
+    let why = if !kept {
+        String::new()
+    } else if stop.by_operator {
+        " (an operator's)".to_owned()
+    } else if stop.persists {
+        " (its cause persists)".to_owned()
+    } else if stop.uid != UNKNOWN_UID && Some(stop.uid) != own_uid() {
+        format!(" (user {}'s)", stop.uid)
+    } else {
+        String::new()
+    };
+    format!(
+        "{} #{} {} ({cause}): {}{why}",
+        if kept { "kept" } else { "released" },
+        stop.id,
+        stop.owner.as_str(),
+        stop.reason.as_str()
+    )
 }
 
 /// A release with no shared memory to read the status from (a full `/dev/shm`): through the

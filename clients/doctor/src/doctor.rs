@@ -145,8 +145,8 @@ fn leftovers() -> Check {
         }
         Err(error) => Check::warn(
             "iceoryx2",
-            format!("cannot list iceoryx2 nodes: {error:?}"),
-            "check that /dev/shm and /tmp/iceoryx2 are writable",
+            error.to_string(),
+            "the shared-memory directory must be usable by this user (SCOUT_IPC_DIR, or the group of /run/scout)",
         ),
     }
 }

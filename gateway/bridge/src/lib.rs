@@ -178,7 +178,7 @@ fn forward_state(
     halt: &dyn Fn() -> bool,
 ) -> anyhow::Result<()> {
     let node = services::node(&robot_name.node(Program::Bridge))
-        .map_err(|e| anyhow::anyhow!("creating the bridge's iceoryx2 node: {e:?}"))?;
+        .map_err(|e| anyhow::anyhow!("creating the bridge's iceoryx2 node: {e}"))?;
     let (state_service, state_events) = services::state_services(&node, robot_name, Role::Client)?;
     let states = state_service
         .subscriber_builder()
@@ -348,7 +348,7 @@ fn serve_queries(
                 move || serve_estops(robot_name, config, &estops, estop_counters, halt)
             })?;
         let node = services::node(&robot_name.node(Program::BridgeCommands))
-            .map_err(|e| anyhow::anyhow!("creating the bridge's iceoryx2 node: {e:?}"))?;
+            .map_err(|e| anyhow::anyhow!("creating the bridge's iceoryx2 node: {e}"))?;
         let mut commands = RemoteControl::new(&node, robot_name, config, Arc::clone(&drives))?;
         let mut counters = Counters::default();
         let links = session
@@ -554,7 +554,7 @@ fn serve_estops(
     halt: &(dyn Fn() -> bool + Sync),
 ) -> anyhow::Result<()> {
     let node = services::node(&robot_name.node(Program::BridgeEstops))
-        .map_err(|e| anyhow::anyhow!("creating the bridge's iceoryx2 node: {e:?}"))?;
+        .map_err(|e| anyhow::anyhow!("creating the bridge's iceoryx2 node: {e}"))?;
     let mut port = ControlPort::open(&node, robot_name, Way::Stop, REMOTE_PREFIX)
         .map_err(|e| anyhow::anyhow!("opening the bridge's stop port: {e}"))?;
     while !halt() {

@@ -4,6 +4,8 @@
 //!
 //! - [`services`]: the iceoryx2 services of a robot, their names and sizing, created by the
 //!   gateway and opened by clients; the request round trip.
+//! - [`ipc`]: the iceoryx2 service flavour, its objects files in one directory whose
+//!   permissions decide who is a local client.
 //! - [`state`]: the zero-copy chassis state payload, one field per feedback message.
 //! - [`control`]: control requests and answers, typed and on the wire; the arbiter's status.
 //! - [`json`]: the public JSON forms of the state and the status (`scout echo`, zenoh).
@@ -24,6 +26,7 @@ mod macros;
 
 pub mod control;
 pub mod failure;
+pub mod ipc;
 pub mod json;
 pub mod remote;
 pub mod robot;

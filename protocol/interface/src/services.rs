@@ -35,10 +35,8 @@ use crate::control::{
 };
 use crate::state::StatePayload;
 
-/// The iceoryx2 service flavour every process uses: inter-process, shared memory, with ports
-/// that may move between threads and be shared (a mutex each, uncontended): the Python package
-/// waits on a subscriber with the GIL released. The same shared-memory objects as `ipc`'s.
-pub type Ipc = iceoryx2::service::ipc_threadsafe::Service;
+pub use crate::ipc::Ipc;
+use crate::ipc::IpcDirError;
 
 /// The state's publish-subscribe service.
 pub type StateService = publish_subscribe::PortFactory<Ipc, StatePayload, ()>;
@@ -124,23 +122,78 @@ pub fn quiet_iceoryx2_logs() {
     iceoryx2::prelude::set_log_level_from_env_or(LogLevel::Fatal);
 }
 
+/// Why this process's iceoryx2 node could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum NodeError {
+    /// The shared-memory directory cannot be used.
+    #[error(transparent)]
+    Dir(#[from] IpcDirError),
+    /// iceoryx2 refused.
+    #[error("creating this process's iceoryx2 node in {dir}: {failure:?}")]
+    Create {
+        /// The shared-memory directory.
+        dir: String,
+        /// What iceoryx2 said.
+        failure: NodeCreationFailure,
+    },
+}
+
+/// iceoryx2's configuration: every object in the shared-memory directory
+/// ([`crate::ipc::ipc_dir`]).
+pub fn config() -> Result<Config, IpcDirError> {
+    crate::ipc::config_in(&crate::ipc::ipc_dir()?)
+}
+
 /// A node named `name`, without iceoryx2's signal handlers: the program owns SIGINT and SIGTERM.
-pub fn node(name: &str) -> Result<Node<Ipc>, NodeCreationFailure> {
-    let mut builder = NodeBuilder::new().signal_handling_mode(SignalHandlingMode::Disabled);
+pub fn node(name: &str) -> Result<Node<Ipc>, NodeError> {
+    build_node(name, config()?)
+}
+
+/// The gateway's node: as [`node`], but it never waits for another process's object to be
+/// ready (iceoryx2's `creation_timeout`, 1 s by default, spent retrying while it is not): an
+/// object a client made that the gateway cannot open is given up at once, so that nothing a
+/// client does stalls the control loop. (A client makes its objects before it registers with
+/// a service, so they are ready when the gateway first sees it.)
+pub fn gateway_node(name: &str) -> Result<Node<Ipc>, NodeError> {
+    let mut config = config()?;
+    config.global.creation_timeout = Duration::ZERO;
+    build_node(name, config)
+}
+
+fn build_node(name: &str, config: Config) -> Result<Node<Ipc>, NodeError> {
+    let mut builder = NodeBuilder::new()
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .config(&config);
     if let Ok(name) = NodeName::new(name) {
         builder = builder.name(&name);
     }
-    builder.create::<Ipc>()
+    builder
+        .create::<Ipc>()
+        .map_err(|failure| NodeError::Create {
+            dir: config.global.root_path().to_string(),
+            failure,
+        })
+}
+
+/// Why listing the nodes failed.
+#[derive(Debug, thiserror::Error)]
+pub enum ListError {
+    /// The shared-memory directory cannot be used.
+    #[error(transparent)]
+    Dir(#[from] IpcDirError),
+    /// iceoryx2 refused.
+    #[error("listing the iceoryx2 nodes: {0:?}")]
+    List(iceoryx2::node::NodeListFailure),
 }
 
 /// Removes what dead processes (SIGKILL, crash) left in shared memory; returns the names of
 /// their nodes (`scout-gateway-ROBOT`, `scout-client-ROBOT`...; empty for an unnamed one).
-pub fn remove_dead_nodes() -> Result<Vec<String>, iceoryx2::node::NodeListFailure> {
+pub fn remove_dead_nodes() -> Result<Vec<String>, ListError> {
     use iceoryx2::node::NodeView;
-    // Its global configuration is loaded here first: quietly (no "No config file was loaded").
     quiet_iceoryx2_logs();
+    let config = config()?;
     let mut removed = Vec::new();
-    Node::<Ipc>::list(Config::global_config(), |state| {
+    Node::<Ipc>::list(&config, |state| {
         if let NodeState::Dead(view) = state {
             let name = view
                 .details()
@@ -152,7 +205,8 @@ pub fn remove_dead_nodes() -> Result<Vec<String>, iceoryx2::node::NodeListFailur
             }
         }
         CallbackProgression::Continue
-    })?;
+    })
+    .map_err(ListError::List)?;
     Ok(removed)
 }
 

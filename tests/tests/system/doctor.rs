@@ -432,8 +432,10 @@ fn doctor_reads_the_robot_through_zenoh_when_asked() {
 #[test]
 fn what_a_killed_gateway_left_in_shared_memory_is_removed_and_named() {
     let name = robot_name("doctor-leftovers");
-    let domain = scout_system_tests::Iceoryx2Domain::new(&name);
-    let mut gateway = Gateway::start_at(Some(domain.dir()), &["--sim", "--name", &name], &[]);
+    let domain = scout_system_tests::IpcDomain::new(&name);
+    let ipc_dir = domain.env().1.to_string_lossy().into_owned();
+    let mut gateway =
+        Gateway::start_with_env(&["--sim", "--name", &name], &[("SCOUT_IPC_DIR", &ipc_dir)]);
     let deadline = std::time::Instant::now() + Duration::from_secs(10);
     while !gateway.log().contains("silent -> ok") {
         assert!(
@@ -445,7 +447,7 @@ fn what_a_killed_gateway_left_in_shared_memory_is_removed_and_named() {
     }
     gateway.signal(nix::sys::signal::Signal::SIGKILL);
     assert_eq!(gateway.wait_exit(Duration::from_secs(10)), None, "killed");
-    let doctor_here = || scout_system_tests::doctor_at(Some(domain.dir()), &["--name", &name]);
+    let doctor_here = || scout_system_tests::doctor_in(Some(&domain), &["--name", &name]);
     let (_, checks) = doctor_here();
     let leftovers = check(&checks, "iceoryx2").clone();
     assert_eq!(leftovers["verdict"], "warn", "{leftovers}");

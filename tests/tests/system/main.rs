@@ -22,5 +22,6 @@ mod safety;
 mod sim;
 mod status;
 mod teleop;
+mod users;
 mod watchdog;
 mod web;

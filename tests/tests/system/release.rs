@@ -6,12 +6,12 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-use scout_system_tests::{Iceoryx2Domain, TempDir, robot_name, wait_output};
+use scout_system_tests::{IpcDomain, TempDir, robot_name, wait_output};
 
 #[test]
 fn the_release_quick_start_check_passes_on_this_builds_programs() {
     let test = "release_smoke";
-    let domain = Iceoryx2Domain::new(&robot_name(test));
+    let domain = IpcDomain::new(&robot_name(test));
     let run_dir = TempDir::new(&robot_name(test));
     let bin_dir = scout_system_tests::built_bin_dir();
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("release/smoke");
@@ -19,7 +19,7 @@ fn the_release_quick_start_check_passes_on_this_builds_programs() {
     // and the whole run is bounded here too.
     let child = Command::new(&script)
         .arg(&bin_dir)
-        .current_dir(domain.dir())
+        .env(domain.env().0, domain.env().1)
         .env("SCOUT_RUN_DIR", run_dir.path())
         .env_remove("RUNNER")
         .env_remove("PYTHON")
