@@ -61,6 +61,14 @@ pub const CHASSIS_TIMEOUT: Duration = Duration::from_millis(500);
 /// stops the robot until a release and a new take.
 pub const WIRE_GAP_LIMIT: Duration = Duration::from_millis(400);
 
+/// The chassis reports its motion this often (v1 0x131, v2 0x221): the time each report
+/// stands for when its reports are counted against the gateway's clock ([`ChassisClock`]).
+pub const MOTION_REPORT_PERIOD: Duration = Duration::from_millis(20);
+
+/// How long after a port opens its reports are not yet counted against the gateway's clock:
+/// what the port held from before (a tty's buffer) arrives at once, and is no pause.
+pub const REPORTS_SETTLE: Duration = Duration::from_secs(1);
+
 /// How the previous gateway of this robot ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Start {
@@ -141,6 +149,7 @@ pub struct Core {
     last_lateness: Duration,
     safety: SafetyConfig,
     runaway: Runaway,
+    chassis_clock: ChassisClock,
     /// When the last motion command was handed to the open port.
     last_motion_written: Option<Duration>,
     /// A protocol v2 chassis' command mode (0x421, 0x211).
@@ -160,6 +169,32 @@ pub struct Core {
     black_box_stop_seen: u64,
     /// Whether there is a black box (`[blackbox] minutes` > 0).
     black_box_on: bool,
+}
+
+/// The chassis' own time, told by its motion reports (one every [`MOTION_REPORT_PERIOD`]),
+/// against the gateway's clock. Reports that stand for more time than the gateway's clock
+/// moved were sent while that clock stood still: a paused VM whose clocks were restored, a
+/// restored checkpoint, every clock of the host held back. Such a pause hides from the wire-gap
+/// check (no time passed, as far as the host can tell) while the chassis timed out and braked.
+#[derive(Debug, Clone, Copy, Default)]
+struct ChassisClock {
+    /// How far the reports run ahead of the gateway's clock: a leaky bucket that fills one
+    /// period per report and drains at the gateway's pace.
+    lead: Duration,
+    /// The last report's arrival.
+    last: Option<Duration>,
+}
+
+impl ChassisClock {
+    /// A motion report at `now`: how far the chassis' reports now run ahead.
+    fn handle_report(&mut self, now: Duration) -> Duration {
+        let drained = self
+            .last
+            .map_or(Duration::ZERO, |last| now.saturating_sub(last));
+        self.lead = self.lead.saturating_sub(drained) + MOTION_REPORT_PERIOD;
+        self.last = Some(now);
+        self.lead
+    }
 }
 
 /// Watching the chassis move or turn faster than commanded.
@@ -254,6 +289,7 @@ impl Core {
             last_lateness: Duration::ZERO,
             safety: config.safety.clone(),
             runaway: Runaway::default(),
+            chassis_clock: ChassisClock::default(),
             last_motion_written: None,
             command_mode: CommandMode::new(),
             version_asked: false,
@@ -402,6 +438,31 @@ impl Core {
         }
     }
 
+    /// A motion report at `now`: reports that stand for more time than the gateway's clock
+    /// moved, by more than [`WIRE_GAP_LIMIT`], show a pause of the host's clocks (the chassis
+    /// may have braked by its timeout meanwhile): an `overrun`, as a stall the clock saw is.
+    fn observe_report(&mut self, now: Duration) {
+        if now.saturating_sub(self.opened_at) < REPORTS_SETTLE {
+            self.chassis_clock = ChassisClock::default();
+            return;
+        }
+        let lead = self.chassis_clock.handle_report(now);
+        if lead > WIRE_GAP_LIMIT {
+            let detail = format!(
+                "the chassis reported {} ms of motion faster than this host's clock moved: the \
+                 host's clocks stood still (a paused VM, a restored checkpoint), and the chassis \
+                 may have stopped by its {} ms timeout",
+                lead.as_millis(),
+                CHASSIS_TIMEOUT.as_millis()
+            );
+            warn!("{detail}");
+            self.arbiter
+                .handle_gap(now, StopCause::Overrun, &detail, false);
+            self.status_due = true;
+            self.chassis_clock = ChassisClock::default();
+        }
+    }
+
     /// The chassis moving or turning faster than commanded (beyond what braking explains), or
     /// the wrong way, for longer than the configured time, is a runaway.
     fn observe_motion(&mut self, now: Duration, linear: f64, angular: f64) {
@@ -487,6 +548,7 @@ impl Core {
         info!("{} {} open", self.transport, self.device());
         self.link = Link::Open;
         self.opened_at = now;
+        self.chassis_clock = ChassisClock::default();
         // A new port: the time it was closed is the link's gap, not the wire's.
         self.last_motion_written = None;
         // Perhaps another chassis, or the same one after a power cycle: nothing held, nothing
@@ -573,6 +635,7 @@ impl Core {
             RxEvent::Message(counted) => match &counted.message {
                 Message::SystemStatus(status) => self.observe_system(now, status),
                 Message::MotionFeedback(motion) => {
+                    self.observe_report(now);
                     self.observe_motion(now, motion.linear(), motion.angular());
                 }
                 Message::MotorFeedback(_)
@@ -583,6 +646,7 @@ impl Core {
             RxEvent::V2(message) => match message {
                 MessageV2::SystemState(system) => self.observe_system_v2(now, system),
                 MessageV2::MotionState(motion) => {
+                    self.observe_report(now);
                     self.observe_motion(now, motion.linear(), motion.angular());
                 }
                 MessageV2::MotionCommand(_)

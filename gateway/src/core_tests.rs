@@ -237,6 +237,34 @@ impl Pair {
         self.now += time;
     }
 
+    /// Every clock of the host stands still for `time` (a paused VM whose clocks were
+    /// restored, a restored checkpoint) while the chassis runs on: it gets no command meanwhile,
+    /// and its reports wait in the port, read at once when the host runs again.
+    fn freeze_host_clocks(&mut self, time: Duration) {
+        let start = self.now - self.epoch;
+        let mut waiting = Vec::new();
+        let mut at = start;
+        while at < start + time {
+            waiting.extend(self.chassis.poll_feedback(at));
+            at += ms(1);
+        }
+        self.epoch -= time;
+        for feedback in waiting {
+            match feedback {
+                Feedback::V1(batch) => {
+                    for counted in batch {
+                        self.core.handle_rx(self.now, &RxEvent::Message(counted));
+                    }
+                }
+                Feedback::V2(frames) => {
+                    for message in frames {
+                        self.core.handle_rx(self.now, &RxEvent::V2(message));
+                    }
+                }
+            }
+        }
+    }
+
     /// A request from `client` at the current time, answered at once; the next step (at the
     /// same time) carries out what it caused.
     fn request(&mut self, client: Client, request: &Request) -> Result<Accepted, Rejected> {
@@ -1007,6 +1035,35 @@ fn a_tick_later_than_the_chassis_timeout_is_an_overrun(protocol: Protocol) {
         "{}",
         status.tick_max_lateness_ms
     );
+}
+
+fn a_pause_every_host_clock_hides_shows_in_the_chassis_reports(protocol: Protocol) {
+    let mut pair = Pair::of(protocol);
+    pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(2));
+    // The review's case: both clocks held back 2 s; the chassis braked by its own timeout.
+    pair.freeze_host_clocks(Duration::from_secs(2));
+    assert_eq!(pair.chassis.actual().linear, 0.0, "the chassis braked");
+    let before = pair.motion_commands().len();
+    let answers = pair.keep_streaming(TELEOP, 0.5, ms(500));
+    assert!(
+        pair.stops()
+            .contains(&("gateway".into(), StopCause::Overrun)),
+        "{:?}",
+        pair.stops()
+    );
+    assert!(answers.iter().all(Result::is_err), "the stream is revoked");
+    let after = &pair.motion_commands()[before..];
+    assert!(
+        after.iter().all(|(_, command)| command.linear == 0.0),
+        "nothing moves after the pause: {after:?}"
+    );
+    assert_eq!(pair.chassis.actual().linear, 0.0);
+    // A pause shorter than the chassis' timeout is a burst, not a gap: it drives on.
+    let mut pair = Pair::of(protocol);
+    pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(2));
+    pair.freeze_host_clocks(ms(200));
+    pair.stream(TELEOP, Class::Teleop, 0.5, ms(300));
+    assert!(pair.stops().is_empty(), "{:?}", pair.stops());
 }
 
 /// Streams, freezes the gateway for `stall` (SIGSTOP, starved of CPU) at `phase` into a tick,
@@ -1825,6 +1882,7 @@ both_protocols!(
     a_failed_port_is_reopened_with_a_doubling_backoff,
     after_an_unclean_exit_the_gateway_starts_stopped,
     a_stall_that_may_have_let_the_chassis_time_out_latches_an_overrun,
+    a_pause_every_host_clock_hides_shows_in_the_chassis_reports,
     a_suspend_of_the_host_is_a_gap_and_moves_nothing,
     a_chassis_faster_than_commanded_is_a_runaway,
     a_chassis_exception_state_is_a_gap,
