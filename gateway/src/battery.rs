@@ -7,7 +7,7 @@ use std::collections::VecDeque;
 use std::time::Duration;
 
 use scout_interface::state::{
-    BatteryLevel, BatteryPayload, BatterySource, PowerStatus, StatePayload,
+    BatteryLevel, BatteryPayload, BatterySource, LevelFrom, PowerStatus, StatePayload,
 };
 use scout_protocol::battery::{BatterySpec, percent_at};
 
@@ -231,7 +231,18 @@ impl BatteryMonitor {
             .filter(|(_, until)| now < *until)
             .map_or(BatteryLevel::Unknown, |(level, _)| level);
         let to = by_charge.max(by_chassis);
+        let level_from = if to == BatteryLevel::Unknown {
+            LevelFrom::None
+        } else if by_chassis > by_charge {
+            match by_chassis {
+                BatteryLevel::Critical => LevelFrom::ChassisCutoff,
+                _ => LevelFrom::ChassisWarning,
+            }
+        } else {
+            LevelFrom::Charge
+        };
         self.payload.level = to.raw();
+        self.payload.level_from = level_from.raw();
         (to != from).then_some(LevelChange { from, to })
     }
 
@@ -242,7 +253,8 @@ impl BatteryMonitor {
 }
 
 /// `battery critical: 8 % (estimated from 24.2 V)`: the level, the charge and where it came
-/// from.
+/// from, and what set the level when the charge did not (`...; the chassis cut the drives off
+/// for battery under-voltage`). The state, the status and the audit say the same.
 pub fn describe(battery: &BatteryPayload) -> String {
     let level = battery.level().name();
     let charge = if battery.percent.is_nan() {
@@ -250,13 +262,17 @@ pub fn describe(battery: &BatteryPayload) -> String {
     } else {
         format!("{:.0} %", battery.percent)
     };
-    match battery.source() {
+    let judged = match battery.source() {
         BatterySource::Bms => format!("battery {level}: {charge} (smart battery)"),
         BatterySource::Voltage => format!(
             "battery {level}: {charge} (estimated from {:.1} V)",
             battery.voltage
         ),
         BatterySource::None => format!("battery {level}: nothing reported"),
+    };
+    match battery.level_from().words() {
+        "" => judged,
+        why => format!("{judged}; {why}"),
     }
 }
 
@@ -399,6 +415,14 @@ mod tests {
         state.system.fault_bits = scout_protocol::Fault::BatteryUndervoltageWarning.mask();
         monitor.update(&state, secs(0.0));
         assert_eq!(monitor.payload().level(), BatteryLevel::Low);
+        // A full pack judged low: the words say the chassis set it, not the charge.
+        assert_eq!(monitor.payload().level_from(), LevelFrom::ChassisWarning);
+        let said = monitor.describe();
+        assert!(
+            said.starts_with("battery low: ")
+                && said.ends_with("the chassis warns of battery under-voltage"),
+            "{said}"
+        );
         // The warning flickers off under a surge's end: the level holds.
         state.system.fault_bits = 0;
         let changes: Vec<_> = (1..100)
@@ -409,12 +433,14 @@ mod tests {
         state.system.fault_bits = scout_protocol::Fault::BatteryUndervoltageFault.mask();
         monitor.update(&state, secs(20.0));
         assert_eq!(monitor.payload().level(), BatteryLevel::Critical);
+        assert_eq!(monitor.payload().level_from(), LevelFrom::ChassisCutoff);
         // 30 s after the bits clear, the charge alone judges again.
         state.system.fault_bits = 0;
         monitor.update(&state, secs(49.0));
         assert_eq!(monitor.payload().level(), BatteryLevel::Critical);
         monitor.update(&state, secs(51.0));
         assert_eq!(monitor.payload().level(), BatteryLevel::Ok);
+        assert_eq!(monitor.payload().level_from(), LevelFrom::Charge);
     }
 
     #[test]
@@ -519,6 +545,36 @@ mod tests {
                 if battery.percent <= battery.critical_percent {
                     proptest::prop_assert_eq!(battery.level(), BatteryLevel::Critical);
                 }
+                // What set the level is named: the charge (within its hysteresis), or the
+                // chassis' bits; and the words say the same.
+                let by_charge = |margin: f64| {
+                    if battery.percent <= battery.critical_percent + margin {
+                        BatteryLevel::Critical
+                    } else if battery.percent <= battery.low_percent + margin {
+                        BatteryLevel::Low
+                    } else {
+                        BatteryLevel::Ok
+                    }
+                };
+                let (lower, upper) = (by_charge(0.0), by_charge(HYSTERESIS_PERCENT));
+                match battery.level_from() {
+                    LevelFrom::Charge => proptest::prop_assert!(
+                        lower <= battery.level() && battery.level() <= upper,
+                        "{battery:?}"
+                    ),
+                    LevelFrom::ChassisWarning => {
+                        proptest::prop_assert_eq!(battery.level(), BatteryLevel::Low);
+                    }
+                    LevelFrom::ChassisCutoff => {
+                        proptest::prop_assert_eq!(battery.level(), BatteryLevel::Critical);
+                    }
+                    LevelFrom::None => proptest::prop_assert!(false, "a level without a cause"),
+                }
+                let said = monitor.describe();
+                let prefix = format!("battery {}:", battery.level().name());
+                proptest::prop_assert!(said.starts_with(&prefix), "{}", said);
+                let why = battery.level_from().words();
+                proptest::prop_assert!(why.is_empty() || said.ends_with(why), "{}", said);
             }
         }
     }

@@ -1169,6 +1169,7 @@ impl Core {
         status.autonomy_armed = arbiter.autonomy_armed();
         let battery = self.tracker.state().battery;
         status.battery_level = battery.level;
+        status.battery_level_from = battery.level_from;
         // Whole percent: the estimate's every wiggle is no change of the status.
         status.battery_percent = battery.percent.round();
         status.lights = LightsControl::of(arbiter.lights()).raw();

@@ -9,6 +9,7 @@ use std::time::Duration;
 use clap::Args;
 use scout_clients::client::Robot;
 use scout_clients::interface::json::status_json;
+use scout_clients::interface::state::LevelFrom;
 use scout_clients::monotonic_ns;
 use serde_json::Value;
 
@@ -86,9 +87,19 @@ const EVENTS_SHOWN: usize = 5;
 /// `low: 18 %, charge soon` (nothing before a gateway that reports the battery).
 fn battery(battery: &Value) -> Option<String> {
     let level = battery["level"].as_str()?;
-    let charge = battery["percent"]
+    let mut charge = battery["percent"]
         .as_f64()
         .map_or_else(|| "charge unknown".to_owned(), |p| format!("{p:.0} %"));
+    // The level is the chassis' own when its under-voltage bits set it: said, so that a
+    // critical battery at 35 % is no riddle.
+    if let Some(why) = battery["level_from"]
+        .as_str()
+        .and_then(|from| from.parse::<LevelFrom>().ok())
+        .map(LevelFrom::words)
+        .filter(|why| !why.is_empty())
+    {
+        charge = format!("{charge} ({why})");
+    }
     Some(match level {
         "low" => format!("LOW: {charge}, charge soon"),
         "critical" => format!(
@@ -620,6 +631,16 @@ mod tests {
         }
         json["battery"] = json!({"level": "critical", "percent": 7.0});
         assert!(render(&json).contains("battery   CRITICAL: 7 %, charge now"));
+        // The chassis' cut-off sets the level: said beside a charge that would not.
+        json["battery"] =
+            json!({"level": "critical", "percent": 35.0, "level_from": "chassis_cutoff"});
+        assert!(
+            render(&json).contains(
+                "battery   CRITICAL: 35 % (the chassis cut the drives off for battery under-voltage), charge now"
+            ),
+            "{}",
+            render(&json)
+        );
     }
 
     #[test]

@@ -82,7 +82,8 @@ pub fn state() -> Value {
     }));
     let battery = object(json!({
         "source": string(), "percent": nullable_of("number"), "status": string(),
-        "level": string(), "voltage": nullable_of("number"), "current": nullable_of("number"),
+        "level": string(), "level_from": string(), "voltage": nullable_of("number"),
+        "current": nullable_of("number"),
         "health_percent": nullable_of("number"), "temperature": nullable_of("number"),
         "capacity_ah": nullable_of("number"), "low_percent": nullable_of("number"),
         "critical_percent": nullable_of("number"),
@@ -142,7 +143,9 @@ pub fn status() -> Value {
                 "limited": boolean(),
             })),
             "autonomy_armed": boolean(),
-            "battery": object(json!({ "level": string(), "percent": nullable_of("number") })),
+            "battery": object(json!({
+                "level": string(), "percent": nullable_of("number"), "level_from": string(),
+            })),
             "lights": string(),
             "sources": { "type": "array", "items": source },
             "rejections": { "type": "object", "additionalProperties": integer() },

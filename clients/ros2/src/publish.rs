@@ -499,11 +499,15 @@ pub fn diagnostic_statuses(
                 BatterySource::Bms => "smart battery",
                 BatterySource::Voltage | BatterySource::None => "estimated from the voltage",
             };
-            let message = format!(
+            let mut message = format!(
                 "{}: {charge} ({source}), {}",
                 level.name(),
                 battery_state.status().name()
             );
+            let why = battery_state.level_from().words();
+            if !why.is_empty() {
+                message = format!("{message}; {why}");
+            }
             match level {
                 _ if link_state != LinkState::Ok => {
                     (STALE, format!("no report from the chassis; last {message}"))

@@ -863,6 +863,8 @@ pub struct StatusPayload {
     pub autonomy_armed: bool,
     /// [`crate::state::BatteryLevel`] byte.
     pub battery_level: u8,
+    /// [`crate::state::LevelFrom`] byte: what set the level.
+    pub battery_level_from: u8,
     /// The battery's charge, % (NaN: unknown).
     pub battery_percent: f64,
     /// [`LightsControl`] byte.

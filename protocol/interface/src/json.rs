@@ -10,7 +10,7 @@ use scout_protocol::{ChassisState, FaultClear, Light, Message};
 use serde_json::{Map, Value, json};
 
 use crate::control::{Class, LightsControl, RejectionKind, StatusPayload, StopCause, UNKNOWN_UID};
-use crate::state::{BatteryLevel, Received, StatePayload};
+use crate::state::{BatteryLevel, LevelFrom, Received, StatePayload};
 
 fn age_ms(at_ns: u64, now_ns: u64) -> f64 {
     now_ns.saturating_sub(at_ns) as f64 / 1e6
@@ -328,6 +328,7 @@ pub fn state_field(state: &StatePayload, key: &str, now_ns: u64) -> Option<Value
                 "percent": battery.percent(),
                 "status": battery.status().name(),
                 "level": battery.level().name(),
+                "level_from": battery.level_from().name(),
                 "voltage": known(battery.voltage),
                 "current": known(battery.current),
                 "health_percent": known(battery.health_percent),
@@ -445,6 +446,9 @@ pub fn status_json(status: &StatusPayload, now_ns: u64) -> Value {
                 .unwrap_or(BatteryLevel::Unknown)
                 .name(),
             "percent": status.battery_percent.is_finite().then_some(status.battery_percent),
+            "level_from": LevelFrom::from_raw(status.battery_level_from)
+                .unwrap_or(LevelFrom::None)
+                .name(),
         },
         "lights": lights.name(),
         "sources": sources,

@@ -288,6 +288,32 @@ wire_enum! {
 }
 
 wire_enum! {
+    /// What set the battery's level: its charge against the thresholds, or the chassis' own
+    /// under-voltage bits (held 30 s after they clear), whichever is worse.
+    LevelFrom {
+        /// No level yet.
+        None = 0 => "none",
+        /// The state of charge against the configured thresholds.
+        Charge = 1 => "charge",
+        /// The chassis' battery under-voltage warning.
+        ChassisWarning = 2 => "chassis_warning",
+        /// The chassis' battery under-voltage fault: it cut the drives off.
+        ChassisCutoff = 3 => "chassis_cutoff",
+    }
+}
+
+impl LevelFrom {
+    /// In words, for a status line: `""` for the charge (the percent says it).
+    pub fn words(self) -> &'static str {
+        match self {
+            LevelFrom::None | LevelFrom::Charge => "",
+            LevelFrom::ChassisWarning => "the chassis warns of battery under-voltage",
+            LevelFrom::ChassisCutoff => "the chassis cut the drives off for battery under-voltage",
+        }
+    }
+}
+
+wire_enum! {
     /// Whether the battery charges: the values of ROS's `sensor_msgs/BatteryState`
     /// `power_supply_status`.
     PowerStatus {
@@ -330,6 +356,8 @@ pub struct BatteryPayload {
     pub status: u8,
     /// [`BatteryLevel`] as `u8`.
     pub level: u8,
+    /// [`LevelFrom`] as `u8`: what set the level.
+    pub level_from: u8,
     /// State of charge, 0..=100 %.
     pub percent: f64,
     /// Pack voltage, V.
@@ -355,6 +383,7 @@ impl BatteryPayload {
             source: BatterySource::None.raw(),
             status: PowerStatus::Unknown.raw(),
             level: BatteryLevel::Unknown.raw(),
+            level_from: LevelFrom::None.raw(),
             percent: f64::NAN,
             voltage: f64::NAN,
             current: f64::NAN,
@@ -384,6 +413,11 @@ impl BatteryPayload {
     /// The level against the thresholds.
     pub fn level(&self) -> BatteryLevel {
         BatteryLevel::from_raw(self.level).unwrap_or(BatteryLevel::Unknown)
+    }
+
+    /// What set the level.
+    pub fn level_from(&self) -> LevelFrom {
+        LevelFrom::from_raw(self.level_from).unwrap_or(LevelFrom::None)
     }
 }
 

@@ -146,12 +146,14 @@ class Battery:
     """The battery as the gateway judges it, on either protocol: the charge (a smart battery's
     report, or the gateway's estimate from the voltage: `source`), whether it charges (`status`:
     charging, discharging, not_charging, full, unknown), its `level` against the thresholds
-    (ok, low, critical, unknown). None where nothing measures or estimates a value."""
+    (ok, low, critical, unknown), and what set it (`level_from`: charge, chassis_warning,
+    chassis_cutoff, none). None where nothing measures or estimates a value."""
 
     source: str
     percent: Optional[float]
     status: str
     level: str
+    level_from: str
     voltage: Optional[float]
     current: Optional[float]
     health_percent: Optional[float]
