@@ -123,9 +123,17 @@ pub fn drive(args: &DriveArgs) -> anyhow::Result<ExitCode> {
         next += DRIVE_PERIOD;
         std::thread::sleep(next.saturating_duration_since(Instant::now()));
     }
-    // Stop the robot before leaving: zero speed, then give the control back.
-    let _ = controller.drive(0.0, 0.0);
+    // Stop the robot before leaving: zero speed, then give the control back. Control that
+    // ended meanwhile (a stall of this program past the class's age, a stop) is said, and is
+    // no success: the robot stopped before it was asked to.
+    let zero = controller.drive(0.0, 0.0);
     controller.relinquish().context("giving up control")?;
+    if let Err(error) = zero
+        && error.lost_control()
+    {
+        println!("{error}");
+        return Err(error.into());
+    }
     match last_answer {
         Err(rejected @ ControlError::Rejected(_)) => Err(rejected.into()),
         _ => Ok(ExitCode::SUCCESS),

@@ -285,7 +285,9 @@ struct Shown {
 
 pub fn run(args: &TeleopArgs) -> anyhow::Result<ExitCode> {
     let mut link = Link::connect(args)?;
-    let mut action = format!("take control: {}", link.take_control());
+    // Control is taken by the first movement key, never by starting: a running autonomy drives
+    // on until a person asks to drive.
+    let mut action = "none yet: a movement key takes control".to_owned();
     let _guard = TerminalGuard::enter()?;
     let (mut linear, mut angular) = (0.0f64, 0.0f64);
     let mut next = Instant::now();
@@ -393,6 +395,9 @@ fn draw(
             json["motion"]["angular"].as_f64().unwrap_or(0.0),
         ));
     }
+    // Each line cut to the terminal's width: a longer one would wrap onto the next, which the
+    // next line then overwrites in part.
+    let width = terminal::size().map_or(80, |(columns, _)| usize::from(columns.max(1)));
     execute!(
         out,
         cursor::MoveTo(0, 0),
@@ -400,7 +405,17 @@ fn draw(
     )?;
     for (row, line) in lines.iter().enumerate() {
         execute!(out, cursor::MoveTo(0, row as u16))?;
-        write!(out, "{line}")?;
+        write!(out, "{}", fit(line, width))?;
     }
     out.flush()
+}
+
+/// `line` cut to `width` characters, its last one `…` when cut.
+fn fit(line: &str, width: usize) -> String {
+    if line.chars().count() <= width {
+        return line.to_owned();
+    }
+    let mut cut: String = line.chars().take(width.saturating_sub(1)).collect();
+    cut.push('…');
+    cut
 }

@@ -374,3 +374,40 @@ fn ctrl_c_stops_scout_drive_before_it_exits() {
         "Ctrl-C stops the drive, it does not latch the stop"
     );
 }
+
+/// `scout drive` stalled past its class's age just before its end (a loaded host, SIGSTOP): the
+/// gateway ended its control, and the program says so and exits 4 instead of "accepted" and 0.
+#[test]
+fn scout_drive_whose_control_lapsed_at_its_end_says_so_and_fails() {
+    let name = robot_name("drive-lapsed");
+    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    let robot = connect(&name);
+    let status = robot.status().expect("status");
+    let mut drive = scout_system_tests::command("scout");
+    drive
+        .args(["drive", "--name", &name, "--class", "teleop"])
+        .args(["--linear", "0.2", "--duration", "2"])
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped());
+    let child = drive.spawn().expect("spawn scout drive");
+    let pid = nix::unistd::Pid::from_raw(child.id() as i32);
+    wait_for_status(&status, LIMIT, |s| {
+        s["selected"]["client"]
+            .as_str()
+            .is_some_and(|client| client.starts_with("drive-"))
+    });
+    // Frozen for longer than its whole duration: it wakes up past its end, its control long
+    // lapsed (teleop: 250 ms without a command).
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGSTOP).expect("SIGSTOP");
+    std::thread::sleep(Duration::from_secs(3));
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGCONT).expect("SIGCONT");
+    let output = scout_system_tests::wait_output(child, LIMIT);
+    let said = format!(
+        "{}{}",
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert_eq!(output.status.code(), Some(4), "{said}");
+    assert!(said.contains("stale"), "names the cause: {said}");
+}

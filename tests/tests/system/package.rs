@@ -170,6 +170,10 @@ fn the_debian_package_installs_upgrades_and_purges_in_a_throwaway_root() {
     );
     let run_dir = std::fs::metadata(root.join("var/lib/scout")).expect("the run directory");
     assert_eq!(std::os::unix::fs::MetadataExt::uid(&run_dir), uid);
+    // The shared memory's directory: the gateway user's, its group's members are the clients.
+    let ipc = std::fs::metadata(root.join("run/scout")).expect("the shared-memory directory");
+    assert_eq!(std::os::unix::fs::MetadataExt::uid(&ipc), uid);
+    assert_eq!(std::os::unix::fs::MetadataExt::mode(&ipc) & 0o7777, 0o770);
 
     // systemd accepts the unit as installed (its ExecStart in the root), with not one warning;
     // the units it names (network-online.target...) are this host's.
@@ -187,6 +191,20 @@ fn the_debian_package_installs_upgrades_and_purges_in_a_throwaway_root() {
         complaints.trim().is_empty(),
         "systemd-analyze verify: {complaints}"
     );
+    // Its confinement holds (docs/operating.md gives the figure, and what it leaves open).
+    let security = run(Command::new("systemd-analyze")
+        .args(["security", "--offline=true"])
+        .arg(format!("--root={}", root.display()))
+        .arg(units.join("scout-gateway.service")));
+    let rating = String::from_utf8_lossy(&security.stdout);
+    let exposure: f64 = rating
+        .lines()
+        .find_map(|line| line.split("Overall exposure level for").nth(1))
+        .and_then(|rest| rest.split(':').nth(1))
+        .and_then(|rest| rest.split_whitespace().next())
+        .and_then(|number| number.parse().ok())
+        .unwrap_or_else(|| panic!("no exposure level in: {rating}"));
+    assert!(exposure <= 3.0, "systemd-analyze security: {exposure}\n{rating}");
 
     // The operator changes the configuration; an upgrade keeps the change.
     let conffile = root.join(CONFFILE);

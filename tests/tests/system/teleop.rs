@@ -69,6 +69,10 @@ fn keyboard_teleop(name: &str, extra: &[&str], client: &str) {
         .expect("spawn scout teleop");
     let mut screen = String::new();
     read_until(&mut master, &mut screen, "scout teleop");
+    // Starting takes nothing: a running autonomy would drive on until a key is pressed.
+    read_until(&mut master, &mut screen, "a movement key takes control");
+    let idle = wait_for_status(&status, LIMIT, |s| s["seq"].as_u64().is_some());
+    assert_eq!(idle["selected"], serde_json::Value::Null, "{idle}");
     master.write_all(b"ww").expect("keys");
     read_until(&mut master, &mut screen, "linear +0.20 m/s");
     // The state and the arbiter's status are shown (through zenoh with --remote).
