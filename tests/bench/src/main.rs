@@ -93,6 +93,9 @@ enum Role {
         seconds: f64,
         #[arg(long, default_value_t = 0)]
         mappings: usize,
+        /// Garbage (not the endpoint's magic) instead of releases.
+        #[arg(long)]
+        garbage: bool,
     },
 }
 
@@ -123,7 +126,8 @@ fn main() -> ExitCode {
             name,
             seconds,
             mappings,
-        }) => roles::datagram_flood(&name, seconds, mappings),
+            garbage,
+        }) => roles::datagram_flood(&name, seconds, mappings, garbage),
         None => run::run(&run::Options {
             quick: cli.quick,
             json: cli.json,

@@ -187,8 +187,21 @@ pub struct Roles {
 impl Roles {
     /// Starts `scout-bench ROLE ARGS`.
     pub fn spawn(&mut self, args: &[&str]) -> anyhow::Result<()> {
+        self.spawn_through(&[], args)
+    }
+
+    /// Starts `WRAPPER... scout-bench ROLE ARGS` (`nice`, `setpriv`...).
+    pub fn spawn_through(&mut self, wrapper: &[&str], args: &[&str]) -> anyhow::Result<()> {
         let exe = std::env::current_exe()?;
-        let child = Command::new(exe)
+        let mut command = match wrapper.split_first() {
+            Some((program, rest)) => {
+                let mut command = Command::new(program);
+                command.args(rest).arg(exe);
+                command
+            }
+            None => Command::new(exe),
+        };
+        let child = command
             .args(args)
             .stdin(Stdio::null())
             .stdout(Stdio::null())

@@ -178,10 +178,15 @@ fn many_mappings(count: usize) -> usize {
     count
 }
 
-/// Release datagrams on `name`'s stop endpoint for `seconds`, as fast as its queue takes them,
-/// from an unbound socket (no answers), after making `mappings` memory mappings. Prints
-/// `ready MAPPINGS` once mapped, then `sent N` at the end.
-pub fn datagram_flood(name: &str, seconds: f64, mappings: usize) -> anyhow::Result<()> {
+/// Release datagrams (or `garbage`) on `name`'s stop endpoint for `seconds`, as fast as its
+/// queue takes them, from an unbound socket (no answers), after making `mappings` memory
+/// mappings. Prints `ready MAPPINGS` once mapped, then `sent N` at the end.
+pub fn datagram_flood(
+    name: &str,
+    seconds: f64,
+    mappings: usize,
+    garbage: bool,
+) -> anyhow::Result<()> {
     use std::os::linux::net::SocketAddrExt;
     use std::os::unix::net::{SocketAddr, UnixDatagram};
 
@@ -197,15 +202,24 @@ pub fn datagram_flood(name: &str, seconds: f64, mappings: usize) -> anyhow::Resu
     let end = Instant::now() + Duration::from_secs_f64(seconds);
     let mut sent = 0u64;
     while Instant::now() < end {
-        let datagram = StopRequest {
-            seq: sent,
-            name: Some(format!("flood-{}", std::process::id())),
-            ask: Ask::Release {
-                target: ReleaseTarget::Own,
-                through: u64::MAX,
-            },
-        }
-        .emit();
+        let datagram = if garbage {
+            let mut bytes = [0u8; 64];
+            for (i, byte) in bytes.iter_mut().enumerate() {
+                *byte = (sent as u8).wrapping_mul(31).wrapping_add(i as u8);
+            }
+            bytes.to_vec()
+        } else {
+            StopRequest {
+                seq: sent,
+                name: Some(format!("flood-{}", std::process::id())),
+                ask: Ask::Release {
+                    target: ReleaseTarget::Own,
+                    through: u64::MAX,
+                },
+            }
+            .emit()
+            .to_vec()
+        };
         match socket.send_to_addr(&datagram, &gateway) {
             Ok(_) => sent += 1,
             Err(error) if error.kind() == std::io::ErrorKind::WouldBlock => {

@@ -320,6 +320,7 @@ pub fn run(options: &Options) -> anyhow::Result<()> {
     command_latency(&mut bench, &mut report, &states)?;
     remote_latency(&mut bench, &mut report, &states)?;
     ticks(&mut bench, &mut report, &states)?;
+    stop_endpoint_flood(&mut bench, &mut report, &states)?;
     watchers(&mut bench, &mut report)?;
     recovery(&mut bench, &mut report, states)?;
     cost(&mut bench, &mut report)?;
@@ -1291,6 +1292,94 @@ fn ticks(bench: &mut Bench, report: &mut Report, states: &StateSubscriber) -> an
         report.ticks.push((label.to_owned(), ticks));
     }
     Ok(())
+}
+
+/// How many processes flood the stop endpoint in [`stop_endpoint_flood`] (the review's case).
+const ENDPOINT_FLOODERS: usize = 8;
+
+/// [`ENDPOINT_FLOODERS`] processes at nice 19 flooding the stop endpoint with garbage, as
+/// another user where the bench runs as root (`nobody`, if it can run this binary), else as
+/// this one: what it costs the gateway (its CPU, % of a core, against the same window idle;
+/// the endpoint serves 1 ms of datagrams and rests 4 ms, so about 20 % at most), and a stop's
+/// latency meanwhile through the same endpoint.
+fn stop_endpoint_flood(
+    bench: &mut Bench,
+    report: &mut Report,
+    states: &StateSubscriber,
+) -> anyhow::Result<()> {
+    let pid = bench
+        .gateway
+        .as_ref()
+        .map(Gateway::pid)
+        .context("a gateway")?;
+    let window = Duration::from_secs_f64(bench.plan.window);
+    let cpu = |span: Duration| -> anyhow::Result<f64> {
+        let (before, _) = usage(pid)?;
+        let start = Instant::now();
+        std::thread::sleep(span);
+        let (after, _) = usage(pid)?;
+        Ok((after - before) / start.elapsed().as_secs_f64() * 100.0)
+    };
+    progress("stop endpoint: the gateway's CPU idle");
+    let idle = cpu(window)?;
+    let other_user = nix::unistd::geteuid().is_root() && runnable_by_others()?;
+    let wrapper: &[&str] = if other_user {
+        &["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups", "nice", "-n", "19"]
+    } else {
+        &["nice", "-n", "19"]
+    };
+    let who = if other_user { "user nobody" } else { "this user" };
+    progress(&format!(
+        "stop endpoint: {ENDPOINT_FLOODERS} flooders of garbage ({who}, nice 19), then e-stops during it"
+    ));
+    let seconds = (bench.plan.window * 3.0 + 20.0).to_string();
+    let mut roles = Roles::default();
+    for _ in 0..ENDPOINT_FLOODERS {
+        roles.spawn_through(wrapper, &["datagram-flood", &bench.name, &seconds, "--garbage"])?;
+    }
+    std::thread::sleep(Duration::from_secs(1));
+    let flooded = cpu(window)?;
+    // The e-stops are this user's: measured only beside another user's flood (past a user's
+    // share its releases go unanswered, and the bench releases after each stop).
+    let stops = if other_user {
+        let robot = connect(&bench.name)?;
+        let mut local = local(&robot)?;
+        stop_samples(&mut local, states, bench.plan.stops, bench.client_priority)?
+    } else {
+        progress("stop endpoint: no e-stops measured (the flooders are this user: run as root)");
+        Vec::new()
+    };
+    drop(roles);
+    report.value(
+        "gateway_cpu_percent_endpoint_idle",
+        "gateway CPU, % of a core, before the stop-endpoint flood",
+        idle,
+    );
+    report.value(
+        "gateway_cpu_percent_endpoint_flood",
+        &format!("gateway CPU, % of a core, {ENDPOINT_FLOODERS} flooders of {who}"),
+        flooded,
+    );
+    if !stops.is_empty() {
+        let trace = trace(bench)?;
+        report_stops(
+            report,
+            "estop_latency_endpoint_flood_us",
+            "e-stop to the chassis during the stop-endpoint flood",
+            &trace,
+            &stops,
+        );
+    }
+    Ok(())
+}
+
+/// Whether every other user can run this binary (every directory above it lets them in).
+fn runnable_by_others() -> anyhow::Result<bool> {
+    use std::os::unix::fs::PermissionsExt;
+    let exe = std::env::current_exe()?;
+    Ok(exe.ancestors().all(|path| {
+        std::fs::metadata(path).is_ok_and(|metadata| metadata.permissions().mode() & 0o001 != 0)
+    }))
 }
 
 /// Two `scout record` and a Foxglove client on `scout foxglove` attached at once: what each
