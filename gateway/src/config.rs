@@ -243,21 +243,23 @@ impl BlackBoxConfig {
         Ok(dir)
     }
 
-    fn validate(&self) -> Result<(), String> {
+    fn validate(&self) -> Result<(), ConfigError> {
         if !(0.0..=60.0).contains(&self.minutes) {
-            return Err(format!(
+            return Err(ConfigError::Invalid(format!(
                 "blackbox.minutes must be within 0..=60 (0: off), found {}",
                 self.minutes
-            ));
+            )));
         }
         if !(0.0..=3600.0).contains(&self.min_interval_s) {
-            return Err(format!(
+            return Err(ConfigError::Invalid(format!(
                 "blackbox.min_interval_s must be within 0..=3600, found {}",
                 self.min_interval_s
-            ));
+            )));
         }
         if self.max_frames == 0 || self.keep == 0 {
-            return Err("blackbox.max_frames and blackbox.keep must be positive".into());
+            return Err(ConfigError::Invalid(
+                "blackbox.max_frames and blackbox.keep must be positive".into(),
+            ));
         }
         Ok(())
     }
@@ -298,16 +300,17 @@ impl Default for BatteryConfig {
 
 impl BatteryConfig {
     /// Why the settings cannot be used, if they cannot.
-    fn validate(&self) -> Result<(), String> {
+    fn validate(&self) -> Result<(), ConfigError> {
+        let invalid = |why: String| Err(ConfigError::Invalid(why));
         let (low, critical) = (self.low_percent, self.critical_percent);
         if !(0.0..=100.0).contains(&critical) || !(0.0..=100.0).contains(&low) || critical > low {
-            return Err(format!(
+            return invalid(format!(
                 "battery.critical_percent ({critical}) and battery.low_percent ({low}) must be \
                  percentages with critical at most low"
             ));
         }
         if !(0.0..=1.0).contains(&self.internal_resistance_ohm) {
-            return Err(format!(
+            return invalid(format!(
                 "battery.internal_resistance_ohm must be within 0..=1 ohm, found {}",
                 self.internal_resistance_ohm
             ));
@@ -315,7 +318,7 @@ impl BatteryConfig {
         if let Some(curve) = &self.curve
             && !scout_protocol::battery::curve_is_valid(curve)
         {
-            return Err(
+            return invalid(
                 "battery.curve must be at least two [volts, percent] pairs, both rising, \
                         the percent within 0..=100"
                     .into(),
@@ -324,7 +327,7 @@ impl BatteryConfig {
         if let Some(capacity) = self.capacity_ah
             && !(capacity.is_finite() && capacity > 0.0)
         {
-            return Err(format!(
+            return invalid(format!(
                 "battery.capacity_ah must be positive, found {capacity}"
             ));
         }
@@ -458,8 +461,8 @@ impl GatewayConfig {
                 )));
             }
         }
-        self.battery.validate().map_err(ConfigError::Invalid)?;
-        self.blackbox.validate().map_err(ConfigError::Invalid)?;
+        self.battery.validate()?;
+        self.blackbox.validate()?;
         self.zenoh
             .validate()
             .map_err(|error| ConfigError::Invalid(error.to_string()))?;

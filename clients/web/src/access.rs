@@ -82,7 +82,7 @@ impl User {
     }
 
     /// Checks the name and token.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<(), UsersError> {
         let name_ok = !self.name.is_empty()
             && self.name.len() <= MAX_USER_NAME
             && self
@@ -90,19 +90,33 @@ impl User {
                 .bytes()
                 .all(|byte| byte.is_ascii_alphanumeric() || matches!(byte, b'.' | b'_' | b'-'));
         if !name_ok {
-            return Err(format!(
-                "user name {:?}: 1 to {MAX_USER_NAME} of A-Z a-z 0-9 . _ -",
-                self.name
-            ));
+            return Err(UsersError::Name(self.name.clone()));
         }
         if self.token.chars().count() < MIN_TOKEN || self.token.chars().any(char::is_whitespace) {
-            return Err(format!(
-                "user {}: its token needs at least {MIN_TOKEN} characters and no spaces",
-                self.name
-            ));
+            return Err(UsersError::Token(self.name.clone()));
         }
         Ok(())
     }
+}
+
+/// Why the users cannot be served.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum UsersError {
+    /// None given.
+    #[error("no users: give at least one")]
+    None,
+    /// A name that is not one.
+    #[error("user name {0:?}: 1 to {MAX_USER_NAME} of A-Z a-z 0-9 . _ -")]
+    Name(String),
+    /// A token too short, or with spaces.
+    #[error("user {0}: its token needs at least {MIN_TOKEN} characters and no spaces")]
+    Token(String),
+    /// A name given twice.
+    #[error("user {0} is given twice")]
+    Twice(String),
+    /// Two users with one token: the token would not tell them apart.
+    #[error("users {0} and {1} have the same token")]
+    SameToken(String, String),
 }
 
 /// The users, checked: names and tokens distinct.
@@ -111,21 +125,18 @@ pub struct Users(Vec<User>);
 
 impl Users {
     /// Checks `users`: at least one, each valid, no name or token twice.
-    pub fn new(users: Vec<User>) -> Result<Users, String> {
+    pub fn new(users: Vec<User>) -> Result<Users, UsersError> {
         if users.is_empty() {
-            return Err("no users: give at least one".into());
+            return Err(UsersError::None);
         }
         for (at, user) in users.iter().enumerate() {
             user.check()?;
             for other in &users[..at] {
                 if other.name == user.name {
-                    return Err(format!("user {} is given twice", user.name));
+                    return Err(UsersError::Twice(user.name.clone()));
                 }
                 if other.token == user.token {
-                    return Err(format!(
-                        "users {} and {} have the same token",
-                        other.name, user.name
-                    ));
+                    return Err(UsersError::SameToken(other.name.clone(), user.name.clone()));
                 }
             }
         }
@@ -324,30 +335,21 @@ mod tests {
             token: token.into(),
         };
         assert!(Users::new(vec![]).is_err());
+        let refused = |users| Users::new(users).map(|_| ()).unwrap_err().to_string();
+        assert!(refused(vec![user("a b", "0123456789abcdef")]).contains("user name"));
+        assert!(refused(vec![user("a", "short")]).contains("16"));
         assert!(
-            Users::new(vec![user("a b", "0123456789abcdef")])
-                .unwrap_err()
-                .contains("user name")
-        );
-        assert!(
-            Users::new(vec![user("a", "short")])
-                .unwrap_err()
-                .contains("16")
-        );
-        assert!(
-            Users::new(vec![
+            refused(vec![
                 user("a", "0123456789abcdef"),
                 user("a", "0123456789abcdeg")
             ])
-            .unwrap_err()
             .contains("twice")
         );
         assert!(
-            Users::new(vec![
+            refused(vec![
                 user("a", "0123456789abcdef"),
                 user("b", "0123456789abcdef")
             ])
-            .unwrap_err()
             .contains("same token")
         );
         assert!(

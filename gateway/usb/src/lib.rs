@@ -197,7 +197,7 @@ pub enum OpenError {
         /// The adapter.
         adapter: String,
         /// What went wrong.
-        what: String,
+        what: SetUpError,
     },
     /// The OS refused (permissions, busy, gone).
     #[error("opening the adapter {adapter}: {error}{hint}")]
@@ -209,6 +209,36 @@ pub enum OpenError {
         /// What to do about it.
         hint: &'static str,
     },
+}
+
+/// A step of an adapter's set-up that failed.
+#[derive(Debug, thiserror::Error)]
+pub enum SetUpError {
+    /// A control request was not taken.
+    #[error("{what} failed: {error}")]
+    Request {
+        /// The request, in words.
+        what: &'static str,
+        /// What USB said.
+        error: io::Error,
+    },
+    /// An answer did not decode.
+    #[error("its {what}: {error}")]
+    Answer {
+        /// What it answered, in words.
+        what: &'static str,
+        /// Why it does not decode.
+        error: gs_usb::Error,
+    },
+    /// Its constants allow no bit timing for 500 kbit/s.
+    #[error("no bit timing for 500 kbit/s: {0}")]
+    Timing(gs_usb::BitTimingError),
+    /// It has no bulk endpoints to carry frames.
+    #[error("its interface 0 has no bulk IN and OUT endpoints")]
+    Endpoints,
+    /// Its IN endpoint's packet size is not one USB has.
+    #[error("its IN endpoint's packet size, {0} bytes, is not a USB one")]
+    PacketSize(usize),
 }
 
 impl OpenError {
@@ -393,26 +423,22 @@ impl GsUsbPort {
             .claim_interface(INTERFACE)
             .wait()
             .map_err(|e| OpenError::io(adapter, e))?;
-        let set_up = |what: String| OpenError::SetUp {
+        let set_up = |what: SetUpError| OpenError::SetUp {
             adapter: name.clone(),
             what,
         };
         // Whether it answers at all, before anything that could wait longer.
         let timing = timing_for(&interface).map_err(set_up)?;
-        let (in_address, out_address) = bulk_endpoints(&interface)
-            .ok_or_else(|| set_up("its interface 0 has no bulk IN and OUT endpoints".into()))?;
+        let (in_address, out_address) =
+            bulk_endpoints(&interface).ok_or_else(|| set_up(SetUpError::Endpoints))?;
         let mut input = interface
             .endpoint::<Bulk, In>(in_address)
             .map_err(|e| OpenError::io(adapter, e))?;
         let mut out = interface
             .endpoint::<Bulk, Out>(out_address)
             .map_err(|e| OpenError::io(adapter, e))?;
-        let size = transfer_size(input.max_packet_size()).ok_or_else(|| {
-            set_up(format!(
-                "its IN endpoint's packet size, {} bytes, is not a USB one",
-                input.max_packet_size()
-            ))
-        })?;
+        let size = transfer_size(input.max_packet_size())
+            .ok_or_else(|| set_up(SetUpError::PacketSize(input.max_packet_size())))?;
         // A halt left by an earlier owner (or a stall before an unplug) is cleared.
         let _ = input.clear_halt().wait();
         let _ = out.clear_halt().wait();
@@ -643,15 +669,28 @@ fn bulk_endpoints(interface: &Interface) -> Option<(u8, u8)> {
 
 /// The first half of the set-up Linux's driver does: byte order, the device's configuration,
 /// the channel's constants; the bit timing for 500 kbit/s from them.
-fn timing_for(interface: &Interface) -> Result<BitTiming, String> {
-    control_out(interface, Request::HostFormat, &HostConfig::encode())
-        .map_err(|e| format!("it did not take the host format request: {e}"))?;
-    let config = DeviceConfig::decode(&control_in(interface, Request::DeviceConfig)?)
-        .map_err(|e| format!("its device configuration: {e}"))?;
-    let constants = BtConst::decode(&control_in(interface, Request::BtConst)?)
-        .map_err(|e| format!("its bit-timing constants: {e}"))?;
-    let timing = BitTiming::for_bitrate(&constants, BITRATE)
-        .map_err(|e| format!("no bit timing for 500 kbit/s: {e}"))?;
+fn timing_for(interface: &Interface) -> Result<BitTiming, SetUpError> {
+    control_out(interface, Request::HostFormat, &HostConfig::encode()).map_err(|error| {
+        SetUpError::Request {
+            what: "the host format request",
+            error,
+        }
+    })?;
+    let config =
+        DeviceConfig::decode(&control_in(interface, Request::DeviceConfig)?).map_err(|error| {
+            SetUpError::Answer {
+                what: "device configuration",
+                error,
+            }
+        })?;
+    let constants =
+        BtConst::decode(&control_in(interface, Request::BtConst)?).map_err(|error| {
+            SetUpError::Answer {
+                what: "bit-timing constants",
+                error,
+            }
+        })?;
+    let timing = BitTiming::for_bitrate(&constants, BITRATE).map_err(SetUpError::Timing)?;
     tracing::debug!(
         "gs_usb: {} channels, firmware {}, hardware {}, {} Hz clock, {timing:?}",
         config.channels,
@@ -664,17 +703,17 @@ fn timing_for(interface: &Interface) -> Result<BitTiming, String> {
 
 /// The second half: the channel reset (an earlier owner may have left it started), the bit
 /// timing, then start.
-fn start_channel(interface: &Interface, timing: &BitTiming) -> Result<(), String> {
+fn start_channel(interface: &Interface, timing: &BitTiming) -> Result<(), SetUpError> {
+    let step = |what: &'static str| move |error| SetUpError::Request { what, error };
     control_out(interface, Request::Mode, &DeviceMode::STOPPED.encode())
-        .map_err(|e| format!("resetting the channel failed: {e}"))?;
+        .map_err(step("resetting the channel"))?;
     control_out(interface, Request::BitTiming, &timing.encode())
-        .map_err(|e| format!("setting 500 kbit/s failed: {e}"))?;
+        .map_err(step("setting 500 kbit/s"))?;
     let start = DeviceMode {
         start: true,
         flags: 0,
     };
-    control_out(interface, Request::Mode, &start.encode())
-        .map_err(|e| format!("starting the channel failed: {e}"))
+    control_out(interface, Request::Mode, &start.encode()).map_err(step("starting the channel"))
 }
 
 fn control_out(interface: &Interface, request: Request, data: &[u8]) -> io::Result<()> {
@@ -695,7 +734,7 @@ fn control_out(interface: &Interface, request: Request, data: &[u8]) -> io::Resu
         .map_err(io::Error::from)
 }
 
-fn control_in(interface: &Interface, request: Request) -> Result<Vec<u8>, String> {
+fn control_in(interface: &Interface, request: Request) -> Result<Vec<u8>, SetUpError> {
     let setup = Setup::new(request, CHANNEL, interface.interface_number());
     interface
         .control_in(
@@ -710,7 +749,14 @@ fn control_in(interface: &Interface, request: Request) -> Result<Vec<u8>, String
             CONTROL_TIMEOUT,
         )
         .wait()
-        .map_err(|e| format!("request {request:?} failed: {e}"))
+        .map_err(|error| SetUpError::Request {
+            what: match request {
+                Request::BtConst => "the bit-timing constants request",
+                Request::DeviceConfig => "the device configuration request",
+                Request::HostFormat | Request::BitTiming | Request::Mode => "a control request",
+            },
+            error: io::Error::from(error),
+        })
 }
 
 /// What one transfer from the adapter says, for the gateway (`None`: an echo, accounted

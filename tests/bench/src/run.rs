@@ -1324,18 +1324,33 @@ fn stop_endpoint_flood(
     let idle = cpu(window)?;
     let other_user = nix::unistd::geteuid().is_root() && runnable_by_others()?;
     let wrapper: &[&str] = if other_user {
-        &["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups", "nice", "-n", "19"]
+        &[
+            "setpriv",
+            "--reuid=65534",
+            "--regid=65534",
+            "--clear-groups",
+            "nice",
+            "-n",
+            "19",
+        ]
     } else {
         &["nice", "-n", "19"]
     };
-    let who = if other_user { "user nobody" } else { "this user" };
+    let who = if other_user {
+        "user nobody"
+    } else {
+        "this user"
+    };
     progress(&format!(
         "stop endpoint: {ENDPOINT_FLOODERS} flooders of garbage ({who}, nice 19), then e-stops during it"
     ));
     let seconds = (bench.plan.window * 3.0 + 20.0).to_string();
     let mut roles = Roles::default();
     for _ in 0..ENDPOINT_FLOODERS {
-        roles.spawn_through(wrapper, &["datagram-flood", &bench.name, &seconds, "--garbage"])?;
+        roles.spawn_through(
+            wrapper,
+            &["datagram-flood", &bench.name, &seconds, "--garbage"],
+        )?;
     }
     std::thread::sleep(Duration::from_secs(1));
     let flooded = cpu(window)?;

@@ -204,7 +204,10 @@ fn the_debian_package_installs_upgrades_and_purges_in_a_throwaway_root() {
         .and_then(|rest| rest.split_whitespace().next())
         .and_then(|number| number.parse().ok())
         .unwrap_or_else(|| panic!("no exposure level in: {rating}"));
-    assert!(exposure <= 3.0, "systemd-analyze security: {exposure}\n{rating}");
+    assert!(
+        exposure <= 3.0,
+        "systemd-analyze security: {exposure}\n{rating}"
+    );
 
     // The operator changes the configuration; an upgrade keeps the change.
     let conffile = root.join(CONFFILE);

@@ -99,7 +99,7 @@ fn run(cli: &Cli, stop: &AtomicBool) -> anyhow::Result<()> {
             true,
         ),
     };
-    let users = Users::new(users).map_err(Usage)?;
+    let users = Users::new(users).map_err(|error| Usage(error.to_string()))?;
     let tls = match (&cli.tls_self_signed, &cli.tls_cert, &cli.tls_key) {
         (Some(dir), _, _) => Some(tls::self_signed(dir, &certificate_names(cli.listen))?),
         (None, Some(cert), Some(key)) => Some(tls::from_files(cert, key)?),
