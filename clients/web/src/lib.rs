@@ -3,10 +3,12 @@
 //! like any other, as `web:USER`: its E-STOP a stop owned by its user, its drives teleop
 //! commands under a lease, aged from the browser's clock. Sans-IO: the request heads
 //! ([`http`]), who may connect and do what ([`access`]) and what a page's messages ask for
-//! ([`session`]); [`server`] is the driver around them (sockets, threads, the clock), over TLS
-//! ([`tls`]) beyond loopback. [`qr`] shows the link to a phone's camera.
+//! ([`session`]) and who may hold a connection ([`gate`]); [`server`] is the driver around them
+//! (sockets and tasks on tokio, threads for the gateway, the clock), over TLS ([`tls`]) beyond
+//! loopback. [`qr`] shows the link to a phone's camera.
 
 pub mod access;
+pub mod gate;
 pub mod http;
 pub mod page;
 pub mod qr;

@@ -69,14 +69,16 @@ fn websockets_missing(test: &str) -> bool {
     }
 }
 
-/// `scout web --name NAME --listen 127.0.0.1:0 EXTRA`, and the lines it printed up to its link.
-fn start_web(name: &str, extra: &[&str]) -> (Background, Vec<String>) {
+/// `scout web --name NAME --listen 127.0.0.1:0 EXTRA`, and the lines it printed up to its link;
+/// its log goes to `log`.
+fn start_web(name: &str, extra: &[&str], log: &Path) -> (Background, Vec<String>) {
     let mut web = command("scout");
     web.args(["web", "--name", name, "--listen", "127.0.0.1:0"])
         .args(extra)
+        .env("RUST_LOG", "info")
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
-        .stderr(Stdio::inherit());
+        .stderr(std::fs::File::create(log).expect("scout web's log"));
     let mut child = web.spawn().expect("spawn scout web");
     let lines = line_reader(child.stdout.take().expect("stdout"));
     let background = Background::from_child(child);
@@ -107,6 +109,9 @@ struct Served {
     /// The link without its token, and the token.
     url: String,
     token: String,
+    /// `scout web`'s log, in a directory of its own.
+    log: PathBuf,
+    _run: scout_system_tests::TempDir,
 }
 
 impl Served {
@@ -119,7 +124,9 @@ impl Served {
         let name = robot_name(prefix);
         let gateway = Gateway::start(&[chassis, &["--name", &name]].concat());
         connect_within(&name, Duration::from_secs(20));
-        let (web, printed) = start_web(&name, extra);
+        let run = scout_system_tests::TempDir::new(&format!("{name}-web"));
+        let log = run.path().join("scout-web.log");
+        let (web, printed) = start_web(&name, extra, &log);
         let link = printed.last().expect("the link");
         let (url, token) = link.split_once("#token=").expect("a link with a token");
         let (url, token) = (url.to_owned(), token.to_owned());
@@ -130,6 +137,8 @@ impl Served {
             printed,
             url,
             token,
+            log,
+            _run: run,
         }
     }
 
@@ -165,18 +174,30 @@ fn the_page_in_a_real_browser_drives_stops_and_refuses_as_the_rules_say() {
         .arg(&served.name)
         .arg(&shots)
         .arg(&*trace)
+        .arg(served.web.pid().to_string())
         // Selenium's manager would look for a browser on the internet otherwise.
         .env("SE_OFFLINE", "true");
     let output = run_with_input(browser, b"", Duration::from_secs(240));
     let stdout = String::from_utf8_lossy(&output.stdout);
     assert!(
         output.status.success(),
-        "the browser checks failed:\n{}\n{stdout}",
-        String::from_utf8_lossy(&output.stderr)
+        "the browser checks failed:\n{}\n{stdout}\nscout web's log:\n{}",
+        String::from_utf8_lossy(&output.stderr),
+        std::fs::read_to_string(&served.log).unwrap_or_default()
     );
     // The figures (time to the state, drives in a 1 s hold, time to zero, E-STOP tap to its
     // answer and to zero on the wire): printed, never asserted beyond the script's bounds.
     eprintln!("scout web in Chromium: {}", stdout.trim());
+    // Fifty wrong tokens at once (and the pages' own): counted in a line or two, not one each.
+    let log = std::fs::read_to_string(&served.log).expect("scout web's log");
+    let reports = log
+        .lines()
+        .filter(|line| line.contains("refused for a wrong token"))
+        .count();
+    assert!(
+        (1..=3).contains(&reports),
+        "{reports} lines about wrong tokens:\n{log}"
+    );
 }
 
 #[test]
@@ -249,7 +270,11 @@ fn over_tls_the_page_and_its_websocket_go_encrypted_with_the_printed_certificate
     // A restart keeps the certificate.
     served.web.signal(nix::sys::signal::Signal::SIGTERM);
     assert_eq!(served.web.wait_exit(Duration::from_secs(10)), Some(0));
-    let (_again, printed) = start_web(&served.name, &["--tls-self-signed", &certs]);
+    let (_again, printed) = start_web(
+        &served.name,
+        &["--tls-self-signed", &certs],
+        &served.log.with_extension("again.log"),
+    );
     assert!(
         printed
             .iter()

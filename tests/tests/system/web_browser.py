@@ -1,9 +1,10 @@
 """The operator's page (`scout web`) in a real browser: headless Chromium driven by Selenium.
 
-Usage: web_browser.py URL TOKEN SCOUT ROBOT SCREENSHOT_DIR SIM_TRACE
+Usage: web_browser.py URL TOKEN SCOUT ROBOT SCREENSHOT_DIR SIM_TRACE WEB_PID
 
 SIM_TRACE is the simulated chassis' trace (`scout-sim --trace`: what it read off the wire, in
-CLOCK_BOOTTIME), for the E-STOP tap to zero on the wire.
+CLOCK_BOOTTIME), for the E-STOP tap to zero on the wire. WEB_PID is scout web's process: the
+last check stops it, and the page must say it cannot stop the robot any more.
 
 Each check raises AssertionError with what was seen. At the end it prints one JSON line of
 figures (what the test measured; nothing here asserts a speed beyond the issue's bounds).
@@ -12,6 +13,8 @@ figures (what the test measured; nothing here asserts a speed beyond the issue's
 import http.server
 import json
 import os
+import signal
+import socket
 import statistics
 import subprocess
 import sys
@@ -23,7 +26,7 @@ from selenium.webdriver.chrome.service import Service
 from selenium.webdriver.common.action_chains import ActionChains
 from selenium.webdriver.common.by import By
 
-URL, TOKEN, SCOUT, ROBOT, SHOTS, TRACE = sys.argv[1:7]
+URL, TOKEN, SCOUT, ROBOT, SHOTS, TRACE, WEB_PID = sys.argv[1:8]
 HOST = URL.split("//", 1)[1].rstrip("/")
 CHROMIUM = os.environ.get("SCOUT_CHROMIUM", "/usr/bin/chromium")
 DRIVER = os.environ.get("SCOUT_CHROMEDRIVER", "/usr/bin/chromedriver")
@@ -46,6 +49,72 @@ class OtherOrigin(http.server.BaseHTTPRequestHandler):
 
     def log_message(self, *args):
         pass
+
+
+class StallingProxy:
+    """A TCP proxy in front of scout web whose way back to the browser can stall: it stops
+    reading what the server sends (its receive buffer set small), as a phone on bad Wi-Fi does,
+    while what the browser sends still goes through."""
+
+    def __init__(self, upstream):
+        self.upstream = upstream
+        self.flowing = threading.Event()
+        self.flowing.set()
+        self.listener = socket.create_server(("127.0.0.1", 0))
+        self.port = self.listener.getsockname()[1]
+        threading.Thread(target=self._accept, daemon=True).start()
+
+    def _accept(self):
+        while True:
+            client, _ = self.listener.accept()
+            server = socket.socket()
+            server.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+            server.connect(self.upstream)
+            threading.Thread(target=self._pump, args=(client, server, False), daemon=True).start()
+            threading.Thread(target=self._pump, args=(server, client, True), daemon=True).start()
+
+    def _pump(self, source, sink, stalls):
+        try:
+            while True:
+                if stalls:
+                    self.flowing.wait()
+                data = source.recv(4096)
+                if not data:
+                    break
+                sink.sendall(data)
+        except OSError:
+            pass
+        for s in (source, sink):
+            try:
+                s.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+
+
+def status_now():
+    done = subprocess.run([SCOUT, "status", "--json", "--name", ROBOT],
+                          capture_output=True, text=True, timeout=20)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout)
+
+
+def web_stops():
+    return [s for s in status_now()["stops"] if s["owner"] == "web:operator"]
+
+
+def alert_on_screen_in_red(driver, words, limit=15.0):
+    """The alert says `words`, is within the viewport, and is white on red."""
+    text = until(f"the alert saying {words!r}", lambda: words in driver.find_element(By.ID, "alert").text
+                 and driver.find_element(By.ID, "alert").text, limit)
+    rect = js(driver, "const r = document.getElementById('alert').getBoundingClientRect();"
+                      "return [r.top, r.bottom, innerHeight]")
+    assert rect[0] >= 0 and rect[1] <= rect[2], f"the alert off screen: {rect}"
+    color = js(driver, "return getComputedStyle(document.getElementById('alert')).backgroundColor")
+    red, green, blue = (int(c) for c in color[color.index("(") + 1:color.index(")")].split(",")[:3])
+    assert red >= 180 and green <= 80 and blue <= 80, f"the alert not red: {color}"
+    size = js(driver, "return parseFloat(getComputedStyle(document.getElementById('alert')).fontSize)")
+    assert size >= 18, f"the alert's words are small: {size}px"
+    return text
 
 
 def browser(width, height, mobile):
@@ -286,14 +355,101 @@ try:
         time.sleep(0.05)
     assert "Stopped by " + owner in phone.find_element(By.ID, "why").text, phone.find_element(By.ID, "why").text
 
+    # A congested page (the way back stalls, as a phone's on bad Wi-Fi): its E-STOP still
+    # latches at once, the page shows it unconfirmed until the answer gets through, then
+    # confirmed. (Before, the server read a page only between its writes: a write that could
+    # not drain held the E-STOP back, then closed the page and lost it.)
+    # (The page's origin and its Host header are both the proxy's: the origin check passes.)
+    proxy = StallingProxy(("127.0.0.1", int(HOST.rsplit(":", 1)[1])))
+    phone.get(f"http://127.0.0.1:{proxy.port}/#token={TOKEN}")
+    until("the page through the proxy", lambda: commanded(phone) is not None)
+    proxy.flowing.clear()
+    until("the page sees the link congested", lambda: js(phone, "return stale"), 10.0)
+    phone.save_screenshot(os.path.join(SHOTS, "phone-congested.png"))
+    tapped = time.monotonic()
+    ActionChains(phone).click(phone.find_element(By.ID, "estop")).perform()
+    until("the E-STOP latched behind the congested link", lambda: web_stops(), 5.0)
+    figures["congested_estop_latched_ms"] = round((time.monotonic() - tapped) * 1000)
+    assert js(phone, "return estop && !estop.stop"), "shown confirmed before any answer came"
+    alert_on_screen_in_red(phone, "NOT CONFIRMED")
+    phone.save_screenshot(os.path.join(SHOTS, "phone-estop-not-confirmed.png"))
+    proxy.flowing.set()
+    until("the E-STOP shown confirmed once the link drains",
+          lambda: js(phone, "return !!(estop && estop.stop)"), 30.0)
+    assert "STOPPED" in phone.find_element(By.ID, "estop").text
+    phone.find_element(By.ID, "release").click()
+    until("own stops released", lambda: not web_stops())
+
+    # Idle connections (another user's, renewed as they close) cannot keep a page out: the page
+    # reconnects and its E-STOP latches.
+    flooding = threading.Event()
+    flooding.set()
+    address = ("127.0.0.1", int(HOST.rsplit(":", 1)[1]))
+
+    def idle_connections():
+        held = []
+        while flooding.is_set():
+            while len(held) < 63:
+                try:
+                    held.append(socket.create_connection(address, timeout=2))
+                except OSError:
+                    time.sleep(0.01)
+            for s in list(held):
+                s.setblocking(False)
+                try:
+                    if s.recv(1) == b"":
+                        held.remove(s)
+                        s.close()
+                except BlockingIOError:
+                    pass
+                except OSError:
+                    held.remove(s)
+            time.sleep(0.005)
+        for s in held:
+            s.close()
+
+    flooder = threading.Thread(target=idle_connections, daemon=True)
+    flooder.start()
+    time.sleep(1.0)
+    started = time.monotonic()
+    phone.get(f"{URL}#token={TOKEN}")
+    until("the page connected through the idle flood",
+          lambda: js(phone, "return !!me && ws.readyState === WebSocket.OPEN"), 20.0)
+    figures["reconnect_through_idle_flood_ms"] = round((time.monotonic() - started) * 1000)
+    ActionChains(phone).click(phone.find_element(By.ID, "estop")).perform()
+    until("the E-STOP latched through the idle flood", lambda: web_stops(), 5.0)
+    until("and confirmed", lambda: js(phone, "return !!(estop && estop.stop)"), 5.0)
+    flooding.clear()
+    flooder.join()
+    phone.find_element(By.ID, "release").click()
+    until("own stops released", lambda: not web_stops())
+
     # Without the token, with a wrong one, or from another origin: refused, nothing can be done.
-    for fragment, shown in (("", "No token"), ("#token=wrong-token-0123456789", "No connection")):
+    for fragment, shown in (("", "No token"), ("#token=wrong-token-0123456789", "token is wrong")):
         desktop.get("about:blank")
         desktop.get(URL + fragment)
         until("the page", lambda: js(desktop, "return !!document.getElementById('why')"))
-        until(f"refused ({fragment or 'no token'})", lambda: shown in desktop.find_element(By.ID, "why").text)
+        alert_on_screen_in_red(desktop, shown)
         assert desktop.find_element(By.ID, "me").text == "–"
-        assert js(desktop, "return ws.readyState") != 1
+        assert js(desktop, "return ws ? ws.readyState : -1") != 1
+        assert js(desktop, "return document.getElementById('estop').disabled")
+
+    # Token guessing is slowed per address, and logged by count (checked in scout web's log by
+    # the test): fifty wrong tokens at once.
+    def guess(n):
+        with socket.create_connection(address, timeout=30) as s:
+            s.sendall((f"GET /ws?token=guess-{n:020d} HTTP/1.1\r\nHost: {HOST}\r\n"
+                       f"Origin: {URL.rstrip('/')}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                       "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n").encode())
+            s.settimeout(30)
+            while s.recv(4096):
+                pass
+
+    guessers = [threading.Thread(target=guess, args=(n,)) for n in range(50)]
+    for g in guessers:
+        g.start()
+    for g in guessers:
+        g.join()
     # A page of another origin (another port) with the right token.
     other_origin = http.server.ThreadingHTTPServer(("127.0.0.1", 0), OtherOrigin)
     threading.Thread(target=other_origin.serve_forever, daemon=True).start()
@@ -301,6 +457,26 @@ try:
     until("another origin refused", lambda: desktop.title in ("open", "refused"))
     other_origin.shutdown()
     assert desktop.title == "refused", desktop.title
+
+    # On a small phone (390x640): a wrong token says so, in red, on screen, with the E-STOP
+    # shown unavailable.
+    small = browser(390, 640, True)
+    try:
+        small.get(f"{URL}#token=an-old-token-of-a-former-start")
+        alert_on_screen_in_red(small, "token is wrong")
+        assert "UNAVAILABLE" in small.find_element(By.ID, "estop").text
+        small.save_screenshot(os.path.join(SHOTS, "phone-wrong-token.png"))
+        # scout web stopped: a page that was live says it cannot stop the robot any more.
+        small.get("about:blank")  # a new fragment alone would not load the page again
+        small.get(f"{URL}#token={TOKEN}")
+        until("the small page connected", lambda: js(small, "return !!me"))
+        os.kill(int(WEB_PID), signal.SIGTERM)
+        alert_on_screen_in_red(small, "No connection to scout web")
+        assert "UNAVAILABLE" in small.find_element(By.ID, "estop").text
+        assert js(small, "return document.getElementById('estop').disabled")
+        small.save_screenshot(os.path.join(SHOTS, "phone-no-scout-web.png"))
+    finally:
+        small.quit()
 
     print(json.dumps(figures))
 finally:

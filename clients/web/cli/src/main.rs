@@ -45,9 +45,14 @@ struct Cli {
     #[arg(long, value_name = "FILE", requires = "tls_cert")]
     tls_key: Option<PathBuf>,
     /// The users (a TOML file of [[users]] with name, role = "view", "stop" or "drive", and
-    /// token). Without it: one user, `operator`, role drive, with a new token each start.
-    #[arg(long, value_name = "FILE")]
+    /// token). Without it: one user, `operator`, role drive, with a new token each start (or
+    /// the one of --token-file).
+    #[arg(long, value_name = "FILE", conflicts_with = "token_file")]
     users: Option<PathBuf>,
+    /// Keep the `operator` user's token in FILE (made with a new token, mode 0600, if missing):
+    /// a bookmarked link keeps working across restarts of scout web.
+    #[arg(long, value_name = "FILE")]
+    token_file: Option<PathBuf>,
 }
 
 /// The users file.
@@ -94,7 +99,12 @@ fn run(cli: &Cli, stop: &AtomicBool) -> anyhow::Result<()> {
             vec![User {
                 name: "operator".into(),
                 role: Role::Drive,
-                token: new_token().map_err(|error| anyhow::anyhow!("no random token: {error}"))?,
+                token: match &cli.token_file {
+                    Some(path) => kept_token(path)?,
+                    None => {
+                        new_token().map_err(|error| anyhow::anyhow!("no random token: {error}"))?
+                    }
+                },
             }],
             true,
         ),
@@ -128,8 +138,14 @@ fn run(cli: &Cli, stop: &AtomicBool) -> anyhow::Result<()> {
         let user = &users.all()[0];
         let link = format!("{url}#token={}", user.token);
         println!(
-            "scout web for robot {} on {url}: open {link} (user {}, role {}; a new token each start)",
-            cli.name, user.name, user.role
+            "scout web for robot {} on {url}: open {link} (user {}, role {}; {})",
+            cli.name,
+            user.name,
+            user.role,
+            match &cli.token_file {
+                Some(path) => format!("the token kept in {}", path.display()),
+                None => "a new token each start: --token-file FILE keeps one".to_owned(),
+            }
         );
         for other in &urls[1..] {
             println!("  or {other}#token={}", user.token);
@@ -158,6 +174,44 @@ fn run(cli: &Cli, stop: &AtomicBool) -> anyhow::Result<()> {
     std::io::stdout().flush()?;
     server.run(stop)?;
     Ok(())
+}
+
+/// The token kept in `path`: read, or made (mode 0600, the directory made too) when the file is
+/// missing. A file others may read is refused: the token is the page's key.
+fn kept_token(path: &std::path::Path) -> anyhow::Result<String> {
+    use std::os::unix::fs::{MetadataExt, OpenOptionsExt};
+    match std::fs::symlink_metadata(path) {
+        Ok(metadata) => {
+            if metadata.mode() & 0o077 != 0 || !metadata.is_file() {
+                return Err(Usage(format!(
+                    "{}: a token file must be a file only its owner can read (chmod 600 {})",
+                    path.display(),
+                    path.display()
+                ))
+                .into());
+            }
+            let token = std::fs::read_to_string(path)
+                .map_err(|error| Usage(format!("reading {}: {error}", path.display())))?;
+            Ok(token.trim().to_owned())
+        }
+        Err(error) if error.kind() == std::io::ErrorKind::NotFound => {
+            let token = new_token().map_err(|error| anyhow::anyhow!("no random token: {error}"))?;
+            if let Some(dir) = path.parent().filter(|dir| !dir.as_os_str().is_empty()) {
+                std::fs::create_dir_all(dir)
+                    .map_err(|error| Usage(format!("making {}: {error}", dir.display())))?;
+            }
+            let mut file = std::fs::OpenOptions::new()
+                .write(true)
+                .create_new(true)
+                .mode(0o600)
+                .open(path)
+                .map_err(|error| Usage(format!("making {}: {error}", path.display())))?;
+            writeln!(file, "{token}")
+                .map_err(|error| Usage(format!("writing {}: {error}", path.display())))?;
+            Ok(token)
+        }
+        Err(error) => Err(Usage(format!("reading {}: {error}", path.display())).into()),
+    }
 }
 
 /// The names a self-signed certificate is made for: this host's name, localhost, and the
@@ -248,7 +302,7 @@ fn exit_code(error: &anyhow::Error) -> u8 {
         match cause.downcast_ref::<WebError>() {
             Some(WebError::Listen { .. } | WebError::NeedsTls(_)) => Some(Failure::Usage),
             Some(WebError::Gateway(error)) => Some(error.kind()),
-            None => None,
+            Some(WebError::Runtime(_)) | None => None,
         }
     })
 }
