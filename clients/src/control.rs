@@ -206,6 +206,15 @@ impl Stopper {
         Ok(reply.answer.map_err(ControlError::Rejected)?.stop)
     }
 
+    /// The gateway's process id, asked through the stop endpoint (a ping).
+    pub fn gateway_pid(&mut self) -> Result<u32, ControlError> {
+        let reply = self
+            .client
+            .request(Ask::Ping, ANSWER_TIMEOUT)
+            .map_err(ControlError::from)?;
+        Ok(reply.gateway_pid)
+    }
+
     fn ask(&mut self, ask: Ask) -> Result<Accepted, ControlError> {
         let request = ask.request();
         match (
@@ -292,7 +301,9 @@ impl Controller {
         };
         match (&answer, request) {
             (Ok(accepted), Request::TakeControl { .. }) => self.lease = accepted.lease,
-            (Ok(_), Request::Relinquish) => self.lease = None,
+            // A stop revokes every lease, this one's too: a key pressed right after (before
+            // a drive learnt of it) takes control again rather than driving a dead lease.
+            (Ok(_), Request::Relinquish | Request::Stop { .. }) => self.lease = None,
             (Err(error), _) if error.lost_control() => self.lease = None,
             _ => {}
         }

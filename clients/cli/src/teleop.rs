@@ -219,8 +219,14 @@ impl Link {
                 let id = answer.as_ref().ok().and_then(|accepted| accepted.stop);
                 (describe(&answer), id)
             }
-            Self::Remote { controller, .. } => {
+            Self::Remote {
+                controller,
+                control,
+                ..
+            } => {
                 let answer = controller.stop(REASON);
+                // A stop revokes every lease, this one's too.
+                *control &= answer.is_err();
                 let id = answer.as_ref().ok().and_then(|accepted| accepted.stop);
                 (describe_remote(&answer), id)
             }
@@ -397,7 +403,11 @@ fn draw(
     }
     // Each line cut to the terminal's width: a longer one would wrap onto the next, which the
     // next line then overwrites in part.
-    let width = terminal::size().map_or(80, |(columns, _)| usize::from(columns.max(1)));
+    // A terminal that tells no size (a pseudo-terminal nobody sized) is not cut.
+    let width = match terminal::size() {
+        Ok((columns, _)) if columns > 0 => usize::from(columns),
+        _ => usize::MAX,
+    };
     execute!(
         out,
         cursor::MoveTo(0, 0),

@@ -9,18 +9,61 @@ use serialport::{SerialPort, TTYPort};
 
 const LIMIT: Duration = Duration::from_secs(10);
 
-/// Reads what the program drew until `wanted` appears in it.
-fn read_until(master: &mut TTYPort, screen: &mut String, wanted: &str) {
-    let deadline = Instant::now() + LIMIT;
-    let mut buffer = [0u8; 4096];
-    while !screen.contains(wanted) {
-        assert!(
-            Instant::now() < deadline,
-            "`{wanted}` never appeared; screen: {screen:?}"
-        );
-        if let Ok(n) = master.read(&mut buffer) {
-            screen.push_str(&String::from_utf8_lossy(&buffer[..n]));
+/// What the program drew, read off the pseudo-terminal by a thread of its own from the start
+/// (a terminal nobody reads fills up, and the program would block drawing: a person's terminal
+/// is always read).
+struct Screen {
+    text: String,
+    chunks: std::sync::mpsc::Receiver<String>,
+}
+
+impl Screen {
+    fn reading(mut master: TTYPort) -> Screen {
+        let (sender, chunks) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let mut buffer = [0u8; 4096];
+            loop {
+                match master.read(&mut buffer) {
+                    Ok(0) => return,
+                    Ok(n) => {
+                        let chunk = String::from_utf8_lossy(&buffer[..n]).into_owned();
+                        if sender.send(chunk).is_err() {
+                            return;
+                        }
+                    }
+                    Err(error) if error.kind() == std::io::ErrorKind::TimedOut => {}
+                    Err(_) => return,
+                }
+            }
+        });
+        Screen {
+            text: String::new(),
+            chunks,
         }
+    }
+
+    /// Waits until `wanted` appears in what was drawn.
+    fn until(&mut self, wanted: &str) {
+        let deadline = Instant::now() + LIMIT;
+        while !self.text.contains(wanted) {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match self.chunks.recv_timeout(left) {
+                Ok(chunk) => self.text.push_str(&chunk),
+                Err(_) => panic!("`{wanted}` never appeared; screen: {:?}", self.text),
+            }
+        }
+    }
+
+    /// Everything drawn until the program closed the terminal (or `LIMIT`).
+    fn to_the_end(&mut self) -> &str {
+        let deadline = Instant::now() + LIMIT;
+        while let Ok(chunk) = self
+            .chunks
+            .recv_timeout(deadline.saturating_duration_since(Instant::now()))
+        {
+            self.text.push_str(&chunk);
+        }
+        &self.text
     }
 }
 
@@ -67,17 +110,17 @@ fn keyboard_teleop(name: &str, extra: &[&str], client: &str) {
         .stderr(open())
         .spawn()
         .expect("spawn scout teleop");
-    let mut screen = String::new();
-    read_until(&mut master, &mut screen, "scout teleop");
+    let mut screen = Screen::reading(master.try_clone_native().expect("the pty, to read"));
+    screen.until("scout teleop");
     // Starting takes nothing: a running autonomy would drive on until a key is pressed.
-    read_until(&mut master, &mut screen, "a movement key takes control");
+    screen.until("a movement key takes control");
     let idle = wait_for_status(&status, LIMIT, |s| s["seq"].as_u64().is_some());
     assert_eq!(idle["selected"], serde_json::Value::Null, "{idle}");
     master.write_all(b"ww").expect("keys");
-    read_until(&mut master, &mut screen, "linear +0.20 m/s");
+    screen.until("linear +0.20 m/s");
     // The state and the arbiter's status are shown (through zenoh with --remote).
-    read_until(&mut master, &mut screen, "chassis  link ok");
-    read_until(&mut master, &mut screen, &format!("driving {client}"));
+    screen.until("chassis  link ok");
+    screen.until(&format!("driving {client}"));
     let driving = wait_for_status(&status, LIMIT, |s| s["selected"]["client"] == client);
     assert_eq!(driving["selected"]["class"], "teleop");
     master.write_all(b"e").expect("e-stop key");
@@ -85,7 +128,7 @@ fn keyboard_teleop(name: &str, extra: &[&str], client: &str) {
     assert_eq!(latched["stops"][0]["owner"], client);
     // Released: nothing moves until a movement key takes control again.
     master.write_all(b"r").expect("release key");
-    read_until(&mut master, &mut screen, "press a movement key");
+    screen.until("press a movement key");
     wait_for_status(&status, LIMIT, |s| {
         s["latched"] == false && s["selected"].is_null()
     });
@@ -99,23 +142,14 @@ fn keyboard_teleop(name: &str, extra: &[&str], client: &str) {
             break status.code();
         }
         assert!(Instant::now() < deadline, "teleop did not quit");
-        let mut buffer = [0u8; 4096];
-        if let Ok(n) = master.read(&mut buffer) {
-            screen.push_str(&String::from_utf8_lossy(&buffer[..n]));
-        }
+        std::thread::sleep(Duration::from_millis(20));
     };
     assert_eq!(code, Some(0));
-    let mut buffer = [0u8; 4096];
-    while let Ok(n) = master.read(&mut buffer) {
-        if n == 0 {
-            break;
-        }
-        screen.push_str(&String::from_utf8_lossy(&buffer[..n]));
-    }
+    drop(slave);
+    let screen = screen.to_the_end();
     assert!(
         screen.contains("\u{1b}[?1049l"),
         "the alternate screen was left: {screen:?}"
     );
     assert!(screen.contains("\u{1b}[?25h"), "the cursor was shown again");
-    drop(slave);
 }
