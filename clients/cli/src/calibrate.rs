@@ -323,16 +323,64 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<ExitCode> {
     let text = std::fs::read_to_string(&args.config).unwrap_or(text);
     write_config(&args.config, &with_factors(&text, new_distance, new_yaw)?)?;
     println!(
-        "written to {}: restart the gateway to apply them (sudo systemctl restart \
-         scout-gateway)",
-        args.config.display()
+        "written to {}: restart the gateway to apply them ({})",
+        args.config.display(),
+        restart_hint(&args.robot.name)
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// How to restart the gateway of `robot`: through its systemd unit when it runs as one (its
+/// control group is the unit's), else by hand.
+fn restart_hint(robot: &str) -> String {
+    let command = scout_clients::control::Stopper::new(robot, "calibrate")
+        .ok()
+        .and_then(|mut stopper| stopper.gateway_pid().ok())
+        .and_then(|pid| std::fs::read_to_string(format!("/proc/{pid}/cgroup")).ok())
+        .and_then(|cgroup| restart_command(&cgroup));
+    command.unwrap_or_else(|| "stop it with Ctrl-C or SIGTERM, and start it again".to_owned())
+}
+
+/// The command that restarts the systemd service a `/proc/PID/cgroup` text puts its process in
+/// (the process is the service's own, not in a scope or slice below it), if any.
+fn restart_command(cgroup: &str) -> Option<String> {
+    let path = cgroup.lines().find_map(|line| line.strip_prefix("0::"))?;
+    let unit = path.rsplit('/').next()?;
+    if !unit.ends_with(".service") {
+        return None;
+    }
+    Some(if path.contains("/user@") {
+        format!("systemctl --user restart {unit}")
+    } else {
+        format!("sudo systemctl restart {unit}")
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_restart_command_comes_from_the_control_group() {
+        assert_eq!(
+            restart_command("0::/system.slice/scout-gateway.service\n").as_deref(),
+            Some("sudo systemctl restart scout-gateway.service")
+        );
+        assert_eq!(
+            restart_command(
+                "0::/user.slice/user-1000.slice/user@1000.service/app.slice/scout.service\n"
+            )
+            .as_deref(),
+            Some("systemctl --user restart scout.service")
+        );
+        // A terminal's, or a program of a desktop session: by hand.
+        for cgroup in [
+            "0::/user.slice/user-1000.slice/session-3.scope\n",
+            "0::/user.slice/user-1000.slice/user@1000.service/app.slice/app-term-1.scope\n",
+        ] {
+            assert_eq!(restart_command(cgroup), None, "{cgroup}");
+        }
+    }
 
     #[test]
     fn the_factor_is_the_one_in_force_times_measured_over_reported() {

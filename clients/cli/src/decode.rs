@@ -19,7 +19,9 @@ pub struct DecodeArgs {
     /// The protocol of CAN frames: by their ids (v1's and v2's do not overlap), or forced.
     #[arg(long, value_enum, default_value_t = ProtocolArg::Auto)]
     protocol: ProtocolArg,
-    /// Lines to decode; standard input when none.
+    /// Lines to decode, or files of them (an argument that names a file, as a black box's,
+    /// is read line by line); standard input when none.
+    #[arg(value_name = "LINE|FILE")]
     lines: Vec<String>,
 }
 
@@ -43,7 +45,7 @@ pub fn run(args: &DecodeArgs) -> anyhow::Result<ExitCode> {
     let stdout = std::io::stdout();
     let mut out = BufWriter::new(stdout.lock());
     let mut bad_lines = 0usize;
-    let mut decode_one = |number: usize, line: &str| -> anyhow::Result<()> {
+    let mut decode_one = |number: &str, line: &str| -> anyhow::Result<()> {
         // Blank lines, and `#` comments (a black box's header).
         if line.trim().is_empty() || line.trim_start().starts_with('#') {
             return Ok(());
@@ -68,11 +70,21 @@ pub fn run(args: &DecodeArgs) -> anyhow::Result<ExitCode> {
     if args.lines.is_empty() {
         for (index, line) in std::io::stdin().lock().lines().enumerate() {
             let line = line.context("reading standard input")?;
-            decode_one(index + 1, &line)?;
+            decode_one(&(index + 1).to_string(), &line)?;
         }
     } else {
-        for (index, line) in args.lines.iter().enumerate() {
-            decode_one(index + 1, line)?;
+        for (index, argument) in args.lines.iter().enumerate() {
+            let path = std::path::Path::new(argument);
+            if !path.is_file() {
+                decode_one(&(index + 1).to_string(), argument)?;
+                continue;
+            }
+            let file =
+                std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
+            for (number, line) in std::io::BufReader::new(file).lines().enumerate() {
+                let line = line.with_context(|| format!("reading {}", path.display()))?;
+                decode_one(&format!("{}:{}", path.display(), number + 1), &line)?;
+            }
         }
     }
     out.flush()?;

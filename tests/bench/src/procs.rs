@@ -126,6 +126,11 @@ impl Sim {
         Ok(self.stdin.flush()?)
     }
 
+    /// How it ended, if it did (its exit status, or the signal that killed it).
+    pub fn exited(&mut self) -> Option<std::process::ExitStatus> {
+        self.child.try_wait().ok().flatten()
+    }
+
     /// Quits, so that its trace is complete.
     pub fn quit(mut self) -> anyhow::Result<()> {
         self.send("quit")?;
@@ -163,6 +168,11 @@ impl Gateway {
 
     pub fn pid(&self) -> i32 {
         self.child.id() as i32
+    }
+
+    /// How it ended, if it did (its exit status, or the signal that killed it).
+    pub fn exited(&mut self) -> Option<std::process::ExitStatus> {
+        self.child.try_wait().ok().flatten()
     }
 
     pub fn kill(mut self) {

@@ -123,10 +123,11 @@ pub fn soak(minutes: f64, json_out: Option<&Path>) -> anyhow::Result<()> {
     let scratch = std::env::temp_dir().join(format!("scout-soak-{}", std::process::id()));
     std::fs::create_dir_all(&scratch)?;
     let name = format!("soak-{}", std::process::id());
-    let sim = Sim::start(&["--serial"])?;
-    let gateway = Gateway::start(
+    let mut sim = Sim::start(&["--serial"])?;
+    let log = scratch.join("gateway.log");
+    let mut gateway = Gateway::start(
         &["--serial", &sim.port, "--name", &name, "--no-zenoh"],
-        &scratch.join("gateway.log"),
+        &log,
     )?;
     crate::roles::connect(&name)?;
     let started = Instant::now();
@@ -136,6 +137,18 @@ pub fn soak(minutes: f64, json_out: Option<&Path>) -> anyhow::Result<()> {
     let mut round = 0;
     eprintln!("soak: {minutes} min of churn against robot {name}, a sample every 10 s");
     while Instant::now() < end {
+        // The subject gone, the soak says how and stops: churning on against nothing would
+        // only print that no gateway runs, round after round.
+        if let Some(status) = gateway.exited() {
+            anyhow::bail!(
+                "the gateway ended after {round} rounds ({status}); the last lines of its log ({}):\n{}",
+                log.display(),
+                last_lines(&log, 20)
+            );
+        }
+        if let Some(status) = sim.exited() {
+            anyhow::bail!("the simulator ended after {round} rounds ({status})");
+        }
         churn(&name, round)?;
         round += 1;
         if Instant::now() >= next_sample {
@@ -175,6 +188,13 @@ pub fn soak(minutes: f64, json_out: Option<&Path>) -> anyhow::Result<()> {
     drop(sim);
     let _ = std::fs::remove_dir_all(&scratch);
     Ok(())
+}
+
+/// The last `count` lines of the file at `path` (what can be read of it).
+fn last_lines(path: &Path, count: usize) -> String {
+    let text = std::fs::read_to_string(path).unwrap_or_default();
+    let lines: Vec<&str> = text.lines().collect();
+    lines[lines.len().saturating_sub(count)..].join("\n")
 }
 
 #[cfg(test)]

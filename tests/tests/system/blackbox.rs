@@ -102,12 +102,13 @@ fn a_stop_saves_the_black_box_decode_reads_it_and_the_sim_replays_it() {
         gateway.log()
     );
 
-    // `scout decode` reads every frame line; `scout blackbox save` saves another.
+    // `scout decode FILE` (as the box's header says) reads every frame line; `scout blackbox
+    // save` saves another.
     let path = saved.to_string_lossy().into_owned();
     let mut decode = scout_system_tests::command("scout");
     decode
-        .args(["decode", "--json"])
-        .stdin(std::fs::File::open(&saved).expect("open"));
+        .args(["decode", "--json", &path])
+        .stdin(std::process::Stdio::null());
     let output = decode.output().expect("scout decode");
     assert!(
         output.status.success(),

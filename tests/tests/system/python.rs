@@ -94,9 +94,8 @@ fn a_gateway_of_another_interface_version_is_a_version_error_saying_what_the_cli
     // What an older gateway leaves in shared memory: the state services with its own layout.
     let name = scout_system_tests::robot_name("py-version");
     let service = scout_clients::interface::services::state_service(&name);
-    let node = iceoryx2::prelude::NodeBuilder::new()
-        .create::<iceoryx2::prelude::ipc::Service>()
-        .expect("an iceoryx2 node");
+    let node = scout_clients::interface::services::node("older-gateway")
+        .expect("an iceoryx2 node, in the shared-memory directory");
     let service_name: iceoryx2::prelude::ServiceName =
         service.as_str().try_into().expect("a service name");
     let _events = node
