@@ -146,6 +146,7 @@ impl RemoteArgs {
 }
 
 fn main() -> ExitCode {
+    scout_man::exit_if_asked(<Cli as clap::CommandFactory>::command);
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Decode(args) => decode::run(&args),

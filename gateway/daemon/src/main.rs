@@ -95,6 +95,7 @@ struct Cli {
 const USAGE: u8 = Failure::Usage.exit_code();
 
 fn main() -> ExitCode {
+    scout_man::exit_if_asked(<Cli as clap::CommandFactory>::command);
     let cli = Cli::parse();
     let _log = scout_io::logging::init();
     let config = match configure(&cli) {

@@ -94,12 +94,22 @@ fn the_debian_package_installs_upgrades_and_purges_in_a_throwaway_root() {
     let dir = TempDir::new(&robot_name("deb"));
     let first = package(&dir.path().join("1"), 1);
 
-    // What it holds: every program, the unit, the configuration as a conffile, the glibc floor.
+    // What it holds: every program and its manual page, the unit, the configuration as a
+    // conffile, the glibc floor.
     let listing = text(&run(Command::new("dpkg-deb").arg("--contents").arg(&first)));
     let programs = text(&run(Command::new(script()).arg("--programs")));
     for file in programs
         .split_whitespace()
-        .map(|program| format!("./usr/bin/{program}"))
+        .flat_map(|program| {
+            [
+                format!("./usr/bin/{program}"),
+                format!("./usr/share/man/man1/{program}.1.gz"),
+            ]
+        })
+        .chain(
+            // A subcommand's page, as git's.
+            ["./usr/share/man/man1/scout-status.1.gz"].map(str::to_owned),
+        )
         .chain(
             [
                 "./usr/lib/systemd/system/scout-gateway.service",
@@ -133,6 +143,16 @@ fn the_debian_package_installs_upgrades_and_purges_in_a_throwaway_root() {
     assert!(
         !lint_out.lines().any(|line| line.starts_with("E:")),
         "lintian found errors:\n{lint_out}"
+    );
+    // Every program has its manual page, and lintian finds nothing wrong in them.
+    let about_pages: Vec<&str> = lint_out
+        .lines()
+        .filter(|line| line.contains("manual-page") || line.contains("manpage"))
+        .collect();
+    assert!(
+        about_pages.is_empty(),
+        "lintian about the manual pages:\n{}",
+        about_pages.join("\n")
     );
 
     // Installed into an empty root with a dpkg database of its own.

@@ -55,6 +55,7 @@ struct Args {
 }
 
 fn main() -> ExitCode {
+    scout_man::exit_if_asked(<Args as clap::CommandFactory>::command);
     let args = Args::parse();
     if !(args.listen.is_finite() && (0.1..=60.0).contains(&args.listen)) {
         eprintln!(

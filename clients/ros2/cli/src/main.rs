@@ -116,6 +116,7 @@ impl Ros2Args {
 }
 
 fn main() -> ExitCode {
+    scout_man::exit_if_asked(<Ros2Args as clap::CommandFactory>::command);
     let args = Ros2Args::parse();
     match run(&args) {
         Ok(code) => code,

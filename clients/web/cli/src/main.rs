@@ -63,6 +63,7 @@ struct UsersFile {
 }
 
 fn main() -> ExitCode {
+    scout_man::exit_if_asked(<Cli as clap::CommandFactory>::command);
     let cli = Cli::parse();
     tracing_subscriber::fmt()
         .with_env_filter(

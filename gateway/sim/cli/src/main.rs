@@ -86,6 +86,7 @@ enum ProtocolArg {
 }
 
 fn main() -> ExitCode {
+    scout_man::exit_if_asked(<Cli as clap::CommandFactory>::command);
     let cli = Cli::parse();
     if matches!(cli.protocol, ProtocolArg::V2) && cli.serial {
         eprintln!(
