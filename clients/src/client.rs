@@ -7,7 +7,7 @@ use iceoryx2::node::Node;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::subscriber::Subscriber;
 use scout_interface::StatePayload;
-use scout_interface::failure::Failure;
+use scout_interface::failure::{Failure, FailureKind};
 use scout_interface::robot::{BadRobotName, Program, RobotName};
 use scout_interface::services::{self, Ipc, Role, ServiceError};
 
@@ -70,9 +70,10 @@ impl ClientError {
             Self::SharedMemoryFull { .. } | Self::Node(services::NodeError::Dir(_))
         )
     }
+}
 
-    /// What kind of failure this is.
-    pub fn kind(&self) -> Failure {
+impl FailureKind for ClientError {
+    fn kind(&self) -> Failure {
         match self {
             Self::BadName(_) | Self::BadClientName(_) => Failure::Usage,
             Self::Service(error) => error.kind(),

@@ -13,7 +13,7 @@ use scout_interface::stop_socket::{Ask, StopClient, StopSocketError};
 use scout_protocol::FaultClear;
 
 use crate::client::{ClientError, Robot};
-use crate::failure::Failure;
+use scout_interface::failure::{Failure, FailureKind};
 use scout_interface::robot::{Program, RobotName};
 
 pub use scout_interface::services::ANSWER_TIMEOUT;
@@ -52,9 +52,8 @@ impl From<StopSocketError> for ControlError {
     }
 }
 
-impl ControlError {
-    /// What kind of failure this is.
-    pub fn kind(&self) -> Failure {
+impl FailureKind for ControlError {
+    fn kind(&self) -> Failure {
         match self {
             Self::Rejected(_) => Failure::Refused,
             Self::NoAnswer { .. } => Failure::NoGateway,
@@ -63,7 +62,9 @@ impl ControlError {
             Self::Stop(error) => error.kind(),
         }
     }
+}
 
+impl ControlError {
     /// The kind of rejection, if the arbiter refused the request.
     pub fn rejection(&self) -> Option<RejectionKind> {
         match self {

@@ -5,7 +5,7 @@ use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
-use crate::failure::Failure;
+use scout_interface::failure::{Failure, FailureKind};
 
 use scout_interface::StatePayload;
 use scout_interface::json::state_json;
@@ -83,9 +83,9 @@ pub enum EchoError {
     Io(#[source] std::io::Error),
 }
 
-impl EchoError {
-    /// What kind of failure this is: a gateway fallen silent is as good as gone.
-    pub fn kind(&self) -> Failure {
+/// A gateway fallen silent is as good as gone.
+impl FailureKind for EchoError {
+    fn kind(&self) -> Failure {
         match self {
             Self::Client(error) => error.kind(),
             Self::Idle(_) => Failure::NoGateway,

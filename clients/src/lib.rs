@@ -19,6 +19,15 @@ pub mod failure;
 #[cfg(feature = "remote")]
 pub mod remote;
 
+/// This library's error types and the interface crate's, each of which says its kind
+/// ([`failure::FailureKind`]): what [`failure::exit_code`] knows besides a program's own.
+pub const ERROR_KINDS: &[failure::KindOf] = &[
+    failure::kind_if::<client::ClientError>,
+    failure::kind_if::<control::ControlError>,
+    failure::kind_if::<echo::EchoError>,
+    scout_interface::failure::kind_of,
+];
+
 pub use scout_interface as interface;
 pub use scout_interface::control::{
     Accepted, Class, Rejected, RejectionKind, ReleaseTarget, Request, StopCause,

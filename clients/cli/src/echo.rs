@@ -10,6 +10,7 @@ use anyhow::Context;
 use clap::Args;
 use scout_clients::client::Robot;
 use scout_clients::echo::{echo_json, echo_live};
+use scout_clients::failure::{Failure, FailureKind};
 use scout_clients::remote::{RemoteStates, SessionSettings};
 
 use crate::{RemoteArgs, RobotArgs};
@@ -127,4 +128,11 @@ fn remote(
         printed += 1;
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// A gateway silent through zenoh is as good as gone (or unreachable).
+impl FailureKind for RemoteSilent {
+    fn kind(&self) -> Failure {
+        Failure::NoGateway
+    }
 }

@@ -18,7 +18,7 @@ use std::io::ErrorKind;
 use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand};
-use scout_clients::failure::{self, Failure};
+use scout_clients::failure;
 
 /// Command-line tool for an AgileX SCOUT chassis.
 #[derive(Debug, Parser)]
@@ -193,9 +193,11 @@ fn is_broken_pipe(error: &anyhow::Error) -> bool {
 /// The exit code for `error`: its kind's (`scout_clients::failure`), knowing this program's
 /// own errors.
 fn exit_code(error: &anyhow::Error) -> u8 {
-    failure::exit_code(error.chain(), |cause| {
-        let silent = cause.downcast_ref::<status::Silent>().is_some()
-            || cause.downcast_ref::<echo::RemoteSilent>().is_some();
-        silent.then_some(Failure::NoGateway)
-    })
+    failure::exit_code(
+        error.chain(),
+        &[
+            failure::kind_if::<status::Silent>,
+            failure::kind_if::<echo::RemoteSilent>,
+        ],
+    )
 }

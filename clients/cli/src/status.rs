@@ -8,6 +8,7 @@ use std::time::Duration;
 
 use clap::Args;
 use scout_clients::client::Robot;
+use scout_clients::failure::{Failure, FailureKind};
 use scout_clients::interface::json::status_json;
 use scout_clients::interface::state::LevelFrom;
 use scout_clients::monotonic_ns;
@@ -391,6 +392,13 @@ fn rejections(rejections: &Value) -> String {
         "none".into()
     } else {
         counted.join(", ")
+    }
+}
+
+/// A gateway that publishes no status is as good as gone.
+impl FailureKind for Silent {
+    fn kind(&self) -> Failure {
+        Failure::NoGateway
     }
 }
 

@@ -20,7 +20,7 @@ use tracing::{info, warn};
 use scout_clients::ReleaseTarget;
 use scout_clients::control::ControlError;
 use scout_clients::control::Stopper;
-use scout_clients::failure::Failure;
+use scout_clients::failure::{Failure, FailureKind};
 
 use crate::backend::Backend;
 use crate::channels::{ChannelError, Channels};
@@ -80,9 +80,9 @@ pub enum LiveError {
     Read(#[source] scout_clients::client::ClientError),
 }
 
-impl LiveError {
-    /// What kind of failure this is: an address that cannot be listened on is a usage error.
-    pub fn kind(&self) -> Failure {
+/// An address that cannot be listened on is a usage error.
+impl FailureKind for LiveError {
+    fn kind(&self) -> Failure {
         match self {
             Self::Listen { .. } => Failure::Usage,
             Self::Source(error) => error.kind(),

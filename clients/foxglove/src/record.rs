@@ -10,7 +10,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use foxglove::{Context, McapCompression, McapWriteOptions, McapWriterHandle};
-use scout_clients::failure::Failure;
+use scout_clients::failure::{Failure, FailureKind};
 use tracing::{info, warn};
 
 use crate::channels::{ChannelError, Channels, TOPICS};
@@ -95,9 +95,9 @@ pub enum RecordError {
     },
 }
 
-impl RecordError {
-    /// What kind of failure this is: an existing file is a usage error.
-    pub fn kind(&self) -> Failure {
+/// An existing file is a usage error.
+impl FailureKind for RecordError {
+    fn kind(&self) -> Failure {
         match self {
             Self::Exists(_) => Failure::Usage,
             Self::Source(error) => error.kind(),

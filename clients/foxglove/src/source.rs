@@ -9,7 +9,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use scout_clients::client::{ClientError, Robot};
-use scout_clients::failure::Failure;
+use scout_clients::failure::{Failure, FailureKind};
 use scout_clients::monotonic_ns;
 use tracing::warn;
 
@@ -81,9 +81,9 @@ pub enum SourceError {
     Thread(#[source] std::io::Error),
 }
 
-impl SourceError {
-    /// What kind of failure this is.
-    pub fn kind(&self) -> Failure {
+/// .
+impl FailureKind for SourceError {
+    fn kind(&self) -> Failure {
         match self {
             Self::Client(error) => error.kind(),
             Self::Thread(_) => Failure::Failed,

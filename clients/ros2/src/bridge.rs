@@ -26,7 +26,7 @@ use crate::publish::{Clocks, Messages, Topic};
 use crate::stream::{Action, CmdVelStream, Ignored, Origin, Outcome};
 use scout_clients::client::{ClientError, Robot};
 use scout_clients::control::ControlError;
-use scout_clients::failure::Failure;
+use scout_clients::failure::{Failure, FailureKind};
 use scout_interface::control::ReleaseTarget;
 use scout_interface::robot::RobotName;
 
@@ -75,9 +75,9 @@ pub enum BridgeError {
     },
 }
 
-impl BridgeError {
-    /// What kind of failure this is: a setting that cannot work is a usage error.
-    pub fn kind(&self) -> Failure {
+/// A setting that cannot work is a usage error.
+impl FailureKind for BridgeError {
+    fn kind(&self) -> Failure {
         match self {
             Self::Client(error) => error.kind(),
             Self::Control(error) => error.kind(),

@@ -408,6 +408,13 @@ fn check_name(what: &'static str, name: &str, path: bool) -> Result<(), Ros2Conf
     Ok(())
 }
 
+/// A configuration that cannot be used is a usage error.
+impl scout_interface::failure::FailureKind for Ros2ConfigError {
+    fn kind(&self) -> scout_interface::failure::Failure {
+        scout_interface::failure::Failure::Usage
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

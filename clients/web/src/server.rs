@@ -15,6 +15,7 @@ use std::time::{Duration, Instant};
 use futures_util::{SinkExt, StreamExt};
 use scout_clients::client::{ClientError, Robot};
 use scout_clients::control::{ControlError, Controller, Stopper};
+use scout_clients::failure::{Failure, FailureKind};
 use scout_interface::control::{Class, ReleaseTarget, Request};
 use scout_interface::json::{state_json, status_json};
 use scout_interface::services::{monotonic, monotonic_ns};
@@ -945,6 +946,17 @@ fn control_thread(robot: &str, client: &str, slot: &Slot, answers: &mpsc::Unboun
                     "{client}: a stop or release reached the control thread: ignored (the page's stop thread serves them)"
                 );
             }
+        }
+    }
+}
+
+/// An address that cannot be listened on, or needs TLS, is a usage error.
+impl FailureKind for WebError {
+    fn kind(&self) -> Failure {
+        match self {
+            Self::Listen { .. } | Self::NeedsTls(_) => Failure::Usage,
+            Self::Gateway(error) => error.kind(),
+            Self::Runtime(_) => Failure::Failed,
         }
     }
 }

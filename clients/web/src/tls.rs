@@ -157,6 +157,13 @@ fn config(
     Ok(Arc::new(config))
 }
 
+/// TLS that cannot be set up is a usage error: the files or the flags are wrong.
+impl scout_interface::failure::FailureKind for TlsError {
+    fn kind(&self) -> scout_interface::failure::Failure {
+        scout_interface::failure::Failure::Usage
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

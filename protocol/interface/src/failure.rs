@@ -1,7 +1,8 @@
 //! What kind of failure an error is: the one vocabulary every program's exit code comes from.
 //!
-//! Each error type says its kind (`kind()`); [`Failure::exit_code`] maps kinds to exit codes,
-//! once for every program; [`Failure::of_chain`] finds the kind of an error and its causes.
+//! Each error type says its kind through one trait, [`FailureKind`]; each crate lists its error
+//! types once ([`KINDS`] here); [`Failure::exit_code`] maps kinds to exit codes, once for every
+//! program; [`Failure::of_chain`] finds the kind of an error and its causes.
 
 use std::error::Error;
 
@@ -51,33 +52,49 @@ impl Failure {
     }
 }
 
-/// The kind of `cause` if it is one of this crate's errors.
-pub fn kind_of(cause: &(dyn Error + 'static)) -> Option<Failure> {
-    if let Some(error) = cause.downcast_ref::<ServiceError>() {
-        return Some(error.kind());
-    }
-    if let Some(error) = cause.downcast_ref::<RequestError>() {
-        return Some(error.kind());
-    }
-    if let Some(error) = cause.downcast_ref::<ControlPortError>() {
-        return Some(error.kind());
-    }
-    if let Some(error) = cause.downcast_ref::<StopSocketError>() {
-        return Some(error.kind());
-    }
-    if cause.downcast_ref::<BadRobotName>().is_some() {
-        return Some(Failure::Usage);
-    }
-    #[cfg(feature = "zenoh")]
-    if let Some(error) = cause.downcast_ref::<RemoteError>() {
-        return Some(error.kind());
-    }
-    None
+/// An error that knows what kind of failure it is.
+pub trait FailureKind: Error + 'static {
+    /// What kind of failure this is.
+    fn kind(&self) -> Failure;
 }
 
-impl ServiceError {
-    /// What kind of failure this is.
-    pub fn kind(&self) -> Failure {
+/// Tells the kind of an error, if it is of the type it knows.
+pub type KindOf = fn(&(dyn Error + 'static)) -> Option<Failure>;
+
+/// The kind of `cause` if it is an `E`: one entry of a crate's list of error types.
+pub fn kind_if<E: FailureKind>(cause: &(dyn Error + 'static)) -> Option<Failure> {
+    cause.downcast_ref::<E>().map(FailureKind::kind)
+}
+
+/// The kind of the first of `kinds` that knows `cause`.
+pub fn kind_in(kinds: &[KindOf], cause: &(dyn Error + 'static)) -> Option<Failure> {
+    kinds.iter().find_map(|kind_of| kind_of(cause))
+}
+
+/// This crate's error types.
+pub const KINDS: &[KindOf] = &[
+    kind_if::<ServiceError>,
+    kind_if::<RequestError>,
+    kind_if::<ControlPortError>,
+    kind_if::<StopSocketError>,
+    kind_if::<BadRobotName>,
+    #[cfg(feature = "zenoh")]
+    kind_if::<RemoteError>,
+];
+
+/// The kind of `cause` if it is one of this crate's errors.
+pub fn kind_of(cause: &(dyn Error + 'static)) -> Option<Failure> {
+    kind_in(KINDS, cause)
+}
+
+impl FailureKind for BadRobotName {
+    fn kind(&self) -> Failure {
+        Failure::Usage
+    }
+}
+
+impl FailureKind for ServiceError {
+    fn kind(&self) -> Failure {
         match self {
             Self::NoGateway { .. } => Failure::NoGateway,
             Self::Name(_)
@@ -89,9 +106,8 @@ impl ServiceError {
     }
 }
 
-impl RequestError {
-    /// What kind of failure this is.
-    pub fn kind(&self) -> Failure {
+impl FailureKind for RequestError {
+    fn kind(&self) -> Failure {
         match self {
             Self::Rejected(_) => Failure::Refused,
             Self::NoAnswer { .. } => Failure::NoGateway,
@@ -100,9 +116,8 @@ impl RequestError {
     }
 }
 
-impl ControlPortError {
-    /// What kind of failure this is.
-    pub fn kind(&self) -> Failure {
+impl FailureKind for ControlPortError {
+    fn kind(&self) -> Failure {
         match self {
             Self::Service(error) => error.kind(),
             Self::Name(_) => Failure::Usage,
@@ -111,9 +126,8 @@ impl ControlPortError {
     }
 }
 
-impl StopSocketError {
-    /// What kind of failure this is.
-    pub fn kind(&self) -> Failure {
+impl FailureKind for StopSocketError {
+    fn kind(&self) -> Failure {
         match self {
             Self::NoGateway { .. } | Self::NoAnswer { .. } => Failure::NoGateway,
             Self::Reply { .. } | Self::Io { .. } => Failure::Failed,
@@ -121,10 +135,10 @@ impl StopSocketError {
     }
 }
 
+/// A bad configuration is a usage error.
 #[cfg(feature = "zenoh")]
-impl RemoteError {
-    /// What kind of failure this is: a bad configuration is a usage error.
-    pub fn kind(&self) -> Failure {
+impl FailureKind for RemoteError {
+    fn kind(&self) -> Failure {
         match self {
             Self::Config(_) => Failure::Usage,
             Self::Zenoh(_) => Failure::Failed,

@@ -15,7 +15,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use clap::{Args, Parser, Subcommand};
-use scout_clients::failure::{self, Failure};
+use scout_clients::failure::{self, Failure, FailureKind};
 use scout_foxglove::live::{Live, LiveError, LiveOptions};
 use scout_foxglove::origin::OriginPolicy;
 use scout_foxglove::record::{RecordError, RecordOptions, record};
@@ -205,15 +205,22 @@ fn serve(args: &ServeArgs, stop: &AtomicBool) -> anyhow::Result<()> {
 #[error("{0}")]
 struct Usage(String);
 
+impl FailureKind for Usage {
+    fn kind(&self) -> Failure {
+        Failure::Usage
+    }
+}
+
 /// The exit code for `error`: its kind's (`scout_clients::failure`), knowing this program's
 /// own errors.
 fn exit_code(error: &anyhow::Error) -> u8 {
-    failure::exit_code(error.chain(), |cause| {
-        if cause.downcast_ref::<Usage>().is_some() {
-            return Some(Failure::Usage);
-        }
-        let kind = cause.downcast_ref::<RecordError>().map(RecordError::kind);
-        kind.or_else(|| cause.downcast_ref::<LiveError>().map(LiveError::kind))
-            .or_else(|| cause.downcast_ref::<SourceError>().map(SourceError::kind))
-    })
+    failure::exit_code(
+        error.chain(),
+        &[
+            failure::kind_if::<Usage>,
+            failure::kind_if::<RecordError>,
+            failure::kind_if::<LiveError>,
+            failure::kind_if::<SourceError>,
+        ],
+    )
 }

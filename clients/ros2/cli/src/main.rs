@@ -11,7 +11,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::Context;
 use clap::Parser;
-use scout_clients::failure::{self, Failure};
+use scout_clients::failure;
 use scout_clients::interface::robot::RobotName;
 use scout_ros2::bridge::{self, BridgeError};
 use scout_ros2::config::{Middleware, Ros2Config, Ros2ConfigError};
@@ -130,12 +130,13 @@ fn main() -> ExitCode {
 /// The exit code for `error`: its kind's (`scout_clients::failure`), knowing this program's
 /// own errors.
 fn exit_code(error: &anyhow::Error) -> u8 {
-    failure::exit_code(error.chain(), |cause| {
-        if cause.downcast_ref::<Ros2ConfigError>().is_some() {
-            return Some(Failure::Usage);
-        }
-        cause.downcast_ref::<BridgeError>().map(BridgeError::kind)
-    })
+    failure::exit_code(
+        error.chain(),
+        &[
+            failure::kind_if::<Ros2ConfigError>,
+            failure::kind_if::<BridgeError>,
+        ],
+    )
 }
 
 fn run(args: &Ros2Args) -> anyhow::Result<ExitCode> {

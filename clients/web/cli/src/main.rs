@@ -14,7 +14,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use clap::Parser;
-use scout_clients::failure::{self, Failure};
+use scout_clients::failure::{self, Failure, FailureKind};
 use scout_web::access::{Role, User, Users, new_token};
 use scout_web::qr;
 use scout_web::server::{Server, WebError, WebOptions};
@@ -293,19 +293,23 @@ fn reachable_from_another(ip: IpAddr) -> bool {
 #[error("{0}")]
 struct Usage(String);
 
+impl FailureKind for Usage {
+    fn kind(&self) -> Failure {
+        Failure::Usage
+    }
+}
+
 /// The exit code for `error`: its kind's (`scout_clients::failure`), knowing this program's
 /// own errors.
 fn exit_code(error: &anyhow::Error) -> u8 {
-    failure::exit_code(error.chain(), |cause| {
-        if cause.downcast_ref::<Usage>().is_some() || cause.downcast_ref::<TlsError>().is_some() {
-            return Some(Failure::Usage);
-        }
-        match cause.downcast_ref::<WebError>() {
-            Some(WebError::Listen { .. } | WebError::NeedsTls(_)) => Some(Failure::Usage),
-            Some(WebError::Gateway(error)) => Some(error.kind()),
-            Some(WebError::Runtime(_)) | None => None,
-        }
-    })
+    failure::exit_code(
+        error.chain(),
+        &[
+            failure::kind_if::<Usage>,
+            failure::kind_if::<TlsError>,
+            failure::kind_if::<WebError>,
+        ],
+    )
 }
 
 #[cfg(test)]
