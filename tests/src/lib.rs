@@ -208,6 +208,69 @@ pub fn line_reader(pipe: impl std::io::Read + Send + 'static) -> std::sync::mpsc
     lines
 }
 
+/// A peer process (the Python peers of the ROS 2 tests) that answers each JSON command on its
+/// standard input with one JSON line, after a first `{"ready": true}`; killed when dropped.
+#[derive(Debug)]
+pub struct JsonPeer {
+    child: std::process::Child,
+    stdin: std::process::ChildStdin,
+    lines: std::sync::mpsc::Receiver<String>,
+    /// What it is, for the messages.
+    what: String,
+    /// How long an answer may take.
+    limit: Duration,
+}
+
+impl JsonPeer {
+    /// Starts `command` (its standard error is the test's) and waits for its `ready`.
+    pub fn start(mut command: Command, what: &str, limit: Duration) -> JsonPeer {
+        let mut child = command
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .unwrap_or_else(|error| panic!("spawn {what}: {error}"));
+        let stdin = child.stdin.take().expect("stdin");
+        let lines = line_reader(child.stdout.take().expect("stdout"));
+        let mut peer = JsonPeer {
+            child,
+            stdin,
+            lines,
+            what: what.to_owned(),
+            limit,
+        };
+        assert_eq!(peer.answer()["ready"], true, "{what} is not ready");
+        peer
+    }
+
+    /// Its next line, as JSON.
+    pub fn answer(&mut self) -> serde_json::Value {
+        let line = self
+            .lines
+            .recv_timeout(self.limit)
+            .unwrap_or_else(|_| panic!("{} answered nothing within {:?}", self.what, self.limit));
+        serde_json::from_str(&line).unwrap_or_else(|_| panic!("{}: not JSON: {line}", self.what))
+    }
+
+    /// Sends `command` and returns its answer, which must not be an error.
+    pub fn ask(&mut self, command: serde_json::Value) -> serde_json::Value {
+        use std::io::Write;
+        writeln!(self.stdin, "{command}")
+            .and_then(|()| self.stdin.flush())
+            .unwrap_or_else(|error| panic!("writing to {}: {error}", self.what));
+        let answer = self.answer();
+        assert!(answer.get("error").is_none(), "{command}: {answer}");
+        answer
+    }
+}
+
+impl Drop for JsonPeer {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
 impl Sim {
     /// Starts `scout-sim` with `args` (e.g. `--serial`) and waits for its port line.
     pub fn start(args: &[&str]) -> Sim {

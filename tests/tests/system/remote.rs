@@ -29,6 +29,40 @@ fn query_until_answered(session: &zenoh::Session, key: &str) -> Value {
     }
 }
 
+/// A gateway on the simulator listening for zenoh on `endpoint` (with `args`: `--remote-commands`
+/// and the like), read here through iceoryx2, and a zenoh session that reached it.
+struct Remote {
+    name: String,
+    _gateway: Gateway,
+    robot: scout_clients::client::Robot,
+    status: scout_clients::control::StatusReader,
+    session: zenoh::Session,
+}
+
+impl Remote {
+    fn start(prefix: &str, endpoint: &str, args: &[&str]) -> Remote {
+        let name = robot_name(prefix);
+        let gateway = Gateway::start(
+            &[
+                &["--sim", "--name", &name, "--zenoh-listen", endpoint],
+                args,
+            ]
+            .concat(),
+        );
+        let robot = connect(&name);
+        let status = robot.status().expect("status");
+        let session = zenoh_session("client", &[], &[endpoint.to_owned()]);
+        query_until_answered(&session, &format!("scout/{name}/info"));
+        Remote {
+            name,
+            _gateway: gateway,
+            robot,
+            status,
+            session,
+        }
+    }
+}
+
 #[test]
 fn a_remote_process_reads_the_state_of_a_gateway_driving_the_simulator() {
     let name = robot_name("remote-state");
@@ -116,12 +150,13 @@ fn liveliness_appears_and_disappears_with_the_gateway() {
 
 #[test]
 fn remote_commands_are_ignored_by_default_and_counted() {
-    let name = robot_name("remote-off");
-    let port = free_port();
-    let _gateway = Gateway::start(&["--sim", "--name", &name, "--zenoh-listen", &tcp(port)]);
-    let robot = connect(&name);
-    let session = zenoh_session("client", &[], &[tcp(port)]);
-    query_until_answered(&session, &format!("scout/{name}/info"));
+    let Remote {
+        name,
+        robot,
+        session,
+        _gateway,
+        ..
+    } = Remote::start("remote-off", &tcp(free_port()), &[]);
     let answers = zenoh_query(
         &session,
         &format!("scout/{name}/cmd/estop/laptop"),
@@ -174,13 +209,17 @@ fn remote_command(
 
 #[test]
 fn enabled_remote_commands_go_through_the_arbiter_and_bad_input_is_rejected() {
-    let name = robot_name("remote-on");
-    let port = free_port();
-    let _gateway = Gateway::start_remote(&name, &tcp(port), &[]);
-    let robot = connect(&name);
-    let status = robot.status().expect("status");
-    let session = zenoh_session("client", &[], &[tcp(port)]);
-    query_until_answered(&session, &format!("scout/{name}/info"));
+    let Remote {
+        name,
+        robot,
+        status,
+        session,
+        _gateway,
+    } = Remote::start(
+        "remote-on",
+        &tcp(free_port()),
+        &["--remote-commands", "estop,teleop,release"],
+    );
     // The peer's name is the last chunk of the key: zenoh's access control binds it to the
     // peer's certificate (see the TLS test); the payload names nobody.
     let command = |kind: &str, peer: &str, payload: &str| {
@@ -321,13 +360,17 @@ fn enabled_remote_commands_go_through_the_arbiter_and_bad_input_is_rejected() {
 /// so healing restarts nothing; one sent after the release takes control.
 #[test]
 fn a_take_control_held_up_across_a_release_is_refused_as_outdated() {
-    let name = robot_name("remote-outdated");
-    let port = free_port();
-    let _gateway = Gateway::start_remote(&name, &tcp(port), &[]);
-    let robot = connect(&name);
-    let status = robot.status().expect("status");
-    let session = zenoh_session("client", &[], &[tcp(port)]);
-    query_until_answered(&session, &format!("scout/{name}/info"));
+    let Remote {
+        name,
+        status,
+        session,
+        _gateway,
+        ..
+    } = Remote::start(
+        "remote-outdated",
+        &tcp(free_port()),
+        &["--remote-commands", "estop,teleop,release"],
+    );
     let started = Instant::now();
     let clock_ms = || 1_000 + started.elapsed().as_millis() as u64;
     let command =
@@ -403,21 +446,18 @@ fn drives_put_over_udp_drive_and_stop_when_they_stop() {
 
 fn drives_put_on_the_fast_lane(endpoint: &str) {
     let scheme = endpoint.split('/').next().unwrap_or("link");
-    let name = robot_name(&format!("remote-put-{scheme}"));
-    let _gateway = Gateway::start(&[
-        "--sim",
-        "--name",
-        &name,
-        "--zenoh-listen",
+    let Remote {
+        name,
+        robot,
+        status,
+        session,
+        _gateway,
+    } = Remote::start(
+        &format!("remote-put-{scheme}"),
         endpoint,
-        "--remote-commands",
-        "estop,teleop",
-    ]);
-    let robot = connect(&name);
-    let status = robot.status().expect("status");
+        &["--remote-commands", "estop,teleop"],
+    );
     let state = robot.subscribe().expect("subscribe");
-    let session = zenoh_session("client", &[], &[endpoint.to_owned()]);
-    query_until_answered(&session, &format!("scout/{name}/info"));
     let key = format!("scout/{name}/cmd/drive/laptop");
     let started = Instant::now();
     let sent_ms = || 1_000 + started.elapsed().as_millis() as u64;
@@ -904,21 +944,14 @@ fn remote_estop(session: &zenoh::Session, robot: &str, peer: &str) {
 
 #[test]
 fn a_remote_estop_is_answered_and_latched_under_a_flood_from_rotating_peer_names() {
-    let name = robot_name("remote-flood");
     let port = free_port();
-    let _gateway = Gateway::start(&[
-        "--sim",
-        "--name",
-        &name,
-        "--zenoh-listen",
-        &tcp(port),
-        "--remote-commands",
-        "estop",
-    ]);
-    let robot = connect(&name);
-    let status = robot.status().expect("status");
-    let session = zenoh_session("client", &[], &[tcp(port)]);
-    query_until_answered(&session, &format!("scout/{name}/info"));
+    let Remote {
+        name,
+        status,
+        session,
+        _gateway,
+        ..
+    } = Remote::start("remote-flood", &tcp(port), &["--remote-commands", "estop"]);
     // Two sessions flood releases (not allowed here) over 1000 peer names, never waiting.
     let flooding = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(true));
     let floods: Vec<_> = (0..2)
@@ -967,21 +1000,17 @@ fn a_remote_estop_is_answered_and_latched_under_a_flood_from_rotating_peer_names
 
 #[test]
 fn any_peer_name_zenoh_carries_can_stop_and_release_its_own() {
-    let name = robot_name("remote-names");
-    let port = free_port();
-    let _gateway = Gateway::start(&[
-        "--sim",
-        "--name",
-        &name,
-        "--zenoh-listen",
-        &tcp(port),
-        "--remote-commands",
-        "estop,release",
-    ]);
-    let robot = connect(&name);
-    let status = robot.status().expect("status");
-    let session = zenoh_session("client", &[], &[tcp(port)]);
-    query_until_answered(&session, &format!("scout/{name}/info"));
+    let Remote {
+        name,
+        status,
+        session,
+        _gateway,
+        ..
+    } = Remote::start(
+        "remote-names",
+        &tcp(free_port()),
+        &["--remote-commands", "estop,release"],
+    );
     let long = "a".repeat(26);
     let mapped = scout_clients::interface::remote::peer_client_name(&long);
     for (peer, owner) in [

@@ -6,14 +6,12 @@
 //! (`.ci/run` installs them). Without them the test skips, saying why, unless
 //! `SCOUT_REQUIRE_ROS2_STANDIN` is set (as in CI): then it fails.
 
-use std::io::Write;
-use std::process::{Child, ChildStdin, Command, Stdio};
-use std::sync::mpsc::Receiver;
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use nix::sys::signal::Signal;
 use scout_system_tests::{
-    Background, Gateway, Sim, chassis_stays_still, comes_to_rest, connect, free_port, line_reader,
+    Background, Gateway, JsonPeer, Sim, chassis_stays_still, comes_to_rest, connect, free_port,
     moving, robot_name, scout, skip, tcp,
 };
 use serde_json::{Value, json};
@@ -45,50 +43,26 @@ fn standin_missing() -> Option<String> {
 }
 
 /// The Python stand-in, one JSON command and answer per line.
-struct RosNode {
-    child: Child,
-    stdin: ChildStdin,
-    lines: Receiver<String>,
-}
+struct RosNode(JsonPeer);
 
 impl RosNode {
     fn start(router: &str, domain: u32) -> RosNode {
         let script =
             std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/system/ros2_node.py");
-        let mut child = Command::new(python())
+        let mut command = Command::new(python());
+        command
             .arg(script)
             .arg(router)
-            .env("ROS_DOMAIN_ID", domain.to_string())
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("spawn the ROS 2 stand-in");
-        let stdin = child.stdin.take().expect("stdin");
-        let lines = line_reader(child.stdout.take().expect("stdout"));
-        let mut node = RosNode {
-            child,
-            stdin,
-            lines,
-        };
-        assert_eq!(node.answer()["ready"], true);
-        node
-    }
-
-    fn answer(&mut self) -> Value {
-        let line = self
-            .lines
-            .recv_timeout(Duration::from_secs(30))
-            .expect("the ROS 2 stand-in answers within 30 s");
-        serde_json::from_str(&line).expect("JSON answer")
+            .env("ROS_DOMAIN_ID", domain.to_string());
+        RosNode(JsonPeer::start(
+            command,
+            "the ROS 2 stand-in",
+            Duration::from_secs(30),
+        ))
     }
 
     fn ask(&mut self, command: Value) -> Value {
-        writeln!(self.stdin, "{command}").expect("write to the stand-in");
-        self.stdin.flush().expect("flush");
-        let answer = self.answer();
-        assert!(answer.get("error").is_none(), "{command}: {answer}");
-        answer
+        self.0.ask(command)
     }
 
     fn echo(&mut self, topic: &str, type_name: &str, count: usize) -> Vec<Value> {
@@ -126,13 +100,6 @@ impl RosNode {
         let replies = answer["replies"].as_array().cloned().unwrap_or_default();
         assert_eq!(replies.len(), 1, "{answer}");
         replies[0].clone()
-    }
-}
-
-impl Drop for RosNode {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
     }
 }
 
@@ -564,7 +531,11 @@ fn rmw_zenoh_peer() -> Result<std::path::PathBuf, String> {
             let manifest =
                 std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("rmw-zenoh-peer/Cargo.toml");
             let mut build = scout_system_tests::cargo();
+            // CI lints the workspace by compiling it through clippy's driver: not this
+            // workspace, which is not under test.
             build
+                .env_remove("RUSTC_WORKSPACE_WRAPPER")
+                .env_remove("CLIPPY_ARGS")
                 .args(["build", "--quiet", "--locked", "--manifest-path"])
                 .arg(&manifest)
                 .arg("--target-dir")

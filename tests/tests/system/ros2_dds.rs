@@ -7,15 +7,13 @@
 //! `python`, as `.ci/run` makes them). Without them, or without a network namespace (root), a
 //! test skips saying why, unless `SCOUT_REQUIRE_ROS2` is set (as in CI): then it fails.
 
-use std::io::Write;
-use std::process::{Child, ChildStdin, Stdio};
-use std::sync::mpsc::Receiver;
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use nix::sys::signal::Signal;
 use scout_system_tests::{
-    Background, Gateway, NetNs, Sim, chassis_stays_still, comes_to_rest, connect, line_reader,
-    moving, robot_name, scout, skip,
+    Background, Gateway, JsonPeer, NetNs, Sim, chassis_stays_still, comes_to_rest, connect, moving,
+    robot_name, scout, skip,
 };
 use serde_json::{Value, json};
 
@@ -46,53 +44,24 @@ fn prerequisites(test: &str, variable: &str) -> Option<(NetNs, String)> {
 }
 
 /// A real rclpy node in the namespace, one JSON command and answer per line.
-struct RclpyNode {
-    child: Child,
-    stdin: ChildStdin,
-    lines: Receiver<String>,
-}
+struct RclpyNode(JsonPeer);
 
 impl RclpyNode {
     fn start(namespace: &NetNs, python: &str, domain: u32, env: &[(&str, &str)]) -> RclpyNode {
         let script =
             std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/system/ros2_dds_peer.py");
-        let mut child = namespace
-            .command(python)
+        let mut command = namespace.command(python);
+        command
             .arg(script)
             .env("ROS_DOMAIN_ID", domain.to_string())
             .env_remove("ROS_LOCALHOST_ONLY")
             .env_remove("ROS_AUTOMATIC_DISCOVERY_RANGE")
-            .envs(env.iter().copied())
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("spawn rclpy");
-        let stdin = child.stdin.take().expect("stdin");
-        let lines = line_reader(child.stdout.take().expect("stdout"));
-        let mut node = RclpyNode {
-            child,
-            stdin,
-            lines,
-        };
-        assert_eq!(node.answer()["ready"], true);
-        node
-    }
-
-    fn answer(&mut self) -> Value {
-        let line = self
-            .lines
-            .recv_timeout(Duration::from_secs(60))
-            .expect("rclpy answers within 60 s");
-        serde_json::from_str(&line).expect("JSON answer")
+            .envs(env.iter().copied());
+        RclpyNode(JsonPeer::start(command, "rclpy", Duration::from_secs(60)))
     }
 
     fn ask(&mut self, command: Value) -> Value {
-        writeln!(self.stdin, "{command}").expect("write to rclpy");
-        self.stdin.flush().expect("flush");
-        let answer = self.answer();
-        assert!(answer.get("error").is_none(), "{command}: {answer}");
-        answer
+        self.0.ask(command)
     }
 
     /// `count` samples of `topic` from a new subscription (the peer waits up to 20 s), or the
@@ -144,13 +113,6 @@ impl RclpyNode {
 
     fn publish(&mut self, linear: f64, stamped: bool) {
         self.ask(json!({"cmd": "publish", "linear": linear, "angular": 0.0, "stamped": stamped}));
-    }
-}
-
-impl Drop for RclpyNode {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
     }
 }
 

@@ -55,7 +55,7 @@ impl Screen {
     }
 
     /// Everything drawn until the program closed the terminal (or `LIMIT`).
-    fn to_the_end(&mut self) -> &str {
+    fn read_to_the_end(&mut self) -> &str {
         let deadline = Instant::now() + LIMIT;
         while let Ok(chunk) = self
             .chunks
@@ -146,7 +146,7 @@ fn keyboard_teleop(name: &str, extra: &[&str], client: &str) {
     };
     assert_eq!(code, Some(0));
     drop(slave);
-    let screen = screen.to_the_end();
+    let screen = screen.read_to_the_end();
     assert!(
         screen.contains("\u{1b}[?1049l"),
         "the alternate screen was left: {screen:?}"
