@@ -6,7 +6,7 @@
 //! or the disk.
 
 use std::collections::VecDeque;
-use std::fmt::Write as _;
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, SyncSender, TryRecvError, TrySendError};
@@ -22,6 +22,8 @@ use crate::config::BlackBoxConfig;
 /// A save waits this long after its cause, so that the file shows what followed (the stop on
 /// the wire, the chassis coming to rest); causes within it share one file.
 pub const SAVE_AFTER: Duration = Duration::from_secs(2);
+/// The buffer a save writes through: the one allocation of a save, whatever the ring holds.
+const WRITE_BUFFER: usize = 64 * 1024;
 /// Frames in flight between the control loop and the black box's thread.
 const CHANNEL: usize = 8192;
 /// The thread wakes this often to take what came: the control loop never has a sleeper to
@@ -64,23 +66,31 @@ impl Recorded {
     /// The candump log line: `(WALL) rx|tx ID#DATA boot=BOOT`, seconds with microseconds
     /// (candump and canplayer read the first three fields; `scout decode` reads it all).
     pub fn line(&self) -> String {
-        let mut line = format!(
+        let mut line = Vec::with_capacity(64);
+        let _ = self.write_line(&mut line);
+        line.pop(); // its newline
+        String::from_utf8_lossy(&line).into_owned()
+    }
+
+    /// Writes [`Recorded::line`] and its newline to `out`, allocating nothing.
+    pub fn write_line(&self, out: &mut impl Write) -> std::io::Result<()> {
+        write!(
+            out,
             "({}.{:06}) {} {:03X}#",
             self.wall.as_secs(),
             self.wall.subsec_micros(),
             self.direction.name(),
             self.frame.id()
-        );
+        )?;
         for byte in self.frame.data() {
-            let _ = write!(line, "{byte:02X}");
+            write!(out, "{byte:02X}")?;
         }
-        let _ = write!(
-            line,
+        writeln!(
+            out,
             " boot={}.{:06}",
             self.boot.as_secs(),
             self.boot.subsec_micros()
-        );
-        line
+        )
     }
 }
 
@@ -121,17 +131,17 @@ impl Ring {
         self.frames.iter()
     }
 
-    /// The file: a header of `#` lines (`header`, one per line), then a line per frame.
-    pub fn render(&self, header: &[String]) -> String {
-        let mut text = String::with_capacity(64 * (self.frames.len() + header.len()));
+    /// Writes the file to `out`: a header of `#` lines (`header`, one per line), then a line per
+    /// frame, as they go (the file is never whole in memory: a multi-MB text built and freed
+    /// every save would only leave the allocator's heap fragmented).
+    pub fn write_to(&self, out: &mut impl Write, header: &[String]) -> std::io::Result<()> {
         for line in header {
-            let _ = writeln!(text, "# {line}");
+            writeln!(out, "# {line}")?;
         }
         for frame in &self.frames {
-            text.push_str(&frame.line());
-            text.push('\n');
+            frame.write_line(out)?;
         }
-        text
+        Ok(())
     }
 }
 
@@ -333,7 +343,7 @@ impl Keeper {
             ));
         }
         let path = self.dir.join(format!("{}-{stamp}.log", self.robot));
-        match write_file(&self.dir, &path, &self.ring.render(&header)) {
+        match write_file(&self.dir, &path, |out| self.ring.write_to(out, &header)) {
             Ok(()) => info!(
                 "black box saved to {} ({} frames; {})",
                 path.display(),
@@ -349,15 +359,22 @@ impl Keeper {
     }
 }
 
-/// Writes `text` to `path` through a file beside it, synced, so that a crash leaves no half.
-fn write_file(dir: &Path, path: &Path, text: &str) -> anyhow::Result<()> {
-    use std::io::Write;
+/// Writes what `contents` writes to `path` (through a buffer of [`WRITE_BUFFER`] bytes) by way
+/// of a file beside it, synced, so that a crash leaves no half.
+fn write_file(
+    dir: &Path,
+    path: &Path,
+    contents: impl FnOnce(&mut std::io::BufWriter<&std::fs::File>) -> std::io::Result<()>,
+) -> anyhow::Result<()> {
     crate::run_dir::private(dir)?;
     let partial = path.with_extension("log.partial");
     // Anything left there (a crash's leftover, a planted link) goes; the file is made anew.
     let _ = std::fs::remove_file(&partial);
-    let mut file = crate::run_dir::create_new(&partial)?;
-    file.write_all(text.as_bytes())?;
+    let file = crate::run_dir::create_new(&partial)?;
+    let mut out = std::io::BufWriter::with_capacity(WRITE_BUFFER, &file);
+    contents(&mut out)?;
+    out.flush()?;
+    drop(out);
     file.sync_all()?;
     std::fs::rename(&partial, path)?;
     Ok(())
@@ -444,9 +461,17 @@ mod tests {
             small.push(frame(ms, Direction::Rx));
         }
         assert_eq!(small.frames().count(), 10);
-        let text = small.render(&["saved for: a test".into()]);
+        let mut text = Vec::new();
+        small
+            .write_to(&mut text, &["saved for: a test".into()])
+            .expect("written");
+        let text = String::from_utf8(text).expect("text");
         assert!(text.starts_with("# saved for: a test\n("), "{text}");
         assert_eq!(text.lines().count(), 11);
+        assert_eq!(
+            text.lines().nth(1),
+            Some(small.frames().next().expect("a frame").line().as_str())
+        );
     }
 
     #[test]

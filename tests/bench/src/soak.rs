@@ -2,8 +2,8 @@
 //! (controllers that take, drive and give up control, stops and releases, clients killed by
 //! SIGKILL and stopped by SIGSTOP, a request flood) and samples the gateway's resident memory,
 //! open files and threads, and the shared-memory files, every 10 s. It prints each one's first
-//! and last value and its slope per hour over the run after the first fifth (the warm-up), so
-//! that a long run says "flat" with a number.
+//! and last value and its slope per hour after the warm-up ([`WARM_UP`]: the black box's ring
+//! full, every service made), so that a long run says "flat" with a number.
 
 use std::path::Path;
 use std::process::{Child, Stdio};
@@ -13,6 +13,32 @@ use anyhow::Context;
 use serde_json::json;
 
 use crate::procs::{self, Gateway, Sim};
+
+/// What the slopes leave out: the black box's ring filling (the gateway's default `[blackbox]
+/// minutes`, 5: the simulator's frames fill it in that time, up to 12 MB, as designed), every
+/// service and the first clients' made (the first rounds), and a minute more.
+const WARM_UP: Duration = Duration::from_secs(6 * 60);
+
+/// The samples the slopes are taken over, and what they leave out, in words: those after the
+/// warm-up; in a run too short to have three of them, those after the first fifth (saying so).
+fn after_warm_up(samples: &[Sample]) -> (&[Sample], String) {
+    let warm = WARM_UP.as_secs_f64();
+    let from = samples.partition_point(|sample| sample.at < warm);
+    if samples.len().saturating_sub(from) >= 3 {
+        (
+            &samples[from..],
+            format!("after the warm-up of {} min", WARM_UP.as_secs() / 60),
+        )
+    } else {
+        (
+            &samples[samples.len() / 5..],
+            format!(
+                "after the first fifth: shorter than the {} min warm-up, mostly warm-up",
+                WARM_UP.as_secs() / 60
+            ),
+        )
+    }
+}
 
 /// A figure of a sample, and its label.
 type Metric = (&'static str, fn(&Sample) -> f64);
@@ -157,20 +183,18 @@ pub fn soak(minutes: f64, json_out: Option<&Path>) -> anyhow::Result<()> {
         }
     }
     samples.push(sample(gateway.pid(), started.elapsed().as_secs_f64())?);
-    let warm = samples.len() / 5;
+    let (settled, which) = after_warm_up(&samples);
     let metrics: [Metric; 4] = [
         ("resident memory, MB", |s| s.rss_mb),
         ("open files", |s| s.open_files),
         ("threads", |s| s.threads),
         ("files in /dev/shm", |s| s.shm_files),
     ];
-    println!(
-        "| after {minutes} min, {round} rounds | first | last | slope per hour (after the first fifth) |"
-    );
+    println!("| after {minutes} min, {round} rounds | first | last | slope per hour ({which}) |");
     println!("|---|---|---|---|");
     let mut figures = serde_json::Map::new();
     for (label, value) in metrics {
-        let points: Vec<(f64, f64)> = samples[warm..].iter().map(|s| (s.at, value(s))).collect();
+        let points: Vec<(f64, f64)> = settled.iter().map(|s| (s.at, value(s))).collect();
         let (first, last) = (value(&samples[0]), value(&samples[samples.len() - 1]));
         let slope = slope_per_hour(&points);
         println!("| {label} | {first:.2} | {last:.2} | {slope:+.3} |");
@@ -180,7 +204,8 @@ pub fn soak(minutes: f64, json_out: Option<&Path>) -> anyhow::Result<()> {
         );
     }
     if let Some(path) = json_out {
-        let report = json!({ "minutes": minutes, "rounds": round, "figures": figures });
+        let report =
+            json!({ "minutes": minutes, "rounds": round, "slopes": which, "figures": figures });
         std::fs::write(path, serde_json::to_string_pretty(&report)?)
             .with_context(|| format!("writing {}", path.display()))?;
     }
@@ -200,6 +225,25 @@ fn last_lines(path: &Path, count: usize) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_slopes_leave_the_warm_up_out_or_say_they_could_not() {
+        let at = |minutes: f64| Sample {
+            at: minutes * 60.0,
+            rss_mb: 0.0,
+            open_files: 0.0,
+            threads: 0.0,
+            shm_files: 0.0,
+        };
+        let long: Vec<Sample> = (0..=60).map(|m| at(f64::from(m))).collect();
+        let (settled, which) = after_warm_up(&long);
+        assert_eq!(settled[0].at, 360.0);
+        assert!(which.contains("warm-up of 6 min"), "{which}");
+        let short: Vec<Sample> = (0..=10).map(|m| at(f64::from(m) / 2.0)).collect();
+        let (settled, which) = after_warm_up(&short);
+        assert_eq!(settled.len(), 9);
+        assert!(which.contains("first fifth"), "{which}");
+    }
 
     #[test]
     fn the_slope_is_per_hour_and_flat_for_a_constant() {
