@@ -863,14 +863,30 @@ trait Commander {
 struct Local {
     driver: scout_clients::control::Controller,
     safety: scout_clients::control::Controller,
+    /// Asks the gateway for its newest stop (a ping of the stop endpoint).
+    stopper: scout_clients::control::Stopper,
     /// The id of the bench's last stop: its release names it.
     last_stop: u64,
 }
 
 impl Commander for Local {
     fn take(&mut self) -> anyhow::Result<()> {
-        self.driver.take_control()?;
-        Ok(())
+        match self.driver.take_control() {
+            Ok(_) => Ok(()),
+            // A stop the gateway latched itself (the simulator starved of CPU on a loaded
+            // machine, say: chassis_silent): said, released as the robot's operator would
+            // (the bench is this gateway's operator), and tried once more.
+            Err(error) if error.rejection() == Some(scout_clients::RejectionKind::Latched) => {
+                progress(&format!(
+                    "{error}: the gateway stopped the robot during the bench; released, once"
+                ));
+                let through = self.stopper.newest_stop()?.unwrap_or(u64::MAX);
+                self.safety.release(ReleaseTarget::All, through)?;
+                self.driver.take_control()?;
+                Ok(())
+            }
+            Err(error) => Err(error.into()),
+        }
     }
     fn drive(&mut self, linear: f64) -> anyhow::Result<()> {
         self.driver.drive(linear, 0.0)?;
@@ -1089,6 +1105,7 @@ fn local(robot: &Robot) -> anyhow::Result<Local> {
     Ok(Local {
         driver: robot.controller("bench-driver", Some(Class::Teleop))?,
         safety: robot.controller("bench-safety", None)?,
+        stopper: robot.stopper("bench-safety")?,
         last_stop: 0,
     })
 }
