@@ -183,6 +183,10 @@ struct ChassisClock {
     lead: Duration,
     /// The last report's arrival.
     last: Option<Duration>,
+    /// Host time that passed, in the last gap between reports, beyond what the reports stood
+    /// for: reports read at once right after (the backlog of a gateway that was starved of the
+    /// CPU, while the clock moved) spend it rather than count as ahead. Each gap replaces it.
+    credit: Duration,
 }
 
 impl ChassisClock {
@@ -191,7 +195,16 @@ impl ChassisClock {
         let drained = self
             .last
             .map_or(Duration::ZERO, |last| now.saturating_sub(last));
-        self.lead = self.lead.saturating_sub(drained) + MOTION_REPORT_PERIOD;
+        let ahead = self.lead + MOTION_REPORT_PERIOD;
+        if drained > ahead {
+            self.credit = drained - ahead;
+            self.lead = Duration::ZERO;
+        } else {
+            let extra = ahead - drained;
+            let spent = extra.min(self.credit);
+            self.credit -= spent;
+            self.lead = extra - spent;
+        }
         self.last = Some(now);
         self.lead
     }
@@ -1224,4 +1237,33 @@ fn error_clear_v2(code: FaultClear) -> Option<ErrorClearV2> {
         | FaultClear::MotorOverCurrent
         | FaultClear::Unknown(_) => ErrorClearV2::All,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MS: Duration = Duration::from_millis(1);
+
+    #[test]
+    fn a_starved_gateways_backlog_is_no_lead_a_frozen_clock_is() {
+        let mut clock = ChassisClock::default();
+        let mut now = Duration::from_secs(10);
+        for _ in 0..50 {
+            now += MOTION_REPORT_PERIOD;
+            assert!(clock.handle_report(now) <= MOTION_REPORT_PERIOD);
+        }
+        // The gateway starved of the CPU for 450 ms while the clock moved: the 22 reports that
+        // queued meanwhile are read at once, and stand for no more than the time that passed.
+        now += 450 * MS;
+        for _ in 0..22 {
+            assert!(clock.handle_report(now) <= MOTION_REPORT_PERIOD);
+        }
+        // Every clock of the host held back: 30 reports in no time run 600 ms ahead.
+        let mut lead = Duration::ZERO;
+        for _ in 0..30 {
+            lead = clock.handle_report(now);
+        }
+        assert!(lead > WIRE_GAP_LIMIT, "{lead:?}");
+    }
 }
