@@ -1,5 +1,6 @@
 //! scout-ros2: the chassis as a ROS 2 node, without a ROS install: `scout ros2` (the `scout-ros2`
-//! program), the bridge ([`bridge`]) over DDS ([`dds_node`], with its [`ros_discovery`] entry)
+//! program), the bridge ([`bridge`]) over DDS ([`dds_node`], with its [`ros_discovery`] entry,
+//! decoding what it reads as [`dds_wire`] says)
 //! or rmw_zenoh ([`zenoh_node`], [`rmw`]: data keys, the sample attachment, liveliness tokens),
 //! with its settings ([`config`]), the messages it makes from the state ([`publish`]), when a
 //! cmd_vel stream may take control ([`stream`]), the CDR of its messages ([`msgs`], [`cdr`]) and
@@ -13,6 +14,8 @@ pub mod cdr;
 pub mod config;
 #[cfg(feature = "node")]
 pub mod dds_node;
+#[cfg(feature = "dds")]
+pub mod dds_wire;
 pub mod definitions;
 pub mod msgs;
 pub mod publish;

@@ -5,17 +5,17 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use scout_ros2::{dds_node, msgs, rmw};
+use scout_ros2::{dds_wire, msgs, rmw};
 use scout_interface::control::Class;
 use scout_interface::remote::{self, RemoteCommand};
 
 fuzz_target!(|input: &[u8]| {
     let _ = msgs::decode_twist(input, false);
     let _ = msgs::decode_twist(input, true);
-    let _ = dds_node::decode_cmd_vel(input, false);
-    let _ = dds_node::decode_cmd_vel(input, true);
+    let _ = dds_wire::decode_cmd_vel(input, false);
+    let _ = dds_wire::decode_cmd_vel(input, true);
     let _ = msgs::decode_trigger_request(input);
-    let _ = dds_node::decode_trigger_request(input);
+    let _ = dds_wire::decode_trigger_request(input);
     let _ = rmw::parse_attachment(input);
     // The first line is the key, the rest the payload.
     let (key, payload) = match input.iter().position(|&b| b == b'\n') {
