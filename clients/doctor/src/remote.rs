@@ -6,6 +6,7 @@
 use std::time::{Duration, Instant};
 
 use scout_clients::remote::{RemoteError, RemoteStates, SessionSettings, info_key};
+use scout_interface::link::Protection;
 use zenoh::Wait;
 
 use crate::check::{Check, Verdict};
@@ -67,9 +68,64 @@ pub fn inspect(
     let reached = state.verdict == Verdict::Pass;
     let mut checks = vec![state];
     if reached {
+        checks.push(link_kind(&settings, endpoint));
         checks.push(measure_link(&settings, robot, endpoint));
     }
     checks
+}
+
+/// Which kind of link `endpoint` is from this host, what protects it, and what the guide
+/// recommends for it.
+fn link_kind(settings: &SessionSettings, endpoint: &str) -> Check {
+    let links = match settings.links("client", &[]) {
+        Ok(links) => links,
+        Err(error) => return Check::fail("zenoh.security", error.to_string(), "see the error"),
+    };
+    match links.iter().find(|link| link.endpoint == endpoint) {
+        Some(link) => security(endpoint, &link.protection),
+        None => Check::fail(
+            "zenoh.security",
+            format!("{endpoint} is not among the session's links"),
+            "report this: the endpoint given is what the session connects to",
+        ),
+    }
+}
+
+/// The verdict on a link of `endpoint`'s protocol with `protection`.
+fn security(endpoint: &str, protection: &Protection) -> Check {
+    const NAME: &str = "zenoh.security";
+    let udp = endpoint.starts_with("udp/");
+    let detail = |kind: &str| format!("{endpoint}: {kind} ({protection})");
+    match protection {
+        Protection::Local => Check::pass(NAME, detail("a link on this host")),
+        Protection::Tunnel { .. } if udp => Check::pass(
+            NAME,
+            detail(
+                "plain UDP inside an authenticated tunnel, the link docs/remote.md recommends                  for driving over Wi-Fi or 4G",
+            ),
+        ),
+        Protection::Tunnel { .. } => Check::warn(
+            NAME,
+            detail("inside an authenticated tunnel, but not over UDP"),
+            "over TCP a lost packet holds back every drive after it: for driving over a lossy              link use udp/ inside the tunnel (docs/remote.md)",
+        ),
+        Protection::MutualTls => Check::pass(
+            NAME,
+            detail(
+                "TLS or QUIC with certificates: authenticated; through loss, QUIC's drives                  arrive in bursts and TCP's wait behind a lost packet (docs/remote.md: which                  link)",
+            ),
+        ),
+        Protection::ServerTls => Check::warn(
+            NAME,
+            detail("encrypted, but the gateway cannot tell who you are"),
+            "give the operator a certificate and the gateway enable_mtls              (config/zenoh-tls-gateway.json5): without it the gateway takes e-stops only",
+        ),
+        Protection::Plain { .. } => Check::warn(
+            NAME,
+            detail("a plain link: nobody is authenticated"),
+            "anyone who reaches it can command as any peer name; the gateway takes only              e-stops over it unless its network is declared trusted. Drive over UDP inside              WireGuard, or QUIC with certificates (docs/remote.md: drive over Wi-Fi or 4G              securely)",
+        ),
+    }
 }
 
 /// Why no session opened, and what to do: a TLS failure names the certificates.
@@ -115,7 +171,8 @@ fn cannot_connect(endpoint: &str, config_file: Option<&str>, error: &RemoteError
             "zenoh",
             format!("cannot reach {endpoint}: {text}"),
             "is the gateway (or the zenoh router) listening there? `scout-gateway \
-             --zenoh-listen tcp/0.0.0.0:7448` listens beyond this machine; check firewalls",
+             --zenoh-listen tcp/0.0.0.0:7448` listens beyond this machine (to drive over it, \
+             see docs/remote.md: which links remote peers may drive over); check firewalls",
         ),
     }
 }
@@ -245,6 +302,40 @@ fn measure_link(settings: &SessionSettings, robot: &str, endpoint: &str) -> Chec
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn each_kind_of_link_gets_the_guides_verdict() {
+        let tunnel = Protection::Tunnel {
+            interface: "wg0".into(),
+        };
+        let plain = Protection::Plain {
+            reach: "interface wlan0".into(),
+        };
+        let verdict = |endpoint: &str, protection: &Protection| {
+            let check = security(endpoint, protection);
+            (check.verdict, check.detail)
+        };
+        let (pass, detail) = verdict("udp/10.8.0.1:7448", &tunnel);
+        assert_eq!(pass, Verdict::Pass);
+        assert!(
+            detail.contains("recommends") && detail.contains("wg0"),
+            "{detail}"
+        );
+        assert_eq!(verdict("tcp/10.8.0.1:7448", &tunnel).0, Verdict::Warn);
+        assert_eq!(verdict("udp/192.168.1.20:7448", &plain).0, Verdict::Warn);
+        assert_eq!(
+            verdict("quic/192.168.1.20:7448", &Protection::ServerTls).0,
+            Verdict::Warn
+        );
+        assert_eq!(
+            verdict("quic/192.168.1.20:7448", &Protection::MutualTls).0,
+            Verdict::Pass
+        );
+        assert_eq!(
+            verdict("tcp/127.0.0.1:7448", &Protection::Local).0,
+            Verdict::Pass
+        );
+    }
 
     #[test]
     fn the_clock_offset_comes_from_the_fastest_answer() {

@@ -99,6 +99,29 @@ impl Drop for Bridge {
     }
 }
 
+/// Refuses remote commands that move the robot (or undo a stop) over links that authenticate
+/// nobody, unless the configuration declares the network trusted (then each such link is
+/// warned of); see [`scout_interface::link`].
+pub fn check_links(config: &ZenohConfig) -> anyhow::Result<()> {
+    if !config.enabled || scout_interface::link::risky(&config.remote_commands).is_empty() {
+        return Ok(());
+    }
+    let links = config
+        .session()
+        .links("peer", &config.authenticated_interfaces)?;
+    for link in
+        scout_interface::link::check(&links, &config.remote_commands, config.trusted_network)?
+    {
+        tracing::warn!(
+            "remote peers may command this robot ({}) over {} ({}): the network is declared trusted (zenoh.trusted_network)",
+            config.remote_commands.allowed_names(),
+            link.endpoint,
+            link.protection
+        );
+    }
+    Ok(())
+}
+
 fn zenoh_error(error: impl std::fmt::Display) -> anyhow::Error {
     anyhow::anyhow!("{error}")
 }

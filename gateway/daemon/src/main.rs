@@ -82,6 +82,10 @@ struct Cli {
     /// $ZENOH_CONFIG].
     #[arg(long, value_name = "FILE")]
     zenoh_config: Option<String>,
+    /// Remote peers may drive over links that authenticate nobody (plain udp/ or tcp/ beyond
+    /// loopback): every network they reach is trusted.
+    #[arg(long)]
+    zenoh_trusted_network: bool,
     /// No zenoh: local clients only.
     #[arg(long)]
     no_zenoh: bool,
@@ -105,6 +109,10 @@ fn main() -> ExitCode {
             return ExitCode::from(USAGE);
         }
     };
+    if let Err(error) = scout_bridge::check_links(&config.zenoh) {
+        eprintln!("scout-gateway: {error:#}");
+        return ExitCode::from(USAGE);
+    }
     // The stop endpoint first: binding it is the robot name's lock on this host.
     let (spec, endpoint) = match config
         .validate()
@@ -158,6 +166,9 @@ fn configure(cli: &Cli) -> anyhow::Result<GatewayConfig> {
     }
     if cli.no_zenoh {
         config.zenoh.enabled = false;
+    }
+    if cli.zenoh_trusted_network {
+        config.zenoh.trusted_network = true;
     }
     if let Some(allowed) = &cli.remote_commands {
         config.zenoh.remote_commands.enabled = true;

@@ -9,6 +9,8 @@
 //! - [`state`]: the zero-copy chassis state payload, one field per feedback message.
 //! - [`control`]: control requests and answers, typed and on the wire; the arbiter's status.
 //! - [`json`]: the public JSON forms of the state and the status (`scout echo`, zenoh).
+//! - [`link`]: what protects each zenoh link, and the rule that remote peers drive only over
+//!   links that authenticate them.
 //! - [`remote`]: zenoh key expressions, remote commands and their permissions.
 //! - [`stop_socket`]: the stop endpoint beside iceoryx2 (a Unix datagram socket): stops and
 //!   releases that need no shared memory and no client slot.
@@ -28,6 +30,7 @@ pub mod control;
 pub mod failure;
 pub mod ipc;
 pub mod json;
+pub mod link;
 pub mod remote;
 pub mod robot;
 pub mod services;

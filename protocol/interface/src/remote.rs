@@ -675,6 +675,12 @@ pub struct ZenohConfig {
     pub state_rate_hz: f64,
     /// Remote commands.
     pub remote_commands: RemoteCommands,
+    /// Interfaces that admit only authenticated machines, beside WireGuard ones (recognised by
+    /// themselves): remote peers may drive over links through them.
+    pub authenticated_interfaces: Vec<String>,
+    /// Declares every network the links reach trusted: remote peers may then drive over links
+    /// that authenticate nobody (plain `udp/` or `tcp/` beyond loopback), with a warning.
+    pub trusted_network: bool,
 }
 
 /// Remote commands: off by default; when on, only the listed kinds.
@@ -714,6 +720,8 @@ impl Default for ZenohConfig {
             connect: Vec::new(),
             state_rate_hz: 50.0,
             remote_commands: RemoteCommands::default(),
+            authenticated_interfaces: Vec::new(),
+            trusted_network: false,
         }
     }
 }
@@ -824,6 +832,47 @@ impl SessionSettings {
         Ok(config)
     }
 
+    /// The links a session with these settings opens in `mode` (its listen and connect
+    /// endpoints, zenoh's default listener included), and what protects each, on this host;
+    /// `tunnels` names interfaces to count as authenticated beside WireGuard ones.
+    pub fn links(
+        &self,
+        mode: &str,
+        tunnels: &[String],
+    ) -> Result<Vec<crate::link::Link>, RemoteError> {
+        use crate::link::{Direction, Endpoint, Host, Link, Protection};
+        let config = self.config(mode)?;
+        let mut endpoints = Vec::new();
+        for (key, direction) in [
+            ("listen/endpoints", Direction::Listen),
+            ("connect/endpoints", Direction::Connect),
+        ] {
+            for text in configured_endpoints(&config, key, mode) {
+                let mut endpoint = Endpoint::parse(&text)
+                    .map_err(|error| RemoteError::Config(error.to_string()))?;
+                resolve(&mut endpoint);
+                endpoints.push((endpoint, direction));
+            }
+        }
+        let mtls = (config.get_json("transport/link/tls/enable_mtls").ok())
+            .and_then(|json| serde_json::from_str::<Option<bool>>(&json).ok())
+            .flatten()
+            .unwrap_or(false);
+        let destinations: Vec<std::net::IpAddr> = (endpoints.iter())
+            .filter(|(_, direction)| *direction == Direction::Connect)
+            .filter_map(|(endpoint, _)| endpoint.ip())
+            .collect();
+        let host = Host::this(tunnels, &destinations);
+        Ok(endpoints
+            .into_iter()
+            .map(|(endpoint, direction)| Link {
+                protection: Protection::of(&endpoint, direction, &host, mtls),
+                endpoint: endpoint.text,
+                direction,
+            })
+            .collect())
+    }
+
     /// Opens a session (never from inside a current-thread tokio runtime: `wait` blocks).
     pub fn open(&self, mode: &str) -> Result<zenoh::Session, RemoteError> {
         use zenoh::Wait;
@@ -839,6 +888,39 @@ fn insert(config: &mut zenoh::Config, key: &str, value: &str) -> Result<(), Remo
     config
         .insert_json5(key, value)
         .map_err(|e| RemoteError::Config(format!("{key} = {value}: {e}")))
+}
+
+/// The endpoints under `key` (`listen/endpoints`, `connect/endpoints`) for `mode`: a list, or
+/// a list per mode (zenoh's defaults are: a peer listens on `tcp/[::]:0`, every interface).
+#[cfg(feature = "zenoh")]
+fn configured_endpoints(config: &zenoh::Config, key: &str, mode: &str) -> Vec<String> {
+    let value = (config.get_json(key).ok())
+        .and_then(|json| serde_json::from_str::<serde_json::Value>(&json).ok())
+        .unwrap_or_default();
+    let list = match &value {
+        serde_json::Value::Object(per_mode) => per_mode.get(mode).cloned().unwrap_or_default(),
+        other => other.clone(),
+    };
+    (list.as_array().into_iter().flatten())
+        .filter_map(|endpoint| endpoint.as_str().map(str::to_owned))
+        .collect()
+}
+
+/// A host name in `endpoint` replaced by the first address it resolves to (a name that does
+/// not resolve stays, and counts as reachable from anywhere).
+#[cfg(feature = "zenoh")]
+fn resolve(endpoint: &mut crate::link::Endpoint) {
+    use std::net::ToSocketAddrs;
+    if endpoint.ip().is_some() || endpoint.protocol.starts_with("unix") {
+        return;
+    }
+    if let Some(address) = (endpoint.host.as_str(), 0)
+        .to_socket_addrs()
+        .ok()
+        .and_then(|mut addresses| addresses.next())
+    {
+        endpoint.host = address.ip().to_string();
+    }
 }
 
 #[cfg(feature = "zenoh")]
@@ -1042,5 +1124,56 @@ mod tests {
             command_key("alpha", RemoteKind::Drive, "op"),
             "scout/alpha/cmd/drive/op"
         );
+    }
+
+    #[cfg(feature = "zenoh")]
+    #[test]
+    fn a_sessions_links_come_from_its_settings_or_its_file_and_zenohs_defaults() {
+        use crate::link::{Direction, Protection};
+        let dir = std::env::temp_dir().join(format!("scout-links-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let file = dir.join("peer.json5");
+        // A file that names no listener: zenoh's peer default, every interface.
+        std::fs::write(
+            &file,
+            r#"{ mode: "peer", connect: { endpoints: ["tcp/127.0.0.1:7449"] } }"#,
+        )
+        .expect("write");
+        let settings = SessionSettings {
+            config_file: Some(file.display().to_string()),
+            ..SessionSettings::default()
+        };
+        let links = settings.links("peer", &[]).expect("links");
+        let summary: Vec<(&str, Direction, bool)> = (links.iter())
+            .map(|l| {
+                (
+                    l.endpoint.as_str(),
+                    l.direction,
+                    l.protection.authenticates_peers(),
+                )
+            })
+            .collect();
+        assert_eq!(
+            summary,
+            [
+                ("tcp/[::]:0", Direction::Listen, false),
+                ("tcp/127.0.0.1:7449", Direction::Connect, true),
+            ]
+        );
+        assert_eq!(
+            links[0].protection,
+            Protection::Plain {
+                reach: "every interface".into()
+            }
+        );
+        // Endpoints given override the file's.
+        let settings = SessionSettings {
+            listen: vec!["udp/localhost:7448".into()],
+            ..settings
+        };
+        let links = settings.links("peer", &[]).expect("links");
+        assert_eq!(links[0].endpoint, "udp/localhost:7448");
+        assert_eq!(links[0].protection, Protection::Local);
+        let _ = std::fs::remove_dir_all(dir);
     }
 }

@@ -8,8 +8,8 @@ use nix::sys::signal::Signal;
 use scout_clients::interface::json::state_json;
 use scout_clients::monotonic_ns;
 use scout_system_tests::{
-    Background, Gateway, Pki, Sim, connect, free_port, robot_name, scout, tcp, wait_for_state,
-    wait_for_status, zenoh_query, zenoh_session,
+    Background, Gateway, NetNs, Pki, Sim, connect, free_port, robot_name, scout, skip, tcp,
+    wait_for_state, wait_for_status, zenoh_query, zenoh_session,
 };
 use serde_json::Value;
 use zenoh::Wait;
@@ -1037,4 +1037,124 @@ fn any_peer_name_zenoh_carries_can_stop_and_release_its_own() {
         );
         wait_for_status(&status, LIMIT, |s| s["latched"] == false);
     }
+}
+
+/// Runs `scout-gateway` on the simulator as `name` with `args` inside `namespace`; returns its
+/// exit code if it exits within the limit (else `None`, once it logged that its zenoh is up:
+/// it is then killed), and its log.
+fn gateway_in(namespace: &NetNs, name: &str, args: &[&str]) -> (Option<i32>, String) {
+    let run_dir = scout_system_tests::TempDir::new(name);
+    let mut child = namespace
+        .binary("scout-gateway")
+        .env("RUST_LOG", "info")
+        .env("SCOUT_RUN_DIR", run_dir.path())
+        .args(["--sim", "--name", name])
+        .args(args)
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("spawn scout-gateway in the namespace");
+    let lines = scout_system_tests::line_reader(child.stderr.take().expect("stderr"));
+    let deadline = Instant::now() + LIMIT;
+    let mut log = String::new();
+    while let Ok(line) = lines.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
+        log.push_str(&line);
+        log.push('\n');
+        if line.contains("zenoh: publishing") {
+            let _ = child.kill();
+            let _ = child.wait();
+            return (None, log);
+        }
+    }
+    // Its stderr closed (it exited) or the limit passed.
+    let code = match child.try_wait() {
+        Ok(Some(status)) => status.code(),
+        _ => {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("scout-gateway neither started its zenoh nor exited in {LIMIT:?}:\n{log}");
+        }
+    };
+    (code, log)
+}
+
+/// Remote peers drive only over links that authenticate them: a gateway asked to take teleop
+/// over plain UDP on every interface, or over a zenoh configuration that listens on zenoh's
+/// default (TCP, every interface), refuses to start (exit 2), saying why and what to do; with
+/// e-stops alone, or the network declared trusted (a warning naming the link), it starts. In a
+/// network namespace of its own: nothing listens beyond the test.
+#[test]
+fn drive_permissions_over_links_that_authenticate_nobody_are_refused_unless_declared_trusted() {
+    const TEST: &str =
+        "drive_permissions_over_links_that_authenticate_nobody_are_refused_unless_declared_trusted";
+    let namespace = match NetNs::create() {
+        Ok(namespace) => namespace,
+        Err(why) => {
+            assert!(!nix::unistd::geteuid().is_root(), "{TEST}: {why}");
+            skip(TEST, &why);
+            return;
+        }
+    };
+    let name = robot_name("untrusted_link");
+    let every = format!("udp/0.0.0.0:{}", free_port());
+    let listen = ["--zenoh-listen", every.as_str()];
+    let (code, log) = gateway_in(
+        &namespace,
+        &name,
+        &[&listen[..], &["--remote-commands", "estop,teleop,release"]].concat(),
+    );
+    assert_eq!(code, Some(2), "{log}");
+    for words in [
+        "refusing to take remote commands (teleop, release)",
+        &format!("{every} (plain, no authentication, reachable on every interface)"),
+        "WireGuard",
+        "--remote-commands estop",
+        "--zenoh-trusted-network",
+    ] {
+        assert!(log.contains(words), "{words:?} not in:\n{log}");
+    }
+    // A zenoh configuration that names no listener: zenoh's own default, every interface.
+    let dir = scout_system_tests::TempDir::new(&format!("{name}-zenoh"));
+    let file = dir.path().join("zenoh.json5");
+    std::fs::write(
+        &file,
+        r#"{ mode: "peer", scouting: { multicast: { enabled: false } } }"#,
+    )
+    .expect("write zenoh config");
+    let file = file.display().to_string();
+    let (code, log) = gateway_in(
+        &namespace,
+        &name,
+        &["--zenoh-config", &file, "--remote-commands", "autonomy"],
+    );
+    assert_eq!(code, Some(2), "{log}");
+    assert!(log.contains("tcp/[::]:0 (plain"), "{log}");
+    // E-stops alone: it starts, and says nothing of the link.
+    let (code, log) = gateway_in(
+        &namespace,
+        &name,
+        &[&listen[..], &["--remote-commands", "estop"]].concat(),
+    );
+    assert_eq!(code, None, "{log}");
+    assert!(!log.contains("declared trusted"), "{log}");
+    // Declared trusted: it starts, with a warning naming the link.
+    let (code, log) = gateway_in(
+        &namespace,
+        &name,
+        &[
+            &listen[..],
+            &[
+                "--remote-commands",
+                "estop,teleop",
+                "--zenoh-trusted-network",
+            ],
+        ]
+        .concat(),
+    );
+    assert_eq!(code, None, "{log}");
+    assert!(
+        log.contains(&format!("over {every} (plain")) && log.contains("declared trusted"),
+        "{log}"
+    );
 }
