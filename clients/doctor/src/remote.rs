@@ -101,29 +101,37 @@ fn security(endpoint: &str, protection: &Protection) -> Check {
         Protection::Tunnel { .. } if udp => Check::pass(
             NAME,
             detail(
-                "plain UDP inside an authenticated tunnel, the link docs/remote.md recommends                  for driving over Wi-Fi or 4G",
+                "plain UDP inside an authenticated tunnel, the link docs/remote.md recommends \
+                 for driving over Wi-Fi or 4G",
             ),
         ),
         Protection::Tunnel { .. } => Check::warn(
             NAME,
             detail("inside an authenticated tunnel, but not over UDP"),
-            "over TCP a lost packet holds back every drive after it: for driving over a lossy              link use udp/ inside the tunnel (docs/remote.md)",
+            "over TCP a lost packet holds back every drive after it: for driving over a lossy \
+             link use udp/ inside the tunnel (docs/remote.md)",
         ),
         Protection::MutualTls => Check::pass(
             NAME,
             detail(
-                "TLS or QUIC with certificates: authenticated; through loss, QUIC's drives                  arrive in bursts and TCP's wait behind a lost packet (docs/remote.md: which                  link)",
+                "TLS or QUIC with certificates: authenticated; through loss, QUIC's drives \
+                 arrive in bursts and TCP's wait behind a lost packet (docs/remote.md: which \
+                 link)",
             ),
         ),
         Protection::ServerTls => Check::warn(
             NAME,
             detail("encrypted, but the gateway cannot tell who you are"),
-            "give the operator a certificate and the gateway enable_mtls              (config/zenoh-tls-gateway.json5): without it the gateway takes e-stops only",
+            "give the operator a certificate and the gateway enable_mtls \
+             (config/zenoh-tls-gateway.json5): without it the gateway takes e-stops only",
         ),
         Protection::Plain { .. } => Check::warn(
             NAME,
             detail("a plain link: nobody is authenticated"),
-            "anyone who reaches it can command as any peer name; the gateway takes only              e-stops over it unless its network is declared trusted. Drive over UDP inside              WireGuard, or QUIC with certificates (docs/remote.md: drive over Wi-Fi or 4G              securely)",
+            "anyone who reaches it can command as any peer name; the gateway takes only \
+             e-stops over it unless its network is declared trusted. Drive over UDP inside \
+             WireGuard, or QUIC with certificates (docs/remote.md: drive over Wi-Fi or 4G \
+             securely)",
         ),
     }
 }

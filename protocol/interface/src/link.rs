@@ -241,8 +241,8 @@ pub fn risky(commands: &RemoteCommands) -> Vec<Permission> {
 #[error(
     "refusing to take remote commands ({allowed}) over {links}: anyone who reaches it could \
      command as any peer name. Safe choices: listen on a WireGuard interface's address (e.g. \
-     --zenoh-listen udp/10.8.0.1:7448), or QUIC/TLS with mutual authentication \
-     (--zenoh-config config/zenoh-quic-gateway.json5), or allow remote e-stops only \
+     --zenoh-listen udp/10.8.0.1:7448, config/zenoh-wireguard-gateway.json5), or TLS or QUIC \
+     with mutual authentication (config/zenoh-tls-gateway.json5), or allow remote e-stops only \
      (--remote-commands estop); name another authenticating interface in \
      [zenoh] authenticated_interfaces; on a network you trust, say so with \
      --zenoh-trusted-network ([zenoh] trusted_network = true). See docs/remote.md"

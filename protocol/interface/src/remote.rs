@@ -842,6 +842,12 @@ impl SessionSettings {
     ) -> Result<Vec<crate::link::Link>, RemoteError> {
         use crate::link::{Direction, Endpoint, Host, Link, Protection};
         let config = self.config(mode)?;
+        // A configuration file's own mode decides which of zenoh's defaults apply.
+        let mode = (config.get_json("mode").ok())
+            .and_then(|json| serde_json::from_str::<Option<String>>(&json).ok())
+            .flatten()
+            .unwrap_or_else(|| mode.to_owned());
+        let mode = mode.as_str();
         let mut endpoints = Vec::new();
         for (key, direction) in [
             ("listen/endpoints", Direction::Listen),

@@ -391,6 +391,13 @@ fn doctor_reads_the_robot_through_zenoh_when_asked() {
     let (code, checks) = doctor(&["--name", &name, "--zenoh", &tcp(port)]);
     assert_eq!(code, Some(0), "{checks:#?}");
     assert_eq!(verdict(&checks, "zenoh"), "pass", "{checks:#?}");
+    // Which kind of link it is: loopback, this host only.
+    let security = check(&checks, "zenoh.security");
+    assert_eq!(security["verdict"], "pass", "{checks:#?}");
+    assert!(
+        (security["detail"].as_str()).is_some_and(|d| d.contains("this host only")),
+        "{security}"
+    );
     // The link, measured as a remote peer meets it.
     let link = check(&checks, "zenoh.link");
     assert_eq!(link["verdict"], "pass", "{checks:#?}");
