@@ -867,7 +867,12 @@ mod tests {
 
     #[test]
     fn the_example_zenoh_configs_parse() {
-        for file in ["zenoh-tls-gateway.json5", "zenoh-tls-operator.json5"] {
+        for file in [
+            "zenoh-tls-gateway.json5",
+            "zenoh-tls-operator.json5",
+            "zenoh-wireguard-gateway.json5",
+            "zenoh-wireguard-operator.json5",
+        ] {
             let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
                 .join("../../config")
                 .join(file);

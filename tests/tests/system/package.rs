@@ -117,6 +117,9 @@ fn the_debian_package_installs_upgrades_and_purges_in_a_throwaway_root() {
                 "./usr/lib/tmpfiles.d/scout-gateway.conf",
                 "./usr/lib/systemd/network/80-scout-can.network",
                 "./usr/share/doc/scout-gateway/copyright",
+                "./usr/share/doc/scout-gateway/examples/zenoh-wireguard-gateway.json5",
+                "./usr/share/doc/scout-gateway/examples/zenoh-wireguard-operator.json5",
+                "./usr/share/doc/scout-gateway/examples/zenoh-tls-gateway.json5",
                 "./etc/scout/scout-gateway.toml",
             ]
             .map(str::to_owned),

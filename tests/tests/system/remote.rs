@@ -17,6 +17,8 @@ use zenoh::sample::SampleKind;
 
 const LIMIT: Duration = Duration::from_secs(10);
 const QUERY: Duration = Duration::from_secs(3);
+/// How long a query that must reach nothing waits (loopback answers take milliseconds).
+const DENIED: Duration = Duration::from_secs(1);
 
 /// Queries until the gateway's queryable answers (it starts after the session opens).
 fn query_until_answered(session: &zenoh::Session, key: &str) -> Value {
@@ -1067,16 +1069,16 @@ fn gateway_in(namespace: &NetNs, name: &str, args: &[&str]) -> (Option<i32>, Str
             return (None, log);
         }
     }
-    // Its stderr closed (it exited) or the limit passed.
-    let code = match child.try_wait() {
-        Ok(Some(status)) => status.code(),
-        _ => {
-            let _ = child.kill();
-            let _ = child.wait();
-            panic!("scout-gateway neither started its zenoh nor exited in {LIMIT:?}:\n{log}");
+    // Its stderr closed (it is exiting) or the limit passed.
+    while Instant::now() < deadline {
+        if let Ok(Some(status)) = child.try_wait() {
+            return (status.code(), log);
         }
-    };
-    (code, log)
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let _ = child.kill();
+    let _ = child.wait();
+    panic!("scout-gateway neither started its zenoh nor exited in {LIMIT:?}:\n{log}");
 }
 
 /// Remote peers drive only over links that authenticate them: a gateway asked to take teleop
@@ -1157,4 +1159,134 @@ fn drive_permissions_over_links_that_authenticate_nobody_are_refused_unless_decl
         log.contains(&format!("over {every} (plain")) && log.contains("declared trusted"),
         "{log}"
     );
+}
+
+/// The shipped configurations for remote drive inside a tunnel (config/zenoh-wireguard-*.json5,
+/// its endpoints moved to loopback): zenoh's user/password authentication and access control
+/// bind each peer name to its user. Bob cannot take control, drive, release or relinquish as
+/// alice (his queries under her name reach nothing, and her control holds); an unlisted user,
+/// a wrong password and no credentials reach nothing.
+#[test]
+fn user_names_bind_each_peer_name_to_its_password() {
+    let name = robot_name("usrpwd");
+    let dir = scout_system_tests::TempDir::new(&format!("{name}-usrpwd"));
+    let config = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../config");
+    let read = |file: &str| std::fs::read_to_string(config.join(file)).expect("example config");
+    let users = dir.path().join("zenoh-users.txt");
+    std::fs::write(&users, "alice:alice-secret\nbob:bob-secret\n").expect("write users");
+    let gateway_config = dir.path().join("gateway.json5");
+    let shipped = read("zenoh-wireguard-gateway.json5");
+    assert!(shipped.contains("/etc/scout/zenoh-users.txt"));
+    std::fs::write(
+        &gateway_config,
+        shipped.replace("/etc/scout/zenoh-users.txt", &users.display().to_string()),
+    )
+    .expect("write gateway config");
+    let endpoint = format!("udp/127.0.0.1:{}", free_port());
+    let mut gateway = Gateway::start(&[
+        "--sim",
+        "--name",
+        &name,
+        "--zenoh-config",
+        &gateway_config.display().to_string(),
+        "--zenoh-listen",
+        &endpoint,
+        "--remote-commands",
+        "estop,teleop,release",
+    ]);
+    let robot = connect(&name);
+    let status = robot.status().expect("status");
+    let operator = read("zenoh-wireguard-operator.json5");
+    let open = |user: Option<(&str, &str)>| {
+        let file = dir.path().join(format!("operator-{}.json5", free_port()));
+        let text = match user {
+            Some((user, password)) => operator
+                .replace(r#"user: "alice""#, &format!(r#"user: "{user}""#))
+                .replace(
+                    r#"password: "change-me""#,
+                    &format!(r#"password: "{password}""#),
+                ),
+            None => operator.replace(r#"usrpwd: { user: "alice", password: "change-me" },"#, ""),
+        };
+        std::fs::write(&file, text).expect("write operator config");
+        scout_clients::remote::SessionSettings {
+            config_file: Some(file.display().to_string()),
+            connect: vec![endpoint.clone()],
+            ..Default::default()
+        }
+        .open("client")
+    };
+    let alice = open(Some(("alice", "alice-secret"))).expect("alice's session");
+    let state = query_until_answered(&alice, &format!("scout/{name}/state"));
+    assert_eq!(state["robot"], name.as_str());
+    let take = r#"{"class":"teleop","sent_ms":1000}"#;
+    assert_eq!(
+        remote_command(&alice, &name, "take-control", "alice", take)["accepted"],
+        true
+    );
+    let took = Instant::now();
+    let drive = |seq: u64| {
+        let sent_ms = 1000 + took.elapsed().as_millis() as u64;
+        format!(r#"{{"seq":{seq},"sent_ms":{sent_ms},"linear":0.0,"angular":0.0,"ttl_ms":300}}"#)
+    };
+    assert_eq!(
+        remote_command(&alice, &name, "drive", "alice", &drive(1))["accepted"],
+        true
+    );
+    // Bob reads, and commands as bob; as alice, nothing of his reaches the gateway.
+    let bob = open(Some(("bob", "bob-secret"))).expect("bob's session");
+    assert_eq!(
+        query_until_answered(&bob, &format!("scout/{name}/state"))["robot"],
+        name.as_str()
+    );
+    for (kind, payload) in [
+        ("relinquish", "{}".to_owned()),
+        ("release", "{}".to_owned()),
+        ("take-control", take.to_owned()),
+        ("drive", drive(50)),
+    ] {
+        let key = format!("scout/{name}/cmd/{kind}/alice");
+        let answers = zenoh_query(&bob, &key, Some(&payload), DENIED);
+        assert!(answers.is_empty(), "bob as alice, {kind}: {answers:?}");
+    }
+    // Alice's control held through all of it.
+    assert_eq!(
+        remote_command(&alice, &name, "drive", "alice", &drive(2))["accepted"],
+        true
+    );
+    assert_eq!(
+        wait_for_status(&status, LIMIT, |s| s["selected"]["client"]
+            == "remote:alice")["selected"]["class"],
+        "teleop"
+    );
+    // Bob's own stop is his; alice cannot release it as bob either.
+    assert_eq!(
+        remote_command(&bob, &name, "estop", "bob", r#"{"reason":"bob"}"#)["accepted"],
+        true
+    );
+    let latched = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
+    assert_eq!(latched["stops"][0]["owner"], "remote:bob");
+    let key = format!("scout/{name}/cmd/release/bob");
+    assert!(zenoh_query(&alice, &key, Some("{}"), DENIED).is_empty());
+    assert_eq!(
+        remote_command(&bob, &name, "release", "bob", "{}")["accepted"],
+        true
+    );
+    wait_for_status(&status, LIMIT, |s| s["latched"] == false);
+    // An unlisted user, a wrong password, no credentials: no session, or one that reaches
+    // nothing (not even the state), and nothing latches.
+    for user in [
+        Some(("carol", "carol-secret")),
+        Some(("alice", "bob-secret")),
+        None,
+    ] {
+        let Ok(session) = open(user) else { continue };
+        let estop = format!("scout/{name}/cmd/estop/alice");
+        let answers = zenoh_query(&session, &estop, Some("{}"), DENIED);
+        assert!(answers.is_empty(), "{user:?} was answered: {answers:?}");
+        let state = zenoh_query(&session, &format!("scout/{name}/state"), None, DENIED);
+        assert!(state.is_empty(), "{user:?} read the state");
+    }
+    assert_eq!(wait_for_status(&status, LIMIT, |_| true)["latched"], false);
+    assert!(gateway.is_running(), "{}", gateway.log());
 }
