@@ -76,6 +76,10 @@ enum Role {
         /// Write the figures as JSON to FILE.
         #[arg(long, value_name = "FILE")]
         json: Option<PathBuf>,
+        /// Run the gateway under heaptrack (apt install heaptrack) and print its heap's slope and
+        /// the call sites of what it still holds at the end: the top growers of a long run.
+        #[arg(long)]
+        heap_profile: bool,
     },
     /// A gs_usb USB-CAN adapter emulated on USB in front of the simulated chassis' CAN bus:
     /// the gateway on the bus itself, through the kernel's driver, and in user space
@@ -121,7 +125,11 @@ fn main() -> ExitCode {
             plots: cli.plots,
             client_priority: cli.client_priority,
         }),
-        Some(Role::Soak { minutes, json }) => soak::soak(minutes, json.as_deref()),
+        Some(Role::Soak {
+            minutes,
+            json,
+            heap_profile,
+        }) => soak::soak(minutes, json.as_deref(), heap_profile),
         Some(Role::DatagramFlood {
             name,
             seconds,

@@ -154,9 +154,29 @@ pub struct Gateway {
 
 impl Gateway {
     pub fn start(args: &[&str], log: &Path) -> anyhow::Result<Gateway> {
+        Self::start_through(&[], args, log)
+    }
+
+    /// [`Gateway::start`] through `wrapper` (a program and its arguments that runs the gateway
+    /// as its child, e.g. a profiler).
+    pub fn start_through(wrapper: &[&str], args: &[&str], log: &Path) -> anyhow::Result<Gateway> {
         let log =
             std::fs::File::create(log).with_context(|| format!("creating {}", log.display()))?;
-        let child = command("scout-gateway")?
+        let mut command = command("scout-gateway")?;
+        if let [program, wrapper_args @ ..] = wrapper {
+            let gateway = bin_dir()?.join("scout-gateway");
+            let envs: Vec<_> = (command.get_envs())
+                .map(|(k, v)| (k.to_owned(), v.map(|v| v.to_owned())))
+                .collect();
+            command = Command::new(program);
+            command.args(wrapper_args).arg(gateway);
+            for (key, value) in envs {
+                if let Some(value) = value {
+                    command.env(key, value);
+                }
+            }
+        }
+        let child = command
             .args(args)
             .stdin(Stdio::null())
             .stdout(Stdio::null())

@@ -139,8 +139,135 @@ fn churn(name: &str, round: u64) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Runs the soak for `minutes`, writing the figures as JSON to `json` if given.
-pub fn soak(minutes: f64, json_out: Option<&Path>) -> anyhow::Result<()> {
+/// The process named `name` among `pid`'s children, waited for up to 10 s (a wrapper starts it).
+fn child_named(pid: i32, name: &str) -> anyhow::Result<i32> {
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+        let children =
+            std::fs::read_to_string(format!("/proc/{pid}/task/{pid}/children")).unwrap_or_default();
+        for child in children.split_whitespace() {
+            let comm = std::fs::read_to_string(format!("/proc/{child}/comm")).unwrap_or_default();
+            if comm.trim() == name {
+                return Ok(child.parse()?);
+            }
+        }
+        anyhow::ensure!(
+            Instant::now() < deadline,
+            "no {name} started under process {pid} within 10 s"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// The gateway under heaptrack: its data file, then what it says.
+struct HeapProfile {
+    /// The data file's path without heaptrack's suffix (`.zst` or `.gz`).
+    output: std::path::PathBuf,
+}
+
+impl HeapProfile {
+    fn new(scratch: &Path) -> anyhow::Result<Self> {
+        let found = std::process::Command::new("heaptrack")
+            .arg("--version")
+            .output()
+            .is_ok_and(|output| output.status.success());
+        anyhow::ensure!(
+            found,
+            "--heap-profile runs the gateway under heaptrack, which is not installed: apt install heaptrack"
+        );
+        Ok(Self {
+            output: scratch.join("gateway-heap"),
+        })
+    }
+
+    /// The wrapper the gateway runs under.
+    fn wrapper(&self) -> Vec<String> {
+        vec![
+            "heaptrack".into(),
+            "-o".into(),
+            self.output.display().to_string(),
+        ]
+    }
+
+    /// Prints the live heap's first and last size and slope after the warm-up (from heaptrack's
+    /// massif snapshots), and the call sites of what the gateway still held when it exited:
+    /// with a bounded warm-up (the black box's ring) left out, what grew.
+    fn report(&self, warm_up: f64) -> anyhow::Result<()> {
+        let data = ["zst", "gz"]
+            .iter()
+            .map(|suffix| self.output.with_extension(suffix))
+            .find(|path| path.exists())
+            .with_context(|| format!("heaptrack wrote no {}.zst", self.output.display()))?;
+        let massif = self.output.with_extension("massif");
+        let printed = std::process::Command::new("heaptrack_print")
+            .arg("-f")
+            .arg(&data)
+            .args([
+                "-p", "0", "-a", "0", "-T", "0", "-l", "1", "-n", "8", "-s", "2",
+            ])
+            .arg("-M")
+            .arg(&massif)
+            .output()
+            .context("running heaptrack_print")?;
+        let text = String::from_utf8_lossy(&printed.stdout);
+        let snapshots = massif_heap(&std::fs::read_to_string(&massif).unwrap_or_default());
+        if let (Some(first), Some(last)) = (snapshots.first(), snapshots.last()) {
+            let settled: Vec<(f64, f64)> = (snapshots.iter())
+                .filter(|(at, _)| *at >= warm_up)
+                .map(|(at, bytes)| (*at, bytes / 1e6))
+                .collect();
+            println!(
+                "heap (heaptrack, {} snapshots): {:.2} MB at {:.0} s, {:.2} MB at {:.0} s; slope {:+.3} MB per hour after the warm-up",
+                snapshots.len(),
+                first.1 / 1e6,
+                first.0,
+                last.1 / 1e6,
+                last.0,
+                slope_per_hour(&settled)
+            );
+        }
+        // The leaks section: what the gateway held at its clean exit, by call site.
+        let held: Vec<&str> = (text.lines())
+            .skip_while(|line| !line.starts_with("MEMORY LEAKS"))
+            .take(120)
+            .collect();
+        println!("what the gateway held at its exit, by call site (heaptrack_print -l):");
+        println!("{}", held.join("\n"));
+        for line in text.lines().filter(|line| {
+            line.starts_with("peak heap memory consumption")
+                || line.starts_with("total memory leaked")
+                || line.starts_with("total runtime")
+        }) {
+            println!("{line}");
+        }
+        println!(
+            "the data file, for heaptrack_gui or heaptrack_print: {}",
+            data.display()
+        );
+        Ok(())
+    }
+}
+
+/// (time in s, heap bytes) of each snapshot of a massif file as heaptrack_print writes it
+/// (`time=` in ms, `mem_heap_B=`).
+fn massif_heap(massif: &str) -> Vec<(f64, f64)> {
+    let mut snapshots = Vec::new();
+    let mut time = None;
+    for line in massif.lines() {
+        if let Some(value) = line.strip_prefix("time=") {
+            time = value.trim().parse::<f64>().ok();
+        } else if let (Some(value), Some(at)) = (line.strip_prefix("mem_heap_B="), time)
+            && let Ok(bytes) = value.trim().parse::<f64>()
+        {
+            snapshots.push((at / 1e3, bytes));
+        }
+    }
+    snapshots
+}
+
+/// Runs the soak for `minutes`, writing the figures as JSON to `json` if given, the gateway
+/// under heaptrack if `heap_profile`.
+pub fn soak(minutes: f64, json_out: Option<&Path>, heap_profile: bool) -> anyhow::Result<()> {
     anyhow::ensure!(
         minutes.is_finite() && minutes > 0.0,
         "give a positive number of minutes"
@@ -151,14 +278,29 @@ pub fn soak(minutes: f64, json_out: Option<&Path>) -> anyhow::Result<()> {
     let name = format!("soak-{}", std::process::id());
     let mut sim = Sim::start(&["--serial"])?;
     let log = scratch.join("gateway.log");
-    let mut gateway = Gateway::start(
+    let profile = heap_profile
+        .then(|| HeapProfile::new(&scratch))
+        .transpose()?;
+    let wrapper = profile
+        .as_ref()
+        .map(HeapProfile::wrapper)
+        .unwrap_or_default();
+    let wrapper: Vec<&str> = wrapper.iter().map(String::as_str).collect();
+    let mut gateway = Gateway::start_through(
+        &wrapper,
         &["--serial", &sim.port, "--name", &name, "--no-zenoh"],
         &log,
     )?;
+    // The gateway itself, under its wrapper if any.
+    let pid = if profile.is_some() {
+        child_named(gateway.pid(), "scout-gateway")?
+    } else {
+        gateway.pid()
+    };
     crate::roles::connect(&name)?;
     let started = Instant::now();
     let end = started + Duration::from_secs_f64(minutes * 60.0);
-    let mut samples = vec![sample(gateway.pid(), 0.0)?];
+    let mut samples = vec![sample(pid, 0.0)?];
     let mut next_sample = started + Duration::from_secs(10);
     let mut round = 0;
     eprintln!("soak: {minutes} min of churn against robot {name}, a sample every 10 s");
@@ -179,10 +321,10 @@ pub fn soak(minutes: f64, json_out: Option<&Path>) -> anyhow::Result<()> {
         round += 1;
         if Instant::now() >= next_sample {
             next_sample += Duration::from_secs(10);
-            samples.push(sample(gateway.pid(), started.elapsed().as_secs_f64())?);
+            samples.push(sample(pid, started.elapsed().as_secs_f64())?);
         }
     }
-    samples.push(sample(gateway.pid(), started.elapsed().as_secs_f64())?);
+    samples.push(sample(pid, started.elapsed().as_secs_f64())?);
     let (settled, which) = after_warm_up(&samples);
     let metrics: [Metric; 4] = [
         ("resident memory, MB", |s| s.rss_mb),
@@ -208,6 +350,23 @@ pub fn soak(minutes: f64, json_out: Option<&Path>) -> anyhow::Result<()> {
             json!({ "minutes": minutes, "rounds": round, "slopes": which, "figures": figures });
         std::fs::write(path, serde_json::to_string_pretty(&report)?)
             .with_context(|| format!("writing {}", path.display()))?;
+    }
+    if let Some(profile) = &profile {
+        // A clean exit, so that what it still holds is told apart from what it freed; then
+        // heaptrack writes its file.
+        nix::sys::signal::kill(
+            nix::unistd::Pid::from_raw(pid),
+            nix::sys::signal::Signal::SIGTERM,
+        )?;
+        let deadline = Instant::now() + Duration::from_secs(120);
+        while gateway.exited().is_none() && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(200));
+        }
+        profile.report(WARM_UP.as_secs_f64())?;
+        // The data file stays for heaptrack_gui; the rest of the scratch directory goes.
+        drop(gateway);
+        drop(sim);
+        return Ok(());
     }
     drop(gateway);
     drop(sim);
@@ -243,6 +402,14 @@ mod tests {
         let (settled, which) = after_warm_up(&short);
         assert_eq!(settled.len(), 9);
         assert!(which.contains("first fifth"), "{which}");
+    }
+
+    #[test]
+    fn the_heap_comes_from_each_massif_snapshot() {
+        let massif = "desc: heaptrack\nsnapshot=0\n#-----------\ntime=0\nmem_heap_B=1000\n\
+                      mem_heap_extra_B=0\nsnapshot=1\ntime=2500\nmem_heap_B=3000\nheap_tree=peak\n";
+        assert_eq!(massif_heap(massif), [(0.0, 1000.0), (2.5, 3000.0)]);
+        assert!(massif_heap("").is_empty());
     }
 
     #[test]
