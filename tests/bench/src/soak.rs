@@ -49,6 +49,11 @@ struct Sample {
     /// Since the start, s.
     at: f64,
     rss_mb: f64,
+    /// The kernel's split of it (`/proc/PID/status`): anonymous memory (the heap, stacks),
+    /// shared memory (iceoryx2's segments the gateway touched), mapped files.
+    rss_anon_mb: f64,
+    rss_shmem_mb: f64,
+    rss_file_mb: f64,
     open_files: f64,
     threads: f64,
     shm_files: f64,
@@ -58,15 +63,32 @@ fn sample(pid: i32, at: f64) -> anyhow::Result<Sample> {
     let (_, rss_mb) = procs::usage(pid)?;
     let open_files = std::fs::read_dir(format!("/proc/{pid}/fd"))?.count() as f64;
     let status = std::fs::read_to_string(format!("/proc/{pid}/status"))?;
-    let threads = status
-        .lines()
-        .find_map(|line| line.strip_prefix("Threads:"))
-        .and_then(|value| value.trim().parse().ok())
-        .unwrap_or(0.0);
+    let field = |name: &str| {
+        (status.lines())
+            .find_map(|line| line.strip_prefix(name))
+            .and_then(|value| {
+                value
+                    .trim()
+                    .trim_end_matches("kB")
+                    .trim()
+                    .parse::<f64>()
+                    .ok()
+            })
+            .unwrap_or(0.0)
+    };
+    let threads = field("Threads:");
+    let (rss_anon_mb, rss_shmem_mb, rss_file_mb) = (
+        field("RssAnon:") / 1024.0,
+        field("RssShmem:") / 1024.0,
+        field("RssFile:") / 1024.0,
+    );
     let shm_files = std::fs::read_dir("/dev/shm").map_or(0, |dir| dir.count()) as f64;
     Ok(Sample {
         at,
         rss_mb,
+        rss_anon_mb,
+        rss_shmem_mb,
+        rss_file_mb,
         open_files,
         threads,
         shm_files,
@@ -226,13 +248,29 @@ impl HeapProfile {
                 slope_per_hour(&settled)
             );
         }
-        // The leaks section: what the gateway held at its clean exit, by call site.
-        let held: Vec<&str> = (text.lines())
+        // The leaks section: what the gateway held at its clean exit, by call site, each with
+        // the innermost frames of its backtrace.
+        println!(
+            "what the gateway held at its exit, by call site (heaptrack_print -l), top {HELD_SITES}:"
+        );
+        let mut sites = 0;
+        let mut frames = 0;
+        for line in text
+            .lines()
             .skip_while(|line| !line.starts_with("MEMORY LEAKS"))
-            .take(120)
-            .collect();
-        println!("what the gateway held at its exit, by call site (heaptrack_print -l):");
-        println!("{}", held.join("\n"));
+        {
+            if line.contains(" leaked over ") && line.ends_with("from:") {
+                sites += 1;
+                frames = 0;
+                if sites > HELD_SITES {
+                    break;
+                }
+                println!("{line}");
+            } else if sites > 0 && line.starts_with("    ") && frames < HELD_FRAMES {
+                frames += 1;
+                println!("{line}");
+            }
+        }
         for line in text.lines().filter(|line| {
             line.starts_with("peak heap memory consumption")
                 || line.starts_with("total memory leaked")
@@ -248,18 +286,25 @@ impl HeapProfile {
     }
 }
 
+/// The call sites of held memory a heap profile prints, and the frames of each.
+const HELD_SITES: usize = 8;
+const HELD_FRAMES: usize = 16;
+
 /// (time in s, heap bytes) of each snapshot of a massif file as heaptrack_print writes it
-/// (`time=` in ms, `mem_heap_B=`).
+/// (`time=` in its `time_unit`, s or ms; `mem_heap_B=`).
 fn massif_heap(massif: &str) -> Vec<(f64, f64)> {
     let mut snapshots = Vec::new();
     let mut time = None;
+    let mut unit = 1.0;
     for line in massif.lines() {
-        if let Some(value) = line.strip_prefix("time=") {
-            time = value.trim().parse::<f64>().ok();
+        if let Some(value) = line.strip_prefix("time_unit:") {
+            unit = if value.trim() == "ms" { 1e-3 } else { 1.0 };
+        } else if let Some(value) = line.strip_prefix("time=") {
+            time = value.trim().parse::<f64>().ok().map(|t| t * unit);
         } else if let (Some(value), Some(at)) = (line.strip_prefix("mem_heap_B="), time)
             && let Ok(bytes) = value.trim().parse::<f64>()
         {
-            snapshots.push((at / 1e3, bytes));
+            snapshots.push((at, bytes));
         }
     }
     snapshots
@@ -326,8 +371,11 @@ pub fn soak(minutes: f64, json_out: Option<&Path>, heap_profile: bool) -> anyhow
     }
     samples.push(sample(pid, started.elapsed().as_secs_f64())?);
     let (settled, which) = after_warm_up(&samples);
-    let metrics: [Metric; 4] = [
+    let metrics: [Metric; 7] = [
         ("resident memory, MB", |s| s.rss_mb),
+        ("  of it anonymous (heap, stacks), MB", |s| s.rss_anon_mb),
+        ("  of it shared memory, MB", |s| s.rss_shmem_mb),
+        ("  of it mapped files, MB", |s| s.rss_file_mb),
         ("open files", |s| s.open_files),
         ("threads", |s| s.threads),
         ("files in /dev/shm", |s| s.shm_files),
@@ -390,6 +438,9 @@ mod tests {
         let at = |minutes: f64| Sample {
             at: minutes * 60.0,
             rss_mb: 0.0,
+            rss_anon_mb: 0.0,
+            rss_shmem_mb: 0.0,
+            rss_file_mb: 0.0,
             open_files: 0.0,
             threads: 0.0,
             shm_files: 0.0,
@@ -406,9 +457,12 @@ mod tests {
 
     #[test]
     fn the_heap_comes_from_each_massif_snapshot() {
-        let massif = "desc: heaptrack\nsnapshot=0\n#-----------\ntime=0\nmem_heap_B=1000\n\
-                      mem_heap_extra_B=0\nsnapshot=1\ntime=2500\nmem_heap_B=3000\nheap_tree=peak\n";
+        let massif = "desc: heaptrack\ntime_unit: ms\nsnapshot=0\n#-----------\ntime=0\n\
+                      mem_heap_B=1000\nmem_heap_extra_B=0\nsnapshot=1\ntime=2500\n\
+                      mem_heap_B=3000\nheap_tree=peak\n";
         assert_eq!(massif_heap(massif), [(0.0, 1000.0), (2.5, 3000.0)]);
+        let seconds = massif.replace("time_unit: ms", "time_unit: s");
+        assert_eq!(massif_heap(&seconds)[1], (2500.0, 3000.0));
         assert!(massif_heap("").is_empty());
     }
 
