@@ -843,10 +843,7 @@ impl SessionSettings {
         use crate::link::{Direction, Endpoint, Host, Link, Protection};
         let config = self.config(mode)?;
         // A configuration file's own mode decides which of zenoh's defaults apply.
-        let mode = (config.get_json("mode").ok())
-            .and_then(|json| serde_json::from_str::<Option<String>>(&json).ok())
-            .flatten()
-            .unwrap_or_else(|| mode.to_owned());
+        let mode = config_value::<String>(&config, "mode").unwrap_or_else(|| mode.to_owned());
         let mode = mode.as_str();
         let mut endpoints = Vec::new();
         for (key, direction) in [
@@ -860,10 +857,7 @@ impl SessionSettings {
                 endpoints.push((endpoint, direction));
             }
         }
-        let mtls = (config.get_json("transport/link/tls/enable_mtls").ok())
-            .and_then(|json| serde_json::from_str::<Option<bool>>(&json).ok())
-            .flatten()
-            .unwrap_or(false);
+        let mtls = config_value(&config, "transport/link/tls/enable_mtls").unwrap_or(false);
         let destinations: Vec<std::net::IpAddr> = (endpoints.iter())
             .filter(|(_, direction)| *direction == Direction::Connect)
             .filter_map(|(endpoint, _)| endpoint.ip())
@@ -896,13 +890,18 @@ fn insert(config: &mut zenoh::Config, key: &str, value: &str) -> Result<(), Remo
         .map_err(|e| RemoteError::Config(format!("{key} = {value}: {e}")))
 }
 
+/// The value at `key` of a zenoh configuration, if set and of type `T`.
+#[cfg(feature = "zenoh")]
+fn config_value<T: serde::de::DeserializeOwned>(config: &zenoh::Config, key: &str) -> Option<T> {
+    let json = config.get_json(key).ok()?;
+    serde_json::from_str::<Option<T>>(&json).ok().flatten()
+}
+
 /// The endpoints under `key` (`listen/endpoints`, `connect/endpoints`) for `mode`: a list, or
 /// a list per mode (zenoh's defaults are: a peer listens on `tcp/[::]:0`, every interface).
 #[cfg(feature = "zenoh")]
 fn configured_endpoints(config: &zenoh::Config, key: &str, mode: &str) -> Vec<String> {
-    let value = (config.get_json(key).ok())
-        .and_then(|json| serde_json::from_str::<serde_json::Value>(&json).ok())
-        .unwrap_or_default();
+    let value = config_value::<serde_json::Value>(config, key).unwrap_or_default();
     let list = match &value {
         serde_json::Value::Object(per_mode) => per_mode.get(mode).cloned().unwrap_or_default(),
         other => other.clone(),

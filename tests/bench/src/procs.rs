@@ -61,10 +61,28 @@ pub fn ensure_built() -> anyhow::Result<()> {
 /// A command for workspace binary `name`, quiet (`$SCOUT_BENCH_LOG`, e.g. `info`, for more in
 /// the scratch directory's logs).
 pub fn command(name: &str) -> anyhow::Result<Command> {
-    let mut command = Command::new(bin_dir()?.join(name));
+    command_through(&[], name)
+}
+
+/// [`command`] through `wrapper` (see [`through`]).
+pub fn command_through(wrapper: &[&str], name: &str) -> anyhow::Result<Command> {
+    let mut command = through(wrapper, bin_dir()?.join(name));
     let level = std::env::var("SCOUT_BENCH_LOG").unwrap_or_else(|_| "warn".into());
     command.env("RUST_LOG", level);
     Ok(command)
+}
+
+/// `program` run through `wrapper` (a program and its arguments that runs it as its child:
+/// nsenter, a profiler), or directly when `wrapper` is empty.
+fn through(wrapper: &[&str], program: impl AsRef<std::ffi::OsStr>) -> Command {
+    match wrapper.split_first() {
+        Some((wrapper, rest)) => {
+            let mut command = Command::new(wrapper);
+            command.args(rest).arg(program);
+            command
+        }
+        None => Command::new(program),
+    }
 }
 
 /// A running `scout-sim`.
@@ -162,21 +180,7 @@ impl Gateway {
     pub fn start_through(wrapper: &[&str], args: &[&str], log: &Path) -> anyhow::Result<Gateway> {
         let log =
             std::fs::File::create(log).with_context(|| format!("creating {}", log.display()))?;
-        let mut command = command("scout-gateway")?;
-        if let [program, wrapper_args @ ..] = wrapper {
-            let gateway = bin_dir()?.join("scout-gateway");
-            let envs: Vec<_> = (command.get_envs())
-                .map(|(k, v)| (k.to_owned(), v.map(|v| v.to_owned())))
-                .collect();
-            command = Command::new(program);
-            command.args(wrapper_args).arg(gateway);
-            for (key, value) in envs {
-                if let Some(value) = value {
-                    command.env(key, value);
-                }
-            }
-        }
-        let child = command
+        let child = command_through(wrapper, "scout-gateway")?
             .args(args)
             .stdin(Stdio::null())
             .stdout(Stdio::null())
@@ -222,16 +226,7 @@ impl Roles {
 
     /// Starts `WRAPPER... scout-bench ROLE ARGS` (`nice`, `setpriv`...).
     pub fn spawn_through(&mut self, wrapper: &[&str], args: &[&str]) -> anyhow::Result<()> {
-        let exe = std::env::current_exe()?;
-        let mut command = match wrapper.split_first() {
-            Some((program, rest)) => {
-                let mut command = Command::new(program);
-                command.args(rest).arg(exe);
-                command
-            }
-            None => Command::new(exe),
-        };
-        let child = command
+        let child = through(wrapper, std::env::current_exe()?)
             .args(args)
             .stdin(Stdio::null())
             .stdout(Stdio::null())
