@@ -116,14 +116,24 @@ pub fn example(name: &str) -> Command {
 /// A command for workspace binary `name`. Not under this process' service manager, if any: a
 /// test that wants one sets `NOTIFY_SOCKET` itself.
 pub fn command(name: &str) -> Command {
-    let mut command = Command::new(bin(name));
+    command_for(bin(name))
+}
+
+/// A command for `program` with a workspace binary's environment (see [`command`]).
+fn command_for(program: impl AsRef<std::ffi::OsStr>) -> Command {
+    let mut command = Command::new(program);
+    workspace_env(&mut command);
+    command
+}
+
+/// A workspace binary's environment: warnings logged, no backtraces, no service manager.
+fn workspace_env(command: &mut Command) {
     command
         .env("RUST_LOG", "warn")
         .env_remove("RUST_BACKTRACE")
         .env_remove("NOTIFY_SOCKET")
         .env_remove("WATCHDOG_USEC")
         .env_remove("WATCHDOG_PID");
-    command
 }
 
 /// Reads a child's pipe to the end on a thread of its own, so that the child never blocks on a
@@ -508,10 +518,23 @@ impl Gateway {
 
     /// Starts `scout-gateway` with `args` and the environment variables `env` set.
     pub fn start_with_env(args: &[&str], env: &[(&str, &str)]) -> Gateway {
+        Self::start_through(&[], args, env)
+    }
+
+    /// [`Gateway::start_with_env`] through `wrapper`, a program that runs the one it is given
+    /// in its own place (`ip netns exec NS`, `nsenter ...`): signals reach the gateway.
+    pub fn start_through(wrapper: &[&str], args: &[&str], env: &[(&str, &str)]) -> Gateway {
         let zenoh = args
             .iter()
             .any(|a| a.starts_with("--zenoh") || *a == "--remote-commands");
-        let mut command = command("scout-gateway");
+        let mut command = match wrapper.split_first() {
+            None => command("scout-gateway"),
+            Some((program, rest)) => {
+                let mut wrapped = command_for(program);
+                wrapped.args(rest).arg(bin("scout-gateway"));
+                wrapped
+            }
+        };
         let mut child = command
             .env("RUST_LOG", "info")
             .envs(env.iter().copied())
@@ -1017,12 +1040,7 @@ impl NetNs {
     /// [`NetNs::command`] for a workspace binary, with its environment.
     pub fn binary(&self, name: &str) -> Command {
         let mut command = self.command(bin(name));
-        command
-            .env("RUST_LOG", "warn")
-            .env_remove("RUST_BACKTRACE")
-            .env_remove("NOTIFY_SOCKET")
-            .env_remove("WATCHDOG_USEC")
-            .env_remove("WATCHDOG_PID");
+        workspace_env(&mut command);
         command
     }
 }

@@ -138,6 +138,7 @@ impl Protection {
             };
         }
         // Bound to an interface, or through the one that holds (or routes to) the address.
+        let bound = endpoint.iface.is_some();
         let interface = endpoint.iface.clone().or_else(|| match (ip, direction) {
             (Some(ip), _) if ip.is_unspecified() => None,
             (Some(ip), Direction::Listen) => host.interface_of(ip).map(str::to_owned),
@@ -145,6 +146,21 @@ impl Protection {
             (None, _) => None,
         });
         match interface {
+            // Linux takes a datagram for any of its addresses from any interface (the weak
+            // host model): a machine beside the robot that sends to the tunnel's address over
+            // the LAN reaches a socket bound to that address without any key. Only a socket
+            // bound to the tunnel's interface takes nothing else.
+            Some(interface)
+                if host.is_tunnel(&interface) && !bound && direction == Direction::Listen =>
+            {
+                Self::Plain {
+                    reach: format!(
+                        "every interface: the address is {interface}'s, but Linux takes \
+                         datagrams for it from any network; bind the link to the tunnel with \
+                         #iface={interface}"
+                    ),
+                }
+            }
             Some(interface) if host.is_tunnel(&interface) => Self::Tunnel { interface },
             Some(interface) if interface == "lo" => Self::Local,
             Some(interface) => Self::Plain {
@@ -240,8 +256,8 @@ pub fn risky(commands: &RemoteCommands) -> Vec<Permission> {
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error(
     "refusing to take remote commands ({allowed}) over {links}: anyone who reaches it could \
-     command as any peer name. Safe choices: listen on a WireGuard interface's address (e.g. \
-     --zenoh-listen udp/10.8.0.1:7448, config/zenoh-wireguard-gateway.json5), or TLS or QUIC \
+     command as any peer name. Safe choices: listen on a WireGuard interface, bound to it (e.g. \
+     --zenoh-listen udp/10.8.0.1:7448#iface=wg0, config/zenoh-wireguard-gateway.json5), or TLS or QUIC \
      with mutual authentication (config/zenoh-tls-gateway.json5), or allow remote e-stops only \
      (--remote-commands estop); name another authenticating interface in \
      [zenoh] authenticated_interfaces; on a network you trust, say so with \
@@ -393,11 +409,16 @@ mod tests {
         assert_eq!(listen("tcp/[::1]:7448"), Protection::Local);
         assert_eq!(listen("unixsock-stream//run/scout.sock"), Protection::Local);
         assert_eq!(
-            listen("udp/10.8.0.1:7448"),
+            listen("udp/10.8.0.1:7448#iface=wg0"),
             Protection::Tunnel {
                 interface: "wg0".into()
             }
         );
+        // The tunnel's address, not bound to it: reachable from the LAN (weak host model).
+        assert!(matches!(
+            listen("udp/10.8.0.1:7448"),
+            Protection::Plain { reach } if reach.contains("#iface=wg0")
+        ));
         assert_eq!(
             listen("udp/0.0.0.0:7448"),
             Protection::Plain {
@@ -494,7 +515,7 @@ mod tests {
         }
         let safe = [
             link("udp/127.0.0.1:7448"),
-            link("udp/10.8.0.1:7448"),
+            link("udp/10.8.0.1:7448#iface=wg0"),
             link("tls/0.0.0.0:7448#enable_mtls=true"),
         ];
         let all = commands(&[Permission::Teleop, Permission::Release]);

@@ -1,6 +1,7 @@
 //! SocketCAN end to end: the gateway and the simulator on a virtual CAN bus of each test's own,
 //! can-utils as the independent peer, CAN faults, a gs_usb adapter emulated on USB (through the
-//! kernel's driver and in user space), and zenoh over a lossy, partitioned network.
+//! kernel's driver and in user space), and zenoh over a lossy, partitioned network, plain and
+//! inside a WireGuard tunnel.
 //!
 //! Each test needs to create network interfaces (root, the `vcan` and `sch_netem` modules).
 //! Where it cannot, it prints why and skips, and `socketcan_tests_in_a_vm` runs this whole
@@ -14,6 +15,7 @@ mod faults;
 mod gs_usb;
 mod netem;
 mod netem_bench;
+mod wireguard;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

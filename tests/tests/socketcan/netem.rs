@@ -36,14 +36,22 @@ impl Loopback {
         Self::replace(rule).map(|()| Loopback)
     }
 
-    pub(crate) fn change(&self, rule: &[&str]) {
-        Self::replace(rule).expect("change netem on loopback");
-    }
-
     fn replace(rule: &[&str]) -> Result<(), String> {
         let mut args = vec!["qdisc", "replace", "dev", "lo", "root", "netem"];
         args.extend_from_slice(rule);
         tc(&args)
+    }
+}
+
+/// A network whose conditions a test sets with netem rules (`delay 100ms loss 10%`).
+pub(crate) trait Netem {
+    /// Replaces the rule.
+    fn change(&self, rule: &[&str]);
+}
+
+impl Netem for Loopback {
+    fn change(&self, rule: &[&str]) {
+        Self::replace(rule).expect("change netem on loopback");
     }
 }
 

@@ -14,7 +14,7 @@ use scout_system_tests::{
 use zenoh::Wait;
 
 use crate::LIMIT;
-use crate::netem::Loopback;
+use crate::netem::{Loopback, Netem};
 
 /// How long each configuration drives.
 const DRIVING: Duration = Duration::from_secs(10);
