@@ -7,9 +7,12 @@ says whether control still holds. When an answer says control ended (a stop, a g
 a takeover) it exits 4 and never takes control back by itself. At the end (or Ctrl-C) it puts a
 zero drive and gives control back.
 
-The gateway needs `--remote-commands estop,teleop` and a reachable `--zenoh-listen`:
+The gateway needs `--remote-commands estop,teleop` and a `--zenoh-listen` on a link that
+authenticates peers. Through the WireGuard recipe of docs/remote.md (plain UDP in the tunnel,
+user and password in the operator's zenoh configuration):
 
-    python remote_drive.py --connect udp/ROBOT:7448 --name scout --peer laptop --linear 0.3
+    python remote_drive.py --connect udp/10.8.0.1:7448 --config alice.json5 --name scout \
+        --peer alice --linear 0.3
 
 Exit codes: 0 done, 3 no answer from the gateway, 4 refused (the reason is printed).
 """
@@ -38,6 +41,9 @@ def now_ms() -> int:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--connect", required=True, help="the gateway's zenoh endpoint")
+    parser.add_argument(
+        "--config", help="a zenoh configuration file (the user and password, TLS certificates)"
+    )
     parser.add_argument("--name", default="scout", help="the robot (gateway) name")
     parser.add_argument("--peer", default="operator", help="this peer's name in the keys")
     parser.add_argument("--linear", type=float, default=0.0, help="m/s")
@@ -45,7 +51,7 @@ def main() -> int:
     parser.add_argument("--duration", type=float, default=None, help="s (default: until Ctrl-C)")
     args = parser.parse_args()
 
-    config = zenoh.Config()
+    config = zenoh.Config.from_file(args.config) if args.config else zenoh.Config()
     config.insert_json5("mode", '"client"')
     config.insert_json5("connect/endpoints", json.dumps([args.connect]))
     config.insert_json5("scouting/multicast/enabled", "false")

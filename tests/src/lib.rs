@@ -1368,3 +1368,57 @@ impl TestUsers {
         dir
     }
 }
+
+/// The shipped configurations for remote drive inside a tunnel (config/zenoh-wireguard-*.json5)
+/// made a test's own: the gateway's with a users file of its own (alice and bob), and an
+/// operator's per user, connecting to `endpoint`.
+#[derive(Debug)]
+pub struct ShippedUsers {
+    dir: TempDir,
+    operator: String,
+    /// The gateway's zenoh configuration file.
+    pub gateway: String,
+}
+
+impl ShippedUsers {
+    /// The users, with passwords `alice-secret` and `bob-secret`.
+    pub const USERS: &'static str = "alice:alice-secret\nbob:bob-secret\n";
+
+    pub fn new(test: &str, endpoint: &str) -> ShippedUsers {
+        let dir = TempDir::new(&format!("{test}-users"));
+        let shipped = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../config");
+        let read = |file: &str| std::fs::read_to_string(shipped.join(file)).expect("example");
+        let users = dir.path().join("zenoh-users.txt");
+        std::fs::write(&users, Self::USERS).expect("write the users");
+        let gateway = read("zenoh-wireguard-gateway.json5");
+        assert!(gateway.contains("/etc/scout/zenoh-users.txt"), "{gateway}");
+        let gateway = gateway.replace("/etc/scout/zenoh-users.txt", &users.display().to_string());
+        let file = dir.path().join("gateway.json5");
+        std::fs::write(&file, gateway).expect("write the gateway's config");
+        let operator = read("zenoh-wireguard-operator.json5");
+        assert!(operator.contains("udp/10.8.0.1:7448"), "{operator}");
+        ShippedUsers {
+            operator: operator.replace("udp/10.8.0.1:7448", endpoint),
+            gateway: file.display().to_string(),
+            dir,
+        }
+    }
+
+    /// An operator's configuration file as `user` with `password`, or with no credentials.
+    pub fn operator(&self, user: Option<(&str, &str)>) -> String {
+        let file = self
+            .dir
+            .path()
+            .join(format!("operator-{}.json5", free_port()));
+        let text = match user {
+            Some((user, password)) => (self.operator)
+                .replace(r#"user: "alice""#, &format!(r#"user: "{user}""#))
+                .replace(r#""change-me""#, &format!(r#""{password}""#)),
+            None => {
+                (self.operator).replace(r#"usrpwd: { user: "alice", password: "change-me" },"#, "")
+            }
+        };
+        std::fs::write(&file, text).expect("write an operator's config");
+        file.display().to_string()
+    }
+}

@@ -144,17 +144,21 @@ pub(crate) enum Stranger {
 }
 
 impl Tunnel {
-    /// A tunnel of its own, or `None` (with `test` skipped, saying why) where this kernel or
-    /// machine cannot make one. In the VM, where CI installs wireguard-tools, it must.
+    /// A tunnel of its own, or why this kernel or machine cannot make one. In CI's VM (which
+    /// has wireguard-tools) it must: there, a failure panics.
+    pub(crate) fn new(test: &str) -> Result<Tunnel, String> {
+        Self::create().inspect_err(|reason| {
+            assert!(
+                std::env::var_os(IN_VM).is_none() || std::env::var_os("SCOUT_REQUIRE_VM").is_none(),
+                "{test}: no WireGuard tunnel in the VM: {reason}"
+            );
+        })
+    }
+
+    /// [`Tunnel::new`], or `None` with `test` skipped, saying why.
     pub(crate) fn or_skip(test: &str) -> Option<Tunnel> {
-        match Self::create() {
-            Ok(tunnel) => Some(tunnel),
-            Err(reason) => {
-                assert!(
-                    std::env::var_os(IN_VM).is_none()
-                        || std::env::var_os("SCOUT_REQUIRE_VM").is_none(),
-                    "{test}: no WireGuard tunnel in the VM: {reason}"
-                );
+        Self::new(test)
+            .map_err(|reason| {
                 skip(
                     test,
                     &format!(
@@ -162,9 +166,8 @@ impl Tunnel {
                          in a VM (with wireguard-tools installed)"
                     ),
                 );
-                None
-            }
-        }
+            })
+            .ok()
     }
 
     fn create() -> Result<Tunnel, String> {
@@ -366,40 +369,6 @@ impl Drop for Tunnel {
     }
 }
 
-/// The shipped configurations (config/zenoh-wireguard-*.json5), their endpoints and users made
-/// the test's own: the gateway's, and one per `(user, password)` of an operator's.
-struct Configs {
-    dir: TempDir,
-    operator: String,
-}
-
-impl Configs {
-    fn new(name: &str, endpoint: &str) -> (Configs, String) {
-        let dir = TempDir::new(&format!("{name}-configs"));
-        let shipped = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../config");
-        let read = |file: &str| std::fs::read_to_string(shipped.join(file)).expect("example");
-        let users = dir.path().join("zenoh-users.txt");
-        std::fs::write(&users, "alice:alice-secret\nbob:bob-secret\n").expect("users");
-        let gateway = dir.path().join("gateway.json5");
-        let text = read("zenoh-wireguard-gateway.json5")
-            .replace("/etc/scout/zenoh-users.txt", &users.display().to_string());
-        std::fs::write(&gateway, text).expect("gateway config");
-        let operator =
-            read("zenoh-wireguard-operator.json5").replace("udp/10.8.0.1:7448", endpoint);
-        let gateway = gateway.display().to_string();
-        (Configs { dir, operator }, gateway)
-    }
-
-    fn operator(&self, user: &str, password: &str) -> String {
-        let file = self.dir.path().join(format!("{user}-{password}.json5"));
-        let text = (self.operator)
-            .replace(r#"user: "alice""#, &format!(r#"user: "{user}""#))
-            .replace(r#""change-me""#, &format!(r#""{password}""#));
-        std::fs::write(&file, text).expect("operator config");
-        file.display().to_string()
-    }
-}
-
 /// `scout ARGS` run through `namespace` (or here), its exit code and output.
 fn scout_in(namespace: Option<&Namespace>, args: &[&str]) -> std::process::Child {
     let scout = scout_system_tests::bin("scout");
@@ -446,7 +415,7 @@ fn through_wireguard_only_a_listed_key_with_the_users_password_drives() {
     let name = robot_name("wg-impostors");
     let port = free_port();
     let endpoint = tunnel.connect(port);
-    let (configs, gateway_config) = Configs::new(&name, &endpoint);
+    let configs = scout_system_tests::ShippedUsers::new(&name, &endpoint);
     let through = tunnel.robot().through();
     let gateway = Gateway::start_through(
         &through,
@@ -455,7 +424,7 @@ fn through_wireguard_only_a_listed_key_with_the_users_password_drives() {
             "--name",
             &name,
             "--zenoh-config",
-            &gateway_config,
+            &configs.gateway,
             "--zenoh-listen",
             &tunnel.listen(port),
             "--remote-commands",
@@ -486,7 +455,7 @@ fn through_wireguard_only_a_listed_key_with_the_users_password_drives() {
     scout_system_tests::release_all(&name);
 
     // Alice, through the tunnel, drives.
-    let alice = configs.operator("alice", "alice-secret");
+    let alice = configs.operator(Some(("alice", "alice-secret")));
     let drive = |config: &str| {
         [
             "drive",
@@ -535,7 +504,7 @@ fn through_wireguard_only_a_listed_key_with_the_users_password_drives() {
     // The impostors, at once: each waits out its own timeouts.
     let no_key = tunnel.stranger(Stranger::NoKey);
     let wrong_key = tunnel.stranger(Stranger::WrongKey);
-    let bob = configs.operator("bob", "bob-secret");
+    let bob = configs.operator(Some(("bob", "bob-secret")));
     let tries = [
         ("a stranger without a key", Some(&no_key), drive(&alice)),
         (

@@ -693,10 +693,14 @@ fn the_python_zenoh_example_drives_on_the_fast_lane() {
     }
     let name = robot_name("remote-python");
     let endpoint = format!("udp/127.0.0.1:{}", free_port());
+    // The secure recipe's configurations (users and access control), on loopback.
+    let configs = scout_system_tests::ShippedUsers::new(&name, &endpoint);
     let _gateway = Gateway::start(&[
         "--sim",
         "--name",
         &name,
+        "--zenoh-config",
+        &configs.gateway,
         "--zenoh-listen",
         &endpoint,
         "--remote-commands",
@@ -705,17 +709,27 @@ fn the_python_zenoh_example_drives_on_the_fast_lane() {
     let robot = connect(&name);
     let status = robot.status().expect("status");
     let state = robot.subscribe().expect("subscribe");
-    let session = zenoh_session("client", &[], std::slice::from_ref(&endpoint));
+    let alice = configs.operator(Some(("alice", "alice-secret")));
+    let session = scout_clients::remote::SessionSettings {
+        config_file: Some(alice.clone()),
+        connect: vec![endpoint.clone()],
+        ..Default::default()
+    }
+    .open("client")
+    .expect("alice's session");
     query_until_answered(&session, &format!("scout/{name}/info"));
     let example =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/examples/remote_drive.py");
     let mut command = std::process::Command::new(&python);
     command
         .arg(example)
-        .args(["--connect", &endpoint, "--name", &name, "--peer", "py"])
+        .args(["--connect", &endpoint, "--config", &alice])
+        .args(["--name", &name, "--peer", "alice"])
         .args(["--linear", "0.4", "--duration", "4"]);
     let mut driver = Background::spawn(command);
-    let driving = wait_for_status(&status, LIMIT, |s| s["selected"]["client"] == "remote:py");
+    let driving = wait_for_status(&status, LIMIT, |s| {
+        s["selected"]["client"] == "remote:alice"
+    });
     assert_eq!(driving["selected"]["class"], "teleop");
     wait_for_state(&state, LIMIT, |s| {
         s["motion"]["linear"].as_f64() > Some(0.3)
@@ -1169,26 +1183,14 @@ fn drive_permissions_over_links_that_authenticate_nobody_are_refused_unless_decl
 #[test]
 fn user_names_bind_each_peer_name_to_its_password() {
     let name = robot_name("usrpwd");
-    let dir = scout_system_tests::TempDir::new(&format!("{name}-usrpwd"));
-    let config = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../config");
-    let read = |file: &str| std::fs::read_to_string(config.join(file)).expect("example config");
-    let users = dir.path().join("zenoh-users.txt");
-    std::fs::write(&users, "alice:alice-secret\nbob:bob-secret\n").expect("write users");
-    let gateway_config = dir.path().join("gateway.json5");
-    let shipped = read("zenoh-wireguard-gateway.json5");
-    assert!(shipped.contains("/etc/scout/zenoh-users.txt"));
-    std::fs::write(
-        &gateway_config,
-        shipped.replace("/etc/scout/zenoh-users.txt", &users.display().to_string()),
-    )
-    .expect("write gateway config");
     let endpoint = format!("udp/127.0.0.1:{}", free_port());
+    let configs = scout_system_tests::ShippedUsers::new(&name, &endpoint);
     let mut gateway = Gateway::start(&[
         "--sim",
         "--name",
         &name,
         "--zenoh-config",
-        &gateway_config.display().to_string(),
+        &configs.gateway,
         "--zenoh-listen",
         &endpoint,
         "--remote-commands",
@@ -1196,21 +1198,9 @@ fn user_names_bind_each_peer_name_to_its_password() {
     ]);
     let robot = connect(&name);
     let status = robot.status().expect("status");
-    let operator = read("zenoh-wireguard-operator.json5");
     let open = |user: Option<(&str, &str)>| {
-        let file = dir.path().join(format!("operator-{}.json5", free_port()));
-        let text = match user {
-            Some((user, password)) => operator
-                .replace(r#"user: "alice""#, &format!(r#"user: "{user}""#))
-                .replace(
-                    r#"password: "change-me""#,
-                    &format!(r#"password: "{password}""#),
-                ),
-            None => operator.replace(r#"usrpwd: { user: "alice", password: "change-me" },"#, ""),
-        };
-        std::fs::write(&file, text).expect("write operator config");
         scout_clients::remote::SessionSettings {
-            config_file: Some(file.display().to_string()),
+            config_file: Some(configs.operator(user)),
             connect: vec![endpoint.clone()],
             ..Default::default()
         }
