@@ -6,7 +6,7 @@
 use std::time::{Duration, Instant};
 
 use scout_clients::remote::{RemoteError, RemoteStates, SessionSettings, info_key};
-use scout_interface::link::Protection;
+use scout_interface::link::{Endpoint, PACED_DRIVES, Protection};
 use zenoh::Wait;
 
 use crate::check::{Check, Verdict};
@@ -94,10 +94,17 @@ fn link_kind(settings: &SessionSettings, endpoint: &str) -> Check {
 /// The verdict on a link of `endpoint`'s protocol with `protection`.
 fn security(endpoint: &str, protection: &Protection) -> Check {
     const NAME: &str = "zenoh.security";
-    let udp = endpoint.starts_with("udp/");
+    let parsed = Endpoint::parse(endpoint).ok();
+    let udp = parsed.as_ref().is_some_and(|e| e.protocol == "udp");
+    let paced = parsed.as_ref().is_some_and(|e| e.quic_underneath);
     let detail = |kind: &str| format!("{endpoint}: {kind} ({protection})");
     match protection {
         Protection::Local => Check::pass(NAME, detail("a link on this host")),
+        Protection::Tunnel { .. } if paced => Check::warn(
+            NAME,
+            detail("inside an authenticated tunnel, but QUIC under udp/"),
+            PACED_DRIVES,
+        ),
         Protection::Tunnel { .. } if udp => Check::pass(
             NAME,
             detail(
@@ -330,6 +337,9 @@ mod tests {
             "{detail}"
         );
         assert_eq!(verdict("tcp/10.8.0.1:7448", &tunnel).0, Verdict::Warn);
+        let (warn, detail) = verdict("udp/10.8.0.1:7448?rel=1;mixed_rel=1", &tunnel);
+        assert_eq!(warn, Verdict::Warn);
+        assert!(detail.contains("QUIC under udp/"), "{detail}");
         assert_eq!(verdict("udp/192.168.1.20:7448", &plain).0, Verdict::Warn);
         assert_eq!(
             verdict("quic/192.168.1.20:7448", &Protection::ServerTls).0,

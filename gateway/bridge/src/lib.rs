@@ -109,6 +109,15 @@ pub fn check_links(config: &ZenohConfig) -> anyhow::Result<()> {
     let links = config
         .session()
         .links("peer", &config.authenticated_interfaces)?;
+    for link in &links {
+        if scout_interface::link::Endpoint::parse(&link.endpoint).is_ok_and(|e| e.quic_underneath) {
+            tracing::warn!(
+                "remote drives over {}: {}",
+                link.endpoint,
+                scout_interface::link::PACED_DRIVES
+            );
+        }
+    }
     for link in
         scout_interface::link::check(&links, &config.remote_commands, config.trusted_network)?
     {
