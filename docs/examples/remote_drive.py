@@ -3,7 +3,8 @@
 The JSON command protocol of docs/remote.md, as any language would speak it: take control (a
 query, answered), then a drive every 20 ms put on the fast lane (best effort, express, dropped
 rather than queued: a lost drive is replaced by the next), one in ten as a query whose answer
-says whether control still holds. When an answer says control ended (a stop, a gap, a release,
+says whether control still holds. The puts go on a session of their own (a connection that
+carries nothing else: over QUIC, queries retransmitted after a loss would hold them back). When an answer says control ended (a stop, a gap, a release,
 a takeover) it exits 4 and never takes control back by itself. At the end (or Ctrl-C) it puts a
 zero drive and gives control back.
 
@@ -55,7 +56,7 @@ def main() -> int:
     config.insert_json5("mode", '"client"')
     config.insert_json5("connect/endpoints", json.dumps([args.connect]))
     config.insert_json5("scouting/multicast/enabled", "false")
-    with zenoh.open(config) as session:
+    with zenoh.open(config) as session, zenoh.open(config) as drives:
 
         def key(kind: str) -> str:
             return f"scout/{args.name}/cmd/{kind}/{args.peer}"
@@ -82,7 +83,7 @@ def main() -> int:
             # declared once and then sent as a number, and over a lossy link that declaration
             # can be lost or overtaken, after which the gateway drops the puts. (Python's
             # session.put has no reliability option: over `udp/` everything is best effort.)
-            session.put(
+            drives.put(
                 key("drive"),
                 drive,
                 encoding=zenoh.Encoding.APPLICATION_JSON,
