@@ -24,6 +24,9 @@ const DRIVING: Duration = Duration::from_secs(10);
 /// E-stops timed per configuration.
 const ESTOPS: usize = 10;
 
+/// The drives' speed, m/s.
+const SPEED: f64 = 0.3;
+
 /// A drive's life: the same on both paths, so that only the transport differs.
 const LIFE: Duration = Duration::from_millis(300);
 
@@ -71,13 +74,15 @@ enum Path {
 }
 
 /// The links and paths compared.
-const RUNS: [(&str, Path); 7] = [
+const RUNS: [(&str, Path); 8] = [
     ("tcp", Path::Queried),
     ("tcp", Path::Put),
     ("quic", Path::Queried),
     ("quic", Path::Put),
     ("quic", Path::PutOnly),
     ("udp", Path::Put),
+    // `udp/...?rel=1;mixed_rel=1`: QUIC without encryption underneath, drives as datagrams.
+    ("udp-rel", Path::Put),
     // Plain UDP inside a WireGuard tunnel, the gateway bound to it.
     ("wireguard", Path::Put),
 ];
@@ -96,6 +101,9 @@ struct Figures {
     superseded: u64,
     lapses: u64,
     estops_ms: Vec<u64>,
+    /// The chassis's states while driving, and those whose command was the drive's speed.
+    states: u64,
+    at_drive: u64,
 }
 
 #[test]
@@ -110,8 +118,24 @@ fn netem_bench_remote_drive() {
     let only: Option<Vec<String>> = std::env::var("SCOUT_NETEM_RUNS")
         .ok()
         .map(|runs| runs.split(',').map(str::to_owned).collect());
+    // `SCOUT_NETEM_PROFILES=0,2` runs only the first and the third network.
+    let profiles: Option<Vec<usize>> = std::env::var("SCOUT_NETEM_PROFILES").ok().map(|p| {
+        (p.split(','))
+            .map(|p| {
+                p.trim()
+                    .parse()
+                    .expect("SCOUT_NETEM_PROFILES: indexes, e.g. 0,2")
+            })
+            .collect()
+    });
     let mut rows = Vec::new();
     for (p, profile) in PROFILES.iter().enumerate() {
+        if profiles
+            .as_ref()
+            .is_some_and(|profiles| !profiles.contains(&p))
+        {
+            continue;
+        }
         for (r, (link, path)) in RUNS.into_iter().enumerate() {
             let label = format!("{link}-{path:?}").to_lowercase();
             if only.as_ref().is_some_and(|only| !only.contains(&label)) {
@@ -136,15 +160,15 @@ fn netem_bench_remote_drive() {
         }
     }
     println!(
-        "| network | link | drives | read / superseded | accepted | no control | age p50 / p99 (ms) | control lapsed | e-stop latched p50 / max (ms) |"
+        "| network | link | drives | read / superseded | accepted | no control | age p50 / p99 (ms) | control lapsed | output at the drive | e-stop latched p50 / max (ms) |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|");
     for (profile, link, path, figures) in rows {
         let mut estops = figures.estops_ms.clone();
         estops.sort_unstable();
         let show = |ms: Option<u64>| ms.map_or("-".to_owned(), |ms| ms.to_string());
         println!(
-            "| {profile} | {link}, {} | {} | {} / {} | {:.0} % | {} | {} / {} | {} | {} / {} ({} of {ESTOPS}) |",
+            "| {profile} | {link}, {} | {} | {} / {} | {:.0} % | {} | {} / {} | {} | {:.0} % | {} / {} ({} of {ESTOPS}) |",
             match path {
                 Path::Queried => "queried",
                 Path::Put => "put (fast lane)",
@@ -158,6 +182,7 @@ fn netem_bench_remote_drive() {
             show(figures.age_p50_ms),
             show(figures.age_p99_ms),
             figures.lapses,
+            100.0 * figures.at_drive as f64 / figures.states.max(1) as f64,
             show(estops.get(estops.len() / 2).copied()),
             show(estops.last().copied()),
             estops.len(),
@@ -185,6 +210,10 @@ fn run(
             let endpoint = format!("quic/127.0.0.1:{port}?mixed_rel=1");
             (endpoint.clone(), endpoint)
         }
+        ("udp-rel", None) => {
+            let endpoint = format!("udp/127.0.0.1:{port}?rel=1;mixed_rel=1");
+            (endpoint.clone(), endpoint)
+        }
         (_, None) => {
             let endpoint = format!("{link}/127.0.0.1:{port}");
             (endpoint.clone(), endpoint)
@@ -210,6 +239,7 @@ fn run(
     let gateway = Gateway::start_through(through.as_ref().map_or(&[][..], |t| &t[..]), &args, &[]);
     let robot = connect_within(name, LIMIT);
     let status = robot.status().expect("status");
+    let state = robot.subscribe().expect("state");
     let settings = SessionSettings {
         config_file: tls.then(|| {
             let connect = format!(r#"connect: {{ endpoints: ["{endpoint}"] }}"#);
@@ -270,11 +300,20 @@ fn run(
         })
     };
     network.change(profile.rule);
-    std::thread::sleep(DRIVING);
+    // Meanwhile, how much of the time the chassis is commanded the drive's speed.
+    let (mut states, mut at_drive) = (0, 0);
+    let driving = Instant::now();
+    while driving.elapsed() < DRIVING {
+        if let Ok(Some(sample)) = state.next_timeout(Duration::from_millis(100)) {
+            states += 1;
+            at_drive += u64::from((sample.command.linear - SPEED).abs() < 0.01);
+        }
+    }
     running.store(false, Ordering::Relaxed);
     teleop.join().expect("teleop");
     let mut figures = std::mem::take(&mut *figures.lock().expect("figures"));
     figures.sent = sent.load(Ordering::Relaxed);
+    (figures.states, figures.at_drive) = (states, at_drive);
 
     // E-stops through the same loss: put and queried on the fast lane, queried on the old.
     let estop_key = format!("scout/{name}/cmd/estop/operator");
@@ -364,7 +403,7 @@ fn drive_put(
     let mut next = Instant::now();
     while running.load(Ordering::Relaxed) {
         sent.fetch_add(1, Ordering::Relaxed);
-        if let Err(RemoteError::Refused { answer, .. }) = controller.drive(0.3, 0.0, LIFE)
+        if let Err(RemoteError::Refused { answer, .. }) = controller.drive(SPEED, 0.0, LIFE)
             && answer.lost_control
         {
             figures.lock().expect("figures").lapses += 1;
@@ -383,7 +422,7 @@ fn drive_put_only(session: &zenoh::Session, name: &str, running: &AtomicBool, se
     while running.load(Ordering::Relaxed) {
         seq += 1;
         let payload = format!(
-            r#"{{"seq":{seq},"sent_ms":{},"linear":0.3,"angular":0.0,"ttl_ms":{}}}"#,
+            r#"{{"seq":{seq},"sent_ms":{},"linear":{SPEED},"angular":0.0,"ttl_ms":{}}}"#,
             scout_clients::monotonic_ns() / 1_000_000,
             LIFE.as_millis()
         );
@@ -415,7 +454,7 @@ fn drive_queried(
     while running.load(Ordering::Relaxed) {
         seq += 1;
         let payload = format!(
-            r#"{{"seq":{seq},"sent_ms":{},"linear":0.3,"angular":0.0,"ttl_ms":{}}}"#,
+            r#"{{"seq":{seq},"sent_ms":{},"linear":{SPEED},"angular":0.0,"ttl_ms":{}}}"#,
             scout_clients::monotonic_ns() / 1_000_000,
             LIFE.as_millis()
         );
