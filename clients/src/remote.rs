@@ -303,9 +303,10 @@ impl RemoteController {
 
     /// Sends `command` as a query and waits for the answer: accepted, or
     /// [`RemoteError::Refused`]. An e-stop not answered within [`ESTOP_QUERY_AFTER`] is asked
-    /// again, the same bytes, up to [`ESTOP_QUERIES`] in all (over plain UDP a query or its
-    /// answer can be lost; a repeated stop only refreshes the same stop): the first answer is
-    /// the answer. Nothing else is repeated: a copy of a take-control that arrives after the
+    /// again, the same bytes, up to [`ESTOP_QUERIES`] in all, and put again on the drive lane
+    /// with each (over plain UDP a query or its answer can be lost; over QUIC a query can wait
+    /// behind its stream's retransmission back-off, where a datagram does not; a repeated stop
+    /// only refreshes the same stop): the first answer is the answer. Nothing else is repeated: a copy of a take-control that arrives after the
     /// first was answered could grant control after that control was used and given up, or
     /// after the take was refused, and the bridge would then attach it to drives still
     /// streaming.
@@ -329,6 +330,10 @@ impl RemoteController {
         let mut asked = Vec::new();
         let reply = loop {
             if asked.len() < queries && start.elapsed() >= ESTOP_QUERY_AFTER * asked.len() as u32 {
+                if !asked.is_empty() {
+                    // A copy that cannot be sent leaves the query to carry the stop.
+                    let _ = self.put(kind, payload.clone());
+                }
                 let replies = self
                     .session
                     .get(command_key(&self.robot, kind, &self.peer))
