@@ -664,16 +664,28 @@ pub fn wait_for_state(
     limit: Duration,
     wanted: impl Fn(&serde_json::Value) -> bool,
 ) -> serde_json::Value {
-    let next = || {
-        let state = subscriber
-            .next_timeout(Duration::from_millis(200))
-            .expect("receive state")?;
-        Some(scout_clients::interface::json::state_json(
-            &state,
-            scout_clients::monotonic_ns(),
-        ))
-    };
-    wait_for("state", limit, next, wanted)
+    wait_for("state", limit, || state_now(subscriber), wanted)
+}
+
+/// As [`wait_for_state`], but the last state seen (`Null` if none) at the deadline instead of a
+/// panic: for a test that says more of what went wrong.
+pub fn try_wait_for_state(
+    subscriber: &scout_clients::client::StateSubscriber,
+    limit: Duration,
+    wanted: impl Fn(&serde_json::Value) -> bool,
+) -> Result<serde_json::Value, serde_json::Value> {
+    try_wait_for(limit, || state_now(subscriber), wanted)
+}
+
+/// The next state as JSON, if one came within 200 ms.
+fn state_now(subscriber: &scout_clients::client::StateSubscriber) -> Option<serde_json::Value> {
+    let state = subscriber
+        .next_timeout(Duration::from_millis(200))
+        .expect("receive state")?;
+    Some(scout_clients::interface::json::state_json(
+        &state,
+        scout_clients::monotonic_ns(),
+    ))
 }
 
 /// The arbiter's newest status as JSON, if one came within `wait`.
@@ -826,6 +838,24 @@ pub fn zenoh_session(mode: &str, listen: &[String], connect: &[String]) -> zenoh
             }
             Err(error) => panic!("open a zenoh session: {error}"),
         }
+    }
+}
+
+/// A client session with `settings`, retried until the gateway listens (at most `limit`).
+pub fn open_within(
+    settings: &scout_clients::remote::SessionSettings,
+    limit: Duration,
+) -> zenoh::Session {
+    let deadline = Instant::now() + limit;
+    loop {
+        match settings.open("client") {
+            Ok(session) => return session,
+            Err(error) => assert!(
+                Instant::now() < deadline,
+                "no zenoh session within {limit:?}: {error}"
+            ),
+        }
+        std::thread::sleep(Duration::from_millis(100));
     }
 }
 

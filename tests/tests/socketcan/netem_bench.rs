@@ -414,6 +414,15 @@ fn drive_put(
     }
 }
 
+/// Drive `seq` as the bench's teleop sends it, stamped now.
+fn drive(seq: u64) -> String {
+    format!(
+        r#"{{"seq":{seq},"sent_ms":{},"linear":{SPEED},"angular":0.0,"ttl_ms":{}}}"#,
+        scout_clients::monotonic_ns() / 1_000_000,
+        LIFE.as_millis()
+    )
+}
+
 /// Drives put alone on `session`, as `RemoteController` puts them, none queried.
 fn drive_put_only(session: &zenoh::Session, name: &str, running: &AtomicBool, sent: &AtomicU64) {
     let key = format!("scout/{name}/cmd/drive/operator");
@@ -421,11 +430,7 @@ fn drive_put_only(session: &zenoh::Session, name: &str, running: &AtomicBool, se
     let mut next = Instant::now();
     while running.load(Ordering::Relaxed) {
         seq += 1;
-        let payload = format!(
-            r#"{{"seq":{seq},"sent_ms":{},"linear":{SPEED},"angular":0.0,"ttl_ms":{}}}"#,
-            scout_clients::monotonic_ns() / 1_000_000,
-            LIFE.as_millis()
-        );
+        let payload = drive(seq);
         let _ = (session.put(&key, payload))
             .congestion_control(zenoh::qos::CongestionControl::Drop)
             .reliability(zenoh::qos::Reliability::BestEffort)
@@ -453,11 +458,7 @@ fn drive_queried(
     let mut next = Instant::now();
     while running.load(Ordering::Relaxed) {
         seq += 1;
-        let payload = format!(
-            r#"{{"seq":{seq},"sent_ms":{},"linear":{SPEED},"angular":0.0,"ttl_ms":{}}}"#,
-            scout_clients::monotonic_ns() / 1_000_000,
-            LIFE.as_millis()
-        );
+        let payload = drive(seq);
         let replies = (session.get(key("drive")).payload(payload))
             .timeout(LIMIT)
             .wait()
