@@ -123,9 +123,9 @@ const ESTOP_QUERIES: usize = 3;
 /// Two sessions, so two connections: the drive lane carries the puts alone (drives and
 /// e-stop copies), the other every query and its answer. Over QUIC the queries' stream
 /// traffic (retransmitted after a loss) otherwise shares one congestion controller with the
-/// drives' datagrams and holds them back: in the VM through 100 ms and 10 % loss, drives alone
-/// on a connection were 74 % accepted, beside the queries 43 % (BENCHMARKS.md). Over UDP it
-/// costs nothing; an e-stop's copies never wait behind a stream's retransmission back-off.
+/// drives' datagrams and holds them back: in the VM through 100 ms and 10 % loss, 43 % of the
+/// drives were accepted on one connection, 65 % on their own (BENCHMARKS.md). Over UDP it costs
+/// a session; an e-stop's copies never wait behind a stream's retransmission back-off.
 ///
 /// Control is never taken back by this type: when the gateway says it ended (a stop, a gap,
 /// a release, a takeover), [`RemoteController::drive`] returns [`RemoteError::Refused`] with
@@ -306,10 +306,10 @@ impl RemoteController {
     /// again, the same bytes, up to [`ESTOP_QUERIES`] in all, and put again on the drive lane
     /// with each (over plain UDP a query or its answer can be lost; over QUIC a query can wait
     /// behind its stream's retransmission back-off, where a datagram does not; a repeated stop
-    /// only refreshes the same stop): the first answer is the answer. Nothing else is repeated: a copy of a take-control that arrives after the
-    /// first was answered could grant control after that control was used and given up, or
-    /// after the take was refused, and the bridge would then attach it to drives still
-    /// streaming.
+    /// only refreshes the same stop): the first answer is the answer. Nothing else is
+    /// repeated: a copy of a take-control that arrives after the first was answered could
+    /// grant control after that control was used and given up, or after the take was refused,
+    /// and the bridge would then attach it to drives still streaming.
     fn ask(
         &mut self,
         kind: RemoteKind,
