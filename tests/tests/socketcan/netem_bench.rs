@@ -288,12 +288,12 @@ fn run(
             Arc::clone(&sent),
             Arc::clone(&figures),
         );
-        let drives = (path == Path::PutOnly).then(|| settings.open("client").expect("a session"));
-        std::thread::spawn(move || match (path, drives) {
-            (Path::Put, _) => drive_put(controller, &running, &sent, &figures),
-            (Path::Queried, _) => drive_queried(&session, &name, &running, &sent, &figures),
-            (Path::PutOnly, drives) => {
-                let drives = drives.expect("the drives' session");
+        let settings = settings.clone();
+        std::thread::spawn(move || match path {
+            Path::Put => drive_put(controller, &running, &sent, &figures),
+            Path::Queried => drive_queried(&session, &name, &running, &sent, &figures),
+            Path::PutOnly => {
+                let drives = settings.open("client").expect("the drives' session");
                 drive_put_only(&drives, &name, &running, &sent);
                 drop(controller);
             }
