@@ -346,16 +346,11 @@ impl Tunnel {
 impl Tunnel {
     /// netem on both ends of the underlay: each datagram meets `rule` once, either way.
     fn set_netem(&self, rule: &[&str]) -> Result<(), String> {
-        let args =
-            |dev: &'static str| [&["qdisc", "replace", "dev", dev, "root", "netem"], rule].concat();
-        crate::tc(
-            &[
-                &["qdisc", "replace", "dev", &self.underlay, "root", "netem"],
-                rule,
-            ]
-            .concat(),
-        )?;
-        self.robot.run("tc", &args("lan0"))
+        fn args<'a>(dev: &'a str, rule: &[&'a str]) -> Vec<&'a str> {
+            [&["qdisc", "replace", "dev", dev, "root", "netem"], rule].concat()
+        }
+        crate::tc(&args(&self.underlay, rule))?;
+        self.robot.run("tc", &args("lan0", rule))
     }
 }
 
