@@ -45,8 +45,9 @@ struct Counters {
     /// Drives put on the fast lane refused (their reasons are the queries'; a put has no
     /// answer to carry them).
     drives_put_rejected: u64,
-    /// Drives put on the fast lane that a newer one from the same peer replaced before the
-    /// bridge got to them.
+    /// Drives put on the fast lane dropped before the bridge got to them: a peer without
+    /// control's replaced by its newer one, the oldest of a controlling peer's past
+    /// [`MAX_QUEUED_DRIVES`] waiting, any from a key past [`MAX_WAITING_DRIVES`].
     drives_superseded: u64,
     state_queries: u64,
     info_queries: u64,
@@ -325,8 +326,8 @@ fn serve_queries(
     let _state_queries = queryable(remote::state_key(robot_name), Asked::State)?;
     let _info_queries = queryable(remote::info_key(robot_name), Asked::Info)?;
     let _command_queries = queryable(remote::command_keys(robot_name), Asked::Command)?;
-    // The fast lane: drives put (not queried) keep only the newest per peer, stamped with
-    // their arrival; the command thread is woken once for however many arrive meanwhile.
+    // The fast lane: drives put (not queried) wait in [`DriveSlots`], stamped with their
+    // arrival; the command thread is woken once for however many arrive meanwhile.
     // An e-stop put goes to the e-stop lane, beside the e-stop queries: a peer sends both, and
     // whichever arrives first latches (the second refreshes the same stop).
     let _command_puts = {
@@ -462,10 +463,12 @@ enum Work {
     Drives,
 }
 
-/// Drives put on the fast lane, the newest per key (so per peer) only, with their arrival on
-/// this host's clock; and what the lane counted. The keys of peers that hold control always
-/// find a place, and go first: peers that hold nothing (a flood of names) never hold up or
-/// push out the drives of the one that drives.
+/// Drives put on the fast lane, with their arrival on this host's clock; and what the lane
+/// counted. The keys of peers that hold control always find a place, and go first: peers that
+/// hold nothing (a flood of names) never hold up or push out the drives of the one that drives.
+/// A holder's drives wait in arrival order, up to [`MAX_QUEUED_DRIVES`], so that a burst that
+/// arrives together (a link that held datagrams back, then let them go) reaches the arbiter
+/// whole and in order, each aged from its own arrival; the others keep only their newest.
 #[derive(Debug, Default)]
 struct DriveSlots {
     waiting: std::sync::Mutex<Waiting>,
@@ -475,20 +478,29 @@ struct DriveSlots {
     ignored: std::sync::atomic::AtomicU64,
 }
 
-/// The drives waiting, newest per key: of peers that hold control, and of the others.
+/// A drive waiting: when it arrived, and its payload.
+type WaitingDrive = (Duration, Vec<u8>);
+
+/// The drives waiting: of peers that hold control, in arrival order per key; of the others,
+/// the newest per key.
 #[derive(Debug, Default)]
 struct Waiting {
-    holders: HashMap<String, (Duration, Vec<u8>)>,
-    others: HashMap<String, (Duration, Vec<u8>)>,
+    holders: HashMap<String, std::collections::VecDeque<WaitingDrive>>,
+    others: HashMap<String, WaitingDrive>,
 }
 
 /// Keys of peers without control waiting at once; a drive from yet another such key is
 /// dropped (and counted as superseded): that many peers at once is a flood, not a teleop.
 const MAX_WAITING_DRIVES: usize = 64;
 
+/// Drives of one peer that holds control waiting at once (160 ms of a 50 Hz teleop); past it
+/// the oldest is dropped (and counted as superseded): the bridge is that far behind, and the
+/// newest matter.
+const MAX_QUEUED_DRIVES: usize = 8;
+
 impl DriveSlots {
-    /// Keeps `payload` as the newest drive on `key`; whether the thread must be woken (no
-    /// drive was waiting).
+    /// Keeps `payload` as a drive on `key` waiting (behind the key's others if its peer holds
+    /// control, in their place if not); whether the thread must be woken (no drive was waiting).
     fn put(&self, key: &str, arrived: Duration, payload: Vec<u8>) -> bool {
         let holder = self
             .holders
@@ -498,33 +510,41 @@ impl DriveSlots {
             return false;
         };
         let wake = waiting.holders.is_empty() && waiting.others.is_empty();
-        let slots = if holder {
-            &mut waiting.holders
-        } else {
-            &mut waiting.others
-        };
-        if !holder && slots.len() >= MAX_WAITING_DRIVES && !slots.contains_key(key) {
+        if holder {
+            let queue = waiting.holders.entry(key.to_owned()).or_default();
+            if queue.len() >= MAX_QUEUED_DRIVES {
+                queue.pop_front();
+                self.superseded.fetch_add(1, Ordering::Relaxed);
+            }
+            queue.push_back((arrived, payload));
+            return wake;
+        }
+        let others = &mut waiting.others;
+        if others.len() >= MAX_WAITING_DRIVES && !others.contains_key(key) {
             self.superseded.fetch_add(1, Ordering::Relaxed);
             return wake;
         }
-        if slots.insert(key.to_owned(), (arrived, payload)).is_some() {
+        if others.insert(key.to_owned(), (arrived, payload)).is_some() {
             self.superseded.fetch_add(1, Ordering::Relaxed);
         }
         wake
     }
 
-    /// The drives waiting: the holders' first, each part oldest arrival first.
-    fn take(&self) -> Vec<(String, (Duration, Vec<u8>))> {
+    /// The drives waiting: the holders' first (each key's in arrival order, the keys by their
+    /// first arrival), then the others' by arrival.
+    fn take(&self) -> Vec<(String, WaitingDrive)> {
         let Ok(mut waiting) = self.waiting.lock() else {
             return Vec::new();
         };
-        let by_arrival = |part: &mut HashMap<String, (Duration, Vec<u8>)>| {
-            let mut taken: Vec<_> = part.drain().collect();
-            taken.sort_by_key(|(_, (arrived, _))| *arrived);
-            taken
-        };
-        let mut taken = by_arrival(&mut waiting.holders);
-        taken.extend(by_arrival(&mut waiting.others));
+        let mut queues: Vec<_> = waiting.holders.drain().collect();
+        queues.sort_by_key(|(_, queue)| queue.front().map(|(arrived, _)| *arrived));
+        let mut taken: Vec<_> = queues
+            .into_iter()
+            .flat_map(|(key, queue)| queue.into_iter().map(move |drive| (key.clone(), drive)))
+            .collect();
+        let mut others: Vec<_> = waiting.others.drain().collect();
+        others.sort_by_key(|(_, (arrived, _))| *arrived);
+        taken.extend(others);
         taken
     }
 
@@ -846,6 +866,41 @@ mod tests {
         }
         assert_eq!(slots.take().len(), MAX_WAITING_DRIVES);
         assert_eq!(slots.superseded.load(Ordering::Relaxed), 1 + 11);
+    }
+
+    #[test]
+    fn a_burst_from_the_peer_in_control_reaches_the_arbiter_whole_and_in_order() {
+        let slots = DriveSlots::default();
+        let ms = Duration::from_millis;
+        let key = "scout/r/cmd/drive/op";
+        slots.set_holder(key.into(), true);
+        assert!(slots.put(key, ms(10), b"1".to_vec()), "first wakes");
+        assert!(!slots.put("scout/r/cmd/drive/other", ms(11), b"x".to_vec()));
+        assert!(!slots.put(key, ms(12), b"2".to_vec()));
+        assert!(!slots.put(key, ms(13), b"3".to_vec()));
+        let taken = slots.take();
+        let taken: Vec<(&str, Duration, &[u8])> = taken
+            .iter()
+            .map(|(key, (at, payload))| (key.as_str(), *at, payload.as_slice()))
+            .collect();
+        assert_eq!(
+            taken,
+            [
+                (key, ms(10), &b"1"[..]),
+                (key, ms(12), &b"2"[..]),
+                (key, ms(13), &b"3"[..]),
+                ("scout/r/cmd/drive/other", ms(11), &b"x"[..]),
+            ]
+        );
+        assert_eq!(slots.superseded.load(Ordering::Relaxed), 0);
+        // A bridge that far behind keeps the newest MAX_QUEUED_DRIVES, counting the rest.
+        for at in 0..MAX_QUEUED_DRIVES as u64 + 3 {
+            slots.put(key, ms(100 + at), at.to_string().into_bytes());
+        }
+        let taken = slots.take();
+        assert_eq!(taken.len(), MAX_QUEUED_DRIVES);
+        assert_eq!(taken[0].1.0, ms(103), "the oldest went");
+        assert_eq!(slots.superseded.load(Ordering::Relaxed), 3);
     }
 
     #[test]
