@@ -535,8 +535,10 @@ impl Gateway {
                 wrapped
             }
         };
+        // `SCOUT_TEST_GATEWAY_LOG=info,scout_bridge=debug` to see more of what it did.
+        let log = std::env::var("SCOUT_TEST_GATEWAY_LOG").unwrap_or_else(|_| "info".into());
         let mut child = command
-            .env("RUST_LOG", "info")
+            .env("RUST_LOG", log)
             .envs(env.iter().copied())
             .args(args)
             .args(if zenoh { None } else { Some("--no-zenoh") })

@@ -101,6 +101,9 @@ struct Figures {
     superseded: u64,
     lapses: u64,
     estops_ms: Vec<u64>,
+    /// Of each, until the gateway published the stop (the status's stamp): the rest is this
+    /// test seeing it.
+    estops_published_ms: Vec<u64>,
     /// The chassis's states while driving, and those whose command was the drive's speed.
     states: u64,
     at_drive: u64,
@@ -160,15 +163,17 @@ fn netem_bench_remote_drive() {
         }
     }
     println!(
-        "| network | link | drives | read / superseded | accepted | no control | age p50 / p99 (ms) | control lapsed | output at the drive | e-stop latched p50 / max (ms) |"
+        "| network | link | drives | read / superseded | accepted | no control | age p50 / p99 (ms) | control lapsed | output at the drive | e-stop latched p50 / max (ms) | of it published p50 / max |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
     for (profile, link, path, figures) in rows {
         let mut estops = figures.estops_ms.clone();
         estops.sort_unstable();
+        let mut published = figures.estops_published_ms.clone();
+        published.sort_unstable();
         let show = |ms: Option<u64>| ms.map_or("-".to_owned(), |ms| ms.to_string());
         println!(
-            "| {profile} | {link}, {} | {} | {} / {} | {:.0} % | {} | {} / {} | {} | {:.0} % | {} / {} ({} of {ESTOPS}) |",
+            "| {profile} | {link}, {} | {} | {} / {} | {:.0} % | {} | {} / {} | {} | {:.0} % | {} / {} ({} of {ESTOPS}) | {} / {} |",
             match path {
                 Path::Queried => "queried",
                 Path::Put => "put (fast lane)",
@@ -186,6 +191,8 @@ fn netem_bench_remote_drive() {
             show(estops.get(estops.len() / 2).copied()),
             show(estops.last().copied()),
             estops.len(),
+            show(published.get(published.len() / 2).copied()),
+            show(published.last().copied()),
         );
     }
 }
@@ -322,6 +329,7 @@ fn run(
         // The statuses so far are not this stop's.
         while status.try_next().expect("status").is_some() {}
         let asked = Instant::now();
+        let asked_ns = scout_clients::monotonic_ns();
         if matches!(path, Path::Put | Path::PutOnly) {
             // As `RemoteController::stop` does: copies put in full (no declared publisher).
             for _ in 0..3 {
@@ -339,13 +347,15 @@ fn run(
             .wait()
             .expect("e-stop query");
         let deadline = asked + LIMIT;
-        let latched = loop {
-            if status
-                .try_next()
-                .expect("status")
-                .is_some_and(|status| status.stopped())
-            {
-                break Some(asked.elapsed());
+        // Every status waiting is read at each look (one per look would put the test's
+        // reading behind the gateway's publishing).
+        let latched = 'seen: loop {
+            while let Some(seen) = status.try_next().expect("status") {
+                if seen.stopped() {
+                    let published = seen.published_ns.saturating_sub(asked_ns) / 1_000_000;
+                    figures.estops_published_ms.push(published);
+                    break 'seen Some(asked.elapsed());
+                }
             }
             if Instant::now() > deadline {
                 break None;
@@ -389,6 +399,10 @@ fn run(
     }
     if let Some(info) = info.first() {
         figures.superseded = info["counters"]["drives_superseded"].as_u64().unwrap_or(0);
+    }
+    // `SCOUT_NETEM_LOGS=1` prints each gateway's log (with `SCOUT_TEST_GATEWAY_LOG` for more).
+    if std::env::var_os("SCOUT_NETEM_LOGS").is_some() {
+        eprintln!("{name}: the gateway's log:\n{}", gateway.log());
     }
     figures
 }
