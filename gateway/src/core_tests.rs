@@ -1534,6 +1534,35 @@ fn with_auto_nothing_goes_out_until_the_protocol_is_told_then_it_drives() {
 }
 
 #[test]
+fn a_chassis_that_steers_its_wheels_is_not_driven_as_a_scout() {
+    let mut pair = Pair::with_firmware(
+        Protocol::V2,
+        Transport::Can,
+        &config(Protocol::V2),
+        Start::Clean,
+    );
+    pair.run(ms(200));
+    pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(1));
+    assert!((pair.chassis.actual().linear - 0.5).abs() < 0.02);
+    // A Ranger's motion-mode feedback (0x291) arrives: the drive stops at once, and stays.
+    let unknown = scout_protocol::can::CanError::UnknownId {
+        id: scout_protocol::v2::id::MOTION_MODE_STATE,
+    };
+    pair.core.handle_rx(
+        pair.now,
+        &RxEvent::Rejected(scout_protocol::link::RxError::Can(unknown)),
+    );
+    pair.run(ms(100));
+    assert_eq!(pair.last_state().link.state(), LinkState::ProtocolMismatch);
+    let reason = pair.stop_reason(StopCause::ChassisSilent);
+    assert!(reason.contains("not a scout2"), "{reason}");
+    let refused = pair.take(TELEOP, Class::Teleop).expect_err("stopped");
+    assert_eq!(refused.kind, Some(RejectionKind::Latched));
+    pair.run(ms(400));
+    assert_eq!(pair.chassis.actual().linear, 0.0);
+}
+
+#[test]
 fn a_chassis_of_the_other_protocol_moves_nothing_and_the_stop_says_why() {
     for firmware in Protocol::ALL {
         let gateway = firmware.other();

@@ -11,7 +11,7 @@ use scout_interface::state::{
 use scout_interface::{FixedText, Transport};
 use scout_protocol::kinematics::{Pose, wrap_angle};
 use scout_protocol::link::RxEvent;
-use scout_protocol::model::Model;
+use scout_protocol::model::{Model, Sign};
 use scout_protocol::sequence::{Continuity, SequenceTracker};
 use scout_protocol::slcan::Slcan;
 use scout_protocol::v2::MessageV2;
@@ -400,6 +400,35 @@ impl StateTracker {
         }
     }
 
+    /// Feedback that says the chassis is not the model the gateway drives by (the configured
+    /// one, or the protocol's default): nothing it sends is used and motion stops, as for a
+    /// protocol mismatch, until the port reopens. A chassis of another model driven with a
+    /// SCOUT's command moves otherwise than its clients ask (a Ranger Mini 2 told a yaw rate
+    /// in the SCOUT's field takes its spin geometry and does not turn; a Hunter steers by a steering
+    /// angle, not a yaw rate).
+    fn check_model(&mut self, sign: Sign) {
+        let model = self
+            .model
+            .unwrap_or(Model::default_for(self.protocol.unwrap_or(Protocol::V2)));
+        if model.may_send(sign) {
+            return;
+        }
+        let models: Vec<&str> = Model::ALL.iter().map(|model| model.name()).collect();
+        self.set_mismatch(Mismatch {
+            reason: format!("not a {model}: it sends {}", sign.short()),
+            detail: format!(
+                "the chassis sends {}, which a {model} does not: it looks like {}. The gateway \
+                 drives the SCOUT models only ({}): driven with a SCOUT's command, another \
+                 chassis moves otherwise than its clients ask. Nothing it sends is used and \
+                 nothing is driven until the port reopens: check which chassis is on this \
+                 port, and --model (docs/chassis.md)",
+                sign.short(),
+                sign.suggests(),
+                models.join(", ")
+            ),
+        });
+    }
+
     fn set_mismatch(&mut self, mismatch: Mismatch) {
         if self.mismatch.is_none() {
             error!("{}", mismatch.detail);
@@ -457,6 +486,9 @@ impl StateTracker {
             RxEvent::Rejected(rejected) => {
                 if let Some(id) = rejected.can_id() {
                     self.detector.observe(id, now);
+                    if let Some(sign) = Sign::of_v2_id(id) {
+                        self.check_model(sign);
+                    }
                 }
                 if rejected.is_checksum() {
                     self.state.link.checksum_errors += 1;
@@ -552,6 +584,11 @@ impl StateTracker {
     fn handle_v2(&mut self, message: &MessageV2, now: Duration) -> Publish {
         if message.is_command() {
             return self.foreign_command(message.name(), message.can_id());
+        }
+        if let MessageV2::MotionState(motion) = message
+            && let Some(sign) = Sign::of_motion_state(motion)
+        {
+            self.check_model(sign);
         }
         let accept = self.accepts(Protocol::V2, message.can_id());
         if accept == Accept::Reject {
@@ -1026,6 +1063,75 @@ mod tests {
             tracker.state().odometry.distance > after.distance,
             "counts from the new reading"
         );
+    }
+
+    #[test]
+    fn feedback_no_scout_sends_stops_the_drive_and_says_what_chassis_it_looks_like() {
+        let on_v2 = |model: Model| {
+            let chassis = ChassisPayload::new(model, model.limits().angular);
+            let mut tracker =
+                StateTracker::new("test", Transport::Can, "can0", Some(Protocol::V2), chassis);
+            tracker.handle_connected(Duration::ZERO, false);
+            tracker.handle_rx(&motion_v2(300, 100), ms(10));
+            tracker.poll(ms(20));
+            assert_eq!(
+                tracker.link_state(),
+                LinkState::Ok,
+                "{model}: a SCOUT's feedback"
+            );
+            tracker
+        };
+        let unknown = |id| RxEvent::Rejected(RxError::Can(can::CanError::UnknownId { id }));
+        let motion = |lateral_mm_s, steering_mrad| {
+            RxEvent::V2(MessageV2::MotionState(MotionV2 {
+                linear_mm_s: 300,
+                lateral_mm_s,
+                steering_mrad,
+                ..MotionV2::default()
+            }))
+        };
+        for model in Model::ALL {
+            for (event, sign) in [
+                (unknown(0x271), Sign::SteeringAngles),
+                (unknown(0x291), Sign::MotionMode),
+                (motion(0, 200), Sign::Steering),
+                (motion(-150, 0), Sign::Lateral),
+            ] {
+                let mut tracker = on_v2(model);
+                tracker.handle_rx(&event, ms(30));
+                tracker.poll(ms(40));
+                if model.may_send(sign) {
+                    assert_eq!(tracker.link_state(), LinkState::Ok, "{model} {sign:?}");
+                    assert!(tracker.mismatch().is_none());
+                    continue;
+                }
+                assert_eq!(
+                    tracker.link_state(),
+                    LinkState::ProtocolMismatch,
+                    "{model} {sign:?}"
+                );
+                let why = tracker.mismatch().expect("said").clone();
+                assert!(
+                    why.reason.len() <= 64
+                        && why.reason.contains(model.name())
+                        && why.reason.contains(sign.short()),
+                    "{why:?}"
+                );
+                assert!(why.detail.contains(sign.suggests()), "{why:?}");
+                // Nothing it sends is used until the port reopens; then it is judged again.
+                let used = tracker.state().link.rx_frames;
+                assert_eq!(tracker.handle_rx(&motion_v2(300, 0), ms(50)), Publish::No);
+                assert_eq!(tracker.state().link.rx_frames, used);
+                tracker.handle_connected(ms(60), false);
+                assert!(tracker.mismatch().is_none(), "a new port");
+                tracker.handle_rx(&event, ms(70));
+                tracker.poll(ms(80));
+                assert_eq!(tracker.link_state(), LinkState::ProtocolMismatch);
+            }
+        }
+        // Only the OMNI moves sideways; nothing of the SCOUT family steers.
+        assert!(Model::ScoutMiniOmni.may_send(Sign::Lateral));
+        assert!(!Model::ScoutMiniOmni.may_send(Sign::Steering));
     }
 
     #[test]

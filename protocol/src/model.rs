@@ -143,6 +143,80 @@ impl Model {
     }
 }
 
+listed! {
+/// Feedback no SCOUT sends: what a v2 chassis' frames say about its model. The ids are the
+/// vendor SDK's (westonrobot/ugv_sdk `agilex_protocol_v2.h`: 0x271 `CAN_MSG_MOTOR_ANGLE_INFO`,
+/// 0x291 `CAN_MSG_CURRENT_CTRL_MODE`; 0x221's third and fourth fields, lateral speed and
+/// steering angle, `MotionStateFrame`), checked against that source, not against a chassis.
+/// What a sign does not catch: a Tracer or a Bunker sends what a SCOUT sends, and a Hunter
+/// whose wheels point straight ahead reports a steering angle of zero.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Sign {
+    /// 0x271: the angles of steered wheels.
+    SteeringAngles,
+    /// 0x291: a motion mode (dual Ackermann, parallel, spin...).
+    MotionMode,
+    /// 0x221 with a steering angle other than zero.
+    Steering,
+    /// 0x221 with a sideways speed other than zero.
+    Lateral,
+}
+}
+
+impl Sign {
+    /// What a frame with v2 id `id` says by its id alone.
+    pub const fn of_v2_id(id: u16) -> Option<Self> {
+        match id {
+            crate::v2::id::MOTOR_ANGLES => Some(Self::SteeringAngles),
+            crate::v2::id::MOTION_MODE_STATE => Some(Self::MotionMode),
+            _ => None,
+        }
+    }
+
+    /// What a v2 motion state (0x221) says.
+    pub const fn of_motion_state(motion: &crate::v2::MotionV2) -> Option<Self> {
+        if motion.steering_mrad != 0 {
+            Some(Self::Steering)
+        } else if motion.lateral_mm_s != 0 {
+            Some(Self::Lateral)
+        } else {
+            None
+        }
+    }
+
+    /// What the chassis sends, in a few words (for a stop's reason).
+    pub const fn short(self) -> &'static str {
+        match self {
+            Self::SteeringAngles => "steering angles (0x271)",
+            Self::MotionMode => "a motion mode (0x291)",
+            Self::Steering => "a steering angle (0x221)",
+            Self::Lateral => "a sideways speed (0x221)",
+        }
+    }
+
+    /// The models that send it, as a person would name them.
+    pub const fn suggests(self) -> &'static str {
+        match self {
+            Self::SteeringAngles | Self::Steering => {
+                "a chassis with steered wheels (a Hunter or a Ranger Mini)"
+            }
+            Self::MotionMode => "a Ranger Mini (four-wheel steering with motion modes)",
+            Self::Lateral => "a SCOUT MINI OMNI or a Ranger Mini (it moves sideways)",
+        }
+    }
+}
+
+impl Model {
+    /// Whether a chassis of this model may send what `sign` says: the OMNI moves sideways;
+    /// no SCOUT steers its wheels or has motion modes.
+    pub const fn may_send(self, sign: Sign) -> bool {
+        match (self, sign) {
+            (Self::ScoutMiniOmni, Sign::Lateral) => true,
+            (Self::Scout | Self::Scout2 | Self::ScoutMini | Self::ScoutMiniOmni, _) => false,
+        }
+    }
+}
+
 /// A name that is no model's ([`Model::parse`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct UnknownModel;

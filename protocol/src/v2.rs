@@ -44,6 +44,14 @@ pub mod id {
     pub const ACTUATOR_LOW: u16 = 0x261;
     /// Wheel odometers, chassis to host.
     pub const ODOMETER: u16 = 0x311;
+    /// Steering motors' angles, chassis to host: a chassis with steered wheels (ugv_sdk
+    /// `CAN_MSG_MOTOR_ANGLE_INFO`). Not decoded: this project drives no such chassis yet.
+    pub const MOTOR_ANGLES: u16 = 0x271;
+    /// Wheel motors' speeds of a steered chassis (ugv_sdk `CAN_MSG_MOTOR_SPEED_INFO`).
+    pub const MOTOR_SPEEDS: u16 = 0x281;
+    /// The motion mode and whether it is changing, chassis to host: a Ranger (ugv_sdk
+    /// `CAN_MSG_CURRENT_CTRL_MODE`, parsed as `AgxMsgMotionModeState`).
+    pub const MOTION_MODE_STATE: u16 = 0x291;
     /// Version reply, older binary form.
     pub const VERSION_BINARY: u16 = 0x41A;
     /// Smart battery (BMS): charge, health, voltage, current, temperature.
