@@ -295,6 +295,12 @@ impl Simulator<'_> {
                 self.write_bytes(&bytes)?;
                 info!("wrote {count} garbage bytes");
             }
+            SimCommand::Frame(frame) => {
+                let mut bytes = Vec::new();
+                self.put_frame(&frame, None, &mut bytes);
+                self.write_bytes(&bytes)?;
+                info!("sent frame 0x{:03X} {:02X?}", frame.id(), frame.data());
+            }
             SimCommand::Corrupt(count) => {
                 self.corrupt_remaining = count;
                 info!("corrupting the checksum of the next {count} feedback frames");

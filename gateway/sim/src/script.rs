@@ -3,6 +3,7 @@
 use std::time::Duration;
 
 use scout_protocol::Motor;
+use scout_protocol::can::CanFrame;
 
 use crate::chassis::{Injection, MotorValue, Protection, Warning};
 
@@ -21,6 +22,8 @@ commands (one a line; # starts a comment):
   motor N current|rpm|driver-temp|motor-temp VALUE   pin a motor value
   motor N auto                 unpin motor N's values
   garbage N                    write N random bytes onto the link
+  frame ID HEX                 send one CAN frame (ID and up to 8 bytes in hex, e.g.
+                               `frame 291 0100000000000000`): another node, another model
   corrupt N                    send the next N feedback frames with a bad checksum
   silence MS                   send nothing for MS milliseconds
   unplug MS                    close the port, come back after MS milliseconds
@@ -35,6 +38,8 @@ pub enum SimCommand {
     Inject(Injection),
     /// Write this many random bytes onto the link.
     Garbage(usize),
+    /// Send this frame once, as it is (another node on the bus, another model's feedback).
+    Frame(CanFrame),
     /// Corrupt the checksum of the next this many feedback frames.
     Corrupt(u32),
     /// Send nothing for this long.
@@ -83,6 +88,9 @@ pub enum Reason {
     /// Not a finite number.
     #[error("expected a number, found `{0}`")]
     Number(String),
+    /// Not a CAN frame.
+    #[error("expected a CAN id (hex, up to 7FF) and up to 8 bytes in hex, found `{0}`")]
+    Frame(String),
 }
 
 /// Parses one line; `Ok(None)` for blank lines and comments.
@@ -127,6 +135,7 @@ fn parse_words(words: &[&str]) -> Result<SimCommand, Reason> {
             Inject(Injection::PinMotor(motor(n)?, field, finite(value)?))
         }
         ["garbage", n] => Garbage(number(n)?),
+        ["frame", id, data] => Frame(frame(id, data)?),
         ["corrupt", n] => Corrupt(number(n)?),
         ["silence", ms] => Silence(millis(ms)?),
         ["unplug", ms] => Unplug(millis(ms)?),
@@ -165,6 +174,20 @@ fn finite(word: &str) -> Result<f64, Reason> {
     }
 }
 
+fn frame(id: &str, data: &str) -> Result<CanFrame, Reason> {
+    let bad = || Reason::Frame(format!("{id} {data}"));
+    let id = u16::from_str_radix(id, 16).map_err(|_| bad())?;
+    if data.len() % 2 != 0 || !data.is_ascii() {
+        return Err(bad());
+    }
+    let bytes = (0..data.len())
+        .step_by(2)
+        .map(|at| u8::from_str_radix(&data[at..at + 2], 16))
+        .collect::<Result<Vec<u8>, _>>()
+        .map_err(|_| bad())?;
+    CanFrame::new(id, &bytes).ok_or_else(bad)
+}
+
 fn millis(word: &str) -> Result<Duration, Reason> {
     number(word).map(Duration::from_millis)
 }
@@ -180,6 +203,10 @@ mod tests {
             ("estop on", SimCommand::Inject(Injection::EStop(true))),
             ("rc off", SimCommand::Inject(Injection::Rc(false))),
             ("standby", SimCommand::Inject(Injection::Standby)),
+            (
+                "frame 291 0100",
+                SimCommand::Frame(CanFrame::new(0x291, &[1, 0]).expect("a frame")),
+            ),
             (
                 "protect overtemp",
                 SimCommand::Inject(Injection::Protect(Protection::DriverOvertemp)),
@@ -235,6 +262,20 @@ mod tests {
                 .to_string()
                 .contains("motor must be 1..4")
         );
+        for bad in [
+            "frame 800 00",
+            "frame 291 0",
+            "frame 291 zz",
+            "frame 291 000000000000000000",
+        ] {
+            assert!(
+                parse(bad)
+                    .expect_err(bad)
+                    .to_string()
+                    .contains("expected a CAN id"),
+                "{bad}"
+            );
+        }
         assert!(
             parse("fly away")
                 .expect_err("unknown")
