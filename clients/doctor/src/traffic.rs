@@ -7,6 +7,7 @@ use std::time::Duration;
 
 use scout_protocol::Severity;
 use scout_protocol::link::RxEvent;
+use scout_protocol::model::{Model, Sign};
 use scout_protocol::v2::{ControlModeV2, MessageV2, RcStateV2, SwitchPosition, SystemStateV2};
 use scout_protocol::version::{Detection, Protocol, ProtocolDetector, protocol_of_feedback_id};
 use scout_protocol::{ChassisState, ControlMode, Direction, Message, SystemStatus, Transport};
@@ -41,6 +42,8 @@ pub struct Traffic {
     pub last_system_v2: Option<SystemStateV2>,
     /// The last v2 RC state (0x241).
     pub last_rc_v2: Option<RcStateV2>,
+    /// What the frames said of the chassis' model that no SCOUT sends, each once, in order.
+    pub signs: Vec<Sign>,
     version: ProtocolDetector,
 }
 
@@ -74,6 +77,7 @@ impl Traffic {
                 match message {
                     MessageV2::SystemState(state) => self.last_system_v2 = Some(*state),
                     MessageV2::RcState(rc) => self.last_rc_v2 = Some(*rc),
+                    MessageV2::MotionState(motion) => self.sign(Sign::of_motion_state(motion)),
                     _ => {}
                 }
             }
@@ -81,6 +85,7 @@ impl Traffic {
                 if let Some(id) = error.can_id() {
                     self.version.observe(id, now);
                     *self.rejected_ids.entry(id).or_default() += 1;
+                    self.sign(Sign::of_v2_id(id));
                 }
                 if error.is_checksum() {
                     self.checksum_errors += 1;
@@ -92,6 +97,53 @@ impl Traffic {
             }
             RxEvent::Slcan(_) => {}
         }
+    }
+
+    fn sign(&mut self, sign: Option<Sign>) {
+        if let Some(sign) = sign
+            && !self.signs.contains(&sign)
+        {
+            self.signs.push(sign);
+        }
+    }
+
+    /// Which model the frames suggest: a SCOUT's (or a chassis that sends the same), or another
+    /// the gateway refuses to drive as a SCOUT.
+    fn model_check(&self) -> Check {
+        let Some(first) = self.signs.first() else {
+            return Check::pass(
+                "model",
+                "nothing a SCOUT does not send (a Tracer or a Bunker sends the same)",
+            );
+        };
+        let sent: Vec<&str> = self.signs.iter().map(|sign| sign.short()).collect();
+        let detail = format!(
+            "the chassis sends {}: it looks like {}",
+            sent.join(", "),
+            first.suggests()
+        );
+        if self
+            .signs
+            .iter()
+            .all(|sign| Model::ScoutMiniOmni.may_send(*sign))
+        {
+            return Check::warn(
+                "model",
+                detail,
+                "if it is a SCOUT MINI OMNI, start the gateway with --model scout-mini-omni: as \
+                 another model it refuses to drive it",
+            );
+        }
+        let models: Vec<&str> = Model::ALL.iter().map(|model| model.name()).collect();
+        Check::fail(
+            "model",
+            detail,
+            format!(
+                "the gateway drives the SCOUT models only ({}) and refuses to drive this chassis: \
+                 driven with a SCOUT's command it would move otherwise than asked (docs/chassis.md)",
+                models.join(", ")
+            ),
+        )
     }
 
     fn valid_frames(&self) -> u64 {
@@ -123,6 +175,7 @@ impl Traffic {
         let mut checks = vec![
             self.traffic_check(transport, window, &v2_ids),
             self.protocol_check(now, &v2_ids),
+            self.model_check(),
             self.errors_check(),
             self.other_host_check(),
         ];
@@ -566,6 +619,50 @@ mod tests {
         assert_eq!(protocol.verdict, Verdict::Pass);
         assert!(protocol.detail.contains("0x211"), "{protocol:?}");
         assert!(protocol.detail.contains("--protocol v2"), "{protocol:?}");
+    }
+
+    #[test]
+    fn a_chassis_that_steers_or_moves_sideways_is_named() {
+        let find = |traffic: &Traffic| {
+            let checks = traffic.checks(Transport::Can, WINDOW, WINDOW);
+            checks
+                .into_iter()
+                .find(|c| c.name == "model")
+                .expect("model")
+        };
+        let motion = |lateral_mm_s, steering_mrad| {
+            RxEvent::V2(MessageV2::MotionState(scout_protocol::v2::MotionV2 {
+                lateral_mm_s,
+                steering_mrad,
+                ..Default::default()
+            }))
+        };
+        let mut traffic = Traffic::new();
+        traffic.handle(&motion(0, 0), Duration::ZERO);
+        assert_eq!(find(&traffic).verdict, Verdict::Pass);
+        // Sideways: an OMNI, or a Ranger.
+        traffic.handle(&motion(120, 0), 20 * MS);
+        let check = find(&traffic);
+        assert_eq!(check.verdict, Verdict::Warn, "{check:?}");
+        assert!(
+            check
+                .fix
+                .as_deref()
+                .is_some_and(|fix| fix.contains("--model scout-mini-omni")),
+            "{check:?}"
+        );
+        // A motion mode: a Ranger, which the gateway refuses to drive.
+        let error = RxError::Can(scout_protocol::can::CanError::UnknownId { id: 0x291 });
+        traffic.handle(&RxEvent::Rejected(error), 40 * MS);
+        traffic.handle(&RxEvent::Rejected(error), 60 * MS);
+        let check = find(&traffic);
+        assert_eq!(check.verdict, Verdict::Fail, "{check:?}");
+        assert!(
+            check
+                .detail
+                .contains("a sideways speed (0x221), a motion mode (0x291)"),
+            "{check:?}"
+        );
     }
 
     #[test]

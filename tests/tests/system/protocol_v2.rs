@@ -216,3 +216,38 @@ fn a_gateway_told_v1_names_a_v2_chassis_and_moves_nothing() {
     assert_eq!(stats["actual"]["linear"], 0.0, "{stats}");
     assert_eq!(stats["control_mode"], "standby", "no 0x421: {stats}");
 }
+
+#[test]
+fn a_chassis_that_reports_a_rangers_motion_mode_is_not_driven_as_a_scout() {
+    let name = robot_name("v2-ranger");
+    let mut sim = Sim::start(&["--slcan", "--protocol", "v2", "--model", "scout2"]);
+    let device = sim.port().to_owned();
+    let gateway = Gateway::start(&["--slcan", &device, "--name", &name]);
+    let robot = connect(&name);
+    let states = robot.subscribe().expect("subscribe");
+    let driver = drive_until_moving(
+        &mut sim,
+        &name,
+        &["--linear", "0.5", "--duration", "30"],
+        Duration::from_secs(5),
+    );
+    // The feedback of a Ranger Mini arrives (0x291: parallel mode, not changing).
+    sim.send("frame 291 0100000000000000");
+    let state = wait_for_state(&states, Duration::from_secs(5), |s| {
+        s["link"]["state"] == "protocol_mismatch"
+    });
+    let status = robot.status().expect("status");
+    let status = wait_for_status(&status, Duration::from_secs(5), |s| {
+        s["stops"].as_array().is_some_and(|stops| !stops.is_empty())
+    });
+    let reason = status["stops"][0]["reason"].as_str().unwrap_or_default();
+    assert!(
+        reason.contains("not a scout2") && reason.contains("0x291"),
+        "{status}\n{state}"
+    );
+    comes_to_rest(&mut sim, Duration::from_secs(2));
+    // The client streaming on moves nothing; the log says what the chassis looks like.
+    chassis_stays_still(&mut sim, Duration::from_secs(1));
+    assert!(gateway.log().contains("a Ranger Mini"), "{}", gateway.log());
+    drop(driver);
+}
