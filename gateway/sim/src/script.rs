@@ -177,7 +177,7 @@ fn finite(word: &str) -> Result<f64, Reason> {
 fn frame(id: &str, data: &str) -> Result<CanFrame, Reason> {
     let bad = || Reason::Frame(format!("{id} {data}"));
     let id = u16::from_str_radix(id, 16).map_err(|_| bad())?;
-    if data.len() % 2 != 0 || !data.is_ascii() {
+    if !data.len().is_multiple_of(2) || !data.is_ascii() {
         return Err(bad());
     }
     let bytes = (0..data.len())
