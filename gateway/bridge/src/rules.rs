@@ -773,6 +773,21 @@ mod tests {
     }
 
     #[test]
+    fn a_take_control_held_up_on_its_way_does_not_lock_out_the_drives_after_it() {
+        let mut rules = teleop();
+        // The take-control arrives 600 ms after it was sent (a stall); its drives on time.
+        take(&mut rules, 1600 * MS, "op", 1000);
+        for seq in 1..=5u64 {
+            let now = Duration::from_millis(1600 + seq * 20);
+            let send = drive(&mut rules, now, "op", seq, 1600 + seq * 20)
+                .expect("the session's first drive starts the clock anew");
+            assert_eq!(send.via, Via::Control { sent: now });
+        }
+        // Later in the session a stamp from the future is refused as before.
+        drive(&mut rules, 1720 * MS, "op", 6, 2500).expect_err("ahead");
+    }
+
+    #[test]
     fn peers_that_hold_nothing_never_push_out_one_that_drives() {
         let mut rules = teleop();
         take(&mut rules, 1000 * MS, "op", 0);

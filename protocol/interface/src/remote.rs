@@ -208,7 +208,10 @@ impl SenderTiming {
     /// one, or leaping past it by more than [`MAX_SEQ_LEAP`] plus one a [`MIN_SEQ_PERIOD`]; a
     /// stamp from the future ([`AHEAD_TOLERANCE`]); a command older than `life`. A
     /// take-control from the future is no error: it starts the clock anew (the sender's
-    /// clock jumped: a reboot, another machine). Nothing is learned here.
+    /// clock jumped: a reboot, another machine). Nor is the first drive of a control session:
+    /// a take-control held up on its way (a stalled link or host) taught a delay its drives do
+    /// not have, and would refuse every one until control was taken again. Nothing is learned
+    /// here.
     pub fn check(
         &self,
         now: Duration,
@@ -233,7 +236,7 @@ impl SenderTiming {
         }
         let (late, clock) = match self.clock.age(now, sent_ms) {
             Ok(aged) => aged,
-            Err(_) if seq.is_none() => SenderClock::default()
+            Err(_) if seq.is_none() || self.last.is_none() => SenderClock::default()
                 .age(now, sent_ms)
                 .unwrap_or((Duration::ZERO, SenderClock::default())),
             Err(ahead) => {
@@ -1069,7 +1072,9 @@ mod tests {
                             let since = ((now - at).as_millis() / MIN_SEQ_PERIOD.as_millis()) as u64;
                             proptest::prop_assert!(seq <= last_seq + MAX_SEQ_LEAP + since);
                         }
-                        if let (Some(_), Some(fastest)) = (seq, fastest) {
+                        // Within a control session: its first drive, like a take-control,
+                        // may start the clock anew.
+                        if let (Some(_), Some(fastest), Some(_)) = (seq, fastest, last) {
                             proptest::prop_assert!(delay + AHEAD_TOLERANCE.as_millis() as i128 + 1 >= fastest, "learned a stamp from the future");
                         }
                         timing.accept(checked);
