@@ -476,16 +476,19 @@ fn through_wireguard_only_a_listed_key_with_the_users_password_drives() {
     let args = drive(&alice);
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
     let child = scout_in(None, &args);
-    scout_system_tests::try_wait_for_state(&state, LIMIT, |s| {
+    if let Err(last) = scout_system_tests::try_wait_for_state(&state, LIMIT, |s| {
         s["command"]["linear"].as_f64() > Some(0.0)
-    })
-    .unwrap_or_else(|last| {
+    }) {
+        let output = scout_system_tests::wait_output(child, LIMIT);
         panic!(
             "alice's drive through the tunnel never reached the chassis (last state {last}); \
-             the gateway's log:\n{}",
+             scout drive: {:?}: {}{}; the gateway's log:\n{}",
+            output.status.code(),
+            String::from_utf8_lossy(&output.stdout),
+            String::from_utf8_lossy(&output.stderr),
             gateway.log()
         )
-    });
+    }
     // Her drive ends by itself (0), or with its control ended (4) when the emulated CPU stalls
     // a process past the teleop's age; never unanswered.
     let output = scout_system_tests::wait_output(child, LIMIT);
