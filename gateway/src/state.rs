@@ -11,7 +11,7 @@ use scout_interface::state::{
 use scout_interface::{FixedText, Transport};
 use scout_protocol::kinematics::{Pose, wrap_angle};
 use scout_protocol::link::RxEvent;
-use scout_protocol::model::{Model, Sign};
+use scout_protocol::model::{Model, Names, Sign};
 use scout_protocol::sequence::{Continuity, SequenceTracker};
 use scout_protocol::slcan::Slcan;
 use scout_protocol::v2::MessageV2;
@@ -413,18 +413,16 @@ impl StateTracker {
         if model.may_send(sign) {
             return;
         }
-        let models: Vec<&str> = Model::ALL.iter().map(|model| model.name()).collect();
         self.set_mismatch(Mismatch {
             reason: format!("not a {model}: it sends {}", sign.short()),
             detail: format!(
                 "the chassis sends {}, which a {model} does not: it looks like {}. The gateway \
-                 drives the SCOUT models only ({}): driven with a SCOUT's command, another \
+                 drives the SCOUT models only ({Names}): driven with a SCOUT's command, another \
                  chassis moves otherwise than its clients ask. Nothing it sends is used and \
                  nothing is driven until the port reopens: check which chassis is on this \
                  port, and --model (docs/chassis.md)",
                 sign.short(),
                 sign.suggests(),
-                models.join(", ")
             ),
         });
     }

@@ -223,9 +223,18 @@ pub struct UnknownModel;
 
 impl core::fmt::Display for UnknownModel {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        f.write_str("not a model: give one of")?;
+        write!(f, "not a model: give one of {Names}")
+    }
+}
+
+/// Every model's name, comma-separated, for messages (written, nothing allocated).
+#[derive(Debug, Clone, Copy)]
+pub struct Names;
+
+impl core::fmt::Display for Names {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         for (i, model) in Model::ALL.into_iter().enumerate() {
-            f.write_str(if i == 0 { " " } else { ", " })?;
+            f.write_str(if i == 0 { "" } else { ", " })?;
             f.write_str(model.name())?;
         }
         Ok(())

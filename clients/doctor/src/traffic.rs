@@ -7,7 +7,7 @@ use std::time::Duration;
 
 use scout_protocol::Severity;
 use scout_protocol::link::RxEvent;
-use scout_protocol::model::{Model, Sign};
+use scout_protocol::model::{Model, Names, Sign};
 use scout_protocol::v2::{ControlModeV2, MessageV2, RcStateV2, SwitchPosition, SystemStateV2};
 use scout_protocol::version::{Detection, Protocol, ProtocolDetector, protocol_of_feedback_id};
 use scout_protocol::{ChassisState, ControlMode, Direction, Message, SystemStatus, Transport};
@@ -134,14 +134,13 @@ impl Traffic {
                  another model it refuses to drive it",
             );
         }
-        let models: Vec<&str> = Model::ALL.iter().map(|model| model.name()).collect();
         Check::fail(
             "model",
             detail,
             format!(
-                "the gateway drives the SCOUT models only ({}) and refuses to drive this chassis: \
-                 driven with a SCOUT's command it would move otherwise than asked (docs/chassis.md)",
-                models.join(", ")
+                "the gateway drives the SCOUT models only ({Names}) and refuses to drive this \
+                 chassis: driven with a SCOUT's command it would move otherwise than asked \
+                 (docs/chassis.md)"
             ),
         )
     }
