@@ -252,9 +252,14 @@ impl RemoteController {
     }
 
     /// Latches a stop owned by this peer: put as best-effort copies and queried, so that it
-    /// latches from whichever arrives first (once). Returns the query's answer.
+    /// latches from whichever arrives first, once (the copies carry the same `seq` and
+    /// `sent_ms`, and the gateway answers a later one as the stop the first latched). Returns
+    /// the query's answer.
     pub fn stop(&mut self, reason: &str) -> Result<RemoteAnswer, RemoteError> {
+        self.seq += 1;
         let command = RemoteCommand {
+            seq: Some(self.seq),
+            sent_ms: Some(now_ms()),
             reason: Some(reason.to_owned()),
             ..RemoteCommand::default()
         };

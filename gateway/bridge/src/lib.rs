@@ -27,8 +27,10 @@ use zenoh::bytes::Encoding;
 use zenoh::qos::CongestionControl;
 use zenoh::query::Query;
 
+mod estops;
 mod rules;
 
+use estops::EstopCopies;
 use rules::{Rules, Via};
 
 /// Counts of what remote peers sent.
@@ -53,8 +55,11 @@ struct Counters {
     info_queries: u64,
     /// Queries dropped unanswered because the query thread was [`MAX_QUEUED_QUERIES`] behind.
     queries_dropped: u64,
-    /// Of the commands, remote e-stops latched.
+    /// Of the commands, remote e-stops latched (or answered as copies of one that had).
     estops_accepted: u64,
+    /// Of those, copies of an e-stop already latched (the same `seq` and `sent_ms` from the
+    /// same peer): answered as that stop, not latched again.
+    estops_copies: u64,
     /// Remote e-stops refused (not allowed, or a key that names no peer).
     estops_rejected: u64,
     /// Remote e-stops answered `disabled`.
@@ -571,6 +576,7 @@ struct Dropped {
 #[derive(Debug, Default)]
 struct EstopCounters {
     accepted: std::sync::atomic::AtomicU64,
+    copies: std::sync::atomic::AtomicU64,
     rejected: std::sync::atomic::AtomicU64,
     disabled: std::sync::atomic::AtomicU64,
 }
@@ -588,6 +594,7 @@ impl EstopCounters {
             commands_rejected: counters.commands_rejected + rejected,
             commands_ignored_disabled: counters.commands_ignored_disabled + disabled,
             estops_accepted: accepted,
+            estops_copies: self.copies.load(Ordering::Relaxed),
             estops_rejected: rejected,
             estops_ignored_disabled: disabled,
             ..counters
@@ -596,8 +603,9 @@ impl EstopCounters {
 }
 
 /// The e-stop lane: every remote e-stop, answered in arrival order, latched through the
-/// bridge's own stop port as the stop of `remote:PEER`. Per query: the permission check and one
-/// stop request, nothing allocated per peer.
+/// bridge's own stop port as the stop of `remote:PEER` (a copy of one that latched is answered
+/// as that stop: [`EstopCopies`]). Per query: the permission check and at most one stop
+/// request; what is kept of e-stops is bounded.
 fn serve_estops(
     robot_name: &RobotName,
     config: &ZenohConfig,
@@ -609,6 +617,7 @@ fn serve_estops(
         .map_err(|e| anyhow::anyhow!("creating the bridge's iceoryx2 node: {e}"))?;
     let mut port = ControlPort::open(&node, robot_name, Way::Stop, REMOTE_PREFIX)
         .map_err(|e| anyhow::anyhow!("opening the bridge's stop port: {e}"))?;
+    let mut copies = EstopCopies::default();
     while !halt() {
         let Ok(item) = estops.recv_timeout(Duration::from_millis(100)) else {
             continue;
@@ -627,9 +636,13 @@ fn serve_estops(
             counters.disabled.fetch_add(1, Ordering::Relaxed);
             RemoteAnswer::rejected(DISABLED)
         } else {
-            match estop(config, &mut port, key, payload.as_deref()) {
-                Ok(accepted) => {
+            let now = services::monotonic();
+            match estop(config, &mut port, &mut copies, now, key, payload.as_deref()) {
+                Ok((accepted, copy)) => {
                     counters.accepted.fetch_add(1, Ordering::Relaxed);
+                    if copy {
+                        counters.copies.fetch_add(1, Ordering::Relaxed);
+                    }
                     RemoteAnswer::accepted(&accepted)
                 }
                 Err(reason) => {
@@ -657,25 +670,35 @@ enum Estop {
 }
 
 /// One remote e-stop: never refused for its payload (a missing, oversized or malformed one
-/// only loses its reason); it needs the permission and the stop service, nothing else.
+/// only loses its reason, and its name as an act); it needs the permission and the stop
+/// service, nothing else. Returns the answer and whether it was a copy of one that latched.
 fn estop(
     config: &ZenohConfig,
     port: &mut ControlPort,
+    copies: &mut EstopCopies,
+    now: Duration,
     key: &str,
     payload: Option<&[u8]>,
-) -> Result<Accepted, CommandError> {
+) -> Result<(Accepted, bool), CommandError> {
     rules::allowed(&config.remote_commands, Permission::Estop)?;
     let (_, peer) = remote::parse_command_key(key)?;
-    let reason = payload
+    let json = payload
         .filter(|payload| payload.len() <= MAX_COMMAND_BYTES)
-        .and_then(|payload| serde_json::from_slice::<Value>(payload).ok())
-        .and_then(|json| {
-            json.get("reason")
-                .and_then(Value::as_str)
-                .map(str::to_owned)
-        })
-        .unwrap_or_else(|| "remote estop".into());
-    Ok(port.request_for_peer(&Request::Stop { reason }, &peer_client_name(peer))?)
+        .and_then(|payload| serde_json::from_slice::<Value>(payload).ok());
+    let field = |name: &str| json.as_ref().and_then(|json| json.get(name));
+    let reason = field("reason")
+        .and_then(Value::as_str)
+        .map_or_else(|| "remote estop".into(), str::to_owned);
+    let act = field("seq")
+        .and_then(Value::as_u64)
+        .zip(field("sent_ms").and_then(Value::as_u64));
+    let client = peer_client_name(peer);
+    if let Some(accepted) = copies.copy_of(now, &client, act) {
+        return Ok((accepted, true));
+    }
+    let accepted = port.request_for_peer(&Request::Stop { reason }, &client)?;
+    copies.handle_latched(now, &client, act, &accepted);
+    Ok((accepted, false))
 }
 
 const DISABLED: &str =

@@ -472,10 +472,12 @@ wire_enum! {
 #[serde(default, deny_unknown_fields)]
 pub struct RemoteCommand {
     /// drive: the peer's own command number, rising by at least one per command (a repeated
-    /// or older number is refused: duplicated or reordered).
+    /// or older number is refused: duplicated or reordered). estop: with `sent_ms`, names the
+    /// e-stop: its copies (the same numbers) latch it once.
     pub seq: Option<u64>,
     /// drive: the peer's clock when it sent the command, ms (any epoch; the bridge learns the
     /// offset, and a command held up by the network for longer than its life is refused).
+    /// estop: with `seq`, names the e-stop (never checked for age: a stop is never refused).
     pub sent_ms: Option<u64>,
     /// take-control: `teleop` or `autonomy`.
     pub class: Option<String>,

@@ -325,15 +325,20 @@ fn run(
     // E-stops through the same loss: put and queried on the fast lane, queried on the old.
     let estop_key = format!("scout/{name}/cmd/estop/operator");
 
-    for _ in 0..ESTOPS {
+    for act in 0..ESTOPS {
         // The statuses so far are not this stop's.
         while status.try_next().expect("status").is_some() {}
         let asked = Instant::now();
         let asked_ns = scout_clients::monotonic_ns();
+        // Named as `RemoteController::stop` names it: its copies latch it once.
+        let estop = format!(
+            r#"{{"reason":"bench","seq":{act},"sent_ms":{}}}"#,
+            asked_ns / 1_000_000
+        );
         if matches!(path, Path::Put | Path::PutOnly) {
             // As `RemoteController::stop` does: copies put in full (no declared publisher).
             for _ in 0..3 {
-                let _ = (session.put(&estop_key, r#"{"reason":"bench"}"#))
+                let _ = (session.put(&estop_key, &estop))
                     .congestion_control(zenoh::qos::CongestionControl::Drop)
                     .reliability(zenoh::qos::Reliability::BestEffort)
                     .express(true)
@@ -342,7 +347,7 @@ fn run(
         }
         let answer = session
             .get(&estop_key)
-            .payload(r#"{"reason":"bench"}"#)
+            .payload(&estop)
             .timeout(LIMIT)
             .wait()
             .expect("e-stop query");

@@ -525,18 +525,29 @@ fn drives_put_on_the_fast_lane(endpoint: &str) {
         .expect("put");
     counters_when(&session, &name, |c| c["puts_ignored"] == 1);
     assert_eq!(wait_for_status(&status, LIMIT, |_| true)["latched"], false);
-    // But an e-stop goes on both lanes: put and queried, it latches once, as the peer's.
+    // But an e-stop goes on both lanes: put and queried, it latches once, as the peer's. Named
+    // (`seq` and `sent_ms`), whichever copy arrives second is answered as the stop the first
+    // latched: a release decided on that answer releases it.
+    let newest = |status: &serde_json::Value| status["newest_stop"].as_u64().unwrap_or(0);
+    let before = newest(&wait_for_status(&status, LIMIT, |_| true));
     let estop_key = format!("scout/{name}/cmd/estop/laptop");
-    let reason = r#"{"reason":"both lanes"}"#;
-    session.put(&estop_key, reason).wait().expect("put");
-    let answered = zenoh_query(&session, &estop_key, Some(reason), QUERY);
+    let estop = r#"{"reason":"both lanes","seq":900,"sent_ms":5}"#;
+    session.put(&estop_key, estop).wait().expect("put");
+    let answered = zenoh_query(&session, &estop_key, Some(estop), QUERY);
     assert_eq!(answered[0]["accepted"], true, "{answered:?}");
-    counters_when(&session, &name, |c| c["estops_accepted"] == 2);
+    let counted = counters_when(&session, &name, |c| c["estops_accepted"] == 2);
+    assert_eq!(counted["estops_copies"], 1, "{counted}");
     let latched = wait_for_status(&status, LIMIT, |s| s["latched"] == true);
     let stops = latched["stops"].as_array().expect("stops");
     assert_eq!(stops.len(), 1, "{latched}");
     assert_eq!(stops[0]["owner"], "remote:laptop");
     assert_eq!(stops[0]["reason"], "both lanes");
+    assert_eq!(newest(&latched), before + 1, "latched once: {latched}");
+    assert_eq!(answered[0]["stop"], before + 1, "{answered:?}");
+    // Another e-stop of the same peer (another number) latches again, a new id.
+    let again = r#"{"reason":"both lanes","seq":901,"sent_ms":6}"#;
+    let answered = zenoh_query(&session, &estop_key, Some(again), QUERY);
+    assert_eq!(answered[0]["stop"], before + 2, "{answered:?}");
 }
 
 /// `scout drive --remote` drives on the fast lane (over plain UDP) and its
