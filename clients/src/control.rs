@@ -338,6 +338,19 @@ impl Controller {
         angular: f64,
         ttl: Option<Duration>,
     ) -> Result<Accepted, ControlError> {
+        self.drive_body(linear, 0.0, angular, ttl)
+    }
+
+    /// Drives at a body velocity (ROS conventions: `linear` m/s forward, `lateral` m/s
+    /// leftward, `angular` rad/s counter-clockwise) with a command that lives at most `ttl`.
+    /// A chassis that does not move sideways refuses a `lateral` other than zero, saying so.
+    pub fn drive_body(
+        &mut self,
+        linear: f64,
+        lateral: f64,
+        angular: f64,
+        ttl: Option<Duration>,
+    ) -> Result<Accepted, ControlError> {
         let Some(lease) = self.lease else {
             return Err(ControlError::Rejected(Rejected {
                 kind: Some(RejectionKind::NoControl),
@@ -347,6 +360,7 @@ impl Controller {
         self.request(&Request::Drive {
             lease,
             linear,
+            lateral,
             angular,
             ttl,
         })

@@ -200,11 +200,25 @@ impl RemoteController {
         angular: f64,
         ttl: Duration,
     ) -> Result<Option<RemoteAnswer>, RemoteError> {
+        self.drive_body(linear, 0.0, angular, ttl)
+    }
+
+    /// Drives at a body velocity (`linear` m/s forward, `lateral` m/s leftward, `angular`
+    /// rad/s) as [`RemoteController::drive`] does; a chassis that does not move sideways
+    /// refuses a `lateral` other than zero (a queried drive's answer says so).
+    pub fn drive_body(
+        &mut self,
+        linear: f64,
+        lateral: f64,
+        angular: f64,
+        ttl: Duration,
+    ) -> Result<Option<RemoteAnswer>, RemoteError> {
         self.seq += 1;
         let command = RemoteCommand {
             seq: Some(self.seq),
             sent_ms: Some(now_ms()),
             linear: Some(linear),
+            lateral: (lateral != 0.0).then_some(lateral),
             angular: Some(angular),
             ttl_ms: Some(u32::try_from(ttl.as_millis()).unwrap_or(u32::MAX)),
             ..RemoteCommand::default()

@@ -73,6 +73,30 @@ pub struct Caps {
     pub linear: f64,
     /// |angular| at most, rad/s.
     pub angular: f64,
+    /// |lateral| at most, m/s (`None`: the chassis' own; a chassis that does not move
+    /// sideways refuses any, whatever the caps say: [`Sideways`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lateral: Option<f64>,
+}
+
+/// Whether the chassis moves sideways: up to a speed, m/s, or not at all, and why not in the
+/// words a refused client reads ("a scout2 does not move sideways").
+#[derive(Debug, Clone, PartialEq)]
+pub enum Sideways {
+    /// Up to this speed either way, m/s.
+    UpTo(f64),
+    /// Not at all: a drive with a lateral speed is refused with this reason.
+    Not(String),
+}
+
+impl Sideways {
+    /// The fastest it goes sideways, m/s (0 when it does not).
+    pub fn limit(&self) -> f64 {
+        match self {
+            Self::UpTo(limit) => *limit,
+            Self::Not(_) => 0.0,
+        }
+    }
 }
 
 /// Rate limits, per second.
@@ -87,6 +111,21 @@ pub struct RateLimits {
     pub angular_acceleration: f64,
     /// Turning slower, rad/s².
     pub angular_deceleration: f64,
+    /// Speeding up sideways, m/s² (a chassis that moves sideways).
+    #[serde(default = "default_lateral_acceleration")]
+    pub lateral_acceleration: f64,
+    /// Slowing down sideways, m/s².
+    #[serde(default = "default_lateral_deceleration")]
+    pub lateral_deceleration: f64,
+}
+
+/// Sideways as forward, by default.
+const fn default_lateral_acceleration() -> f64 {
+    1.0
+}
+
+const fn default_lateral_deceleration() -> f64 {
+    2.0
 }
 
 /// The arbiter's settings (the gateway config's `[arbiter]` table).
@@ -153,6 +192,8 @@ impl Default for ArbiterConfig {
                 linear_deceleration: 2.0,
                 angular_acceleration: 1.5,
                 angular_deceleration: 3.0,
+                lateral_acceleration: default_lateral_acceleration(),
+                lateral_deceleration: default_lateral_deceleration(),
             },
             request_rate_hz: 500.0,
             request_burst: 50,
@@ -200,12 +241,14 @@ impl ArbiterConfig {
         let all = caps
             .iter()
             .flatten()
-            .flat_map(|c| [c.linear, c.angular])
+            .flat_map(|c| [c.linear, c.angular, c.lateral.unwrap_or(1.0)])
             .chain([
                 limits.linear_acceleration,
                 limits.linear_deceleration,
                 limits.angular_acceleration,
                 limits.angular_deceleration,
+                limits.lateral_acceleration,
+                limits.lateral_deceleration,
                 self.request_rate_hz,
             ]);
         if !all.into_iter().all(positive) || self.request_burst == 0 {
@@ -258,8 +301,10 @@ pub struct Origin {
 /// The motion command for one tick.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Output {
-    /// m/s.
+    /// m/s, forward.
     pub linear: f64,
+    /// m/s, leftward.
+    pub lateral: f64,
     /// rad/s.
     pub angular: f64,
     /// The fault-clear code for byte 1.
@@ -272,6 +317,7 @@ impl Output {
     /// Zero speed, nothing to clear.
     pub const STOP: Output = Output {
         linear: 0.0,
+        lateral: 0.0,
         angular: 0.0,
         fault_clear: FaultClear::None,
         limited: false,
@@ -337,6 +383,7 @@ struct Latch<'a> {
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Command {
     linear: f64,
+    lateral: f64,
     angular: f64,
     clamped: bool,
     expires: Duration,
@@ -408,6 +455,7 @@ impl Source {
 pub struct Arbiter {
     config: ArbiterConfig,
     global: Caps,
+    sideways: Sideways,
     stops: Vec<Stop>,
     /// The gap causes present now: their stops cannot be released.
     present: Vec<StopCause>,
@@ -431,12 +479,21 @@ pub struct Arbiter {
 }
 
 impl Arbiter {
-    /// An arbiter with `config` for a chassis that may go at most as fast as `global` says.
-    /// `instance` tells this gateway's leases from another's. Autonomy starts disarmed.
+    /// An arbiter with `config` for a chassis that may go at most as fast as `global` says
+    /// (`global.lateral` `None` or 0: it does not move sideways; [`Arbiter::set_sideways`] says
+    /// why in the refusals). `instance` tells this gateway's leases from another's. Autonomy
+    /// starts disarmed.
     pub fn new(config: ArbiterConfig, global: Caps, instance: u32) -> Self {
+        let sideways = match global.lateral {
+            Some(limit) if limit > 0.0 => Sideways::UpTo(limit),
+            _ => Sideways::Not(
+                "this chassis does not move sideways: send a lateral speed of 0".into(),
+            ),
+        };
         Self {
             config,
             global,
+            sideways,
             stops: Vec::new(),
             present: Vec::new(),
             autonomy_armed: false,
@@ -453,6 +510,12 @@ impl Arbiter {
             history: VecDeque::with_capacity(HISTORY),
             autonomy_barred: None,
         }
+    }
+
+    /// Whether the chassis moves sideways from now on (the protocol it speaks decides it for
+    /// some models). A command already taken goes no faster sideways than this allows.
+    pub fn set_sideways(&mut self, sideways: Sideways) {
+        self.sideways = sideways;
     }
 
     /// Bars autonomy from taking control while `why` holds (a critical battery), or lifts the
@@ -621,11 +684,12 @@ impl Arbiter {
             Request::Drive {
                 lease,
                 linear,
+                lateral,
                 angular,
                 ttl,
             } => {
                 let index = self.admit(now, origin)?;
-                self.drive(now, index, lease, (linear, angular), ttl, sent)
+                self.drive(now, index, lease, (linear, lateral, angular), ttl, sent)
             }
             Request::Relinquish => {
                 let index = self.admit(now, origin)?;
@@ -861,11 +925,11 @@ impl Arbiter {
         now: Duration,
         index: usize,
         lease_id: u64,
-        (linear, angular): (f64, f64),
+        (linear, lateral, angular): (f64, f64, f64),
         ttl: Option<Duration>,
         sent: Duration,
     ) -> Answer {
-        if !linear.is_finite() || !angular.is_finite() {
+        if !linear.is_finite() || !lateral.is_finite() || !angular.is_finite() {
             return Err(Rejection::NotFinite);
         }
         let source = &self.sources[index];
@@ -891,18 +955,30 @@ impl Arbiter {
         if age > life {
             return Err(Rejection::Stale { age, life });
         }
+        // What the chassis cannot do is refused, never reshaped into something else.
+        let lateral_cap = match &self.sideways {
+            Sideways::Not(why) if lateral != 0.0 => {
+                return Err(Rejection::NotAllowed { why: why.clone() });
+            }
+            Sideways::Not(_) => 0.0,
+            Sideways::UpTo(limit) => *limit,
+        };
         let caps = self.config.caps(class).unwrap_or(self.global);
-        let (linear_cap, angular_cap) = (
+        let (linear_cap, angular_cap, lateral_cap) = (
             caps.linear.min(self.global.linear),
             caps.angular.min(self.global.angular),
+            caps.lateral.map_or(lateral_cap, |cap| cap.min(lateral_cap)),
         );
         let clamped_linear = linear.clamp(-linear_cap, linear_cap);
+        let clamped_lateral = lateral.clamp(-lateral_cap, lateral_cap);
         let clamped_angular = angular.clamp(-angular_cap, angular_cap);
-        let clamped = clamped_linear != linear || clamped_angular != angular;
+        let clamped =
+            clamped_linear != linear || clamped_lateral != lateral || clamped_angular != angular;
         if let Some(lease) = self.sources[index].lease.as_mut() {
             lease.heard = now;
             lease.command = Some(Command {
                 linear: clamped_linear,
+                lateral: clamped_lateral,
                 angular: clamped_angular,
                 clamped,
                 expires: sent + life,
@@ -1302,8 +1378,15 @@ impl Arbiter {
             };
             return self.output;
         }
-        let (linear, angular, clamped) =
-            target.map_or((0.0, 0.0, false), |c| (c.linear, c.angular, c.clamped));
+        let (linear, lateral, angular, clamped) = target.map_or((0.0, 0.0, 0.0, false), |c| {
+            (c.linear, c.lateral, c.angular, c.clamped)
+        });
+        // Sideways no faster than the chassis goes now (it may have stopped being able to).
+        let sideways = self.sideways.limit();
+        let (lateral, clamped) = (
+            lateral.clamp(-sideways, sideways),
+            clamped || lateral.abs() > sideways,
+        );
         let dt = period.as_secs_f64();
         let limits = self.config.limits;
         let next_linear = ramp(
@@ -1311,6 +1394,13 @@ impl Arbiter {
             linear,
             limits.linear_acceleration,
             limits.linear_deceleration,
+            dt,
+        );
+        let next_lateral = ramp(
+            self.output.lateral.clamp(-sideways, sideways),
+            lateral,
+            limits.lateral_acceleration,
+            limits.lateral_deceleration,
             dt,
         );
         let next_angular = ramp(
@@ -1322,9 +1412,13 @@ impl Arbiter {
         );
         self.output = Output {
             linear: next_linear,
+            lateral: next_lateral,
             angular: next_angular,
             fault_clear,
-            limited: clamped || next_linear != linear || next_angular != angular,
+            limited: clamped
+                || next_linear != linear
+                || next_lateral != lateral
+                || next_angular != angular,
         };
         self.output
     }

@@ -53,12 +53,22 @@ impl Bench {
     }
 
     fn with(config: ArbiterConfig) -> Self {
+        Self::chassis(config, None)
+    }
+
+    /// A chassis that moves sideways up to `lateral` m/s (the OMNI's 2.0).
+    fn sideways(lateral: f64) -> Self {
+        Self::chassis(ArbiterConfig::default(), Some(lateral))
+    }
+
+    fn chassis(config: ArbiterConfig, lateral: Option<f64>) -> Self {
         Self {
             arbiter: Arbiter::new(
                 config,
                 Caps {
                     linear: MAX_LINEAR_SPEED,
                     angular: DEFAULT_MAX_ANGULAR_SPEED,
+                    lateral,
                 },
                 7,
             ),
@@ -83,11 +93,16 @@ impl Bench {
     }
 
     fn drive(&mut self, who: &Origin, lease: u64, linear: f64) -> Answer {
+        self.drive_body(who, lease, linear, 0.0)
+    }
+
+    fn drive_body(&mut self, who: &Origin, lease: u64, linear: f64, lateral: f64) -> Answer {
         self.request(
             who,
             Request::Drive {
                 lease,
                 linear,
+                lateral,
                 angular: 0.0,
                 ttl: None,
             },
@@ -162,6 +177,88 @@ fn a_fresh_command_drives_with_the_acceleration_limit() {
 }
 
 #[test]
+fn a_chassis_that_does_not_move_sideways_refuses_a_sideways_speed_and_says_why() {
+    let mut bench = Bench::new();
+    let joy = client("joy", 1);
+    let lease = bench.take(&joy, Class::Teleop);
+    let refused = bench
+        .drive_body(&joy, lease, 0.5, 0.3)
+        .expect_err("no sideways");
+    assert_eq!(refused.kind(), RejectionKind::NotAllowed);
+    assert!(
+        refused.to_string().contains("does not move sideways"),
+        "{refused}"
+    );
+    // Refused whole, not reshaped: the forward half of it did not drive either.
+    assert_eq!(bench.idle(ms(100)).linear, 0.0);
+    assert_eq!(
+        bench.drive_body(&joy, lease, 0.5, 0.0),
+        Ok(Accepted::default())
+    );
+    let output = bench.idle(ms(100));
+    assert!(output.linear > 0.0 && output.lateral == 0.0, "{output:?}");
+    // The gateway words the reason by model and protocol.
+    bench
+        .arbiter
+        .set_sideways(Sideways::Not("a scout2 does not move sideways".into()));
+    let refused = bench.drive_body(&joy, lease, 0.0, -0.1).expect_err("no");
+    assert_eq!(refused.to_string(), "a scout2 does not move sideways");
+}
+
+#[test]
+fn sideways_is_capped_ramped_and_stopped_as_forward_is() {
+    let mut bench = Bench::sideways(2.0);
+    let joy = client("joy", 1);
+    let lease = bench.take(&joy, Class::Teleop);
+    let answer = bench.drive_body(&joy, lease, 0.0, 3.0).expect("sideways");
+    assert!(answer.clamped, "3 m/s is beyond the chassis' 2");
+    let first = bench.tick();
+    assert!(
+        (first.lateral - 0.02).abs() < 1e-12,
+        "1 m/s² over 20 ms: {first:?}"
+    );
+    assert!(first.limited);
+    let mut output = first;
+    for _ in 0..150 {
+        let _ = bench.drive_body(&joy, lease, 0.0, -3.0);
+        output = bench.tick();
+    }
+    assert_eq!(output.lateral, -2.0, "capped the other way too");
+    // A class's own cap holds sideways too.
+    let capped = ArbiterConfig {
+        teleop_caps: Some(Caps {
+            linear: 1.0,
+            angular: 0.5,
+            lateral: Some(0.4),
+        }),
+        ..ArbiterConfig::default()
+    };
+    let mut slow = Bench::chassis(capped, Some(2.0));
+    let lease_slow = slow.take(&joy, Class::Teleop);
+    for _ in 0..100 {
+        let _ = slow.drive_body(&joy, lease_slow, 0.0, 1.0);
+        output = slow.tick();
+    }
+    assert_eq!(output.lateral, 0.4);
+    // A stop is zero on every axis at once.
+    bench.stop(&joy, "person");
+    let stopped = bench.tick();
+    assert_eq!(
+        (stopped.linear, stopped.lateral, stopped.angular),
+        (0.0, 0.0, 0.0)
+    );
+    // A chassis that stops moving sideways (another protocol) is not driven sideways on.
+    let mut omni = Bench::sideways(2.0);
+    let lease = omni.take(&joy, Class::Teleop);
+    for _ in 0..50 {
+        let _ = omni.drive_body(&joy, lease, 0.0, 1.0);
+        omni.tick();
+    }
+    omni.arbiter.set_sideways(Sideways::Not("v1".into()));
+    assert_eq!(omni.tick().lateral, 0.0);
+}
+
+#[test]
 fn nothing_drives_without_taking_control() {
     let mut bench = Bench::new();
     let joy = client("joy", 1);
@@ -171,6 +268,7 @@ fn nothing_drives_without_taking_control() {
             Request::Drive {
                 lease: 0,
                 linear: 1.0,
+                lateral: 0.0,
                 angular: 0.0,
                 ttl: None
             }
@@ -280,6 +378,7 @@ fn a_command_lives_from_when_it_was_sent() {
     let drive = Request::Drive {
         lease,
         linear: 0.5,
+        lateral: 0.0,
         angular: 0.0,
         ttl: Some(ms(100)),
     };
@@ -689,6 +788,7 @@ fn a_command_stamped_in_the_future_is_refused_and_counted() {
     let drive = Request::Drive {
         lease,
         linear: 0.5,
+        lateral: 0.0,
         angular: 0.0,
         ttl: None,
     };
@@ -778,6 +878,7 @@ fn drive_sent(bench: &mut Bench, who: &Origin, lease: u64, linear: f64, ago: Dur
     let drive = Request::Drive {
         lease,
         linear,
+        lateral: 0.0,
         angular: 0.0,
         ttl: None,
     };
@@ -914,6 +1015,7 @@ fn a_gap_ends_every_lease_and_disarms_autonomy() {
             Request::Drive {
                 lease: auto,
                 linear: 0.1,
+                lateral: 0.0,
                 angular: 0.0,
                 ttl: None
             }
@@ -1033,7 +1135,9 @@ fn config_is_checked() {
 enum Step {
     /// A take-control sent this many ms before it arrives.
     Take(usize, Class, u8),
-    Drive(usize, f64),
+    Drive(usize, f64, f64),
+    /// The chassis stops (`false`) or starts (`true`) moving sideways.
+    Sideways(bool),
     Stop(usize),
     Release(usize, bool),
     Relinquish(usize),
@@ -1050,7 +1154,13 @@ fn any_step() -> impl Strategy<Value = Step> {
     prop_oneof![
         (who.clone(), class, prop_oneof![Just(0u8), 0u8..250])
             .prop_map(|(w, c, d)| Step::Take(w, c, d)),
-        (who.clone(), -3.0f64..3.0).prop_map(|(w, v)| Step::Drive(w, v)),
+        (
+            who.clone(),
+            -3.0f64..3.0,
+            prop_oneof![Just(0.0), -3.0f64..3.0]
+        )
+            .prop_map(|(w, v, vy)| Step::Drive(w, v, vy)),
+        any::<bool>().prop_map(Step::Sideways),
         who.clone().prop_map(Step::Stop),
         (who.clone(), any::<bool>()).prop_map(|(w, all)| Step::Release(w, all)),
         who.clone().prop_map(Step::Relinquish),
@@ -1070,7 +1180,9 @@ proptest! {
     /// command accepted has lived its life.
     #[test]
     fn no_motion_after_a_gap_stop_or_release_without_a_new_take(steps in prop::collection::vec(any_step(), 1..120)) {
-        let mut bench = Bench::new();
+        // A chassis that moves sideways, every axis under the same rules.
+        let mut bench = Bench::sideways(2.0);
+        let mut sideways = true;
         let clients: Vec<Origin> = (0..4u128)
             .map(|i| if i == 3 { operator("op", i) } else { client(&format!("c{i}"), i) })
             .collect();
@@ -1096,8 +1208,16 @@ proptest! {
                         taken_at[w] = Some(index);
                     }
                 }
-                Step::Drive(w, v) => {
-                    if bench.drive(&clients[w], leases[w], v).is_ok() {
+                Step::Sideways(on) => {
+                    sideways = on;
+                    bench.arbiter.set_sideways(if on { Sideways::UpTo(2.0) } else { Sideways::Not("no".into()) });
+                }
+                Step::Drive(w, v, vy) => {
+                    let answer = bench.drive_body(&clients[w], leases[w], v, vy);
+                    if !sideways && vy != 0.0 {
+                        prop_assert!(answer.is_err(), "sideways taken by a chassis that does not move sideways");
+                    }
+                    if answer.is_ok() {
                         newest_life = newest_life.max(bench.now + bench.arbiter.config.max_age(classes[w]));
                     }
                 }
@@ -1126,19 +1246,24 @@ proptest! {
                         let stopped = !bench.arbiter.stops().is_empty();
                         let at = bench.now;
                         let output = bench.tick();
-                        prop_assert!(output.linear.is_finite() && output.angular.is_finite());
+                        prop_assert!(output.linear.is_finite() && output.angular.is_finite() && output.lateral.is_finite());
                         prop_assert!(output.linear.abs() <= MAX_LINEAR_SPEED);
+                        let sideways_cap = if sideways { 2.0 } else { 0.0 };
+                        prop_assert!(output.lateral.abs() <= sideways_cap);
+                        let moving = output.linear != 0.0 || output.lateral != 0.0 || output.angular != 0.0;
                         if stopped {
-                            prop_assert_eq!(output.linear, 0.0);
-                            prop_assert_eq!(output.angular, 0.0);
-                        } else {
-                            let cut = output.linear == 0.0 && output.angular == 0.0;
-                            prop_assert!(cut || (output.linear - before.linear).abs() <= 2.0 * 0.02 + 1e-9);
+                            prop_assert!(!moving, "a stop is zero on every axis");
+                        } else if moving {
+                            prop_assert!((output.linear - before.linear).abs() <= 2.0 * 0.02 + 1e-9);
+                            prop_assert!(!sideways || (output.lateral - before.lateral).abs() <= 2.0 * 0.02 + 1e-9);
                         }
-                        if output.linear != 0.0 || output.angular != 0.0 {
+                        if moving {
                             prop_assert!(at < newest_life, "moving past the life of every command accepted");
+                            // Slowing down on every axis that moves is no start.
+                            let slows = |now: f64, then: f64| now == 0.0 || now.abs() < then.abs();
                             let retaken = taken_at.iter().flatten().any(|at| *at > blocked_at)
-                                || output.linear.abs() < before.linear.abs();
+                                || (slows(output.linear, before.linear)
+                                    && slows(output.lateral, before.lateral));
                             prop_assert!(retaken, "moving with no take of control since the last gap, stop or release");
                         }
                     }

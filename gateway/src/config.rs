@@ -529,6 +529,11 @@ impl GatewayConfig {
         self.limits_model().limits().linear
     }
 
+    /// The fastest the chassis may go sideways, m/s: the model's (0: it does not).
+    pub fn max_lateral(&self) -> f64 {
+        self.limits_model().limits().lateral
+    }
+
     /// The motion command period.
     pub fn command_period(&self) -> Duration {
         Duration::from_millis(self.timing.command_period_ms)

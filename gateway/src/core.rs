@@ -33,10 +33,11 @@ use scout_protocol::{
 };
 use tracing::{debug, info, warn};
 
-use crate::arbiter::{Accepted, Answer, Arbiter, Caps, LightsSetting, Origin, Output};
+use crate::arbiter::{Accepted, Answer, Arbiter, Caps, LightsSetting, Origin, Output, Sideways};
 use crate::command_mode::CommandMode;
 use crate::config::{GatewayConfig, OnCritical, SafetyConfig};
 use crate::state::{PortCounters, Publish, StateTracker};
+use scout_protocol::model::Model;
 
 /// The state is published at least this often, frames or not: a subscriber sees that the
 /// gateway lives while the chassis is silent, and a late subscriber gets the latest state fast.
@@ -123,6 +124,10 @@ pub struct Core {
     transport: Transport,
     max_linear: f64,
     max_angular: f64,
+    /// The model driven by: whether it moves sideways.
+    model: Model,
+    /// The protocol the arbiter was last told the chassis moves sideways in (or not).
+    sideways_for: Option<Option<Protocol>>,
     period: Duration,
     light_period: Duration,
     stop_cycles: u32,
@@ -214,6 +219,8 @@ impl ChassisClock {
 #[derive(Debug, Clone, Copy, Default)]
 struct Runaway {
     linear: Envelope,
+    /// Sideways, by the forward tolerance and braking.
+    lateral: Envelope,
     angular: Envelope,
     /// When the feedback left an envelope.
     since: Option<Duration>,
@@ -271,6 +278,8 @@ impl Core {
             transport,
             max_linear: config.max_linear(),
             max_angular: config.max_angular(),
+            model: config.limits_model(),
+            sideways_for: None,
             period: config.command_period(),
             light_period: Duration::from_millis(light_period_ms),
             stop_cycles: timing.stop_cycles,
@@ -370,8 +379,10 @@ impl Core {
         let global = Caps {
             linear: config.max_linear(),
             angular: config.max_angular(),
+            lateral: Some(config.max_lateral()),
         };
         let mut arbiter = Arbiter::new(config.arbiter.clone(), global, instance);
+        arbiter.set_sideways(sideways(config.limits_model(), config.fixed_protocol()));
         match start {
             Start::Clean => {}
             Start::AfterUncleanExit => arbiter.handle_gap(
@@ -478,7 +489,7 @@ impl Core {
 
     /// The chassis moving or turning faster than commanded (beyond what braking explains), or
     /// the wrong way, for longer than the configured time, is a runaway.
-    fn observe_motion(&mut self, now: Duration, linear: f64, angular: f64) {
+    fn observe_motion(&mut self, now: Duration, (linear, lateral, angular): (f64, f64, f64)) {
         let quiet = [
             StopCause::ChassisEstop,
             StopCause::RcOverride,
@@ -500,6 +511,13 @@ impl Core {
             safety.runaway_tolerance,
             dt,
         );
+        let lateral_away = self.runaway.lateral.outside(
+            command.lateral,
+            lateral,
+            safety.runaway_braking,
+            safety.runaway_tolerance,
+            dt,
+        );
         let angular_away = self.runaway.angular.outside(
             command.angular,
             angular,
@@ -507,17 +525,24 @@ impl Core {
             safety.runaway_angular_tolerance,
             dt,
         );
-        if quiet || !(linear_away || angular_away) {
+        if quiet || !(linear_away || lateral_away || angular_away) {
             self.runaway.since = None;
             return;
         }
         let since = *self.runaway.since.get_or_insert(now);
         if now - since >= Duration::from_millis(safety.runaway_time_ms) {
-            let detail = format!(
-                "the chassis moves at {linear:.2} m/s, {angular:.2} rad/s against a command of \
-                 {:.2} m/s, {:.2} rad/s",
-                command.linear, command.angular
-            );
+            let detail = if lateral_away {
+                format!(
+                    "the chassis moves sideways at {lateral:.2} m/s against a command of {:.2} m/s",
+                    command.lateral
+                )
+            } else {
+                format!(
+                    "the chassis moves at {linear:.2} m/s, {angular:.2} rad/s against a command \
+                     of {:.2} m/s, {:.2} rad/s",
+                    command.linear, command.angular
+                )
+            };
             self.arbiter
                 .handle_gap(now, StopCause::Runaway, &detail, false);
             self.runaway.since = None;
@@ -649,7 +674,7 @@ impl Core {
                 Message::SystemStatus(status) => self.observe_system(now, status),
                 Message::MotionFeedback(motion) => {
                     self.observe_report(now);
-                    self.observe_motion(now, motion.linear(), motion.angular());
+                    self.observe_motion(now, (motion.linear(), 0.0, motion.angular()));
                 }
                 Message::MotorFeedback(_)
                 | Message::LightFeedback(_)
@@ -660,7 +685,8 @@ impl Core {
                 MessageV2::SystemState(system) => self.observe_system_v2(now, system),
                 MessageV2::MotionState(motion) => {
                     self.observe_report(now);
-                    self.observe_motion(now, motion.linear(), motion.angular());
+                    let rates = (motion.linear(), motion.lateral(), motion.angular());
+                    self.observe_motion(now, rates);
                 }
                 MessageV2::MotionCommand(_)
                 | MessageV2::LightCommand(_)
@@ -854,7 +880,10 @@ impl Core {
                     *left = left.saturating_sub(1);
                     Output::STOP
                 }
-                None => self.arbiter.poll_output(now, self.period),
+                None => {
+                    self.update_sideways();
+                    self.arbiter.poll_output(now, self.period)
+                }
             };
             self.status_due = true;
             if let Some(frame) = self.motion(&output, now) {
@@ -1087,13 +1116,22 @@ impl Core {
         }
     }
 
+    /// Tells the arbiter whether the chassis moves sideways in the protocol it speaks now.
+    fn update_sideways(&mut self) {
+        let protocol = self.tracker.protocol();
+        if self.sideways_for != Some(protocol) {
+            self.sideways_for = Some(protocol);
+            self.arbiter.set_sideways(sideways(self.model, protocol));
+        }
+    }
+
     /// `output` as a motion command in the chassis' protocol (on v1 in the link's control
     /// mode), if the port is open and the protocol known.
     fn motion(&mut self, output: &Output, now: Duration) -> Option<Outgoing> {
         if self.link != Link::Open {
             return None;
         }
-        let (frame, linear, angular) = match self.tracker.protocol()? {
+        let (frame, sent) = match self.tracker.protocol()? {
             Protocol::V1 => {
                 let percent = |speed: f64, max: f64| {
                     units::speed_to_percent(speed, max).map_or(0, |(p, _)| p)
@@ -1108,24 +1146,28 @@ impl Core {
                     message: Message::MotionCommand(command),
                     count: self.motion_count.next_count(),
                 };
+                // v1 has no lateral field in any source: the arbiter refuses sideways on v1.
                 (
                     Outgoing::V1(counted),
-                    command.linear(self.max_linear),
-                    command.angular(self.max_angular),
+                    (
+                        command.linear(self.max_linear),
+                        0.0,
+                        command.angular(self.max_angular),
+                    ),
                 )
             }
             Protocol::V2 => {
-                let command = MotionV2::from_si(output.linear, output.angular);
+                let command =
+                    MotionV2::from_si(output.linear, output.angular).with_lateral(output.lateral);
                 (
                     Outgoing::V2(MessageV2::MotionCommand(command)),
-                    command.linear(),
-                    command.angular(),
+                    (command.linear(), command.lateral(), command.angular()),
                 )
             }
         };
         self.stats.commands_sent += 1;
         self.last_motion_written = Some(now);
-        self.tracker.handle_sent_motion(linear, angular, now);
+        self.tracker.handle_sent_motion(sent, now);
         Some(frame)
     }
 
@@ -1176,6 +1218,7 @@ impl Core {
         }
         let output = arbiter.output();
         status.output_linear = output.linear;
+        status.output_lateral = output.lateral;
         status.output_angular = output.angular;
         status.output_fault_clear = output.fault_clear.raw();
         status.limited = output.limited;
@@ -1237,6 +1280,23 @@ fn error_clear_v2(code: FaultClear) -> Option<ErrorClearV2> {
         | FaultClear::MotorOverCurrent
         | FaultClear::Unknown(_) => ErrorClearV2::All,
     })
+}
+
+/// Whether a chassis of `model` speaking `protocol` (`None`: not known yet) moves sideways.
+/// Only the SCOUT MINI OMNI does, and only on v2: no source gives a lateral field in v1's
+/// motion command (vendor SDK `agilex_protocol_v1.h`: bytes 4-5 reserved).
+pub fn sideways(model: Model, protocol: Option<Protocol>) -> Sideways {
+    let limit = model.limits().lateral;
+    match protocol {
+        _ if limit <= 0.0 => Sideways::Not(format!(
+            "a {model} does not move sideways: send a lateral speed of 0"
+        )),
+        Some(Protocol::V1) => Sideways::Not(format!(
+            "a {model} moves sideways on protocol v2 only (v1's command has no sideways \
+             field): run its gateway with --protocol v2"
+        )),
+        Some(Protocol::V2) | None => Sideways::UpTo(limit),
+    }
 }
 
 #[cfg(test)]

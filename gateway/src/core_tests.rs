@@ -299,6 +299,7 @@ impl Pair {
             &Request::Drive {
                 lease,
                 linear,
+                lateral: 0.0,
                 angular: 0.0,
                 ttl: None,
             },
@@ -1916,3 +1917,141 @@ both_protocols!(
     a_chassis_faster_than_commanded_is_a_runaway,
     a_chassis_exception_state_is_a_gap,
 );
+
+impl Pair {
+    /// Drives sideways at `lateral` m/s (and forward at `linear`) under `client`'s lease every
+    /// 20 ms for `time`; the first refusal, if any.
+    fn stream_body(
+        &mut self,
+        client: Client,
+        (linear, lateral): (f64, f64),
+        time: Duration,
+    ) -> Result<(), Rejected> {
+        if !self.leases.contains_key(&client.1) {
+            self.take(client, Class::Teleop)?;
+        }
+        let lease = self.leases[&client.1];
+        let end = self.now + time;
+        while self.now < end {
+            let drive = Request::Drive {
+                lease,
+                linear,
+                lateral,
+                angular: 0.0,
+                ttl: None,
+            };
+            self.request(client, &drive)?;
+            let next = self.now + TICK;
+            while self.now < next {
+                self.step();
+            }
+        }
+        Ok(())
+    }
+}
+
+#[test]
+fn the_omni_moves_sideways_on_v2_and_its_odometry_follows() {
+    let omni = GatewayConfig {
+        model: Some(Model::ScoutMiniOmni),
+        ..config(Protocol::V2)
+    };
+    let mut pair = Pair::with_firmware(Protocol::V2, Transport::Can, &omni, Start::Clean);
+    pair.run(ms(200));
+    pair.stream_body(TELEOP, (0.0, 0.4), Duration::from_secs(2))
+        .expect("sideways accepted");
+    // On the wire: 0x111's lateral field (bytes 4-5, mm/s); the chassis moves left.
+    assert_eq!(
+        pair.chassis.stats().last_command.map(|c| c.lateral),
+        Some(0.4)
+    );
+    assert!((pair.chassis.actual().lateral - 0.4).abs() < 0.02);
+    let state = pair.last_state();
+    assert!(
+        (state.command.lateral - 0.4).abs() < 1e-9,
+        "{:?}",
+        state.command
+    );
+    let odometry = state.odometry;
+    let truth = pair.chassis.pose();
+    assert!(truth.y > 0.5, "{truth:?}");
+    assert!(
+        (odometry.y - truth.y).abs() < 0.05 * truth.y && odometry.x.abs() < 0.02,
+        "odometry {odometry:?} against the chassis' {truth:?}"
+    );
+    // A stop: zero on every axis at once.
+    pair.request(
+        TELEOP,
+        &Request::Stop {
+            reason: "person".into(),
+        },
+    )
+    .expect("stop");
+    pair.run(ms(40));
+    assert_eq!(pair.last_state().command.lateral, 0.0);
+}
+
+#[test]
+fn sideways_is_refused_where_the_chassis_or_its_protocol_cannot() {
+    for (model, protocol, says) in [
+        (
+            Model::Scout2,
+            Protocol::V2,
+            "a scout2 does not move sideways",
+        ),
+        (
+            Model::ScoutMini,
+            Protocol::V2,
+            "a scout-mini does not move sideways",
+        ),
+        (
+            Model::ScoutMiniOmni,
+            Protocol::V1,
+            "moves sideways on protocol v2 only",
+        ),
+    ] {
+        let gateway = GatewayConfig {
+            model: Some(model),
+            ..config(protocol)
+        };
+        let mut pair = Pair::with_firmware(protocol, Transport::Can, &gateway, Start::Clean);
+        pair.run(ms(200));
+        let refused = pair
+            .stream_body(TELEOP, (0.3, 0.2), ms(100))
+            .expect_err("refused");
+        assert_eq!(refused.kind, Some(RejectionKind::NotAllowed), "{model}");
+        assert!(refused.reason.contains(says), "{model}: {}", refused.reason);
+        pair.run(ms(200));
+        assert_eq!(pair.chassis.actual().linear, 0.0, "{model}: refused whole");
+    }
+}
+
+#[test]
+fn an_omni_drifting_sideways_uncommanded_is_a_runaway() {
+    let omni = GatewayConfig {
+        model: Some(Model::ScoutMiniOmni),
+        ..config(Protocol::V2)
+    };
+    let latches = |lateral_mm_s: i16| {
+        let mut pair = Pair::with_firmware(Protocol::V2, Transport::Can, &omni, Start::Clean);
+        pair.run(ms(200));
+        pair.feedback = false;
+        for _ in 0..40 {
+            let drift = MotionV2 {
+                lateral_mm_s,
+                ..MotionV2::default()
+            };
+            pair.core
+                .handle_rx(pair.now, &RxEvent::V2(MessageV2::MotionState(drift)));
+            pair.now += TICK;
+            pair.step();
+        }
+        (pair
+            .stops()
+            .contains(&("gateway".into(), StopCause::Runaway)))
+        .then(|| pair.stop_reason(StopCause::Runaway))
+    };
+    let reason = latches(-800).expect("0.8 m/s sideways, nothing commanded");
+    assert!(reason.contains("moves sideways at -0.80 m/s"), "{reason}");
+    assert_eq!(latches(100), None, "within the tolerance");
+}

@@ -252,10 +252,15 @@ impl StateTracker {
     }
 
     /// A motion command went out at `linear` m/s and `angular` rad/s, as the wire carries them.
-    pub fn handle_sent_motion(&mut self, linear: f64, angular: f64, now: Duration) {
+    pub fn handle_sent_motion(
+        &mut self,
+        (linear, lateral, angular): (f64, f64, f64),
+        now: Duration,
+    ) {
         self.state.link.tx_frames += 1;
         self.state.command = CommandPayload {
             linear,
+            lateral,
             angular,
             at_ns: nanos(now),
         };
@@ -548,7 +553,7 @@ impl StateTracker {
         }
         self.last_feedback = Some(now);
         if let Message::MotionFeedback(motion) = &counted.message {
-            self.integrate_rates(motion.linear(), motion.angular(), now, true);
+            self.integrate_rates((motion.linear(), 0.0, motion.angular()), now, true);
         }
         let received = Received {
             valid: true,
@@ -604,7 +609,8 @@ impl StateTracker {
         match message {
             MessageV2::MotionState(motion) => {
                 let translate = !self.odometer_fresh(now);
-                self.integrate_rates(motion.linear(), motion.angular(), now, translate);
+                let rates = (motion.linear(), motion.lateral(), motion.angular());
+                self.integrate_rates(rates, now, translate);
             }
             MessageV2::Odometer(odometer) => {
                 self.integrate_odometer(odometer.left_mm, odometer.right_mm, now);
@@ -639,9 +645,15 @@ impl StateTracker {
         odometer.valid && now.saturating_sub(Duration::from_nanos(odometer.at_ns)) <= ODOMETER_FRESH
     }
 
-    /// Integrates the body rates since the previous motion feedback: the heading, and the
-    /// position too when `translate` (no wheel odometer does it).
-    fn integrate_rates(&mut self, linear: f64, angular: f64, now: Duration, translate: bool) {
+    /// Integrates the body rates since the previous motion feedback: the heading and any
+    /// sideways motion (the OMNI's; no wheel odometer measures it), and the forward motion too
+    /// when `translate` (no wheel odometer does it).
+    fn integrate_rates(
+        &mut self,
+        (linear, lateral, angular): (f64, f64, f64),
+        now: Duration,
+        translate: bool,
+    ) {
         let previous = self.state.motion;
         if !previous.received.valid {
             return;
@@ -654,21 +666,21 @@ impl StateTracker {
         // Trapezoid between the previous and this feedback, calibrated.
         let v = (previous.linear() + linear) / 2.0 * self.calibration.distance_scale;
         let w = (previous.angular() + angular) / 2.0 * self.calibration.yaw_scale;
+        let vy = (previous.lateral() + lateral) / 2.0 * self.calibration.distance_scale;
         let odometry = &mut self.state.odometry;
         odometry.rotation += (w * dt).abs();
-        if !translate {
-            odometry.yaw = wrap_angle(odometry.yaw + w * dt);
-            return;
-        }
         let mut pose = Pose {
             x: odometry.x,
             y: odometry.y,
             yaw: odometry.yaw,
         };
-        pose.step(v, w, dt);
+        let forward = if translate { v } else { 0.0 };
+        pose.step_body(forward, vy, w, dt);
         (odometry.x, odometry.y, odometry.yaw) = (pose.x, pose.y, pose.yaw);
-        odometry.distance += (v * dt).abs();
-        self.yaw_at_odometer = odometry.yaw;
+        odometry.distance += forward.hypot(vy) * dt;
+        if translate {
+            self.yaw_at_odometer = odometry.yaw;
+        }
     }
 
     /// Moves the position by the wheel odometers' mean advance since the previous reading,

@@ -367,6 +367,15 @@ impl MotionV2 {
         }
     }
 
+    /// These rates with a leftward speed of `lateral` m/s (the SCOUT MINI OMNI's bytes 4-5:
+    /// vendor SDK `MotionCommandFrame.lateral_velocity`), rounded and saturated alike.
+    pub fn with_lateral(self, lateral: f64) -> Self {
+        Self {
+            lateral_mm_s: thousandths(lateral),
+            ..self
+        }
+    }
+
     /// m/s.
     pub fn linear(&self) -> f64 {
         f64::from(self.linear_mm_s) / 1000.0

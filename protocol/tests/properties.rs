@@ -138,11 +138,15 @@ proptest! {
     }
 
     #[test]
-    fn v2_motion_commands_round_trip_within_a_thousandth(linear in -30.0f64..30.0, angular in -30.0f64..30.0) {
+    fn v2_motion_commands_round_trip_within_a_thousandth(linear in -30.0f64..30.0, angular in -30.0f64..30.0, lateral in -30.0f64..30.0) {
         use scout_protocol::v2::{MessageV2, MotionV2, decode};
-        let command = MotionV2::from_si(linear, angular);
+        let command = MotionV2::from_si(linear, angular).with_lateral(lateral);
         prop_assert!((command.linear() - linear).abs() <= 0.0005 + 1e-9);
         prop_assert!((command.angular() - angular).abs() <= 0.0005 + 1e-9);
+        prop_assert!((command.lateral() - lateral).abs() <= 0.0005 + 1e-9);
+        // Sideways is bytes 4-5, big-endian mm/s (the vendor SDK's MotionCommandFrame).
+        let frame = MessageV2::MotionCommand(command).encode();
+        prop_assert_eq!(i16::from_be_bytes([frame.data()[4], frame.data()[5]]), command.lateral_mm_s);
         prop_assert_eq!(decode(&MessageV2::MotionCommand(command).encode()), Ok(MessageV2::MotionCommand(command)));
     }
 }

@@ -61,6 +61,10 @@ pub struct DriveArgs {
     /// Angular speed, rad/s (counter-clockwise positive).
     #[arg(long, allow_hyphen_values = true, default_value_t = 0.0)]
     angular: f64,
+    /// Sideways speed, m/s (leftward positive): a chassis that moves sideways only (the
+    /// SCOUT MINI OMNI on protocol v2); any other refuses it.
+    #[arg(long, allow_hyphen_values = true, default_value_t = 0.0)]
+    lateral: f64,
     /// How long to drive, s (default: until Ctrl-C).
     #[arg(long, value_name = "S")]
     duration: Option<f64>,
@@ -102,7 +106,7 @@ pub fn drive(args: &DriveArgs) -> anyhow::Result<ExitCode> {
     let mut last: Option<String> = None;
     let mut last_answer = Ok(Accepted::default());
     while !stop.load(Ordering::Relaxed) && duration.is_none_or(|d| start.elapsed() < d) {
-        let answer = controller.drive(args.linear, args.angular);
+        let answer = controller.drive_body(args.linear, args.lateral, args.angular, None);
         match &answer {
             Err(ControlError::NoAnswer { .. } | ControlError::Client(_)) => {
                 return Err(answer.map(|_| ()).unwrap_err().into());
@@ -169,7 +173,7 @@ fn drive_remote(
     let mut next = start;
     let mut last: Option<String> = None;
     while !stop.load(Ordering::Relaxed) && duration.is_none_or(|d| start.elapsed() < d) {
-        match controller.drive(args.linear, args.angular, REMOTE_DRIVE_LIFE) {
+        match controller.drive_body(args.linear, args.lateral, args.angular, REMOTE_DRIVE_LIFE) {
             Ok(Some(answer)) => {
                 let text = match (&answer.reason, answer.clamped) {
                     (Some(reason), _) => reason.clone(),

@@ -23,6 +23,7 @@ use crate::{RemoteArgs, RobotArgs};
 const PERIOD: Duration = Duration::from_millis(20);
 /// One key press changes the speed by this much.
 const LINEAR_STEP: f64 = 0.1;
+const LATERAL_STEP: f64 = 0.1;
 const ANGULAR_STEP: f64 = 0.1;
 
 #[derive(Debug, Args)]
@@ -75,8 +76,10 @@ impl Drop for TerminalGuard {
 }
 
 /// What a key asks for.
+#[derive(Debug, PartialEq)]
 enum Key {
-    Speed(f64, f64),
+    /// A change of the speeds asked for: forward m/s, leftward m/s, rad/s.
+    Speed(f64, f64, f64),
     Zero,
     EStop,
     Release,
@@ -89,10 +92,19 @@ fn key(event: KeyEvent) -> Key {
         event.modifiers.contains(KeyModifiers::CONTROL) && event.code == KeyCode::Char('c');
     match event.code {
         _ if ctrl_c => Key::Quit,
-        KeyCode::Up | KeyCode::Char('w') => Key::Speed(LINEAR_STEP, 0.0),
-        KeyCode::Down | KeyCode::Char('s') => Key::Speed(-LINEAR_STEP, 0.0),
-        KeyCode::Left | KeyCode::Char('a') => Key::Speed(0.0, ANGULAR_STEP),
-        KeyCode::Right | KeyCode::Char('d') => Key::Speed(0.0, -ANGULAR_STEP),
+        KeyCode::Up | KeyCode::Char('w') => Key::Speed(LINEAR_STEP, 0.0, 0.0),
+        KeyCode::Down | KeyCode::Char('s') => Key::Speed(-LINEAR_STEP, 0.0, 0.0),
+        // Shifted, sideways (a chassis that moves sideways; any other refuses it).
+        KeyCode::Left if event.modifiers.contains(KeyModifiers::SHIFT) => {
+            Key::Speed(0.0, LATERAL_STEP, 0.0)
+        }
+        KeyCode::Right if event.modifiers.contains(KeyModifiers::SHIFT) => {
+            Key::Speed(0.0, -LATERAL_STEP, 0.0)
+        }
+        KeyCode::Char('A') => Key::Speed(0.0, LATERAL_STEP, 0.0),
+        KeyCode::Char('D') => Key::Speed(0.0, -LATERAL_STEP, 0.0),
+        KeyCode::Left | KeyCode::Char('a') => Key::Speed(0.0, 0.0, ANGULAR_STEP),
+        KeyCode::Right | KeyCode::Char('d') => Key::Speed(0.0, 0.0, -ANGULAR_STEP),
         KeyCode::Char(' ') => Key::Zero,
         KeyCode::Char('e') => Key::EStop,
         KeyCode::Char('r') => Key::Release,
@@ -187,18 +199,20 @@ impl Link {
     }
 
     /// One drive command; an error when the gateway is gone.
-    fn drive(&mut self, linear: f64, angular: f64) -> anyhow::Result<Driven> {
+    fn drive(&mut self, (linear, lateral, angular): (f64, f64, f64)) -> anyhow::Result<Driven> {
         match self {
-            Self::Local { controller, .. } => match controller.drive(linear, angular) {
-                Err(error @ ControlError::NoAnswer { .. }) => Err(error.into()),
-                Err(error) if error.lost_control() => Ok(Driven::Lost(error.to_string())),
-                answer => Ok(Driven::Answer(describe(&answer))),
-            },
+            Self::Local { controller, .. } => {
+                match controller.drive_body(linear, lateral, angular, None) {
+                    Err(error @ ControlError::NoAnswer { .. }) => Err(error.into()),
+                    Err(error) if error.lost_control() => Ok(Driven::Lost(error.to_string())),
+                    answer => Ok(Driven::Answer(describe(&answer))),
+                }
+            }
             Self::Remote {
                 controller,
                 control,
                 ..
-            } => match controller.drive(linear, angular, REMOTE_DRIVE_LIFE) {
+            } => match controller.drive_body(linear, lateral, angular, REMOTE_DRIVE_LIFE) {
                 Ok(Some(answer)) => Ok(Driven::Answer(describe_remote(&Ok(answer)))),
                 Ok(None) => Ok(Driven::Sent),
                 Err(error @ RemoteError::Refused { .. }) => {
@@ -295,7 +309,7 @@ pub fn run(args: &TeleopArgs) -> anyhow::Result<ExitCode> {
     // on until a person asks to drive.
     let mut action = "none yet: a movement key takes control".to_owned();
     let _guard = TerminalGuard::enter()?;
-    let (mut linear, mut angular) = (0.0f64, 0.0f64);
+    let (mut linear, mut lateral, mut angular) = (0.0f64, 0.0f64, 0.0f64);
     let mut next = Instant::now();
     let mut shown = Shown::default();
     let mut own_stop = 0;
@@ -310,18 +324,19 @@ pub fn run(args: &TeleopArgs) -> anyhow::Result<ExitCode> {
                 continue;
             }
             match key(event) {
-                Key::Speed(dl, da) => {
+                Key::Speed(dl, dy, da) => {
                     if !link.has_control() {
                         // A key press is the deliberate act that takes control again.
-                        (linear, angular) = (0.0, 0.0);
+                        (linear, lateral, angular) = (0.0, 0.0, 0.0);
                         action = format!("take control: {}", link.take_control());
                     }
                     linear = (linear + dl).clamp(-1.5, 1.5);
+                    lateral = (lateral + dy).clamp(-1.5, 1.5);
                     angular = (angular + da).clamp(-1.0, 1.0);
                 }
-                Key::Zero => (linear, angular) = (0.0, 0.0),
+                Key::Zero => (linear, lateral, angular) = (0.0, 0.0, 0.0),
                 Key::EStop => {
-                    (linear, angular) = (0.0, 0.0);
+                    (linear, lateral, angular) = (0.0, 0.0, 0.0);
                     let (answer, id) = link.stop();
                     own_stop = own_stop.max(id.unwrap_or(0));
                     action = format!("e-stop: {answer}");
@@ -343,12 +358,12 @@ pub fn run(args: &TeleopArgs) -> anyhow::Result<ExitCode> {
         }
         next += PERIOD;
         if link.has_control() {
-            match link.drive(linear, angular)? {
+            match link.drive((linear, lateral, angular))? {
                 Driven::Answer(text) => answer = text,
                 Driven::Sent if answer.is_empty() => answer = "sent on the fast lane".into(),
                 Driven::Sent => {}
                 Driven::Lost(error) => {
-                    (linear, angular) = (0.0, 0.0);
+                    (linear, lateral, angular) = (0.0, 0.0, 0.0);
                     answer = format!("{error} (press a movement key to take control)");
                 }
             }
@@ -356,26 +371,34 @@ pub fn run(args: &TeleopArgs) -> anyhow::Result<ExitCode> {
             answer = "no control: press a movement key to take control".to_owned();
         }
         link.refresh(&mut shown)?;
-        draw(&mut out, linear, angular, [&answer, &action], &shown)?;
+        draw(
+            &mut out,
+            (linear, lateral, angular),
+            [&answer, &action],
+            &shown,
+        )?;
     }
 }
 
 fn draw(
     out: &mut impl Write,
-    linear: f64,
-    angular: f64,
+    (linear, lateral, angular): (f64, f64, f64),
     [answer, action]: [&str; 2],
     shown: &Shown,
 ) -> std::io::Result<()> {
     let mut lines = vec![
-        "scout teleop   arrows/WASD speed  space zero  e e-stop  r release  q quit".to_owned(),
+        "scout teleop   arrows/WASD speed  shift+left/right or A/D sideways  space zero  \
+         e e-stop  r release  q quit"
+            .to_owned(),
         String::new(),
-        format!("asking   linear {linear:+.2} m/s   angular {angular:+.2} rad/s"),
+        format!(
+            "asking   linear {linear:+.2} m/s   sideways {lateral:+.2} m/s   angular {angular:+.2} rad/s"
+        ),
         format!("gateway  drive: {answer}   last key: {action}"),
     ];
     if let Some(json) = &shown.status {
         lines.push(format!(
-            "arbiter  stop {}   driving {}   output {:+.3} m/s {:+.3} rad/s{}",
+            "arbiter  stop {}   driving {}   output {:+.3} m/s {:+.3} m/s sideways {:+.3} rad/s{}",
             if json["latched"] == true {
                 "LATCHED"
             } else {
@@ -383,6 +406,7 @@ fn draw(
             },
             json["selected"]["client"].as_str().unwrap_or("nobody"),
             json["output"]["linear"].as_f64().unwrap_or(0.0),
+            json["output"]["lateral"].as_f64().unwrap_or(0.0),
             json["output"]["angular"].as_f64().unwrap_or(0.0),
             if json["output"]["limited"] == true {
                 " (limited)"
@@ -393,11 +417,12 @@ fn draw(
     }
     if let Some(json) = &shown.state {
         lines.push(format!(
-            "chassis  link {}   {}   battery {:.1} V   moving {:+.3} m/s {:+.3} rad/s",
+            "chassis  link {}   {}   battery {:.1} V   moving {:+.3} m/s {:+.3} m/s sideways {:+.3} rad/s",
             json["link"]["state"].as_str().unwrap_or("?"),
             json["system"]["state"].as_str().unwrap_or("?"),
             json["system"]["battery_voltage"].as_f64().unwrap_or(0.0),
             json["motion"]["linear"].as_f64().unwrap_or(0.0),
+            json["motion"]["lateral"].as_f64().unwrap_or(0.0),
             json["motion"]["angular"].as_f64().unwrap_or(0.0),
         ));
     }
@@ -428,4 +453,37 @@ fn fit(line: &str, width: usize) -> String {
     let mut cut: String = line.chars().take(width.saturating_sub(1)).collect();
     cut.push('…');
     cut
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn press(code: KeyCode, modifiers: KeyModifiers) -> Key {
+        key(KeyEvent::new(code, modifiers))
+    }
+
+    #[test]
+    fn shifted_arrows_and_capitals_go_sideways_plain_ones_turn() {
+        let (none, shift) = (KeyModifiers::NONE, KeyModifiers::SHIFT);
+        let left = Key::Speed(0.0, LATERAL_STEP, 0.0);
+        let right = Key::Speed(0.0, -LATERAL_STEP, 0.0);
+        assert_eq!(press(KeyCode::Left, shift), left);
+        assert_eq!(press(KeyCode::Char('A'), shift), left);
+        assert_eq!(press(KeyCode::Right, shift), right);
+        assert_eq!(press(KeyCode::Char('D'), shift), right);
+        assert_eq!(
+            press(KeyCode::Left, none),
+            Key::Speed(0.0, 0.0, ANGULAR_STEP)
+        );
+        assert_eq!(
+            press(KeyCode::Char('a'), none),
+            Key::Speed(0.0, 0.0, ANGULAR_STEP)
+        );
+        assert_eq!(
+            press(KeyCode::Char('w'), none),
+            Key::Speed(LINEAR_STEP, 0.0, 0.0)
+        );
+        assert_eq!(press(KeyCode::Char('c'), KeyModifiers::CONTROL), Key::Quit);
+    }
 }

@@ -116,6 +116,7 @@ impl Transcribe for Ros2Transcript {
                 log_time_ns: self.unix_ns(command.at_ns),
                 payload: msgs::encode_twist(PlanarTwist {
                     linear: command.linear,
+                    lateral: command.lateral,
                     angular: command.angular,
                 }),
             });

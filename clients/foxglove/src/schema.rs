@@ -49,7 +49,7 @@ pub fn state() -> Value {
     }));
     let chassis = object(json!({
         "model": nullable_of("string"), "max_linear": number(), "max_angular": number(),
-        "track": number(), "wheel_radius": number(), "gear_ratio": number(),
+        "max_lateral": number(), "track": number(), "wheel_radius": number(), "gear_ratio": number(),
     }));
     let system = nullable(json!({
         "state": string(), "control_mode": string(), "battery_voltage": number(),
@@ -111,9 +111,9 @@ pub fn state() -> Value {
 pub fn command() -> Value {
     json!({
         "title": "scout.Command",
-        "description": "A motion command as the gateway sent it (m/s, rad/s)",
+        "description": "A motion command as the gateway sent it (m/s, m/s leftward, rad/s)",
         "type": "object",
-        "properties": { "linear": number(), "angular": number() },
+        "properties": { "linear": number(), "lateral": number(), "angular": number() },
     })
 }
 
@@ -139,8 +139,8 @@ pub fn status() -> Value {
             "stops": { "type": "array", "items": stop },
             "selected": nullable(json!({ "client": string(), "class": string() })),
             "output": object(json!({
-                "linear": number(), "angular": number(), "fault_clear": string(),
-                "limited": boolean(),
+                "linear": number(), "lateral": number(), "angular": number(),
+                "fault_clear": string(), "limited": boolean(),
             })),
             "autonomy_armed": boolean(),
             "battery": object(json!({

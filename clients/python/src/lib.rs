@@ -537,13 +537,17 @@ impl NativeController {
         self.call(py, Controller::take_control)
     }
 
+    #[pyo3(signature = (linear, angular, lateral=0.0))]
     fn drive<'py>(
         &self,
         py: Python<'py>,
         linear: f64,
         angular: f64,
+        lateral: f64,
     ) -> PyResult<Bound<'py, PyDict>> {
-        self.call(py, move |controller| controller.drive(linear, angular))
+        self.call(py, move |controller| {
+            controller.drive_body(linear, lateral, angular, None)
+        })
     }
 
     fn heartbeat<'py>(&self, py: Python<'py>, period: f64) -> PyResult<Bound<'py, PyDict>> {

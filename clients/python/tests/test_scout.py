@@ -361,6 +361,31 @@ def test_a_protocol_v2_chassis_reads_and_drives_the_same() -> None:
         started.stop()
 
 
+def test_an_omni_drives_sideways_and_a_scout_refuses_it_whole(robot: scout.Robot) -> None:
+    with robot.controller("pytest-sideways", scout.Class.TELEOP) as controller:
+        controller.take_control()
+        with pytest.raises(scout.Rejected) as refused:
+            controller.drive(0.3, 0.0, lateral=0.2)
+        assert refused.value.cause == "not_allowed"
+        assert "does not move sideways" in refused.value.reason
+    started = Gateway(robot_name("omni"), "--protocol", "v2", "--model", "scout-mini-omni")
+    try:
+        omni = started.connect()
+        until(lambda: omni.next(timeout=1.0).chassis.max_lateral == 2.0, 5.0, "the OMNI's limits")
+        with omni.controller("pytest-omni", scout.Class.TELEOP) as controller:
+            controller.take_control()
+            deadline = time.monotonic() + 5.0
+            while True:
+                controller.drive(0.0, 0.0, lateral=0.4)
+                state = omni.next(timeout=1.0)
+                if state.odometry.y > 0.2:
+                    break
+                assert time.monotonic() < deadline, "the OMNI never moved sideways"
+            assert state.command.lateral > 0.0 and abs(state.odometry.x) < 0.05
+    finally:
+        started.stop()
+
+
 def test_status_is_the_scout_status_json_schema(robot: scout.Robot) -> None:
     until(lambda: robot.latest() is not None, 5.0, "a first state")
     cli = scout_cli("status", "--name", robot.name, "--json")

@@ -503,7 +503,10 @@ fn drive(
                     break;
                 }
                 Action::Take => controller.take_control(),
-                Action::Drive => controller.drive(twist.linear, twist.angular),
+                // linear.y too: a chassis that does not move sideways refuses it, saying so.
+                Action::Drive => {
+                    controller.drive_body(twist.linear, twist.lateral, twist.angular, None)
+                }
             };
             match &answer {
                 // A message is accepted when its speed is: taking control on the way is not a

@@ -749,6 +749,7 @@ mod tests {
             decode_cmd_vel(&twist, false),
             Ok(PlanarTwist {
                 linear: 0.5,
+                lateral: 0.0,
                 angular: -0.25
             })
         );
@@ -838,7 +839,9 @@ mod tests {
         ) {
             let mut payload = ENCAPSULATION.to_vec();
             payload.extend(&body);
-            let bits = |twist: PlanarTwist| (twist.linear.to_bits(), twist.angular.to_bits());
+            let bits = |twist: PlanarTwist| {
+                (twist.linear.to_bits(), twist.lateral.to_bits(), twist.angular.to_bits())
+            };
             proptest::prop_assert_eq!(
                 decode_cmd_vel(&payload, false).ok().map(bits),
                 crate::msgs::decode_twist(&payload, false).ok().map(bits)

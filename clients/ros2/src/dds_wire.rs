@@ -48,6 +48,7 @@ impl From<&Twist> for PlanarTwist {
     fn from(twist: &Twist) -> Self {
         PlanarTwist {
             linear: twist.linear.x,
+            lateral: twist.linear.y,
             angular: twist.angular.z,
         }
     }

@@ -95,6 +95,8 @@ pub struct Odometry<'a> {
     pub y: f64,
     pub yaw: f64,
     pub linear: f64,
+    /// m/s leftward (0 but on a chassis that moves sideways).
+    pub lateral: f64,
     pub angular: f64,
     /// Row-major 6x6 diagonal (x, y, z, roll, pitch, yaw).
     pub pose_covariance: [f64; 6],
@@ -122,7 +124,7 @@ impl Odometry<'_> {
         w.f64s(&[self.x, self.y, 0.0])
             .f64s(&yaw_quaternion(self.yaw));
         covariance(&mut w, &self.pose_covariance);
-        w.f64s(&[self.linear, 0.0, 0.0, 0.0, 0.0, self.angular]);
+        w.f64s(&[self.linear, self.lateral, 0.0, 0.0, 0.0, self.angular]);
         covariance(&mut w, &self.twist_covariance);
         w.finish()
     }
@@ -269,17 +271,19 @@ pub fn decode_trigger_request(bytes: &[u8]) -> Result<(), CdrError> {
     r.finish()
 }
 
-/// The planar part of a `geometry_msgs/Twist`: linear x (m/s), angular z (rad/s).
+/// The planar part of a `geometry_msgs/Twist`: linear x (m/s), linear y (m/s, leftward: a
+/// chassis that moves sideways), angular z (rad/s).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PlanarTwist {
     pub linear: f64,
+    pub lateral: f64,
     pub angular: f64,
 }
 
 /// Writes a planar `Twist` (what a recording's `/cmd_vel` carries).
 pub fn encode_twist(twist: PlanarTwist) -> Vec<u8> {
     let mut w = Writer::new();
-    w.f64s(&[twist.linear, 0.0, 0.0, 0.0, 0.0, twist.angular]);
+    w.f64s(&[twist.linear, twist.lateral, 0.0, 0.0, 0.0, twist.angular]);
     w.finish()
 }
 
@@ -292,13 +296,17 @@ pub fn decode_twist(bytes: &[u8], stamped: bool) -> Result<PlanarTwist, CdrError
         r.skip_string()?;
     }
     let linear = r.f64()?;
-    r.f64()?;
+    let lateral = r.f64()?;
     r.f64()?;
     r.f64()?;
     r.f64()?;
     let angular = r.f64()?;
     r.finish()?;
-    Ok(PlanarTwist { linear, angular })
+    Ok(PlanarTwist {
+        linear,
+        lateral,
+        angular,
+    })
 }
 
 #[cfg(test)]
@@ -340,6 +348,7 @@ mod tests {
             y: -0.25,
             yaw: 1.0,
             linear: 0.3,
+            lateral: 0.0,
             angular: -0.1,
             pose_covariance: [0.01, 0.01, 1e6, 1e6, 1e6, 0.05],
             twist_covariance: [0.02, 1e6, 1e6, 1e6, 1e6, 0.04],
@@ -415,6 +424,7 @@ mod tests {
             decode_twist(&hex(TWIST), false),
             Ok(PlanarTwist {
                 linear: 0.3,
+                lateral: 0.0,
                 angular: 0.2
             })
         );
@@ -422,6 +432,7 @@ mod tests {
             decode_twist(&hex(TWIST_STAMPED), true),
             Ok(PlanarTwist {
                 linear: -0.5,
+                lateral: 0.0,
                 angular: 0.25
             })
         );
@@ -442,6 +453,7 @@ mod tests {
     fn a_twist_written_is_rosbags_own() {
         let twist = PlanarTwist {
             linear: 0.3,
+            lateral: 0.0,
             angular: 0.2,
         };
         assert_eq!(encode_twist(twist), hex(TWIST));

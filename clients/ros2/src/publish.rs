@@ -90,7 +90,7 @@ const UNKNOWN: f64 = 1e6;
 /// uncertainty grows with the distance since the last reset, the heading's with the turning
 /// and the distance, the twist's with the speeds; each axis smaller once its factor is
 /// calibrated (off 1.0).
-fn odometry_covariance(state: &StatePayload, linear: f64, angular: f64) -> ([f64; 6], [f64; 6]) {
+fn odometry_covariance(state: &StatePayload, speed: f64, angular: f64) -> ([f64; 6], [f64; 6]) {
     let odometry = &state.odometry;
     let error = |errors: [f64; 2], factor: f64| errors[usize::from(factor == 1.0)];
     let distance_error = error(DISTANCE_ERROR, odometry.distance_scale);
@@ -99,7 +99,7 @@ fn odometry_covariance(state: &StatePayload, linear: f64, angular: f64) -> ([f64
     let distance = odometry.distance.abs();
     let position = variance(distance_error * distance);
     let heading = variance(turn_error * odometry.rotation.abs() + HEADING_PER_METRE * distance);
-    let speed = variance(distance_error * linear.abs());
+    let speed = variance(distance_error * speed.abs());
     let rate = variance(turn_error * angular.abs());
     (
         [position, position, UNKNOWN, UNKNOWN, UNKNOWN, heading],
@@ -235,8 +235,10 @@ impl Messages {
         // state from before they were published).
         let scale = |factor: f64| if factor > 0.0 { factor } else { 1.0 };
         let linear = state.motion.linear() * scale(odometry.distance_scale);
+        let lateral = state.motion.lateral() * scale(odometry.distance_scale);
         let angular = state.motion.angular() * scale(odometry.yaw_scale);
-        let (pose_covariance, twist_covariance) = odometry_covariance(state, linear, angular);
+        let (pose_covariance, twist_covariance) =
+            odometry_covariance(state, linear.hypot(lateral), angular);
         out.push(Outgoing {
             topic: Topic::Odom,
             payload: Odometry {
@@ -246,6 +248,7 @@ impl Messages {
                 y: odometry.y,
                 yaw: odometry.yaw,
                 linear,
+                lateral,
                 angular,
                 pose_covariance,
                 twist_covariance,

@@ -242,8 +242,9 @@ impl CmdVelStream {
         if starts {
             self.blocked = false;
         }
-        let finite = twist.linear.is_finite() && twist.angular.is_finite();
-        let zero = twist.linear == 0.0 && twist.angular == 0.0;
+        let speeds = [twist.linear, twist.lateral, twist.angular];
+        let finite = speeds.iter().all(|speed| speed.is_finite());
+        let zero = speeds.iter().all(|speed| *speed == 0.0);
         self.starts = starts && finite && !zero;
         let action = if !finite {
             Action::Ignore(Ignored::NotFinite)
@@ -308,10 +309,12 @@ mod tests {
 
     const GO: PlanarTwist = PlanarTwist {
         linear: 0.5,
+        lateral: 0.0,
         angular: 0.0,
     };
     const ZERO: PlanarTwist = PlanarTwist {
         linear: 0.0,
+        lateral: 0.0,
         angular: 0.0,
     };
 
@@ -360,6 +363,26 @@ mod tests {
     }
 
     const MID: Action = Action::Ignore(Ignored::MidStream);
+
+    #[test]
+    fn sideways_alone_is_a_speed_and_not_a_number_sideways_is_ignored() {
+        let (mut stream, mut nav) = (CmdVelStream::new(ms(0), PAUSES), Publisher(1, 0));
+        let sideways = PlanarTwist {
+            linear: 0.0,
+            lateral: 0.3,
+            angular: 0.0,
+        };
+        assert_eq!(nav.send(&mut stream, 3000, sideways), Action::Take);
+        taken(&mut stream);
+        let nan = PlanarTwist {
+            lateral: f64::NAN,
+            ..sideways
+        };
+        assert_eq!(
+            nav.send(&mut stream, 3020, nan),
+            Action::Ignore(Ignored::NotFinite)
+        );
+    }
 
     #[test]
     fn a_stream_going_when_the_bridge_starts_waits_for_a_long_pause() {
@@ -479,6 +502,7 @@ mod tests {
         let (mut stream, mut nav) = (CmdVelStream::new(ms(0), PAUSES), Publisher(1, 0));
         let nan = PlanarTwist {
             linear: f64::NAN,
+            lateral: 0.0,
             angular: 0.0,
         };
         assert_eq!(

@@ -925,9 +925,11 @@ fn control_thread(robot: &str, client: &str, slot: &Slot, answers: &mpsc::Unboun
                 let Some(lease) = controller.lease() else {
                     continue;
                 };
+                // The page drives forward and turning; sideways is not on it yet.
                 let request = Request::Drive {
                     lease,
                     linear,
+                    lateral: 0.0,
                     angular,
                     ttl: Some(ttl),
                 };

@@ -32,6 +32,9 @@ pub struct SimParams {
     pub max_angular: f64,
     /// m/s: protocol v2 firmware clamps its commands to it (v1's percent is of 1.5 m/s).
     pub max_linear: f64,
+    /// m/s sideways: protocol v2 firmware clamps 0x111's lateral field to it (0: the chassis
+    /// does not move sideways and ignores the field; the SCOUT MINI OMNI's is 2.0).
+    pub max_lateral: f64,
     /// Distance between the left and right wheels, m (vendor SDK value).
     pub track_width: f64,
     /// Wheel radius, m.
@@ -76,6 +79,7 @@ impl Default for SimParams {
         Self {
             max_angular: units::DEFAULT_MAX_ANGULAR_SPEED,
             max_linear: units::MAX_LINEAR_SPEED,
+            max_lateral: 0.0,
             track_width: 0.583,
             wheel_radius: 0.165,
             gear_ratio: 32.0,
@@ -113,6 +117,7 @@ impl SimParams {
         Self {
             max_angular: limits.angular,
             max_linear: limits.linear,
+            max_lateral: limits.lateral,
             track_width: geometry.track,
             wheel_radius: geometry.wheel_radius,
             gear_ratio: geometry.gear_ratio,
@@ -422,6 +427,8 @@ pub struct IntervalStats {
 pub struct LastCommand {
     /// m/s.
     pub linear: f64,
+    /// m/s leftward (v2).
+    pub lateral: f64,
     /// rad/s.
     pub angular: f64,
     /// `rc`, `can`, `serial`.
@@ -430,11 +437,13 @@ pub struct LastCommand {
     pub fault_clear: &'static str,
 }
 
-/// A pair of speeds.
+/// A body velocity.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
 pub struct Speeds {
     /// m/s.
     pub linear: f64,
+    /// m/s leftward (a chassis that moves sideways).
+    pub lateral: f64,
     /// rad/s.
     pub angular: f64,
 }
@@ -601,6 +610,7 @@ impl Chassis {
         }
         self.stats.last_command = Some(LastCommand {
             linear: command.linear(self.params.max_linear),
+            lateral: 0.0,
             angular: command.angular(self.params.max_angular),
             control_mode: command.control_mode.name(),
             fault_clear: command.fault_clear.name(),
@@ -618,6 +628,7 @@ impl Chassis {
         self.last_valid_motion = Some(now);
         self.target = Speeds {
             linear: command.linear(self.params.max_linear),
+            lateral: 0.0,
             angular: command.angular(self.params.max_angular),
         };
         if self.drive_inhibited() {
@@ -889,9 +900,18 @@ impl Chassis {
                 target.angular - self.actual.angular,
                 self.params.angular_acceleration * dt,
             );
+            // Sideways as forward.
+            self.actual.lateral += ramp(
+                target.lateral - self.actual.lateral,
+                self.params.linear_acceleration * dt,
+            );
         }
-        let Speeds { linear, angular } = self.actual;
-        self.pose.step(linear, angular, dt);
+        let Speeds {
+            linear,
+            lateral,
+            angular,
+        } = self.actual;
+        self.pose.step_body(linear, lateral, angular, dt);
         if let Some(firmware) = self.v2.as_mut() {
             let half_track = self.params.track_width / 2.0;
             firmware.step(
@@ -907,7 +927,10 @@ impl Chassis {
 
     fn step_motors(&mut self, acceleration: f64, dt: f64) {
         let half_track = self.params.track_width / 2.0;
-        let Speeds { linear, angular } = self.actual;
+        // Sideways motion is left out: which way each mecanum wheel then turns is in no source.
+        let Speeds {
+            linear, angular, ..
+        } = self.actual;
         let (left, right) = (linear - angular * half_track, linear + angular * half_track);
         let rpm_per_mps =
             60.0 / (2.0 * std::f64::consts::PI * self.params.wheel_radius) * self.params.gear_ratio;
@@ -982,8 +1005,14 @@ impl Chassis {
         }
         // The chassis' own logic (manual 2.5, "normally off"): standing still, front off and rear
         // breathing; moving, front on and rear off.
-        let moving =
-            self.actual.linear.abs() > STANDSTILL || self.actual.angular.abs() > STANDSTILL;
+        let Speeds {
+            linear,
+            lateral,
+            angular,
+        } = self.actual;
+        let moving = [linear, lateral, angular]
+            .iter()
+            .any(|speed| speed.abs() > STANDSTILL);
         let (front, rear) = if moving {
             (LightMode::On, LightMode::Off)
         } else {

@@ -180,12 +180,17 @@ impl Chassis {
     fn handle_motion_v2(&mut self, now: Duration, command: MotionV2) -> Option<Ignored> {
         let firmware = self.v2.as_ref()?;
         let mode = firmware.mode;
-        let (max_linear, max_angular) = (self.params.max_linear, self.params.max_angular);
+        let (max_linear, max_angular, max_lateral) = (
+            self.params.max_linear,
+            self.params.max_angular,
+            self.params.max_lateral,
+        );
         if let Some(previous) = self.last_motion_received.replace(now) {
             self.intervals.record(now.saturating_sub(previous));
         }
         self.stats.last_command = Some(LastCommand {
             linear: command.linear(),
+            lateral: command.lateral(),
             angular: command.angular(),
             control_mode: mode.name(),
             fault_clear: "none",
@@ -204,6 +209,7 @@ impl Chassis {
         self.last_valid_motion = Some(now);
         self.target = Speeds {
             linear: command.linear().clamp(-max_linear, max_linear),
+            lateral: command.lateral().clamp(-max_lateral, max_lateral),
             angular: command.angular().clamp(-max_angular, max_angular),
         };
         if self.drive_inhibited() {
@@ -349,7 +355,7 @@ impl Chassis {
         let mut frames = vec![MessageV2::MotionState(MotionV2 {
             linear_mm_s: super::to_i16(actual.linear * 1000.0 * distance_scale),
             angular_mrad_s: super::to_i16(actual.angular * 1000.0 * yaw_scale),
-            lateral_mm_s: 0,
+            lateral_mm_s: super::to_i16(actual.lateral * 1000.0 * distance_scale),
             steering_mrad: 0,
         })];
         for (mut high, low) in motors {

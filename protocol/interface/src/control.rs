@@ -35,7 +35,8 @@ pub struct UnknownName {
 wire_enum! {
     /// What a [`ControlRequest`] asks for (its `kind` byte).
     RequestKind {
-        /// Drive at `linear`, `angular` under `lease` for `ttl_ms` (0: the class's maximum age).
+        /// Drive at `linear`, `lateral`, `angular` under `lease` for `ttl_ms` (0: the class's
+        /// maximum age).
         Drive = 1 => "drive",
         /// Latch a safety stop (`reason`), owned by this client's name.
         Stop = 2 => "stop",
@@ -146,13 +147,17 @@ pub enum Request {
         /// The class to drive as.
         class: Class,
     },
-    /// Drive at these speeds (m/s, rad/s) for at most `ttl` (`None`: the class's maximum age),
-    /// under a lease from [`Request::TakeControl`].
+    /// Drive at this body velocity (ROS conventions: m/s forward, m/s leftward, rad/s
+    /// counter-clockwise) for at most `ttl` (`None`: the class's maximum age), under a lease
+    /// from [`Request::TakeControl`]. Only a chassis that moves sideways takes a `lateral`
+    /// other than zero.
     Drive {
         /// The lease.
         lease: u64,
-        /// m/s.
+        /// m/s, forward.
         linear: f64,
+        /// m/s, leftward.
+        lateral: f64,
         /// rad/s.
         angular: f64,
         /// The command's life.
@@ -222,11 +227,13 @@ impl Request {
             Self::Drive {
                 lease,
                 linear,
+                lateral,
                 angular,
                 ttl,
             } => {
                 wire.lease = *lease;
                 wire.linear = *linear;
+                wire.lateral = *lateral;
                 wire.angular = *angular;
                 wire.ttl_ms = ttl.map_or(0, |ttl| {
                     ttl.as_millis().clamp(1, u128::from(u32::MAX)) as u32
@@ -271,6 +278,7 @@ impl Request {
             RequestKind::Drive => Self::Drive {
                 lease: wire.lease,
                 linear: wire.linear,
+                lateral: wire.lateral,
                 angular: wire.angular,
                 ttl: (wire.ttl_ms > 0).then(|| Duration::from_millis(u64::from(wire.ttl_ms))),
             },
@@ -682,7 +690,7 @@ pub struct LightsRequest {
 
 /// A request from a client to the gateway's arbiter.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::ControlRequest.v9")]
+#[type_name("scout::ControlRequest.v10")]
 #[repr(C)]
 pub struct ControlRequest {
     /// [`RequestKind`] as `u8`.
@@ -710,8 +718,10 @@ pub struct ControlRequest {
     /// CLOCK_BOOTTIME time the client sent it, ns (a command older than its life on arrival is
     /// refused).
     pub sent_ns: u64,
-    /// m/s, for drive.
+    /// m/s, forward, for drive.
     pub linear: f64,
+    /// m/s, leftward, for drive.
+    pub lateral: f64,
     /// rad/s, for drive.
     pub angular: f64,
     /// The command's life, ms (0: the class's maximum age), for drive.
@@ -724,7 +734,7 @@ pub struct ControlRequest {
 
 /// The gateway's answer to one request.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("scout::ControlResponse.v9")]
+#[type_name("scout::ControlResponse.v10")]
 #[repr(C)]
 pub struct ControlResponse {
     /// The request's `seq`.
@@ -831,7 +841,7 @@ pub struct SourcePayload {
 
 /// The arbiter's status, published on every change and at least once a second.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::StatusPayload.v9")]
+#[type_name("scout::StatusPayload.v10")]
 #[repr(C)]
 pub struct StatusPayload {
     /// Rises by one with every publication.
@@ -853,6 +863,8 @@ pub struct StatusPayload {
     pub selected_client: FixedText<MAX_CLIENT_NAME>,
     /// The output, m/s.
     pub output_linear: f64,
+    /// The output, m/s leftward.
+    pub output_lateral: f64,
     /// The output, rad/s.
     pub output_angular: f64,
     /// The fault-clear code going out.
@@ -1013,12 +1025,14 @@ mod tests {
             (
                 any::<u64>(),
                 speed.clone(),
+                speed.clone(),
                 speed,
                 prop::option::of(1u64..100_000)
             )
-                .prop_map(|(lease, linear, angular, ttl)| Request::Drive {
+                .prop_map(|(lease, linear, lateral, angular, ttl)| Request::Drive {
                     lease,
                     linear,
+                    lateral,
                     angular,
                     ttl: ttl.map(Duration::from_millis),
                 }),
@@ -1080,6 +1094,7 @@ mod tests {
             Request::Drive {
                 lease: 1,
                 linear: 0.0,
+                lateral: 0.0,
                 angular: 0.0,
                 ttl: None,
             },

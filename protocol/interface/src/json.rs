@@ -231,6 +231,7 @@ pub fn state_field(state: &StatePayload, key: &str, now_ns: u64) -> Option<Value
                 "model": chassis.model().map(|model| model.name()),
                 "max_linear": chassis.max_linear,
                 "max_angular": chassis.max_angular,
+                "max_lateral": chassis.max_lateral,
                 "track": chassis.track,
                 "wheel_radius": chassis.wheel_radius,
                 "gear_ratio": chassis.gear_ratio,
@@ -356,7 +357,11 @@ pub fn state_field(state: &StatePayload, key: &str, now_ns: u64) -> Option<Value
             "distance_scale": state.odometry.distance_scale,
             "yaw_scale": state.odometry.yaw_scale,
         }),
-        "command" => json!({ "linear": state.command.linear, "angular": state.command.angular }),
+        "command" => json!({
+            "linear": state.command.linear,
+            "lateral": state.command.lateral,
+            "angular": state.command.angular,
+        }),
         _ => return None,
     })
 }
@@ -436,6 +441,7 @@ pub fn status_json(status: &StatusPayload, now_ns: u64) -> Value {
         "selected": selected,
         "output": {
             "linear": status.output_linear,
+            "lateral": status.output_lateral,
             "angular": status.output_angular,
             "fault_clear": FaultClear::from_raw(status.output_fault_clear).name(),
             "limited": status.limited,

@@ -485,6 +485,10 @@ pub struct RemoteCommand {
     pub linear: Option<f64>,
     /// drive: rad/s.
     pub angular: Option<f64>,
+    /// drive: m/s leftward (absent: 0; only a chassis that moves sideways takes another).
+    /// Left out when absent, as an older gateway refuses a field it does not know.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lateral: Option<f64>,
     /// drive: the command's life, ms.
     pub ttl_ms: Option<u32>,
     /// estop: why.
@@ -552,6 +556,7 @@ impl RemoteCommand {
                     Request::Drive {
                         lease,
                         linear,
+                        lateral: self.lateral.unwrap_or(0.0),
                         angular,
                         ttl,
                     },
@@ -968,6 +973,7 @@ mod tests {
                 Request::Drive {
                     lease: 9,
                     linear: 0.5,
+                    lateral: 0.0,
                     angular: 0.0,
                     ttl: None
                 }

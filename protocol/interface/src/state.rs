@@ -90,6 +90,8 @@ pub struct ChassisPayload {
     pub max_linear: f64,
     /// The fastest the gateway lets it turn, rad/s (on v1 also the rate at 100 %).
     pub max_angular: f64,
+    /// The fastest the gateway lets it go sideways, m/s (0: it does not).
+    pub max_lateral: f64,
     /// Distance between the left and right wheels, m.
     pub track: f64,
     /// Wheel radius, m.
@@ -106,6 +108,7 @@ impl ChassisPayload {
             model: model.raw(),
             max_linear: model.limits().linear,
             max_angular,
+            max_lateral: model.limits().lateral,
             track: geometry.track,
             wheel_radius: geometry.wheel_radius,
             gear_ratio: geometry.gear_ratio,
@@ -467,6 +470,8 @@ pub const ODOMETRY_SCALE_RANGE: std::ops::RangeInclusive<f64> = 0.5..=2.0;
 pub struct CommandPayload {
     /// m/s, as sent (after the wire's rounding).
     pub linear: f64,
+    /// m/s leftward, as sent.
+    pub lateral: f64,
     /// rad/s, as sent.
     pub angular: f64,
     /// CLOCK_BOOTTIME time it was sent, ns.
@@ -475,7 +480,7 @@ pub struct CommandPayload {
 
 /// The chassis state a gateway publishes on every decoded feedback frame and link change.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::StatePayload.v9")]
+#[type_name("scout::StatePayload.v10")]
 #[repr(C)]
 pub struct StatePayload {
     /// Increases by one with every publication.

@@ -19,6 +19,7 @@ mod remote;
 mod ros2;
 mod ros2_dds;
 mod safety;
+mod sideways;
 mod sim;
 mod status;
 mod teleop;

@@ -258,10 +258,14 @@ class Controller:
         back after a stop, a release, a takeover or silence ended it."""
         return Answer._from(self._native.take_control())
 
-    def drive(self, linear: float, angular: float) -> Answer:
-        """Drives at `linear` m/s and `angular` rad/s (clamped to the class' caps: see
-        `Answer.clamped`). Send it every 20-100 ms: silence stops the robot."""
-        return Answer._from(self._native.drive(float(linear), float(angular)))
+    def drive(self, linear: float, angular: float, lateral: float = 0.0) -> Answer:
+        """Drives at `linear` m/s and `angular` rad/s, and `lateral` m/s to the left (a SCOUT
+        MINI OMNI on protocol v2; any other chassis refuses a sideways speed, saying why),
+        clamped to the class' caps (see `Answer.clamped`). Send it every 20-100 ms: silence
+        stops the robot."""
+        return Answer._from(
+            self._native.drive(float(linear), float(angular), float(lateral))
+        )
 
     def heartbeat(self, period: float = 0.5) -> Answer:
         """Registers this controller as a heartbeat: if no request comes from it for `period`

@@ -30,11 +30,13 @@ class Link:
 
 @dataclass(frozen=True)
 class Chassis:
-    """The model the gateway drives and its limits (m/s, rad/s) and geometry (m)."""
+    """The model the gateway drives and its limits (m/s, rad/s; `max_lateral` m/s sideways, 0
+    where it does not move sideways) and geometry (m)."""
 
     model: Optional[str]
     max_linear: float
     max_angular: float
+    max_lateral: float
     track: float
     wheel_radius: float
     gear_ratio: float
@@ -187,9 +189,11 @@ class Odometry:
 
 @dataclass(frozen=True)
 class Command:
-    """The motion command on the wire now (what the arbiter sends): m/s, rad/s."""
+    """The motion command on the wire now (what the arbiter sends): m/s forward, m/s leftward,
+    rad/s."""
 
     linear: float
+    lateral: float
     angular: float
 
 

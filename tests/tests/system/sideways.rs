@@ -1,0 +1,178 @@
+//! Sideways motion across processes: `scout drive --lateral` moves a SCOUT MINI OMNI (the
+//! gateway's simulated one, protocol v2) to its left, the gateway's odometry following, and a
+//! chassis that does not move sideways refuses it whole, saying why.
+
+use std::time::Duration;
+
+use scout_system_tests::{Gateway, connect, robot_name, scout, wait_for_state};
+
+const LIMIT: Duration = Duration::from_secs(10);
+
+/// A gateway for a SCOUT MINI OMNI on protocol v2 on `port` (`--sim`, `--slcan PATH`), its
+/// state subscribed, and its first state with the link up.
+fn omni(
+    name: &str,
+    port: &[&str],
+) -> (
+    Gateway,
+    scout_clients::client::StateSubscriber,
+    serde_json::Value,
+) {
+    let args = [
+        "--protocol",
+        "v2",
+        "--model",
+        "scout-mini-omni",
+        "--name",
+        name,
+    ];
+    let gateway = Gateway::start(&[port, &args[..]].concat());
+    let state = connect(name).subscribe().expect("state");
+    let ready = wait_for_state(&state, LIMIT, |s| s["link"]["state"] == "ok");
+    (gateway, state, ready)
+}
+
+#[test]
+fn scout_drive_moves_the_omni_sideways_and_the_odometry_follows() {
+    let name = robot_name("omni");
+    let (_gateway, state, ready) = omni(&name, &["--sim"]);
+    assert_eq!(ready["chassis"]["max_lateral"], 2.0, "{}", ready["chassis"]);
+    let (code, stdout, stderr) = scout(&[
+        "drive",
+        "--name",
+        &name,
+        "--lateral",
+        "0.4",
+        "--duration",
+        "1.5",
+    ]);
+    assert_eq!(code, Some(0), "{stdout}{stderr}");
+    // Left of where it started, not ahead: 0.4 m/s for 1.5 s, less the ramps.
+    let moved = wait_for_state(&state, LIMIT, |s| {
+        s["odometry"]["y"].as_f64().is_some_and(|y| y > 0.3)
+    });
+    let odometry = &moved["odometry"];
+    assert!(
+        odometry["x"].as_f64().is_some_and(|x| x.abs() < 0.05),
+        "{odometry}"
+    );
+    // `scout drive` commands zero before it leaves.
+    wait_for_state(&state, LIMIT, |s| s["command"]["lateral"] == 0.0);
+}
+
+#[test]
+fn a_chassis_that_does_not_move_sideways_refuses_it_whole_and_says_why() {
+    let name = robot_name("no-sideways");
+    let _gateway = Gateway::start(&["--sim", "--name", &name]);
+    let robot = connect(&name);
+    let state = robot.subscribe().expect("state");
+    wait_for_state(&state, LIMIT, |s| s["link"]["state"] == "ok");
+    let (code, stdout, stderr) = scout(&[
+        "drive",
+        "--name",
+        &name,
+        "--linear",
+        "0.3",
+        "--lateral",
+        "0.2",
+        "--duration",
+        "0.5",
+    ]);
+    assert_eq!(code, Some(4), "{stdout}{stderr}");
+    let said = format!("{stdout}{stderr}");
+    assert!(said.contains("a scout does not move sideways"), "{said}");
+    let now = wait_for_state(&state, LIMIT, |_| true);
+    assert_eq!(now["command"]["linear"], 0.0, "refused whole: {now}");
+    assert_eq!(now["odometry"]["x"], 0.0, "{now}");
+}
+
+/// `tests/system/v2_chassis.py`, an emulated v2 chassis on an slcan pseudo-terminal written from
+/// the vendor's field layout: the path of its port, and each motion command it decoded.
+struct EmulatedChassis {
+    child: std::process::Child,
+    lines: std::sync::mpsc::Receiver<String>,
+    port: String,
+}
+
+impl EmulatedChassis {
+    fn start() -> Self {
+        let script =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/system/v2_chassis.py");
+        let mut child = std::process::Command::new("python3")
+            .arg(script)
+            .stdout(std::process::Stdio::piped())
+            .spawn()
+            .expect("python3 runs the emulated chassis");
+        let lines = scout_system_tests::line_reader(child.stdout.take().expect("stdout"));
+        let port = lines.recv_timeout(LIMIT).expect("the emulator's port");
+        Self { child, lines, port }
+    }
+
+    /// The motion commands it decoded, as (linear, angular, lateral, steering), until `done`
+    /// says so of the newest or `LIMIT` passes.
+    fn commands_until(&self, done: impl Fn(&[i64; 4]) -> bool) -> Vec<[i64; 4]> {
+        let deadline = std::time::Instant::now() + LIMIT;
+        let mut seen = Vec::new();
+        while let Ok(line) = self
+            .lines
+            .recv_timeout(deadline.saturating_duration_since(std::time::Instant::now()))
+        {
+            let json: serde_json::Value = serde_json::from_str(&line).expect("a JSON line");
+            let field = |name: &str| json[name].as_i64().expect("a field");
+            let command = [
+                field("linear_mm_s"),
+                field("angular_mrad_s"),
+                field("lateral_mm_s"),
+                field("steering_mrad"),
+            ];
+            seen.push(command);
+            if done(&command) {
+                break;
+            }
+        }
+        seen
+    }
+}
+
+impl Drop for EmulatedChassis {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// The bytes of 0x111 against the vendor's layout (`MotionCommandFrame`: linear, angular,
+/// lateral, steering, each a big-endian int16 in thousandths), read by a chassis emulated
+/// apart from this project's codec and simulator: the OMNI's sideways speed is bytes 4-5.
+#[test]
+fn the_omnis_sideways_speed_is_where_the_vendor_puts_it_in_0x111() {
+    let chassis = EmulatedChassis::start();
+    let name = robot_name("omni-wire");
+    let (_gateway, _state, _) = omni(&name, &["--slcan", &chassis.port]);
+    let drive = scout_system_tests::Background::scout(&[
+        "drive",
+        "--name",
+        &name,
+        "--linear",
+        "0.1",
+        "--lateral",
+        "-0.3",
+        "--duration",
+        "1.5",
+    ]);
+    // The ramps (1 m/s², 20 ms) reach 0.1 forward and 0.3 to the right.
+    let seen = chassis.commands_until(|c| c[0] == 100 && c[2] == -300);
+    assert_eq!(
+        seen.last().map(|c| (c[0], c[2])),
+        Some((100, -300)),
+        "{seen:?}"
+    );
+    assert!(
+        seen.iter().all(|c| c[1] == 0 && c[3] == 0),
+        "no yaw, no steering: {seen:?}"
+    );
+    // Then zero on every field when `scout drive` ends.
+    let seen = chassis.commands_until(|c| *c == [0, 0, 0, 0]);
+    assert_eq!(seen.last(), Some(&[0, 0, 0, 0]), "{seen:?}");
+    drop(drive);
+}

@@ -1,0 +1,102 @@
+"""An emulated protocol v2 chassis on an slcan adapter, written from the vendor's field layout
+(ugv_sdk `agilex_protocol_v2.h`: `MotionCommandFrame`, `SystemStateFrame`, `MotionStateFrame`,
+`ControlModeConfigFrame`), not from this project's codec or its simulator: it checks what the
+gateway puts on the wire against the vendor's layout.
+
+It opens a pseudo-terminal, prints its path on the first line of stdout, answers the slcan
+set-up (C, S6, O), and every 20 ms reports 0x211 (normal, standby until a 0x421 asks for CAN
+command mode, 26.0 V) and 0x221 (the last motion command, while fresh). Each 0x111 whose fields
+differ from the one before is printed as a JSON line: {"linear_mm_s", "angular_mrad_s",
+"lateral_mm_s", "steering_mrad"}, big-endian int16 from bytes 0-1, 2-3, 4-5, 6-7. Standard
+library only; ends on SIGTERM or after 60 s.
+"""
+
+import json
+import os
+import select
+import signal
+import struct
+import sys
+import time
+import tty
+
+MOTION_COMMAND = 0x111
+CONTROL_MODE_CONFIG = 0x421
+SYSTEM_STATE = 0x211
+MOTION_STATE = 0x221
+CAN_COMMAND_MODE = 0x01
+COMMAND_TIMEOUT = 0.5
+PERIOD = 0.02
+
+
+def frame_line(can_id: int, data: bytes) -> bytes:
+    return b"t%03X%d%s\r" % (can_id, len(data), data.hex().upper().encode())
+
+
+def write(fd: int, data: bytes) -> None:
+    try:
+        os.write(fd, data)
+    except (BlockingIOError, OSError):
+        pass
+
+
+def main() -> None:
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    # Nobody may be reading yet: a full buffer drops reports rather than blocking.
+    os.set_blocking(master, False)
+    print(os.ttyname(slave), flush=True)
+    running = [True]
+    signal.signal(signal.SIGTERM, lambda *_: running.__setitem__(0, False))
+    control_mode = 0
+    command = (0, 0, 0, 0)
+    command_at = 0.0
+    printed = None
+    count = 0
+    pending = b""
+    start = time.monotonic()
+    next_report = start
+    while running[0] and time.monotonic() - start < 60:
+        timeout = max(0.0, next_report - time.monotonic())
+        readable, _, _ = select.select([master], [], [], timeout)
+        if readable:
+            try:
+                pending += os.read(master, 4096)
+            except BlockingIOError:
+                pass
+            except OSError:
+                break
+            while b"\r" in pending:
+                line, pending = pending.split(b"\r", 1)
+                if line[:1] in (b"C", b"S", b"O"):
+                    write(master, b"\r")
+                    continue
+                if line[:1] != b"t" or len(line) < 5:
+                    continue
+                can_id = int(line[1:4], 16)
+                length = int(line[4:5], 16)
+                data = bytes.fromhex(line[5 : 5 + 2 * length].decode())
+                if can_id == CONTROL_MODE_CONFIG and data[:1] == bytes([CAN_COMMAND_MODE]):
+                    control_mode = CAN_COMMAND_MODE
+                elif can_id == MOTION_COMMAND and len(data) == 8:
+                    fields = struct.unpack(">hhhh", data)
+                    if control_mode == CAN_COMMAND_MODE:
+                        command, command_at = fields, time.monotonic()
+                    if fields != printed:
+                        printed = fields
+                        names = ("linear_mm_s", "angular_mrad_s", "lateral_mm_s", "steering_mrad")
+                        print(json.dumps(dict(zip(names, fields))), flush=True)
+        now = time.monotonic()
+        if now >= next_report:
+            next_report += PERIOD
+            count = (count + 1) % 256
+            # vehicle_state 0 (normal), control_mode, battery_voltage (0.1 V), error_code, reserved, count
+            system = struct.pack(">BBHHBB", 0, control_mode, 260, 0, 0, count)
+            fresh = now - command_at <= COMMAND_TIMEOUT
+            motion = struct.pack(">hhhh", *(command if fresh else (0, 0, 0, 0)))
+            write(master, frame_line(SYSTEM_STATE, system) + frame_line(MOTION_STATE, motion))
+    sys.stdout.flush()
+
+
+if __name__ == "__main__":
+    main()
