@@ -593,18 +593,24 @@ impl ControlPort {
         let pending = self.client.send_copy(wire).map_err(RequestError::Send)?;
         self.wake.notify().map_err(RequestError::Wake)?;
         let deadline = Instant::now() + ANSWER_TIMEOUT;
-        while Instant::now() < deadline {
+        loop {
+            // The clock is read before looking: a process that stood still past the deadline
+            // (SIGSTOP, a loaded host) still takes the answer that came meanwhile, rather than
+            // saying the gateway did not answer.
+            let late = Instant::now() >= deadline;
             while let Some(response) = pending.receive().map_err(RequestError::Receive)? {
                 if response.seq == self.seq {
                     return Ok(response.answer()?);
                 }
             }
+            if late {
+                return Err(RequestError::NoAnswer {
+                    robot: self.robot.clone(),
+                    timeout: ANSWER_TIMEOUT,
+                });
+            }
             std::thread::sleep(Duration::from_micros(200));
         }
-        Err(RequestError::NoAnswer {
-            robot: self.robot.clone(),
-            timeout: ANSWER_TIMEOUT,
-        })
     }
 }
 
