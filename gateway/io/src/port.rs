@@ -233,13 +233,21 @@ fn is_timeout(error: &io::Error) -> bool {
     )
 }
 
+/// `timeout` as a socket's receive timeout: at least a microsecond. The socket takes whole
+/// microseconds, and zero there means "wait for ever": a wait of a few hundred nanoseconds (what
+/// is left until the next feedback) blocked scout-sim on an idle bus until a frame came, which
+/// none did (a CI run caught it).
+fn socket_timeout(timeout: Duration) -> Duration {
+    timeout.max(Duration::from_micros(1))
+}
+
 impl CanPort {
     /// Reads one frame, waiting at most `timeout` (zero: only what is already queued).
     fn read(&mut self, timeout: Duration) -> io::Result<Incoming> {
         let flags = if timeout.is_zero() {
             MsgFlags::MSG_DONTWAIT
         } else {
-            self.socket.set_read_timeout(timeout)?;
+            self.socket.set_read_timeout(socket_timeout(timeout))?;
             MsgFlags::empty()
         };
         let mut frame = [0u8; wire::FRAME_LEN];
@@ -351,6 +359,18 @@ mod tests {
             0x2000_0000 | class,
             &[0, controller, 0, 0, 0, 0, 0, 0],
         ))
+    }
+
+    #[test]
+    fn a_wait_shorter_than_a_microsecond_is_a_microsecond_not_for_ever() {
+        assert_eq!(
+            socket_timeout(Duration::from_nanos(500)),
+            Duration::from_micros(1)
+        );
+        assert_eq!(
+            socket_timeout(Duration::from_millis(5)),
+            Duration::from_millis(5)
+        );
     }
 
     #[test]
