@@ -33,6 +33,7 @@ pub struct GatewayConfig {
     /// The chassis' protocol: `auto` tells it from the frames (CAN and slcan; RS232 is v1).
     pub protocol: ProtocolSetting,
     /// The model, for its speed limits and geometry (default: `scout` on v1, `scout2` on v2).
+    #[serde(deserialize_with = "model_by_name")]
     pub model: Option<Model>,
     /// The fastest the chassis may turn, rad/s; on protocol v1 also the rate at 100 % angular
     /// command (protocol-notes 4.1; firmware differs). Default: the model's.
@@ -461,6 +462,14 @@ impl GatewayConfig {
                 )));
             }
         }
+        if let (Some(model), Some(protocol)) = (self.model, self.fixed_protocol())
+            && !model.speaks(protocol)
+        {
+            return Err(ConfigError::Invalid(format!(
+                "a {model} does not speak protocol {protocol} (RS232 is v1 alone): connect it \
+                 by CAN and give --protocol v2 or auto"
+            )));
+        }
         self.battery.validate()?;
         self.blackbox.validate()?;
         self.zenoh
@@ -500,11 +509,17 @@ impl GatewayConfig {
 
     /// The protocol the gateway speaks from the start, if it is fixed: RS232 is v1 whatever
     /// `auto` would say (only v1 has an RS232 framing), and the simulated chassis speaks what
-    /// the gateway made it speak (`auto`: v1).
+    /// the gateway made it speak (`auto`: v1, or v2 for a model that speaks v2 alone).
     pub fn fixed_protocol(&self) -> Option<Protocol> {
         match (self.transport, self.protocol.fixed()) {
             (_, Some(protocol)) => Some(protocol),
-            (Some(Transport::Serial | Transport::Sim), None) => Some(Protocol::V1),
+            (Some(Transport::Serial), None) => Some(Protocol::V1),
+            (Some(Transport::Sim), None) => Some(
+                match self.model.is_some_and(|model| !model.speaks(Protocol::V1)) {
+                    true => Protocol::V2,
+                    false => Protocol::V1,
+                },
+            ),
             (Some(Transport::Slcan | Transport::Can | Transport::GsUsb) | None, None) => None,
         }
     }
@@ -562,6 +577,14 @@ impl GatewayConfig {
             },
         })
     }
+}
+
+/// A model by its name, refused with [`Model::parse`]'s message (which says what a known model
+/// not driven yet needs).
+fn model_by_name<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<Model>, D::Error> {
+    let name: Option<String> = serde::Deserialize::deserialize(d)?;
+    name.map(|name| Model::parse(&name).map_err(serde::de::Error::custom))
+        .transpose()
 }
 
 #[cfg(test)]
@@ -746,4 +769,35 @@ mod tests {
             assert_eq!(config.model, Some(model));
         }
     }
+
+    #[test]
+    fn a_model_not_driven_yet_or_on_a_protocol_it_does_not_speak_is_refused() {
+        let refused = toml::from_str::<GatewayConfig>("model = \"hunter2\"")
+            .expect_err("not driven yet")
+            .to_string();
+        assert!(
+            refused.contains("does not drive a hunter2 yet"),
+            "{refused}"
+        );
+        let tracer = |transport: &str, protocol: &str| {
+            toml::from_str::<GatewayConfig>(&format!(
+                "transport = \"{transport}\"\ndevice = \"x\"\nprotocol = \"{protocol}\"\n\
+                 model = \"tracer\""
+            ))
+            .expect("toml")
+        };
+        let Ok(DeviceSpec::Sim { protocol, params }) = tracer("sim", "auto").validate() else {
+            panic!("a simulated tracer")
+        };
+        assert_eq!(protocol, Protocol::V2, "a Tracer speaks v2 alone");
+        assert_eq!(params.track_width, Model::Tracer.geometry().track);
+        for (transport, protocol) in [("serial", "auto"), ("slcan", "v1"), ("sim", "v1")] {
+            let Err(ConfigError::Invalid(why)) = tracer(transport, protocol).validate() else {
+                panic!("a tracer on {transport} {protocol}")
+            };
+            assert!(why.contains("a tracer does not speak protocol v1"), "{why}");
+        }
+        assert!(tracer("slcan", "auto").validate().is_ok());
+    }
 }
+

@@ -1157,8 +1157,15 @@ impl Core {
                 )
             }
             Protocol::V2 => {
-                let command =
-                    MotionV2::from_si(output.linear, output.angular).with_lateral(output.lateral);
+                // The arbiter caps in floating point; on the wire a cap that is not a whole
+                // unit would round up past the model's limit (0.5235 rad/s to 524 mrad/s).
+                let command = MotionV2::from_si(output.linear, output.angular)
+                    .with_lateral(output.lateral)
+                    .within(
+                        self.max_linear,
+                        self.max_angular,
+                        self.model.limits().lateral,
+                    );
                 (
                     Outgoing::V2(MessageV2::MotionCommand(command)),
                     (command.linear(), command.lateral(), command.angular()),

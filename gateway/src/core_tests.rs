@@ -2026,6 +2026,86 @@ fn sideways_is_refused_where_the_chassis_or_its_protocol_cannot() {
     }
 }
 
+/// For every model on v2: asked far beyond its limits on every axis it moves, what goes on the
+/// wire is at most its limits (a limit off the wire's unit rounds down: the SCOUT's 0.5235
+/// rad/s is 523 mrad/s), and a stop is zero on every field at once.
+#[test]
+fn no_model_receives_more_than_its_limits_and_a_stop_is_zero_on_every_field() {
+    for model in Model::ALL
+        .into_iter()
+        .filter(|model| model.speaks(Protocol::V2))
+    {
+        let gateway = GatewayConfig {
+            model: Some(model),
+            ..config(Protocol::V2)
+        };
+        let mut pair = Pair::with_firmware(Protocol::V2, Transport::Can, &gateway, Start::Clean);
+        pair.run(ms(200));
+        let limits = model.limits();
+        let lease = pair.take(TELEOP, Class::Teleop).expect("a lease");
+        let mut most = (0.0_f64, 0.0_f64, 0.0_f64);
+        // One axis at a time, then all three (a chassis that does everything at once at its
+        // limits draws more than the simulated pack gives).
+        let lateral = if limits.lateral > 0.0 { 40.0 } else { 0.0 };
+        for (linear, lateral, angular, ticks) in [
+            (0.0, 0.0, 40.0, 100),
+            (0.0, 0.0, 0.0, 100),
+            (-40.0, 0.0, 0.0, 175),
+            (0.0, 0.0, 0.0, 175),
+            (0.0, lateral, 0.0, 125),
+            (0.0, 0.0, 0.0, 125),
+            (40.0, -lateral, -40.0, 25),
+        ] {
+            for _ in 0..ticks {
+                let drive = Request::Drive {
+                    lease,
+                    linear,
+                    lateral,
+                    angular,
+                    ttl: None,
+                };
+                if let Err(refused) = pair.request(TELEOP, &drive) {
+                    panic!("{model}: capped, not refused: {refused:?}");
+                }
+                let next = pair.now + TICK;
+                while pair.now < next {
+                    pair.step();
+                }
+                let sent = pair.chassis.stats().last_command.expect("commands");
+                most = (
+                    most.0.max(sent.linear.abs()),
+                    most.1.max(sent.angular.abs()),
+                    most.2.max(sent.lateral.abs()),
+                );
+            }
+        }
+        assert!(
+            most.0 <= limits.linear && most.1 <= limits.angular && most.2 <= limits.lateral,
+            "{model}: {most:?} beyond {limits:?}"
+        );
+        assert!(
+            limits.angular - most.1 < 0.001
+                && limits.linear - most.0 < 0.001
+                && limits.lateral - most.2 < 0.001,
+            "{model}: the limits are reached: {most:?}"
+        );
+        pair.request(
+            TELEOP,
+            &Request::Stop {
+                reason: "person".into(),
+            },
+        )
+        .expect("stop");
+        pair.step();
+        let sent = pair.chassis.stats().last_command.expect("commands");
+        assert_eq!(
+            (sent.linear, sent.angular, sent.lateral),
+            (0.0, 0.0, 0.0),
+            "{model}: a stop at once"
+        );
+    }
+}
+
 #[test]
 fn an_omni_drifting_sideways_uncommanded_is_a_runaway() {
     let omni = GatewayConfig {

@@ -378,6 +378,18 @@ impl StateTracker {
     }
 
     fn use_protocol(&mut self, protocol: Protocol) {
+        if let Some(model) = self.model
+            && !model.speaks(protocol)
+        {
+            self.set_mismatch(Mismatch {
+                reason: format!("not a {model}: it speaks protocol {protocol}"),
+                detail: format!(
+                    "the chassis speaks protocol {protocol}, which a {model} does not: nothing \
+                     it sends is used and nothing is driven until the port reopens. Check which \
+                     chassis is on this port, and --model (docs/chassis.md)"
+                ),
+            });
+        }
         self.protocol = Some(protocol);
         self.state.link.protocol = protocol.raw();
         if self.sections_from.is_some_and(|from| from != protocol) {
@@ -422,7 +434,7 @@ impl StateTracker {
             reason: format!("not a {model}: it sends {}", sign.short()),
             detail: format!(
                 "the chassis sends {}, which a {model} does not: it looks like {}. The gateway \
-                 drives the SCOUT models only ({Names}): driven with a SCOUT's command, another \
+                 drives these models only ({Names}): driven with their command, another \
                  chassis moves otherwise than its clients ask. Nothing it sends is used and \
                  nothing is driven until the port reopens: check which chassis is on this \
                  port, and --model (docs/chassis.md)",
@@ -919,6 +931,25 @@ mod tests {
         assert_eq!(state.system.battery_decivolts, 0);
         tracker.handle_rx(&status(1), ms(1110));
         assert!(tracker.state().system.received.valid);
+    }
+
+    #[test]
+    fn a_chassis_on_a_protocol_its_model_does_not_speak_is_not_driven() {
+        let chassis = ChassisPayload::new(Model::Tracer, Model::Tracer.limits().angular);
+        let mut tracker = StateTracker::new("t", Transport::Can, "can0", None, chassis);
+        tracker.handle_connected(Duration::ZERO, false);
+        tracker.handle_rx(&status(0), Duration::ZERO);
+        tracker.poll(ms(300));
+        assert_eq!(tracker.link_state(), LinkState::ProtocolMismatch);
+        let why = tracker.mismatch().expect("said").clone();
+        assert_eq!(why.reason, "not a tracer: it speaks protocol v1");
+        // On v2 it is driven.
+        let mut tracker = StateTracker::new("t", Transport::Can, "can0", None, chassis);
+        tracker.handle_connected(Duration::ZERO, false);
+        tracker.handle_rx(&system_v2(0), Duration::ZERO);
+        tracker.poll(ms(300));
+        assert!(tracker.mismatch().is_none());
+        assert_eq!(tracker.state().chassis.model(), Some(Model::Tracer));
     }
 
     #[test]

@@ -1,4 +1,4 @@
-//! The SCOUT's battery as its manual gives it, and the rest-voltage curve that turns a pack
+//! The SCOUT's battery as its manual gives it (and packs no source gives), and the rest-voltage curve that turns a pack
 //! voltage into a state of charge (the gateway's estimate where no smart battery reports one,
 //! and the simulator's truth).
 
@@ -57,6 +57,17 @@ pub const SCOUT_MINI_BATTERY: BatterySpec = BatterySpec {
     ..SCOUT_BATTERY
 };
 
+/// A pack no source gives (the Tracers', the Bunkers'): no curve, so no charge estimate (the
+/// gateway reports the charge unknown, the chassis' own under-voltage bits still count) until
+/// the configuration's `[battery]` gives one; no thresholds.
+pub const UNKNOWN_BATTERY: BatterySpec = BatterySpec {
+    capacity_ah: None,
+    full_charge_volts: f64::NAN,
+    warning_volts: f64::NAN,
+    cutoff_volts: f64::NAN,
+    curve: &[],
+};
+
 /// The state of charge, %, of a pack resting at `volts` by `curve` (linear between the points,
 /// 0 below the first, 100 above the last; NaN for a NaN voltage).
 pub fn percent_at(curve: &[(f64, f64)], volts: f64) -> f64 {
@@ -108,6 +119,7 @@ mod tests {
         assert_eq!(percent_at(LIFEPO4_8S_REST, 21.0), 0.0);
         assert_eq!(percent_at(LIFEPO4_8S_REST, 29.2), 100.0);
         assert!(percent_at(LIFEPO4_8S_REST, f64::NAN).is_nan());
+        assert!(percent_at(UNKNOWN_BATTERY.curve, 25.0).is_nan(), "no estimate");
     }
 
     #[test]

@@ -1,8 +1,10 @@
-//! The SCOUT models: their speed limits and geometry, as the public sources give them
-//! (protocol-v2-notes 6). One table for the simulator and the gateway.
+//! The AgileX models this gateway drives: their speed limits, geometry and battery, as the
+//! public sources give them (protocol-v2-notes 6, agilex-family-notes). One table for the
+//! simulator and the gateway; each number says what it was checked against, or that it is
+//! assumed.
 
 listed! {
-/// A SCOUT model.
+/// An AgileX model the gateway drives.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "serde", serde(rename_all = "kebab-case"))]
@@ -15,8 +17,50 @@ pub enum Model {
     ScoutMini,
     /// SCOUT MINI OMNI, mecanum wheels (also commands a lateral speed).
     ScoutMiniOmni,
+    /// Tracer, a differential-drive indoor base (two driven wheels and castors; v2 only).
+    Tracer,
+    /// Tracer Mini (the vendor's driver tells it from the Tracer by a parameter alone).
+    TracerMini,
+    /// Bunker, tracked (two actuators).
+    Bunker,
+    /// Bunker Mini, tracked.
+    BunkerMini,
+    /// Bunker Pro, tracked.
+    BunkerPro,
 }
 }
+
+listed! {
+/// How a model's wheels move it: what the gateway's mapping, odometry and simulator take.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Drive {
+    /// Four wheels turned in pairs (the SCOUTs): forward and a yaw rate.
+    SkidSteer,
+    /// Mecanum wheels (the OMNI): forward, sideways and a yaw rate.
+    Mecanum,
+    /// Two driven wheels on castors (the Tracers): forward and a yaw rate.
+    Differential,
+    /// Two tracks (the Bunkers): forward and a yaw rate.
+    Tracked,
+}
+}
+
+impl Drive {
+    /// In a few words, for docs and messages.
+    pub const fn describe(self) -> &'static str {
+        match self {
+            Self::SkidSteer => "skid-steer",
+            Self::Mecanum => "mecanum (it moves sideways)",
+            Self::Differential => "differential drive",
+            Self::Tracked => "tracked",
+        }
+    }
+}
+
+/// The Bunker's yaw-rate limit as its source writes it (just under pi/4, so kept, not rounded
+/// up to the constant).
+#[allow(clippy::approx_constant)]
+const BUNKER_MAX_ANGULAR: f64 = 0.7853;
 
 /// How fast a model may be commanded.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -48,6 +92,51 @@ impl Model {
             Self::Scout2 => "scout2",
             Self::ScoutMini => "scout-mini",
             Self::ScoutMiniOmni => "scout-mini-omni",
+            Self::Tracer => "tracer",
+            Self::TracerMini => "tracer-mini",
+            Self::Bunker => "bunker",
+            Self::BunkerMini => "bunker-mini",
+            Self::BunkerPro => "bunker-pro",
+        }
+    }
+
+    /// How its wheels move it.
+    pub const fn drive(self) -> Drive {
+        match self {
+            Self::Scout | Self::Scout2 | Self::ScoutMini => Drive::SkidSteer,
+            Self::ScoutMiniOmni => Drive::Mecanum,
+            Self::Tracer | Self::TracerMini => Drive::Differential,
+            Self::Bunker | Self::BunkerMini | Self::BunkerPro => Drive::Tracked,
+        }
+    }
+
+    /// How many actuators (motor drivers) report on protocol v2 (0x251.., 0x261..): four on
+    /// the SCOUTs, two on the Tracers and Bunkers (agilex-family-notes' table; the Tracer's
+    /// driver reads two, agilexrobotics/tracer_ros2 `tracer_messenger.hpp`).
+    pub const fn actuators(self) -> u8 {
+        match self.drive() {
+            Drive::SkidSteer | Drive::Mecanum => 4,
+            Drive::Differential | Drive::Tracked => 2,
+        }
+    }
+
+    /// Whether it speaks `protocol`. The Tracers speak v2 alone (the vendor SDK's
+    /// `TracerRobot` is `TracerBaseV2`); the SCOUTs and Bunkers speak both.
+    pub const fn speaks(self, protocol: crate::version::Protocol) -> bool {
+        match (self, protocol) {
+            (Self::Tracer | Self::TracerMini, crate::version::Protocol::V1) => false,
+            (
+                Self::Scout
+                | Self::Scout2
+                | Self::ScoutMini
+                | Self::ScoutMiniOmni
+                | Self::Tracer
+                | Self::TracerMini
+                | Self::Bunker
+                | Self::BunkerMini
+                | Self::BunkerPro,
+                _,
+            ) => true,
         }
     }
 
@@ -59,7 +148,9 @@ impl Model {
     /// The model called `name`, or an error that lists every name: the one parser of
     /// `--model` and the configuration's `model`.
     pub fn parse(name: &str) -> Result<Self, UnknownModel> {
-        Self::from_name(name).ok_or(UnknownModel)
+        Self::from_name(name).ok_or_else(|| {
+            UnknownModel(NotYet::ALL.into_iter().find(|model| model.name() == name))
+        })
     }
 
     /// The byte that stands for it in shared memory.
@@ -69,6 +160,11 @@ impl Model {
             Self::Scout2 => 2,
             Self::ScoutMini => 3,
             Self::ScoutMiniOmni => 4,
+            Self::Tracer => 5,
+            Self::TracerMini => 6,
+            Self::Bunker => 7,
+            Self::BunkerMini => 8,
+            Self::BunkerPro => 9,
         }
     }
 
@@ -89,6 +185,14 @@ impl Model {
     /// The command limits. SCOUT and SCOUT 2.0: 1.5 m/s and 0.5235 rad/s (the vendor SDK's
     /// limits; manual v1.2.12 on). MINI and OMNI: 3.0 m/s and 2.5235 rad/s, the OMNI ±2.0 m/s
     /// sideways (vendor SDK `robot_limits.hpp` and the 2021 v2 SDK's clamps agree).
+    /// Tracer: 1.5 m/s and 0.5235 rad/s, checked against westonrobot/ugv_sdk
+    /// `include/wrp_sdk/platforms/tracer/tracer_types.hpp` (2020, `TracerMotionCmd`; the
+    /// numbers are the SCOUT's, perhaps copied, and the only source). Bunker: 1.5 m/s and
+    /// 0.7853 rad/s, checked against agilexrobotics/bunker_ros
+    /// `bunker_base/include/bunker_base/bunker_params.hpp` ("from user manual v1.2.8 P18").
+    /// Tracer Mini, Bunker Mini and Bunker Pro: no source gives theirs; their family's are
+    /// assumed. A v2 chassis clamps to its own limits too: a cap lower than the chassis'
+    /// is slower, never faster.
     pub const fn limits(self) -> Limits {
         match self {
             Self::Scout | Self::Scout2 => Limits {
@@ -106,6 +210,16 @@ impl Model {
                 angular: 2.5235,
                 lateral: 2.0,
             },
+            Self::Tracer | Self::TracerMini => Limits {
+                linear: 1.5,
+                angular: crate::units::DEFAULT_MAX_ANGULAR_SPEED,
+                lateral: 0.0,
+            },
+            Self::Bunker | Self::BunkerMini | Self::BunkerPro => Limits {
+                linear: 1.5,
+                angular: BUNKER_MAX_ANGULAR,
+                lateral: 0.0,
+            },
         }
     }
 
@@ -113,7 +227,15 @@ impl Model {
     /// the vendor URDF (track 0.58306 m, wheel radius 0.16459 m; gearbox unpublished, the
     /// SCOUT's assumed). MINI and OMNI: the vendor URDF's track 0.416503 m and the spec
     /// sheet's 1:4.3 gearbox; no public source gives a plausible wheel radius, 0.0875 m (a
-    /// 175 mm wheel) is assumed: it only scales the motor rpm.
+    /// 175 mm wheel) is assumed: it only scales the motor rpm. Tracer: the two driven wheels
+    /// 0.34 m apart and 0.16 m in radius, checked against agilexrobotics/tracer_ros
+    /// `tracer_description/urdf/tracer_v1.xacro` (the driven wheels sit at y = ±wheelbase/2:
+    /// that file's "wheelbase" is the track); its gearbox is in no source (1:1 assumed, hub
+    /// motors). Bunker: track 0.58306 m and wheel radius 0.165 m, checked against
+    /// agilexrobotics/bunker_ros `bunker_params.hpp`, whose numbers are the SCOUT 2.0's and
+    /// so doubtful; the SCOUT's 1:32 gearbox assumed. Tracer Mini, Bunker Mini and Bunker
+    /// Pro: no source; their family's are assumed. Geometry scales the simulator's wheels and
+    /// the motor rpm; the gateway's odometry integrates the chassis' reported speeds.
     pub const fn geometry(self) -> Geometry {
         match self {
             Self::Scout => Geometry {
@@ -131,14 +253,31 @@ impl Model {
                 wheel_radius: 0.0875,
                 gear_ratio: 4.3,
             },
+            Self::Tracer | Self::TracerMini => Geometry {
+                track: 0.34,
+                wheel_radius: 0.16,
+                gear_ratio: 1.0,
+            },
+            Self::Bunker | Self::BunkerMini | Self::BunkerPro => Geometry {
+                track: 0.58306,
+                wheel_radius: 0.165,
+                gear_ratio: 32.0,
+            },
         }
     }
 
-    /// The battery ([`crate::battery`]).
+    /// The battery ([`crate::battery`]). No source this project has gives a Tracer's or a
+    /// Bunker's pack: the gateway gives no charge estimate for them (the chassis' own
+    /// under-voltage bits still count) until the configuration's `[battery]` gives a curve.
     pub const fn battery(self) -> crate::battery::BatterySpec {
         match self {
             Self::Scout | Self::Scout2 => crate::battery::SCOUT_BATTERY,
             Self::ScoutMini | Self::ScoutMiniOmni => crate::battery::SCOUT_MINI_BATTERY,
+            Self::Tracer
+            | Self::TracerMini
+            | Self::Bunker
+            | Self::BunkerMini
+            | Self::BunkerPro => crate::battery::UNKNOWN_BATTERY,
         }
     }
 }
@@ -208,22 +347,84 @@ impl Sign {
 
 impl Model {
     /// Whether a chassis of this model may send what `sign` says: the OMNI moves sideways;
-    /// no SCOUT steers its wheels or has motion modes.
+    /// no SCOUT, Tracer or Bunker steers its wheels or has motion modes.
     pub const fn may_send(self, sign: Sign) -> bool {
         match (self, sign) {
             (Self::ScoutMiniOmni, Sign::Lateral) => true,
-            (Self::Scout | Self::Scout2 | Self::ScoutMini | Self::ScoutMiniOmni, _) => false,
+            (
+                Self::Scout
+                | Self::Scout2
+                | Self::ScoutMini
+                | Self::ScoutMiniOmni
+                | Self::Tracer
+                | Self::TracerMini
+                | Self::Bunker
+                | Self::BunkerMini
+                | Self::BunkerPro,
+                _,
+            ) => false,
         }
     }
 }
 
-/// A name that is no model's ([`Model::parse`]).
+listed! {
+/// AgileX models this gateway knows by name but does not drive yet: their steering (and the
+/// Ranger's motion modes) need a mapping of their own (issue 48), and driving one as a SCOUT
+/// would be wrong.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum NotYet {
+    /// Hunter 2.0, Ackermann steering with a brake.
+    Hunter2,
+    /// Hunter SE, Ackermann steering.
+    HunterSe,
+    /// Ranger Mini 2.0, four-wheel steering with motion modes.
+    RangerMini2,
+    /// Ranger Mini 3.0, four-wheel steering with motion modes.
+    RangerMini3,
+}
+}
+
+impl NotYet {
+    /// The name on the command line.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Hunter2 => "hunter2",
+            Self::HunterSe => "hunter-se",
+            Self::RangerMini2 => "ranger-mini-2",
+            Self::RangerMini3 => "ranger-mini-3",
+        }
+    }
+
+    /// What it needs that the gateway does not do yet.
+    pub const fn needs(self) -> &'static str {
+        match self {
+            Self::Hunter2 | Self::HunterSe => {
+                "Ackermann steering (a steering angle from the yaw rate, a minimum turning \
+                 radius, the brake)"
+            }
+            Self::RangerMini2 | Self::RangerMini3 => {
+                "four-wheel steering with motion modes (the mode handshake of 0x141 and 0x291)"
+            }
+        }
+    }
+}
+
+/// A name that is no model's, or a model not driven yet ([`Model::parse`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct UnknownModel;
+pub struct UnknownModel(pub Option<NotYet>);
 
 impl core::fmt::Display for UnknownModel {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        write!(f, "not a model: give one of {Names}")
+        match self.0 {
+            Some(model) => write!(
+                f,
+                "the gateway does not drive a {} yet: it needs {}, which is not built; \
+                 driving it as another model would be unsafe. Models it drives: {Names}",
+                model.name(),
+                model.needs()
+            ),
+            None => write!(f, "not a model: give one of {Names}"),
+        }
     }
 }
 
@@ -276,8 +477,21 @@ mod tests {
             .to_string();
         assert_eq!(
             refused,
-            "not a model: give one of scout, scout2, scout-mini, scout-mini-omni"
+            "not a model: give one of scout, scout2, scout-mini, scout-mini-omni, tracer, \
+             tracer-mini, bunker, bunker-mini, bunker-pro"
         );
+        let hunter = Model::parse("hunter2").expect_err("not driven yet");
+        assert_eq!(hunter, UnknownModel(Some(NotYet::Hunter2)));
+        assert!(
+            hunter.to_string().starts_with(
+                "the gateway does not drive a hunter2 yet: it needs Ackermann steering"
+            ),
+            "{hunter}"
+        );
+        for model in NotYet::ALL {
+            assert_eq!(Model::from_name(model.name()), None, "{}", model.name());
+            assert_eq!(Model::parse(model.name()), Err(UnknownModel(Some(model))));
+        }
         assert_eq!(Model::Scout2.limits().linear, 1.5);
         assert_eq!(Model::ScoutMini.limits().angular, 2.5235);
         assert_eq!(Model::ScoutMiniOmni.limits().lateral, 2.0);
@@ -286,5 +500,36 @@ mod tests {
             Model::Scout.limits().angular,
             crate::units::DEFAULT_MAX_ANGULAR_SPEED
         );
+        assert_eq!(
+            Model::Tracer.limits().angular,
+            crate::units::DEFAULT_MAX_ANGULAR_SPEED
+        );
+        assert_eq!(Model::Bunker.limits().angular, BUNKER_MAX_ANGULAR);
+        assert_eq!(Model::Tracer.geometry().track, 0.34);
+    }
+
+    #[test]
+    fn every_model_is_drivable_within_the_scouts_wire_and_sends_no_steering() {
+        for model in Model::ALL {
+            let limits = model.limits();
+            assert!(limits.linear > 0.0 && limits.angular > 0.0, "{model}");
+            // v2's int16 in mm/s and mrad/s holds ±32.767: every limit fits.
+            assert!(limits.linear < 32.0 && limits.angular < 32.0, "{model}");
+            assert_eq!(
+                limits.lateral > 0.0,
+                model.drive() == Drive::Mecanum,
+                "{model}: sideways only on mecanum wheels"
+            );
+            assert!(model.speaks(crate::version::Protocol::V2), "{model}");
+            for sign in [Sign::Steering, Sign::SteeringAngles, Sign::MotionMode] {
+                assert!(!model.may_send(sign), "{model} steers no wheel");
+            }
+            let geometry = model.geometry();
+            assert!(geometry.track > 0.0 && geometry.wheel_radius > 0.0, "{model}");
+        }
+        assert!(!Model::Tracer.speaks(crate::version::Protocol::V1));
+        assert!(Model::Bunker.speaks(crate::version::Protocol::V1));
+        assert_eq!(Model::Tracer.actuators(), 2);
+        assert_eq!(Model::Scout2.actuators(), 4);
     }
 }

@@ -149,6 +149,26 @@ proptest! {
         prop_assert_eq!(i16::from_be_bytes([frame.data()[4], frame.data()[5]]), command.lateral_mm_s);
         prop_assert_eq!(decode(&MessageV2::MotionCommand(command).encode()), Ok(MessageV2::MotionCommand(command)));
     }
+
+    /// Held within limits, a command is never beyond them on the wire, and a rate within them
+    /// moves by less than a unit.
+    #[test]
+    fn v2_commands_within_limits_never_exceed_them(
+        linear in -30.0f64..30.0, angular in -30.0f64..30.0, lateral in -30.0f64..30.0,
+        limits in (0.0f64..30.0, 0.0f64..30.0, 0.0f64..30.0),
+    ) {
+        use scout_protocol::v2::MotionV2;
+        let (max_linear, max_angular, max_lateral) = limits;
+        let clamp = |value: f64, limit: f64| value.clamp(-limit, limit);
+        let command = MotionV2::from_si(clamp(linear, max_linear), clamp(angular, max_angular))
+            .with_lateral(clamp(lateral, max_lateral))
+            .within(max_linear, max_angular, max_lateral);
+        prop_assert!(command.linear().abs() <= max_linear + 1e-9);
+        prop_assert!(command.angular().abs() <= max_angular + 1e-9);
+        prop_assert!(command.lateral().abs() <= max_lateral + 1e-9);
+        prop_assert!((command.angular() - clamp(angular, max_angular)).abs() <= 0.001 + 1e-9);
+        prop_assert_eq!(MotionV2::from_si(0.0, 0.0).within(max_linear, max_angular, max_lateral), MotionV2::default());
+    }
 }
 
 mod gs_usb {

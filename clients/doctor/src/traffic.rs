@@ -138,8 +138,8 @@ impl Traffic {
             "model",
             detail,
             format!(
-                "the gateway drives the SCOUT models only ({Names}) and refuses to drive this \
-                 chassis: driven with a SCOUT's command it would move otherwise than asked \
+                "the gateway drives these models only ({Names}) and refuses to drive this \
+                 chassis: driven with their command it would move otherwise than asked \
                  (docs/chassis.md)"
             ),
         )

@@ -64,8 +64,8 @@ struct Cli {
     /// (CAN and slcan; RS232 is v1) [default: auto].
     #[arg(long, value_name = "PROTOCOL", value_parser = ProtocolSetting::parse)]
     protocol: Option<ProtocolSetting>,
-    /// The model, for its speed limits and geometry: scout, scout2, scout-mini,
-    /// scout-mini-omni [default: scout on v1, scout2 on v2].
+    /// The model, for its speed limits and geometry; docs/chassis.md lists them (and a name
+    /// that is none says them) [default: scout on v1, scout2 on v2].
     #[arg(long, value_name = "MODEL", value_parser = Model::parse)]
     model: Option<Model>,
     /// The fastest the chassis may turn, rad/s; on v1 also the rate at 100 % angular command

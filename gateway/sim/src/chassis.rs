@@ -41,6 +41,9 @@ pub struct SimParams {
     pub wheel_radius: f64,
     /// Motor turns per wheel turn.
     pub gear_ratio: f64,
+    /// How many actuators report on protocol v2 (1 and 2, or 1 to 4): two on the Tracers and
+    /// Bunkers, four on the SCOUTs.
+    pub actuators: u8,
     /// Linear acceleration limit, m/s².
     pub linear_acceleration: f64,
     /// Angular acceleration limit, rad/s².
@@ -83,6 +86,7 @@ impl Default for SimParams {
             track_width: 0.583,
             wheel_radius: 0.165,
             gear_ratio: 32.0,
+            actuators: 4,
             linear_acceleration: 1.0,
             angular_acceleration: 1.5,
             battery_voltage: 26.0,
@@ -121,6 +125,7 @@ impl SimParams {
             track_width: geometry.track,
             wheel_radius: geometry.wheel_radius,
             gear_ratio: geometry.gear_ratio,
+            actuators: model.actuators(),
             ..Self::default()
         }
     }

@@ -322,6 +322,7 @@ impl Chassis {
         let rc_on = self.rc;
         let motors: Vec<(ActuatorHighV2, ActuatorLowV2)> = Motor::ALL
             .iter()
+            .take(usize::from(self.params.actuators))
             .map(|&motor| {
                 let state = &self.motors[motor.index()];
                 let high = ActuatorHighV2 {

@@ -158,8 +158,29 @@ fn the_odometers_count_each_side_in_mm() {
 }
 
 #[test]
+fn a_tracer_or_a_bunker_reports_two_actuators() {
+    for model in [Model::Tracer, Model::Bunker, Model::Scout2] {
+        let mut chassis = chassis(model);
+        chassis.handle_v2(ms(0), TAKE);
+        let (_, frames) = drive(&mut chassis, go(0.5, 0.3), ms(0), ms(200));
+        let reported = |ids: std::ops::RangeInclusive<u16>| {
+            ids.filter(|id| frames.iter().any(|f| f.can_id() == *id))
+                .count()
+        };
+        let actuators = usize::from(model.actuators());
+        assert_eq!(reported(0x251..=0x258), actuators, "{model}: high speed");
+        assert_eq!(reported(0x261..=0x268), actuators, "{model}: low speed");
+    }
+}
+
+#[test]
 fn commands_are_clamped_to_the_models_limits() {
-    for (model, linear) in [(Model::Scout2, 1.5), (Model::ScoutMini, 3.0)] {
+    for (model, linear) in [
+        (Model::Scout2, 1.5),
+        (Model::ScoutMini, 3.0),
+        (Model::Tracer, 1.5),
+        (Model::BunkerPro, 1.5),
+    ] {
         let mut chassis = chassis(model);
         chassis.handle_v2(ms(0), TAKE);
         chassis.handle_v2(ms(10), go(5.0, -9.0));

@@ -8,6 +8,7 @@ mod blackbox;
 mod decode;
 mod doctor;
 mod examples;
+mod family;
 mod foxglove;
 mod gateway;
 mod odometry;

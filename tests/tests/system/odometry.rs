@@ -99,7 +99,7 @@ fn erring_params(dir: &TempDir) -> String {
 }
 
 /// The factors that undo the deliberate error, as the gateway's configuration.
-fn exact_factors() -> String {
+pub(crate) fn exact_factors() -> String {
     format!(
         "[odometry]\ndistance_scale = {}\nyaw_scale = {}\n",
         1.0 / REPORTED_DISTANCE,
@@ -109,7 +109,7 @@ fn exact_factors() -> String {
 
 /// Drives the square on the erring chassis with the gateway configured by `gateway_config`;
 /// the position and yaw errors over the path.
-fn square(prefix: &str, chassis: &[&str], transport: &[&str], gateway_config: &str) -> (f64, f64) {
+pub(crate) fn square(prefix: &str, chassis: &[&str], transport: &[&str], gateway_config: &str) -> (f64, f64) {
     let name = robot_name(prefix);
     let dir = TempDir::new(&name);
     let params = erring_params(&dir);
@@ -176,7 +176,7 @@ fn square(prefix: &str, chassis: &[&str], transport: &[&str], gateway_config: &s
 const WITHIN: f64 = 0.02;
 
 /// The square's position and yaw errors are within [`WITHIN`] of the path.
-fn assert_within(position: f64, yaw: f64) {
+pub(crate) fn assert_within(position: f64, yaw: f64) {
     assert!(
         position < WITHIN && yaw < WITHIN,
         "position error {:.2} %, yaw error {:.2} % of the path",

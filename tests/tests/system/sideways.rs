@@ -88,14 +88,14 @@ fn a_chassis_that_does_not_move_sideways_refuses_it_whole_and_says_why() {
 
 /// `tests/system/v2_chassis.py`, an emulated v2 chassis on an slcan pseudo-terminal written from
 /// the vendor's field layout: the path of its port, and each motion command it decoded.
-struct EmulatedChassis {
+pub(crate) struct EmulatedChassis {
     child: std::process::Child,
     lines: std::sync::mpsc::Receiver<String>,
-    port: String,
+    pub(crate) port: String,
 }
 
 impl EmulatedChassis {
-    fn start() -> Self {
+    pub(crate) fn start() -> Self {
         let script =
             std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/system/v2_chassis.py");
         let mut child = std::process::Command::new("python3")
@@ -110,7 +110,7 @@ impl EmulatedChassis {
 
     /// The motion commands it decoded, as (linear, angular, lateral, steering), until `done`
     /// says so of the newest or `LIMIT` passes.
-    fn commands_until(&self, done: impl Fn(&[i64; 4]) -> bool) -> Vec<[i64; 4]> {
+    pub(crate) fn commands_until(&self, done: impl Fn(&[i64; 4]) -> bool) -> Vec<[i64; 4]> {
         let deadline = std::time::Instant::now() + LIMIT;
         let mut seen = Vec::new();
         while let Ok(line) = self

@@ -62,8 +62,9 @@ struct Cli {
     /// The firmware's protocol.
     #[arg(long, value_enum, default_value_t = ProtocolArg::V1)]
     protocol: ProtocolArg,
-    /// The model: its speed limits (v2 firmware clamps commands to them) and geometry [default:
-    /// scout with v1, scout2 with v2]. A parameter file overrides what it sets.
+    /// The model: its speed limits (v2 firmware clamps commands to them), geometry and
+    /// actuators [default: scout with v1, scout2 with v2]. A parameter file overrides what it
+    /// sets. docs/chassis.md lists the models (and a name that is none says them).
     #[arg(long, value_name = "MODEL", value_parser = Model::parse)]
     model: Option<Model>,
     /// Seed for `garbage`.
@@ -92,6 +93,16 @@ fn main() -> ExitCode {
         eprintln!(
             "scout-sim: protocol v2 is CAN only (the vendor SDK implements no v2 over RS232): use \
              --slcan or --can"
+        );
+        return ExitCode::from(2);
+    }
+    if let Some(model) = cli.model
+        && matches!(cli.protocol, ProtocolArg::V1)
+        && !model.speaks(Protocol::V1)
+    {
+        eprintln!(
+            "scout-sim: a {model} speaks protocol v2 alone: add --protocol v2 (with --slcan or \
+             --can)"
         );
         return ExitCode::from(2);
     }
