@@ -99,6 +99,33 @@ impl Sideways {
     }
 }
 
+/// How tight the chassis turns: in place (skid-steer, tracks, two driven wheels, mecanum), or
+/// only while moving and no tighter than a radius (steered wheels: the Hunter).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Turning {
+    /// Any yaw rate at any speed, standing still included.
+    InPlace,
+    /// Only while moving, at most `|linear| / min_radius`; a drive that turns standing still is
+    /// refused with `in_place`, one that turns tighter is held to the radius (and says
+    /// `clamped`).
+    Radius {
+        /// m.
+        min_radius: f64,
+        /// The refusal of a turn in place ("a hunter2 cannot turn in place...").
+        in_place: String,
+    },
+}
+
+impl Turning {
+    /// The fastest turn at `linear` m/s, rad/s (`None`: as fast as the caps allow).
+    fn limit(&self, linear: f64) -> Option<f64> {
+        match self {
+            Self::InPlace => None,
+            Self::Radius { min_radius, .. } => Some(linear.abs() / min_radius),
+        }
+    }
+}
+
 /// Rate limits, per second.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -456,6 +483,7 @@ pub struct Arbiter {
     config: ArbiterConfig,
     global: Caps,
     sideways: Sideways,
+    turning: Turning,
     stops: Vec<Stop>,
     /// The gap causes present now: their stops cannot be released.
     present: Vec<StopCause>,
@@ -494,6 +522,7 @@ impl Arbiter {
             config,
             global,
             sideways,
+            turning: Turning::InPlace,
             stops: Vec::new(),
             present: Vec::new(),
             autonomy_armed: false,
@@ -516,6 +545,11 @@ impl Arbiter {
     /// some models). A command already taken goes no faster sideways than this allows.
     pub fn set_sideways(&mut self, sideways: Sideways) {
         self.sideways = sideways;
+    }
+
+    /// How tight the chassis turns (the model decides it).
+    pub fn set_turning(&mut self, turning: Turning) {
+        self.turning = turning;
     }
 
     /// Bars autonomy from taking control while `why` holds (a critical battery), or lifts the
@@ -963,6 +997,14 @@ impl Arbiter {
             Sideways::Not(_) => 0.0,
             Sideways::UpTo(limit) => *limit,
         };
+        if let Turning::Radius { in_place, .. } = &self.turning
+            && angular != 0.0
+            && linear == 0.0
+        {
+            return Err(Rejection::NotAllowed {
+                why: in_place.clone(),
+            });
+        }
         let caps = self.config.caps(class).unwrap_or(self.global);
         let (linear_cap, angular_cap, lateral_cap) = (
             caps.linear.min(self.global.linear),
@@ -971,6 +1013,11 @@ impl Arbiter {
         );
         let clamped_linear = linear.clamp(-linear_cap, linear_cap);
         let clamped_lateral = lateral.clamp(-lateral_cap, lateral_cap);
+        // No tighter than the chassis turns at the speed it may go.
+        let angular_cap = self
+            .turning
+            .limit(clamped_linear)
+            .map_or(angular_cap, |limit| limit.min(angular_cap));
         let clamped_angular = angular.clamp(-angular_cap, angular_cap);
         let clamped =
             clamped_linear != linear || clamped_lateral != lateral || clamped_angular != angular;
@@ -1410,6 +1457,12 @@ impl Arbiter {
             limits.angular_deceleration,
             dt,
         );
+        // A steered chassis turns only as tight as it can at the speed it goes now: while the
+        // speed ramps, so does the turn.
+        let next_angular = self
+            .turning
+            .limit(next_linear)
+            .map_or(next_angular, |limit| next_angular.clamp(-limit, limit));
         self.output = Output {
             linear: next_linear,
             lateral: next_lateral,

@@ -205,6 +205,68 @@ fn a_chassis_that_does_not_move_sideways_refuses_a_sideways_speed_and_says_why()
     assert_eq!(refused.to_string(), "a scout2 does not move sideways");
 }
 
+/// A steered chassis with the Hunter's tightest turn (1.31 m).
+fn steered() -> Bench {
+    let mut bench = Bench::new();
+    bench.arbiter.set_turning(Turning::Radius {
+        min_radius: 1.31,
+        in_place: "a hunter2 cannot turn in place".into(),
+    });
+    bench
+}
+
+fn turn(bench: &mut Bench, who: &Origin, lease: u64, linear: f64, angular: f64) -> Answer {
+    bench.request(
+        who,
+        Request::Drive {
+            lease,
+            linear,
+            lateral: 0.0,
+            angular,
+            ttl: None,
+        },
+    )
+}
+
+#[test]
+fn a_steered_chassis_refuses_a_turn_in_place_and_turns_no_tighter_than_it_can() {
+    let mut bench = steered();
+    let joy = client("joy", 1);
+    let lease = bench.take(&joy, Class::Teleop);
+    let refused = turn(&mut bench, &joy, lease, 0.0, 0.3).expect_err("in place");
+    assert_eq!(refused.kind(), RejectionKind::NotAllowed);
+    assert_eq!(refused.to_string(), "a hunter2 cannot turn in place");
+    assert_eq!(bench.tick(), Output::STOP, "refused whole");
+    // Standing still without turning, and straight, are taken.
+    turn(&mut bench, &joy, lease, 0.0, 0.0).expect("standing still");
+    // Tighter than 1.31 m at 0.5 m/s (0.38 rad/s at most): held to the radius and said.
+    let answer = turn(&mut bench, &joy, lease, 0.5, 1.0).expect("clamped");
+    assert!(answer.clamped);
+    let mut output = bench.tick();
+    for _ in 0..100 {
+        // While the speed ramps up from zero, so does the turn, never tighter.
+        assert!(
+            output.angular.abs() <= output.linear.abs() / 1.31 + 1e-12,
+            "{output:?}"
+        );
+        let _ = turn(&mut bench, &joy, lease, 0.5, 1.0);
+        output = bench.tick();
+    }
+    assert!((output.linear - 0.5).abs() < 1e-12);
+    assert!((output.angular - 0.5 / 1.31).abs() < 1e-12, "{output:?}");
+    // Slowing down tightens nothing: the turn slows with the speed.
+    for _ in 0..40 {
+        let _ = turn(&mut bench, &joy, lease, 0.0, 0.0);
+        output = bench.tick();
+        assert!(output.angular.abs() <= output.linear.abs() / 1.31 + 1e-12);
+    }
+    assert_eq!((output.linear, output.angular), (0.0, 0.0));
+    // Any other chassis turns in place.
+    let mut skid = Bench::new();
+    let lease = skid.take(&joy, Class::Teleop);
+    turn(&mut skid, &joy, lease, 0.0, 0.3).expect("in place");
+}
+
 #[test]
 fn sideways_is_capped_ramped_and_stopped_as_forward_is() {
     let mut bench = Bench::sideways(2.0);
@@ -1379,6 +1441,29 @@ proptest! {
                         }
                     }
                 }
+            }
+        }
+    }
+}
+
+proptest! {
+    /// Whatever a client asks of a steered chassis: the output never turns tighter than its
+    /// radius, never turns standing still, and a turn in place is refused whole.
+    #[test]
+    fn a_steered_chassis_never_turns_tighter_than_it_can(asks in prop::collection::vec((-2.0f64..2.0, -2.0f64..2.0, 1u8..20), 1..40)) {
+        let mut bench = steered();
+        let joy = client("joy", 1);
+        let lease = bench.take(&joy, Class::Teleop);
+        for (linear, angular, ticks) in asks {
+            // Standing still now and then.
+            let linear = if linear.abs() < 0.2 { 0.0 } else { linear };
+            let answer = turn(&mut bench, &joy, lease, linear, angular);
+            if linear == 0.0 && angular != 0.0 {
+                prop_assert!(answer.is_err(), "a turn in place was taken");
+            }
+            for _ in 0..ticks {
+                let output = bench.tick();
+                prop_assert!(output.angular.abs() <= output.linear.abs() / 1.31 + 1e-12, "{output:?}");
             }
         }
     }

@@ -772,11 +772,11 @@ mod tests {
 
     #[test]
     fn a_model_not_driven_yet_or_on_a_protocol_it_does_not_speak_is_refused() {
-        let refused = toml::from_str::<GatewayConfig>("model = \"hunter2\"")
+        let refused = toml::from_str::<GatewayConfig>("model = \"ranger-mini-3\"")
             .expect_err("not driven yet")
             .to_string();
         assert!(
-            refused.contains("does not drive a hunter2 yet"),
+            refused.contains("does not drive a ranger-mini-3 yet"),
             "{refused}"
         );
         let tracer = |transport: &str, protocol: &str| {
@@ -800,4 +800,3 @@ mod tests {
         assert!(tracer("slcan", "auto").validate().is_ok());
     }
 }
-

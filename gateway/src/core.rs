@@ -33,7 +33,9 @@ use scout_protocol::{
 };
 use tracing::{debug, info, warn};
 
-use crate::arbiter::{Accepted, Answer, Arbiter, Caps, LightsSetting, Origin, Output, Sideways};
+use crate::arbiter::{
+    Accepted, Answer, Arbiter, Caps, LightsSetting, Origin, Output, Sideways, Turning,
+};
 use crate::command_mode::CommandMode;
 use crate::config::{GatewayConfig, OnCritical, SafetyConfig};
 use crate::state::{PortCounters, Publish, StateTracker};
@@ -383,6 +385,7 @@ impl Core {
         };
         let mut arbiter = Arbiter::new(config.arbiter.clone(), global, instance);
         arbiter.set_sideways(sideways(config.limits_model(), config.fixed_protocol()));
+        arbiter.set_turning(turning(config.limits_model()));
         match start {
             Start::Clean => {}
             Start::AfterUncleanExit => arbiter.handle_gap(
@@ -656,6 +659,8 @@ impl Core {
 
     /// Something arrived from the port.
     pub fn handle_rx(&mut self, now: Duration, event: &RxEvent) {
+        let driven = as_driven(self.model, event);
+        let event = driven.as_ref().unwrap_or(event);
         let publish = self.tracker.handle_rx(event, now);
         self.publish_if(publish);
         if publish == Publish::No || self.tracker.link_state() != LinkState::Ok {
@@ -1159,17 +1164,43 @@ impl Core {
             Protocol::V2 => {
                 // The arbiter caps in floating point; on the wire a cap that is not a whole
                 // unit would round up past the model's limit (0.5235 rad/s to 524 mrad/s).
-                let command = MotionV2::from_si(output.linear, output.angular)
-                    .with_lateral(output.lateral)
-                    .within(
+                let within = |command: MotionV2, steering: f64| {
+                    command.within(
                         self.max_linear,
                         self.max_angular,
                         self.model.limits().lateral,
-                    );
-                (
-                    Outgoing::V2(MessageV2::MotionCommand(command)),
-                    (command.linear(), command.lateral(), command.angular()),
-                )
+                        steering,
+                    )
+                };
+                match self.model.steering() {
+                    // A steered chassis takes a speed and its inner wheel's angle, never a
+                    // yaw rate (vendor SDK `hunter_base.hpp`: angular 0, steering in 6-7).
+                    Some(steering) => {
+                        let central = steering.central_for(output.linear, output.angular);
+                        let command = within(
+                            MotionV2::from_si(output.linear, 0.0)
+                                .with_steering(steering.inner_from_central(central)),
+                            steering.max_inner,
+                        );
+                        let angular =
+                            steering.yaw_rate_from_inner(command.linear(), command.steering());
+                        (
+                            Outgoing::V2(MessageV2::MotionCommand(command)),
+                            (command.linear(), 0.0, angular),
+                        )
+                    }
+                    None => {
+                        let command = within(
+                            MotionV2::from_si(output.linear, output.angular)
+                                .with_lateral(output.lateral),
+                            0.0,
+                        );
+                        (
+                            Outgoing::V2(MessageV2::MotionCommand(command)),
+                            (command.linear(), command.lateral(), command.angular()),
+                        )
+                    }
+                }
             }
         };
         self.stats.commands_sent += 1;
@@ -1287,6 +1318,40 @@ fn error_clear_v2(code: FaultClear) -> Option<ErrorClearV2> {
         | FaultClear::MotorOverCurrent
         | FaultClear::Unknown(_) => ErrorClearV2::All,
     })
+}
+
+/// How tight a chassis of `model` turns: a steered one only while moving, no tighter than its
+/// smallest circle; every other in place.
+pub fn turning(model: Model) -> Turning {
+    match model.steering() {
+        None => Turning::InPlace,
+        Some(steering) => {
+            let min_radius = steering.min_radius();
+            Turning::Radius {
+                min_radius,
+                in_place: format!(
+                    "a {model} cannot turn in place: it steers its front wheels and turns only \
+                     while moving, on a circle {min_radius:.2} m wide at the tightest; drive \
+                     forward or backward to turn"
+                ),
+            }
+        }
+    }
+}
+
+/// A steered chassis' motion state as the rest of the gateway reads it: with the yaw rate its
+/// speed and steering angle make (the Hunter reports a steering angle where a SCOUT reports a
+/// yaw rate; its vendor driver derives the yaw rate so too). Any other event as it came.
+fn as_driven(model: Model, event: &RxEvent) -> Option<RxEvent> {
+    let steering = model.steering()?;
+    let RxEvent::V2(MessageV2::MotionState(motion)) = event else {
+        return None;
+    };
+    let angular = steering.yaw_rate_from_inner(motion.linear(), motion.steering());
+    Some(RxEvent::V2(MessageV2::MotionState(MotionV2 {
+        angular_mrad_s: MotionV2::from_si(0.0, angular).angular_mrad_s,
+        ..*motion
+    })))
 }
 
 /// Whether a chassis of `model` speaking `protocol` (`None`: not known yet) moves sideways.

@@ -2028,7 +2028,8 @@ fn sideways_is_refused_where_the_chassis_or_its_protocol_cannot() {
 
 /// For every model on v2: asked far beyond its limits on every axis it moves, what goes on the
 /// wire is at most its limits (a limit off the wire's unit rounds down: the SCOUT's 0.5235
-/// rad/s is 523 mrad/s), and a stop is zero on every field at once.
+/// rad/s is 523 mrad/s), a steered one never gets a yaw rate in the yaw-rate field and its
+/// wheels never beyond their widest angle, and a stop is zero on every field at once.
 #[test]
 fn no_model_receives_more_than_its_limits_and_a_stop_is_zero_on_every_field() {
     for model in Model::ALL
@@ -2042,13 +2043,17 @@ fn no_model_receives_more_than_its_limits_and_a_stop_is_zero_on_every_field() {
         let mut pair = Pair::with_firmware(Protocol::V2, Transport::Can, &gateway, Start::Clean);
         pair.run(ms(200));
         let limits = model.limits();
+        let steering = model.steering();
         let lease = pair.take(TELEOP, Class::Teleop).expect("a lease");
-        let mut most = (0.0_f64, 0.0_f64, 0.0_f64);
+        // linear, yaw-rate field, lateral, steering field.
+        let mut most = [0.0_f64; 4];
         // One axis at a time, then all three (a chassis that does everything at once at its
-        // limits draws more than the simulated pack gives).
+        // limits draws more than the simulated pack gives). A steered chassis turns only
+        // while it moves.
         let lateral = if limits.lateral > 0.0 { 40.0 } else { 0.0 };
+        let turning = if steering.is_some() { 40.0 } else { 0.0 };
         for (linear, lateral, angular, ticks) in [
-            (0.0, 0.0, 40.0, 100),
+            (turning, 0.0, 40.0, 100),
             (0.0, 0.0, 0.0, 100),
             (-40.0, 0.0, 0.0, 175),
             (0.0, 0.0, 0.0, 175),
@@ -2072,23 +2077,40 @@ fn no_model_receives_more_than_its_limits_and_a_stop_is_zero_on_every_field() {
                     pair.step();
                 }
                 let sent = pair.chassis.stats().last_command.expect("commands");
-                most = (
-                    most.0.max(sent.linear.abs()),
-                    most.1.max(sent.angular.abs()),
-                    most.2.max(sent.lateral.abs()),
-                );
+                for (most, sent) in
+                    most.iter_mut()
+                        .zip([sent.linear, sent.angular, sent.lateral, sent.steering])
+                {
+                    *most = most.max(sent.abs());
+                }
             }
         }
+        let [linear, angular, lateral, steered] = most;
         assert!(
-            most.0 <= limits.linear && most.1 <= limits.angular && most.2 <= limits.lateral,
-            "{model}: {most:?} beyond {limits:?}"
+            linear <= limits.linear && linear > limits.linear - 0.001,
+            "{model}: {most:?} against {limits:?}"
         );
         assert!(
-            limits.angular - most.1 < 0.001
-                && limits.linear - most.0 < 0.001
-                && limits.lateral - most.2 < 0.001,
-            "{model}: the limits are reached: {most:?}"
+            lateral <= limits.lateral && lateral > limits.lateral - 0.001,
+            "{model}: {most:?} against {limits:?}"
         );
+        match steering {
+            Some(steering) => {
+                assert_eq!(angular, 0.0, "{model}: no yaw rate in the yaw-rate field");
+                let widest = steering.inner_from_central(steering.max_central);
+                assert!(
+                    steered <= steering.max_inner && steered > widest - 0.001,
+                    "{model}: {most:?} against {steering:?}"
+                );
+            }
+            None => {
+                assert!(
+                    angular <= limits.angular && angular > limits.angular - 0.001,
+                    "{model}: {most:?} against {limits:?}"
+                );
+                assert_eq!(steered, 0.0, "{model}: nothing in the steering field");
+            }
+        }
         pair.request(
             TELEOP,
             &Request::Stop {
@@ -2099,11 +2121,82 @@ fn no_model_receives_more_than_its_limits_and_a_stop_is_zero_on_every_field() {
         pair.step();
         let sent = pair.chassis.stats().last_command.expect("commands");
         assert_eq!(
-            (sent.linear, sent.angular, sent.lateral),
-            (0.0, 0.0, 0.0),
+            (sent.linear, sent.angular, sent.lateral, sent.steering),
+            (0.0, 0.0, 0.0, 0.0),
             "{model}: a stop at once"
         );
     }
+}
+
+/// A Hunter driven round a circle: the wire carries its speed and inner wheel's angle, it
+/// refuses to turn in place, and the gateway's odometry (the yaw rate it derives from the
+/// steering angle the chassis reports) follows the chassis' pose.
+#[test]
+fn a_hunter_steers_by_its_wheels_and_its_odometry_follows() {
+    let hunter = GatewayConfig {
+        model: Some(Model::Hunter2),
+        ..config(Protocol::V2)
+    };
+    let mut pair = Pair::with_firmware(Protocol::V2, Transport::Can, &hunter, Start::Clean);
+    pair.run(ms(200));
+    let lease = pair.take(TELEOP, Class::Teleop).expect("a lease");
+    let turn = |linear: f64, angular: f64| Request::Drive {
+        lease,
+        linear,
+        lateral: 0.0,
+        angular,
+        ttl: None,
+    };
+    let refused = pair.request(TELEOP, &turn(0.0, 0.3)).expect_err("in place");
+    assert_eq!(refused.kind, Some(RejectionKind::NotAllowed));
+    assert!(
+        refused.reason.starts_with("a hunter2 cannot turn in place"),
+        "{}",
+        refused.reason
+    );
+    // 0.5 m/s at 0.25 rad/s: a 2 m radius, wider than its tightest; 10 s, most of a circle.
+    for _ in 0..500 {
+        pair.request(TELEOP, &turn(0.5, 0.25)).expect("a turn");
+        let next = pair.now + TICK;
+        while pair.now < next {
+            pair.step();
+        }
+    }
+    let sent = pair.chassis.stats().last_command.expect("commands");
+    let steering = Model::Hunter2.steering().expect("steered");
+    let inner = steering.inner_from_central((0.25_f64 * steering.wheelbase / 0.5).atan());
+    assert_eq!(sent.angular, 0.0, "no yaw rate in the yaw-rate field");
+    assert!((sent.steering - inner).abs() < 0.001, "{sent:?}: {inner}");
+    let state = pair.last_state();
+    assert!(
+        (state.motion.angular() - 0.25).abs() < 0.005,
+        "the yaw rate derived from the reported angle: {:?}",
+        state.motion
+    );
+    let (odometry, truth) = (state.odometry, pair.chassis.pose());
+    assert!(truth.yaw.abs() > 1.0 || truth.y > 1.0, "{truth:?}");
+    let error = (odometry.x - truth.x).hypot(odometry.y - truth.y);
+    assert!(
+        error < 0.02 * 5.0,
+        "odometry {odometry:?} against the chassis' {truth:?}"
+    );
+    // Straight on at once, then the other way at its tightest: the wheels take their time to
+    // turn, which is no runaway.
+    for (linear, angular) in [(0.5, 0.0), (1.0, -2.0), (-0.5, 0.0)] {
+        for _ in 0..150 {
+            pair.request(TELEOP, &turn(linear, angular))
+                .expect("driving on");
+            let next = pair.now + TICK;
+            while pair.now < next {
+                pair.step();
+            }
+        }
+    }
+    assert!(
+        pair.chassis.actual().linear < -0.4,
+        "{:?}",
+        pair.chassis.actual()
+    );
 }
 
 #[test]

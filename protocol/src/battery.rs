@@ -119,7 +119,10 @@ mod tests {
         assert_eq!(percent_at(LIFEPO4_8S_REST, 21.0), 0.0);
         assert_eq!(percent_at(LIFEPO4_8S_REST, 29.2), 100.0);
         assert!(percent_at(LIFEPO4_8S_REST, f64::NAN).is_nan());
-        assert!(percent_at(UNKNOWN_BATTERY.curve, 25.0).is_nan(), "no estimate");
+        assert!(
+            percent_at(UNKNOWN_BATTERY.curve, 25.0).is_nan(),
+            "no estimate"
+        );
     }
 
     #[test]

@@ -1,5 +1,6 @@
-//! Planar motion of the skid-steer base: a pose moved by linear and angular speed over a time
-//! step. One copy for the gateway's odometry and the simulator's ground truth.
+//! Planar motion: a pose moved by a body velocity over a time step, and a steered model's
+//! yaw rate and steering angles. One copy for the gateway's odometry and mapping and the
+//! simulator's ground truth.
 
 /// A pose in the plane: metres and radians (yaw in -pi..pi).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -37,10 +38,99 @@ pub fn wrap_angle(angle: f64) -> f64 {
     (angle + PI).rem_euclid(2.0 * PI) - PI
 }
 
+/// Front-wheel Ackermann steering, as the Hunter's vendor driver does it (agilexrobotics/
+/// hunter_ros2 `hunter_messenger.hpp`: `ConvertCentralAngleToInner`,
+/// `ConvertInnerAngleToCentral`, the bicycle model's yaw rate `v / L * tan(delta)`), checked
+/// against that source. The central angle is the bicycle model's; the inner wheel is the one
+/// on the inside of the turn, the angle 0x111 and 0x221 carry. Angles are positive to the
+/// left; a yaw rate is counter-clockwise, so backing up with the wheels to the left turns
+/// clockwise.
+impl crate::model::Steering {
+    /// The tightest turn, m: the rear axle's radius at the widest central angle.
+    pub fn min_radius(&self) -> f64 {
+        self.wheelbase / self.max_central.tan()
+    }
+
+    /// The fastest yaw rate at `linear` m/s, rad/s (none standing still).
+    pub fn max_yaw_rate(&self, linear: f64) -> f64 {
+        linear.abs() / self.min_radius()
+    }
+
+    /// The yaw rate at `linear` m/s with the central angle `central`, rad/s.
+    pub fn yaw_rate(&self, linear: f64, central: f64) -> f64 {
+        linear * central.tan() / self.wheelbase
+    }
+
+    /// The central angle that turns at `angular` rad/s at `linear` m/s, within the widest
+    /// (straight ahead standing still, where no angle turns).
+    pub fn central_for(&self, linear: f64, angular: f64) -> f64 {
+        if linear == 0.0 {
+            return 0.0;
+        }
+        (angular * self.wheelbase / linear)
+            .atan()
+            .clamp(-self.max_central, self.max_central)
+    }
+
+    /// The inner wheel's angle for the central angle `central`.
+    pub fn inner_from_central(&self, central: f64) -> f64 {
+        let magnitude = central.abs();
+        if magnitude == 0.0 {
+            return 0.0;
+        }
+        let radius = self.wheelbase / magnitude.tan();
+        let inner = (self.wheelbase / (radius - self.track / 2.0)).atan();
+        inner.copysign(central)
+    }
+
+    /// The central angle for the inner wheel's angle `inner`.
+    pub fn central_from_inner(&self, inner: f64) -> f64 {
+        let magnitude = inner.abs();
+        if magnitude == 0.0 {
+            return 0.0;
+        }
+        let radius = self.wheelbase / magnitude.tan() + self.track / 2.0;
+        (self.wheelbase / radius).atan().copysign(inner)
+    }
+
+    /// The yaw rate at `linear` m/s with the inner wheel at `inner` rad.
+    pub fn yaw_rate_from_inner(&self, linear: f64, inner: f64) -> f64 {
+        self.yaw_rate(linear, self.central_from_inner(inner))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use core::f64::consts::PI;
+
+    #[test]
+    fn the_hunters_steering_is_its_vendors() {
+        let hunter = crate::model::Model::Hunter2
+            .steering()
+            .expect("a steered model");
+        // The widest central angle is about the widest inner one (0.58 rad in the source).
+        let inner = hunter.inner_from_central(hunter.max_central);
+        assert!((inner - 0.573).abs() < 0.001, "{inner}");
+        assert!(inner <= hunter.max_inner);
+        for central in [-0.461, -0.2, -0.01, 0.0, 0.003, 0.3, 0.461] {
+            let back = hunter.central_from_inner(hunter.inner_from_central(central));
+            assert!((back - central).abs() < 1e-12, "{central}: {back}");
+        }
+        // Its limits: 1.31 m at the tightest, 1.146 rad/s at 1.5 m/s there.
+        assert!((hunter.min_radius() - 1.309).abs() < 0.001);
+        let limits = crate::model::Model::Hunter2.limits();
+        assert!((hunter.max_yaw_rate(limits.linear) - limits.angular).abs() < 0.001);
+        // Left forward, right backward; nothing standing still.
+        assert!(hunter.central_for(0.5, 0.2) > 0.0);
+        assert!(hunter.central_for(-0.5, 0.2) < 0.0);
+        assert_eq!(hunter.central_for(0.0, 0.2), 0.0);
+        let central = hunter.central_for(0.5, 0.2);
+        assert!((hunter.yaw_rate(0.5, central) - 0.2).abs() < 1e-12);
+        assert!((hunter.yaw_rate(-0.5, hunter.central_for(-0.5, 0.2)) - 0.2).abs() < 1e-12);
+        // Tighter than it turns: the widest angle.
+        assert_eq!(hunter.central_for(0.1, 5.0), hunter.max_central);
+    }
 
     #[test]
     fn straight_and_turning_steps() {

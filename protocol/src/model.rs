@@ -27,6 +27,8 @@ pub enum Model {
     BunkerMini,
     /// Bunker Pro, tracked.
     BunkerPro,
+    /// Hunter 2.0, Ackermann steering (v2 only).
+    Hunter2,
 }
 }
 
@@ -42,6 +44,9 @@ pub enum Drive {
     Differential,
     /// Two tracks (the Bunkers): forward and a yaw rate.
     Tracked,
+    /// Steered front wheels (the Hunter): forward and a steering angle; a yaw rate only while
+    /// moving, no tighter than its minimum turning radius.
+    Ackermann,
 }
 }
 
@@ -53,6 +58,7 @@ impl Drive {
             Self::Mecanum => "mecanum (it moves sideways)",
             Self::Differential => "differential drive",
             Self::Tracked => "tracked",
+            Self::Ackermann => "Ackermann steering (it turns only while moving)",
         }
     }
 }
@@ -61,6 +67,10 @@ impl Drive {
 /// up to the constant).
 #[allow(clippy::approx_constant)]
 const BUNKER_MAX_ANGULAR: f64 = 0.7853;
+
+/// The Hunter 2.0's fastest turn: its top speed on its tightest circle, 1.5 m/s x
+/// tan(0.461) / 0.650 m (`Model::steering`; a unit test recomputes it).
+const HUNTER2_MAX_YAW_RATE: f64 = 1.146;
 
 /// How fast a model may be commanded.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -71,6 +81,22 @@ pub struct Limits {
     pub angular: f64,
     /// m/s, sideways (0 but on the OMNI).
     pub lateral: f64,
+}
+
+/// A steered model's steering (front-wheel Ackermann): what turns a yaw rate into a steering
+/// angle and back (`kinematics`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Steering {
+    /// Front to rear axle, m.
+    pub wheelbase: f64,
+    /// Between the steered wheels, m.
+    pub track: f64,
+    /// The widest central (bicycle-model) angle, rad.
+    pub max_central: f64,
+    /// The widest inner-wheel angle, rad (what 0x111's steering field carries).
+    pub max_inner: f64,
+    /// How fast the wheels turn, rad/s.
+    pub rate: f64,
 }
 
 /// A model's geometry.
@@ -97,6 +123,7 @@ impl Model {
             Self::Bunker => "bunker",
             Self::BunkerMini => "bunker-mini",
             Self::BunkerPro => "bunker-pro",
+            Self::Hunter2 => "hunter2",
         }
     }
 
@@ -107,6 +134,33 @@ impl Model {
             Self::ScoutMiniOmni => Drive::Mecanum,
             Self::Tracer | Self::TracerMini => Drive::Differential,
             Self::Bunker | Self::BunkerMini | Self::BunkerPro => Drive::Tracked,
+            Self::Hunter2 => Drive::Ackermann,
+        }
+    }
+
+    /// Its steering, for a model that steers ([`Drive::Ackermann`]). Hunter 2.0: wheelbase
+    /// 0.650 m, track 0.605 m, the central (bicycle) angle at most 0.461 rad and the inner
+    /// wheel's at most 0.58 rad, checked against agilexrobotics/hunter_ros2 `hunter_params.hpp`
+    /// `HunterV2Params` (commit 583d2e0; "from user manual v1.2.6_S P4"). The rate at which
+    /// the wheels turn is in no source: 1.0 rad/s is assumed (the simulator's).
+    pub const fn steering(self) -> Option<Steering> {
+        match self {
+            Self::Hunter2 => Some(Steering {
+                wheelbase: 0.650,
+                track: 0.605,
+                max_central: 0.461,
+                max_inner: 0.58,
+                rate: 1.0,
+            }),
+            Self::Scout
+            | Self::Scout2
+            | Self::ScoutMini
+            | Self::ScoutMiniOmni
+            | Self::Tracer
+            | Self::TracerMini
+            | Self::Bunker
+            | Self::BunkerMini
+            | Self::BunkerPro => None,
         }
     }
 
@@ -116,6 +170,7 @@ impl Model {
     pub const fn actuators(self) -> u8 {
         match self.drive() {
             Drive::SkidSteer | Drive::Mecanum => 4,
+            Drive::Ackermann => 3,
             Drive::Differential | Drive::Tracked => 2,
         }
     }
@@ -124,7 +179,9 @@ impl Model {
     /// `TracerRobot` is `TracerBaseV2`); the SCOUTs and Bunkers speak both.
     pub const fn speaks(self, protocol: crate::version::Protocol) -> bool {
         match (self, protocol) {
-            (Self::Tracer | Self::TracerMini, crate::version::Protocol::V1) => false,
+            (Self::Tracer | Self::TracerMini | Self::Hunter2, crate::version::Protocol::V1) => {
+                false
+            }
             (
                 Self::Scout
                 | Self::Scout2
@@ -134,7 +191,8 @@ impl Model {
                 | Self::TracerMini
                 | Self::Bunker
                 | Self::BunkerMini
-                | Self::BunkerPro,
+                | Self::BunkerPro
+                | Self::Hunter2,
                 _,
             ) => true,
         }
@@ -148,9 +206,8 @@ impl Model {
     /// The model called `name`, or an error that lists every name: the one parser of
     /// `--model` and the configuration's `model`.
     pub fn parse(name: &str) -> Result<Self, UnknownModel> {
-        Self::from_name(name).ok_or_else(|| {
-            UnknownModel(NotYet::ALL.into_iter().find(|model| model.name() == name))
-        })
+        Self::from_name(name)
+            .ok_or_else(|| UnknownModel(NotYet::ALL.into_iter().find(|model| model.name() == name)))
     }
 
     /// The byte that stands for it in shared memory.
@@ -165,6 +222,7 @@ impl Model {
             Self::Bunker => 7,
             Self::BunkerMini => 8,
             Self::BunkerPro => 9,
+            Self::Hunter2 => 10,
         }
     }
 
@@ -220,6 +278,11 @@ impl Model {
                 angular: BUNKER_MAX_ANGULAR,
                 lateral: 0.0,
             },
+            Self::Hunter2 => Limits {
+                linear: 1.5,
+                angular: HUNTER2_MAX_YAW_RATE,
+                lateral: 0.0,
+            },
         }
     }
 
@@ -263,6 +326,11 @@ impl Model {
                 wheel_radius: 0.165,
                 gear_ratio: 32.0,
             },
+            Self::Hunter2 => Geometry {
+                track: 0.605,
+                wheel_radius: 0.165,
+                gear_ratio: 30.0,
+            },
         }
     }
 
@@ -277,7 +345,8 @@ impl Model {
             | Self::TracerMini
             | Self::Bunker
             | Self::BunkerMini
-            | Self::BunkerPro => crate::battery::UNKNOWN_BATTERY,
+            | Self::BunkerPro
+            | Self::Hunter2 => crate::battery::UNKNOWN_BATTERY,
         }
     }
 }
@@ -351,6 +420,7 @@ impl Model {
     pub const fn may_send(self, sign: Sign) -> bool {
         match (self, sign) {
             (Self::ScoutMiniOmni, Sign::Lateral) => true,
+            (Self::Hunter2, Sign::Steering | Sign::SteeringAngles) => true,
             (
                 Self::Scout
                 | Self::Scout2
@@ -360,7 +430,8 @@ impl Model {
                 | Self::TracerMini
                 | Self::Bunker
                 | Self::BunkerMini
-                | Self::BunkerPro,
+                | Self::BunkerPro
+                | Self::Hunter2,
                 _,
             ) => false,
         }
@@ -373,8 +444,6 @@ listed! {
 /// would be wrong.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum NotYet {
-    /// Hunter 2.0, Ackermann steering with a brake.
-    Hunter2,
     /// Hunter SE, Ackermann steering.
     HunterSe,
     /// Ranger Mini 2.0, four-wheel steering with motion modes.
@@ -388,7 +457,6 @@ impl NotYet {
     /// The name on the command line.
     pub const fn name(self) -> &'static str {
         match self {
-            Self::Hunter2 => "hunter2",
             Self::HunterSe => "hunter-se",
             Self::RangerMini2 => "ranger-mini-2",
             Self::RangerMini3 => "ranger-mini-3",
@@ -398,9 +466,9 @@ impl NotYet {
     /// What it needs that the gateway does not do yet.
     pub const fn needs(self) -> &'static str {
         match self {
-            Self::Hunter2 | Self::HunterSe => {
-                "Ackermann steering (a steering angle from the yaw rate, a minimum turning \
-                 radius, the brake)"
+            Self::HunterSe => {
+                "its steering geometry (no source this project has gives its wheelbase, track \
+                 and steering limits)"
             }
             Self::RangerMini2 | Self::RangerMini3 => {
                 "four-wheel steering with motion modes (the mode handshake of 0x141 and 0x291)"
@@ -478,15 +546,15 @@ mod tests {
         assert_eq!(
             refused,
             "not a model: give one of scout, scout2, scout-mini, scout-mini-omni, tracer, \
-             tracer-mini, bunker, bunker-mini, bunker-pro"
+             tracer-mini, bunker, bunker-mini, bunker-pro, hunter2"
         );
-        let hunter = Model::parse("hunter2").expect_err("not driven yet");
-        assert_eq!(hunter, UnknownModel(Some(NotYet::Hunter2)));
+        let ranger = Model::parse("ranger-mini-2").expect_err("not driven yet");
+        assert_eq!(ranger, UnknownModel(Some(NotYet::RangerMini2)));
         assert!(
-            hunter.to_string().starts_with(
-                "the gateway does not drive a hunter2 yet: it needs Ackermann steering"
+            ranger.to_string().starts_with(
+                "the gateway does not drive a ranger-mini-2 yet: it needs four-wheel steering"
             ),
-            "{hunter}"
+            "{ranger}"
         );
         for model in NotYet::ALL {
             assert_eq!(Model::from_name(model.name()), None, "{}", model.name());
@@ -509,7 +577,7 @@ mod tests {
     }
 
     #[test]
-    fn every_model_is_drivable_within_the_scouts_wire_and_sends_no_steering() {
+    fn every_model_is_drivable_on_v2_and_only_a_steered_one_sends_steering() {
         for model in Model::ALL {
             let limits = model.limits();
             assert!(limits.linear > 0.0 && limits.angular > 0.0, "{model}");
@@ -521,11 +589,20 @@ mod tests {
                 "{model}: sideways only on mecanum wheels"
             );
             assert!(model.speaks(crate::version::Protocol::V2), "{model}");
-            for sign in [Sign::Steering, Sign::SteeringAngles, Sign::MotionMode] {
-                assert!(!model.may_send(sign), "{model} steers no wheel");
+            let steers = model.drive() == Drive::Ackermann;
+            assert_eq!(model.steering().is_some(), steers, "{model}");
+            for sign in [Sign::Steering, Sign::SteeringAngles] {
+                assert_eq!(model.may_send(sign), steers, "{model}");
             }
+            assert!(
+                !model.may_send(Sign::MotionMode),
+                "{model}: no motion modes"
+            );
             let geometry = model.geometry();
-            assert!(geometry.track > 0.0 && geometry.wheel_radius > 0.0, "{model}");
+            assert!(
+                geometry.track > 0.0 && geometry.wheel_radius > 0.0,
+                "{model}"
+            );
         }
         assert!(!Model::Tracer.speaks(crate::version::Protocol::V1));
         assert!(Model::Bunker.speaks(crate::version::Protocol::V1));

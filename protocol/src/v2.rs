@@ -376,11 +376,25 @@ impl MotionV2 {
         }
     }
 
-    /// These rates held within `linear`, `angular` and `lateral` (m/s, rad/s, m/s; each
-    /// non-negative) once rounded: a limit that is not a whole number of the wire's unit rounds
+    /// These rates with the inner wheel's steering angle `steering` rad (a steered chassis'
+    /// bytes 6-7: vendor SDK `MotionCommandFrame.steering_angle`), rounded and saturated alike.
+    pub fn with_steering(self, steering: f64) -> Self {
+        Self {
+            steering_mrad: thousandths(steering),
+            ..self
+        }
+    }
+
+    /// rad, the inner wheel's steering angle.
+    pub fn steering(&self) -> f64 {
+        f64::from(self.steering_mrad) / 1000.0
+    }
+
+    /// These rates held within `linear`, `angular`, `lateral` and `steering` (m/s, rad/s,
+    /// m/s, rad; each non-negative) once rounded: a limit that is not a whole number of the wire's unit rounds
     /// down (0.5235 rad/s is 523 mrad/s, where rounding the rate would send 524). What a
     /// chassis receives is never beyond its model's limits.
-    pub fn within(self, linear: f64, angular: f64, lateral: f64) -> Self {
+    pub fn within(self, linear: f64, angular: f64, lateral: f64, steering: f64) -> Self {
         let hold = |value: i16, limit: f64| {
             // Whole units below the limit, with a margin for the limit's own binary error.
             let most = (limit * 1000.0 + 1e-6).clamp(0.0, f64::from(i16::MAX)) as i16;
@@ -390,7 +404,7 @@ impl MotionV2 {
             linear_mm_s: hold(self.linear_mm_s, linear),
             angular_mrad_s: hold(self.angular_mrad_s, angular),
             lateral_mm_s: hold(self.lateral_mm_s, lateral),
-            steering_mrad: self.steering_mrad,
+            steering_mrad: hold(self.steering_mrad, steering),
         }
     }
 

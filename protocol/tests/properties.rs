@@ -155,19 +155,22 @@ proptest! {
     #[test]
     fn v2_commands_within_limits_never_exceed_them(
         linear in -30.0f64..30.0, angular in -30.0f64..30.0, lateral in -30.0f64..30.0,
-        limits in (0.0f64..30.0, 0.0f64..30.0, 0.0f64..30.0),
+        steering in -2.0f64..2.0,
+        limits in (0.0f64..30.0, 0.0f64..30.0, 0.0f64..30.0, 0.0f64..1.6),
     ) {
         use scout_protocol::v2::MotionV2;
-        let (max_linear, max_angular, max_lateral) = limits;
+        let (max_linear, max_angular, max_lateral, max_steering) = limits;
         let clamp = |value: f64, limit: f64| value.clamp(-limit, limit);
         let command = MotionV2::from_si(clamp(linear, max_linear), clamp(angular, max_angular))
             .with_lateral(clamp(lateral, max_lateral))
-            .within(max_linear, max_angular, max_lateral);
+            .with_steering(clamp(steering, max_steering))
+            .within(max_linear, max_angular, max_lateral, max_steering);
+        prop_assert!(command.steering().abs() <= max_steering + 1e-9);
         prop_assert!(command.linear().abs() <= max_linear + 1e-9);
         prop_assert!(command.angular().abs() <= max_angular + 1e-9);
         prop_assert!(command.lateral().abs() <= max_lateral + 1e-9);
         prop_assert!((command.angular() - clamp(angular, max_angular)).abs() <= 0.001 + 1e-9);
-        prop_assert_eq!(MotionV2::from_si(0.0, 0.0).within(max_linear, max_angular, max_lateral), MotionV2::default());
+        prop_assert_eq!(MotionV2::from_si(0.0, 0.0).within(max_linear, max_angular, max_lateral, max_steering), MotionV2::default());
     }
 }
 

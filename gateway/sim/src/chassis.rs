@@ -17,7 +17,7 @@ use scout_protocol::{
 use serde::Serialize;
 
 use scout_protocol::Transport;
-use scout_protocol::model::Model;
+use scout_protocol::model::{Model, Steering};
 use scout_protocol::v2::MessageV2;
 
 #[path = "chassis_v2.rs"]
@@ -42,8 +42,18 @@ pub struct SimParams {
     /// Motor turns per wheel turn.
     pub gear_ratio: f64,
     /// How many actuators report on protocol v2 (1 and 2, or 1 to 4): two on the Tracers and
-    /// Bunkers, four on the SCOUTs.
+    /// Bunkers, three on the Hunter, four on the SCOUTs.
     pub actuators: u8,
+    /// Front to rear axle of a steered chassis, m (0: it does not steer, and turns by its
+    /// yaw-rate field). A steered one takes a steering angle in 0x111 (its yaw-rate field is
+    /// ignored), turns its wheels at `steering_rate`, and reports the angle in 0x221.
+    pub wheelbase: f64,
+    /// A steered chassis' widest central angle, rad.
+    pub max_central_steering: f64,
+    /// A steered chassis' widest inner-wheel angle, rad (0x111's steering is clamped to it).
+    pub max_steering: f64,
+    /// How fast a steered chassis turns its wheels, rad/s.
+    pub steering_rate: f64,
     /// Linear acceleration limit, m/s².
     pub linear_acceleration: f64,
     /// Angular acceleration limit, rad/s².
@@ -87,6 +97,10 @@ impl Default for SimParams {
             wheel_radius: 0.165,
             gear_ratio: 32.0,
             actuators: 4,
+            wheelbase: 0.0,
+            max_central_steering: 0.0,
+            max_steering: 0.0,
+            steering_rate: 0.0,
             linear_acceleration: 1.0,
             angular_acceleration: 1.5,
             battery_voltage: 26.0,
@@ -128,6 +142,31 @@ impl SimParams {
             actuators: model.actuators(),
             ..Self::default()
         }
+        .with_steering(model.steering())
+    }
+
+    fn with_steering(self, steering: Option<Steering>) -> Self {
+        match steering {
+            None => self,
+            Some(steering) => Self {
+                wheelbase: steering.wheelbase,
+                max_central_steering: steering.max_central,
+                max_steering: steering.max_inner,
+                steering_rate: steering.rate,
+                ..self
+            },
+        }
+    }
+
+    /// The steering of a steered chassis (a wheelbase set), else `None`.
+    pub fn steering(&self) -> Option<Steering> {
+        (self.wheelbase > 0.0).then_some(Steering {
+            wheelbase: self.wheelbase,
+            track: self.track_width,
+            max_central: self.max_central_steering,
+            max_inner: self.max_steering,
+            rate: self.steering_rate,
+        })
     }
 }
 
@@ -386,6 +425,8 @@ pub struct SimStats {
     pub last_command: Option<LastCommand>,
     /// The chassis' actual speeds.
     pub actual: Speeds,
+    /// The inner wheel's steering angle, rad (a steered chassis).
+    pub steering: f64,
     /// Ground-truth pose.
     pub pose: Pose,
     /// Battery voltage, V.
@@ -436,6 +477,8 @@ pub struct LastCommand {
     pub lateral: f64,
     /// rad/s.
     pub angular: f64,
+    /// rad, the inner wheel's steering angle (v2; 0 but on a steered chassis).
+    pub steering: f64,
     /// `rc`, `can`, `serial`.
     pub control_mode: &'static str,
     /// The fault-clear code's name.
@@ -464,6 +507,9 @@ pub struct Chassis {
     last_motion_received: Option<Duration>,
     target: Speeds,
     actual: Speeds,
+    /// A steered chassis' inner-wheel angle now and the one commanded, rad.
+    steering: f64,
+    target_steering: f64,
     pose: Pose,
     motors: [MotorState; 4],
     /// The pack: its charge and what the chassis measures of it.
@@ -539,6 +585,8 @@ impl Chassis {
             last_motion_received: None,
             target: Speeds::default(),
             actual: Speeds::default(),
+            steering: 0.0,
+            target_steering: 0.0,
             pose: Pose::default(),
             motors: [motor; 4],
             estop: false,
@@ -617,6 +665,7 @@ impl Chassis {
             linear: command.linear(self.params.max_linear),
             lateral: 0.0,
             angular: command.angular(self.params.max_angular),
+            steering: 0.0,
             control_mode: command.control_mode.name(),
             fault_clear: command.fault_clear.name(),
         });
@@ -810,6 +859,7 @@ impl Chassis {
             None => self.system_status().control_mode.name(),
         };
         stats.actual = self.actual;
+        stats.steering = self.steering;
         stats.pose = self.pose;
         stats.battery_voltage = self.battery_voltage;
         stats.battery_percent = self.battery.charge_percent;
@@ -910,6 +960,11 @@ impl Chassis {
                 target.lateral - self.actual.lateral,
                 self.params.linear_acceleration * dt,
             );
+        }
+        if let Some(steering) = self.params.steering() {
+            // The wheels turn at their rate; the yaw is what they and the speed make.
+            self.steering += ramp(self.target_steering - self.steering, steering.rate * dt);
+            self.actual.angular = steering.yaw_rate_from_inner(self.actual.linear, self.steering);
         }
         let Speeds {
             linear,

@@ -192,6 +192,7 @@ impl Chassis {
             linear: command.linear(),
             lateral: command.lateral(),
             angular: command.angular(),
+            steering: command.steering(),
             control_mode: mode.name(),
             fault_clear: "none",
         });
@@ -212,6 +213,13 @@ impl Chassis {
             lateral: command.lateral().clamp(-max_lateral, max_lateral),
             angular: command.angular().clamp(-max_angular, max_angular),
         };
+        if let Some(steering) = self.params.steering() {
+            // A steered chassis turns by its wheels' angle; its yaw-rate field means nothing.
+            self.target.angular = 0.0;
+            self.target_steering = command
+                .steering()
+                .clamp(-steering.max_inner, steering.max_inner);
+        }
         if self.drive_inhibited() {
             self.stats.ignored.inhibited += 1;
             return Some(Ignored::Inhibited);
@@ -349,15 +357,22 @@ impl Chassis {
             self.params.reported_yaw_scale,
         );
         let bms = self.params.bms.then(|| self.bms_v2()).into_iter().flatten();
+        let (steered, steering) = (self.params.steering().is_some(), self.steering);
         let Some(firmware) = self.v2.as_mut() else {
             return Vec::new();
         };
         let (left, right) = firmware.odometer;
+        // A steered chassis reports its wheels' angle, not a yaw rate (as its vendor driver
+        // reads it: hunter_ros2 derives the yaw rate from the angle).
+        let (angular, steering) = match steered {
+            true => (0.0, steering),
+            false => (actual.angular * yaw_scale, 0.0),
+        };
         let mut frames = vec![MessageV2::MotionState(MotionV2 {
             linear_mm_s: super::to_i16(actual.linear * 1000.0 * distance_scale),
-            angular_mrad_s: super::to_i16(actual.angular * 1000.0 * yaw_scale),
+            angular_mrad_s: super::to_i16(angular * 1000.0),
             lateral_mm_s: super::to_i16(actual.lateral * 1000.0 * distance_scale),
-            steering_mrad: 0,
+            steering_mrad: super::to_i16(steering * 1000.0),
         })];
         for (mut high, low) in motors {
             // 1 and 4 are on the right (as in v1's numbering); a 4096-count encoder per turn.

@@ -174,6 +174,43 @@ fn a_tracer_or_a_bunker_reports_two_actuators() {
 }
 
 #[test]
+fn a_hunter_steers_by_its_wheels_angle_and_reports_it() {
+    let mut chassis = chassis(Model::Hunter2);
+    chassis.handle_v2(ms(0), TAKE);
+    // A yaw rate in the yaw-rate field turns nothing; the steering field turns the wheels.
+    let (now, _) = drive(&mut chassis, go(0.5, 0.5), ms(0), ms(1000));
+    assert_eq!(chassis.stats().steering, 0.0);
+    assert!(
+        chassis.actual().angular.abs() < 1e-12,
+        "{:?}",
+        chassis.actual()
+    );
+    let steer = MessageV2::MotionCommand(MotionV2::from_si(0.5, 0.0).with_steering(0.3));
+    // The wheels turn at 1 rad/s: 0.3 rad takes 300 ms.
+    let (now, _) = drive(&mut chassis, steer, now, ms(100));
+    let turning = chassis.stats().steering;
+    assert!((0.05..0.15).contains(&turning), "{turning}");
+    let (_, frames) = drive(&mut chassis, steer, now, ms(1000));
+    let steering = Model::Hunter2.steering().expect("steered");
+    assert!((chassis.stats().steering - 0.3).abs() < 1e-9);
+    let yaw = steering.yaw_rate_from_inner(chassis.actual().linear, 0.3);
+    assert!((chassis.actual().angular - yaw).abs() < 1e-9 && yaw > 0.1);
+    let motion = frames
+        .iter()
+        .rev()
+        .find_map(|f| match f {
+            MessageV2::MotionState(m) => Some(*m),
+            _ => None,
+        })
+        .expect("0x221");
+    assert_eq!((motion.angular_mrad_s, motion.steering_mrad), (0, 300));
+    // Never beyond its widest angle.
+    let wide = MessageV2::MotionCommand(MotionV2::from_si(0.5, 0.0).with_steering(-1.5));
+    drive(&mut chassis, wide, ms(3000), ms(2000));
+    assert_eq!(chassis.stats().steering, -steering.max_inner);
+}
+
+#[test]
 fn commands_are_clamped_to_the_models_limits() {
     for (model, linear) in [
         (Model::Scout2, 1.5),

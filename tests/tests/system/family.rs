@@ -64,7 +64,11 @@ fn every_tracer_and_bunker_is_capped_at_its_limits_and_refuses_sideways() {
         assert_eq!(chassis["model"], model.name(), "{chassis}");
         assert_eq!(chassis["max_linear"], limits.linear, "{chassis}");
         assert_eq!(chassis["max_angular"], limits.angular, "{chassis}");
-        assert_eq!(ready["link"]["protocol"], "v2", "{model}: {}", ready["link"]);
+        assert_eq!(
+            ready["link"]["protocol"], "v2",
+            "{model}: {}",
+            ready["link"]
+        );
         let motors = &ready["motors"];
         assert!(
             !motors[1].is_null() && motors[2].is_null() && motors[3].is_null(),

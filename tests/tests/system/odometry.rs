@@ -109,7 +109,12 @@ pub(crate) fn exact_factors() -> String {
 
 /// Drives the square on the erring chassis with the gateway configured by `gateway_config`;
 /// the position and yaw errors over the path.
-pub(crate) fn square(prefix: &str, chassis: &[&str], transport: &[&str], gateway_config: &str) -> (f64, f64) {
+pub(crate) fn square(
+    prefix: &str,
+    chassis: &[&str],
+    transport: &[&str],
+    gateway_config: &str,
+) -> (f64, f64) {
     let name = robot_name(prefix);
     let dir = TempDir::new(&name);
     let params = erring_params(&dir);
