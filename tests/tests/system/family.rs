@@ -1,10 +1,14 @@
-//! The Tracers and the Bunkers across processes: each drives a square on its simulator with the
-//! gateway's odometry closing on the simulator's pose, every one of them is capped at its own
-//! limits and refuses a sideways speed, and the command a Tracer gets is where the vendor puts
-//! it in 0x111 (read by a chassis emulated apart from this project's codec).
+//! The Tracers, the Bunkers and the Hunter across processes: each drives a figure its wheels
+//! allow on its simulator with the gateway's odometry closing on the simulator's pose, every
+//! one is capped at its own limits and refuses what it cannot do (a sideways speed; a turn in
+//! place on the Hunter), and the command each kind gets is where the vendor puts it in 0x111
+//! (read by a chassis emulated apart from this project's codec).
 
 use std::cell::Cell;
-use std::time::Duration;
+use std::time::{Duration, Instant};
+
+use scout_clients::Class;
+use scout_system_tests::{Sim, TempDir};
 
 use scout_protocol::model::{Drive, Model};
 use scout_protocol::version::Protocol;
@@ -153,6 +157,141 @@ fn a_tracers_command_is_where_the_vendor_puts_it_in_0x111() {
     assert!(
         seen.iter().all(|c| c[2] == 0 && c[3] == 0),
         "no sideways, no steering: {seen:?}"
+    );
+    let seen = chassis.commands_until(|c| *c == [0, 0, 0, 0]);
+    assert_eq!(seen.last(), Some(&[0, 0, 0, 0]), "{seen:?}");
+    drop(drive);
+}
+
+/// The newest state's odometry: x, y, yaw and distance, waiting up to 2 s for a first one.
+fn odometry(states: &scout_clients::client::StateSubscriber) -> (f64, f64, f64, f64) {
+    let state = wait_for_state(states, Duration::from_secs(2), |_| true);
+    let value = |key: &str| state["odometry"][key].as_f64().expect("odometry");
+    (value("x"), value("y"), value("yaw"), value("distance"))
+}
+
+/// A Hunter drives a rounded square on its simulator (four sides of 1 m, each followed by a
+/// quarter turn on a 1.5 m circle, steering on the gateway's odometry as a planner would): the
+/// odometry ends within 2 % of the path of the simulator's pose. It refuses to turn in place.
+#[test]
+fn a_hunter_drives_a_rounded_square_and_its_odometry_follows() {
+    let name = robot_name("hunter-figure");
+    let _dir = TempDir::new(&name);
+    let mut sim = Sim::start(&["--slcan", "--protocol", "v2", "--model", "hunter2"]);
+    let port = sim.port().to_owned();
+    let _gateway = Gateway::start(&["--slcan", &port, "--model", "hunter2", "--name", &name]);
+    let robot = connect(&name);
+    let states = robot.subscribe().expect("state");
+    wait_for_state(&states, LIMIT, |s| s["link"]["state"] == "ok");
+    // Turning standing still is refused whole, with the reason.
+    let (code, stdout, stderr) = scout(&[
+        "drive",
+        "--name",
+        &name,
+        "--angular",
+        "0.3",
+        "--duration",
+        "0.3",
+    ]);
+    let said = format!("{stdout}{stderr}");
+    assert_eq!(code, Some(4), "{said}");
+    assert!(said.contains("a hunter2 cannot turn in place"), "{said}");
+    let mut drive = robot
+        .controller("figure", Some(Class::Teleop))
+        .expect("a controller");
+    let deadline = Instant::now() + LIMIT;
+    while drive.take_control().is_err() {
+        assert!(Instant::now() < deadline, "no control of {name}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    const SPEED: f64 = 0.4;
+    const RADIUS: f64 = 1.5;
+    let mut leg = |speeds: (f64, f64), done: &dyn Fn((f64, f64, f64, f64)) -> bool| {
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while !done(odometry(&states)) {
+            assert!(Instant::now() < deadline, "a leg took too long");
+            drive.drive(speeds.0, speeds.1).expect("a drive");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    };
+    let mut path = 0.0;
+    for corner in 1..=4 {
+        let start = odometry(&states).3;
+        leg((SPEED, 0.0), &|(_, _, _, distance)| distance - start >= 1.0);
+        let heading = f64::from(corner) * std::f64::consts::FRAC_PI_2;
+        leg((SPEED, SPEED / RADIUS), &|(_, _, yaw, _)| {
+            let left = (heading - yaw + std::f64::consts::PI)
+                .rem_euclid(std::f64::consts::TAU)
+                - std::f64::consts::PI;
+            left <= 0.0
+        });
+        path += 1.0 + RADIUS * std::f64::consts::FRAC_PI_2;
+    }
+    // Stop, and let the chassis come to rest before comparing.
+    drive.stop("figure done").expect("a stop");
+    wait_for_state(&states, LIMIT, |s| {
+        s["motion"]["linear"].as_f64().is_some_and(|v| v.abs() < 0.001)
+    });
+    let (x, y, yaw, _) = odometry(&states);
+    let truth = sim.stats()["pose"].clone();
+    let value = |key: &str| truth[key].as_f64().expect("a pose");
+    let (true_x, true_y, true_yaw) = (value("x"), value("y"), value("yaw"));
+    eprintln!(
+        "hunter2: odometry ({x:.3}, {y:.3}, {yaw:.3}), truth ({true_x:.3}, {true_y:.3}, \
+         {true_yaw:.3}) over {path:.2} m"
+    );
+    let position = (x - true_x).hypot(y - true_y) / path;
+    let turned = ((yaw - true_yaw + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+        - std::f64::consts::PI)
+        .abs()
+        / std::f64::consts::TAU;
+    assert_within(position, turned);
+    // It went round: back near where it started, facing the way it started.
+    assert!(true_x.hypot(true_y) < 1.0, "({true_x}, {true_y})");
+}
+
+/// A Hunter's 0x111 as the vendor lays it out: the speed in bytes 0-1, nothing in the yaw-rate
+/// field, the inner wheel's angle for the asked turn in bytes 6-7; zero on every field when
+/// the client ends.
+#[test]
+fn a_hunters_command_is_its_speed_and_steering_angle_in_0x111() {
+    let chassis = EmulatedChassis::start();
+    let name = robot_name("hunter-wire");
+    let _gateway = Gateway::start(&[
+        "--slcan",
+        &chassis.port,
+        "--protocol",
+        "v2",
+        "--model",
+        "hunter2",
+        "--name",
+        &name,
+    ]);
+    let state = connect(&name).subscribe().expect("state");
+    wait_for_state(&state, LIMIT, |s| s["link"]["state"] == "ok");
+    let drive = scout_system_tests::Background::scout(&[
+        "drive",
+        "--name",
+        &name,
+        "--linear",
+        "0.3",
+        "--angular",
+        "0.2",
+        "--duration",
+        "1.5",
+    ]);
+    let steering = Model::Hunter2.steering().expect("steered");
+    let inner = steering.inner_from_central(steering.central_for(0.3, 0.2));
+    let mrad = (inner * 1000.0).round() as i64;
+    let seen = chassis.commands_until(|c| c[0] == 300 && (c[3] - mrad).abs() <= 1);
+    let last = seen.last().copied().unwrap_or_default();
+    assert!(
+        last[0] == 300 && (last[3] - mrad).abs() <= 1,
+        "{mrad} mrad: {seen:?}"
+    );
+    assert!(
+        seen.iter().all(|c| c[1] == 0 && c[2] == 0),
+        "no yaw rate, no sideways: {seen:?}"
     );
     let seen = chassis.commands_until(|c| *c == [0, 0, 0, 0]);
     assert_eq!(seen.last(), Some(&[0, 0, 0, 0]), "{seen:?}");
