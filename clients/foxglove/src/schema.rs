@@ -57,7 +57,8 @@ pub fn state() -> Value {
         "unknown_fault_bits": integer(), "age_ms": number(),
     }));
     let motion = nullable(json!({
-        "linear": number(), "angular": number(), "lateral": number(), "age_ms": number(),
+        "linear": number(), "angular": number(), "lateral": number(), "steering": number(),
+        "age_ms": number(),
     }));
     let motor = nullable(json!({
         "motor": integer(), "current": number(), "rpm": integer(),

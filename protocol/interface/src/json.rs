@@ -257,6 +257,7 @@ pub fn state_field(state: &StatePayload, key: &str, now_ns: u64) -> Option<Value
                     "linear": motion.linear(),
                     "angular": motion.angular(),
                     "lateral": motion.lateral(),
+                    "steering": motion.steering(),
                 })
             })
         }

@@ -38,9 +38,9 @@ pub mod state;
 pub mod stop_socket;
 pub mod text;
 
-/// The layout version in every payload's iceoryx2 type name (`scout::StatePayload.v10`). Raise it
+/// The layout version in every payload's iceoryx2 type name (`scout::StatePayload.v11`). Raise it
 /// when a payload changes: the sizes pinned below stop the build until it is raised.
-pub const LAYOUT_VERSION: u32 = 10;
+pub const LAYOUT_VERSION: u32 = 11;
 
 pub use control::{
     Accepted, Class, ControlRequest, ControlResponse, LightsSetting, Rejection, RejectionKind,

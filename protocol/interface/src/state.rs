@@ -163,6 +163,9 @@ pub struct MotionPayload {
     pub angular_mrad_s: i16,
     /// Leftward, mm/s (v2, MINI OMNI; 0 otherwise).
     pub lateral_mm_s: i16,
+    /// The inner wheel's steering angle, mrad, positive to the left (v2, a steered chassis:
+    /// the Hunter; 0 otherwise). Its yaw rate is in `angular_mrad_s`.
+    pub steering_mrad: i16,
 }
 
 /// One motor: v1's 0x200..0x203, or v2's 0x251..0x254 (speed, current, encoder) and
@@ -480,7 +483,7 @@ pub struct CommandPayload {
 
 /// The chassis state a gateway publishes on every decoded feedback frame and link change.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::StatePayload.v10")]
+#[type_name("scout::StatePayload.v11")]
 #[repr(C)]
 pub struct StatePayload {
     /// Increases by one with every publication.
@@ -551,6 +554,7 @@ impl StatePayload {
                     linear_mm_s: motion.linear_mm_s,
                     angular_mrad_s: motion.angular_mrad_s,
                     lateral_mm_s: 0,
+                    steering_mrad: 0,
                 };
             }
             Message::MotorFeedback(motor) => {
@@ -599,6 +603,7 @@ impl StatePayload {
                     linear_mm_s: motion.linear_mm_s,
                     angular_mrad_s: motion.angular_mrad_s,
                     lateral_mm_s: motion.lateral_mm_s,
+                    steering_mrad: motion.steering_mrad,
                 };
             }
             MessageV2::LightState(lights) => {
@@ -798,6 +803,11 @@ impl MotionPayload {
     /// m/s, leftward.
     pub fn lateral(&self) -> f64 {
         f64::from(self.lateral_mm_s) / 1000.0
+    }
+
+    /// rad, the inner wheel's steering angle (a steered chassis).
+    pub fn steering(&self) -> f64 {
+        f64::from(self.steering_mrad) / 1000.0
     }
 }
 

@@ -220,8 +220,7 @@ fn a_hunter_drives_a_rounded_square_and_its_odometry_follows() {
         leg((SPEED, 0.0), &|(_, _, _, distance)| distance - start >= 1.0);
         let heading = f64::from(corner) * std::f64::consts::FRAC_PI_2;
         leg((SPEED, SPEED / RADIUS), &|(_, _, yaw, _)| {
-            let left = (heading - yaw + std::f64::consts::PI)
-                .rem_euclid(std::f64::consts::TAU)
+            let left = (heading - yaw + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
                 - std::f64::consts::PI;
             left <= 0.0
         });
@@ -230,7 +229,9 @@ fn a_hunter_drives_a_rounded_square_and_its_odometry_follows() {
     // Stop, and let the chassis come to rest before comparing.
     drive.stop("figure done").expect("a stop");
     wait_for_state(&states, LIMIT, |s| {
-        s["motion"]["linear"].as_f64().is_some_and(|v| v.abs() < 0.001)
+        s["motion"]["linear"]
+            .as_f64()
+            .is_some_and(|v| v.abs() < 0.001)
     });
     let (x, y, yaw, _) = odometry(&states);
     let truth = sim.stats()["pose"].clone();

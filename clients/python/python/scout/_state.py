@@ -62,11 +62,13 @@ class System:
 @dataclass(frozen=True)
 class Motion:
     """The speeds the chassis reports (v1 0x131, v2 0x221): m/s and rad/s; lateral on a MINI
-    OMNI."""
+    OMNI; steering (rad, the inner wheel's angle, positive to the left) on a Hunter, whose
+    yaw rate the gateway derives from it."""
 
     linear: float
     angular: float
     lateral: float
+    steering: float
     age_ms: float
 
 
