@@ -415,25 +415,16 @@ impl Sign {
 }
 
 impl Model {
-    /// Whether a chassis of this model may send what `sign` says: the OMNI moves sideways;
-    /// no SCOUT, Tracer or Bunker steers its wheels or has motion modes.
+    /// Whether a chassis of this model may send what `sign` says, by how its wheels move it:
+    /// mecanum wheels move sideways, steered wheels report their angles, and nothing this
+    /// gateway drives has motion modes.
     pub const fn may_send(self, sign: Sign) -> bool {
-        match (self, sign) {
-            (Self::ScoutMiniOmni, Sign::Lateral) => true,
-            (Self::Hunter2, Sign::Steering | Sign::SteeringAngles) => true,
-            (
-                Self::Scout
-                | Self::Scout2
-                | Self::ScoutMini
-                | Self::ScoutMiniOmni
-                | Self::Tracer
-                | Self::TracerMini
-                | Self::Bunker
-                | Self::BunkerMini
-                | Self::BunkerPro
-                | Self::Hunter2,
-                _,
-            ) => false,
+        match (self.drive(), sign) {
+            (Drive::Mecanum, Sign::Lateral)
+            | (Drive::Ackermann, Sign::Steering | Sign::SteeringAngles) => true,
+            (Drive::SkidSteer | Drive::Differential | Drive::Tracked, _)
+            | (Drive::Mecanum, Sign::Steering | Sign::SteeringAngles | Sign::MotionMode)
+            | (Drive::Ackermann, Sign::Lateral | Sign::MotionMode) => false,
         }
     }
 }

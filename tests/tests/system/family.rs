@@ -123,31 +123,8 @@ fn every_tracer_and_bunker_is_capped_at_its_limits_and_refuses_sideways() {
 /// 2-3, nothing in the sideways and steering fields; zero on every field when the client ends.
 #[test]
 fn a_tracers_command_is_where_the_vendor_puts_it_in_0x111() {
-    let chassis = EmulatedChassis::start();
-    let name = robot_name("tracer-wire");
-    let _gateway = Gateway::start(&[
-        "--slcan",
-        &chassis.port,
-        "--protocol",
-        "v2",
-        "--model",
-        "tracer",
-        "--name",
-        &name,
-    ]);
-    let state = connect(&name).subscribe().expect("state");
-    wait_for_state(&state, LIMIT, |s| s["link"]["state"] == "ok");
-    let drive = scout_system_tests::Background::scout(&[
-        "drive",
-        "--name",
-        &name,
-        "--linear",
-        "0.1",
-        "--angular",
-        "0.3",
-        "--duration",
-        "1.5",
-    ]);
+    let (chassis, _gateway, drive) =
+        EmulatedChassis::driven("tracer", &["--linear", "0.1", "--angular", "0.3"]);
     let seen = chassis.commands_until(|c| c[0] == 100 && c[1] == 300);
     assert_eq!(
         seen.last().map(|c| (c[0], c[1])),
@@ -256,31 +233,8 @@ fn a_hunter_drives_a_rounded_square_and_its_odometry_follows() {
 /// the client ends.
 #[test]
 fn a_hunters_command_is_its_speed_and_steering_angle_in_0x111() {
-    let chassis = EmulatedChassis::start();
-    let name = robot_name("hunter-wire");
-    let _gateway = Gateway::start(&[
-        "--slcan",
-        &chassis.port,
-        "--protocol",
-        "v2",
-        "--model",
-        "hunter2",
-        "--name",
-        &name,
-    ]);
-    let state = connect(&name).subscribe().expect("state");
-    wait_for_state(&state, LIMIT, |s| s["link"]["state"] == "ok");
-    let drive = scout_system_tests::Background::scout(&[
-        "drive",
-        "--name",
-        &name,
-        "--linear",
-        "0.3",
-        "--angular",
-        "0.2",
-        "--duration",
-        "1.5",
-    ]);
+    let (chassis, _gateway, drive) =
+        EmulatedChassis::driven("hunter2", &["--linear", "0.3", "--angular", "0.2"]);
     let steering = Model::Hunter2.steering().expect("steered");
     let inner = steering.inner_from_central(steering.central_for(0.3, 0.2));
     let mrad = (inner * 1000.0).round() as i64;

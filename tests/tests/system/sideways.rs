@@ -108,6 +108,36 @@ impl EmulatedChassis {
         Self { child, lines, port }
     }
 
+    /// An emulated chassis with a gateway for `model` on protocol v2 on it (its link up) and
+    /// `scout drive` with `drive` (`--linear 0.1 ...`) running against it.
+    pub(crate) fn driven(
+        model: &str,
+        drive: &[&str],
+    ) -> (Self, Gateway, scout_system_tests::Background) {
+        let chassis = Self::start();
+        let name = robot_name(&format!("{model}-wire"));
+        let args = [
+            "--slcan",
+            &chassis.port,
+            "--protocol",
+            "v2",
+            "--model",
+            model,
+        ];
+        let gateway = Gateway::start(&[&args[..], &["--name", &name]].concat());
+        let state = connect(&name).subscribe().expect("state");
+        wait_for_state(&state, LIMIT, |s| s["link"]["state"] == "ok");
+        let drive = scout_system_tests::Background::scout(
+            &[
+                &["drive", "--name", &name][..],
+                drive,
+                &["--duration", "1.5"],
+            ]
+            .concat(),
+        );
+        (chassis, gateway, drive)
+    }
+
     /// The motion commands it decoded, as (linear, angular, lateral, steering), until `done`
     /// says so of the newest or `LIMIT` passes.
     pub(crate) fn commands_until(&self, done: impl Fn(&[i64; 4]) -> bool) -> Vec<[i64; 4]> {
@@ -146,20 +176,8 @@ impl Drop for EmulatedChassis {
 /// apart from this project's codec and simulator: the OMNI's sideways speed is bytes 4-5.
 #[test]
 fn the_omnis_sideways_speed_is_where_the_vendor_puts_it_in_0x111() {
-    let chassis = EmulatedChassis::start();
-    let name = robot_name("omni-wire");
-    let (_gateway, _state, _) = omni(&name, &["--slcan", &chassis.port]);
-    let drive = scout_system_tests::Background::scout(&[
-        "drive",
-        "--name",
-        &name,
-        "--linear",
-        "0.1",
-        "--lateral",
-        "-0.3",
-        "--duration",
-        "1.5",
-    ]);
+    let (chassis, _gateway, drive) =
+        EmulatedChassis::driven("scout-mini-omni", &["--linear", "0.1", "--lateral", "-0.3"]);
     // The ramps (1 m/s², 20 ms) reach 0.1 forward and 0.3 to the right.
     let seen = chassis.commands_until(|c| c[0] == 100 && c[2] == -300);
     assert_eq!(
