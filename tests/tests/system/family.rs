@@ -147,8 +147,8 @@ fn odometry(states: &scout_clients::client::StateSubscriber) -> (f64, f64, f64, 
     (value("x"), value("y"), value("yaw"), value("distance"))
 }
 
-/// A Hunter drives a rounded square on its simulator (four sides of 1 m, each followed by a
-/// quarter turn on a 1.5 m circle, steering on the gateway's odometry as a planner would): the
+/// A Hunter drives a rounded square on its simulator at 0.8 m/s (four sides of 1 m, each
+/// followed by a quarter turn on a 1.5 m circle, steering on the gateway's odometry as a planner would): the
 /// odometry ends within 2 % of the path of the simulator's pose. It refuses to turn in place.
 #[test]
 fn a_hunter_drives_a_rounded_square_and_its_odometry_follows() {
@@ -181,7 +181,7 @@ fn a_hunter_drives_a_rounded_square_and_its_odometry_follows() {
         assert!(Instant::now() < deadline, "no control of {name}");
         std::thread::sleep(Duration::from_millis(50));
     }
-    const SPEED: f64 = 0.4;
+    const SPEED: f64 = 0.8;
     const RADIUS: f64 = 1.5;
     let mut leg = |speeds: (f64, f64), done: &dyn Fn((f64, f64, f64, f64)) -> bool| {
         let deadline = Instant::now() + Duration::from_secs(20);
@@ -224,8 +224,10 @@ fn a_hunter_drives_a_rounded_square_and_its_odometry_follows() {
         .abs()
         / std::f64::consts::TAU;
     assert_within(position, turned);
-    // It went round: back near where it started, facing the way it started.
-    assert!(true_x.hypot(true_y) < 1.0, "({true_x}, {true_y})");
+    // It went round: back near where it started (the figure is 3.5 m across; each leg ends on
+    // the ramp down, so the ends drift), facing about the way it started.
+    assert!(true_x.hypot(true_y) < 1.5, "({true_x}, {true_y})");
+    assert!(true_yaw.abs() < 0.5, "{true_yaw}");
 }
 
 /// A Hunter's 0x111 as the vendor lays it out: the speed in bytes 0-1, nothing in the yaw-rate
