@@ -1331,8 +1331,8 @@ pub fn turning(model: Model) -> Turning {
                 min_radius,
                 in_place: format!(
                     "a {model} cannot turn in place: it steers its front wheels and turns only \
-                     while moving, on a circle {min_radius:.2} m wide at the tightest; drive \
-                     forward or backward to turn"
+                     while moving, on a circle of {min_radius:.2} m radius at the tightest; \
+                     drive forward or backward to turn"
                 ),
             }
         }
