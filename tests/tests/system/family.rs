@@ -224,10 +224,11 @@ fn a_hunter_drives_a_rounded_square_and_its_odometry_follows() {
         .abs()
         / std::f64::consts::TAU;
     assert_within(position, turned);
-    // It went round: back near where it started (the figure is 3.5 m across; each leg ends on
-    // the ramp down, so the ends drift), facing about the way it started.
-    assert!(true_x.hypot(true_y) < 1.5, "({true_x}, {true_y})");
-    assert!(true_yaw.abs() < 0.5, "{true_yaw}");
+    // It went round (each leg ended on the odometry, or the test would have failed there): back
+    // near where it started and facing about the way it started. Loose bounds: each leg ends a
+    // client's poll late, on a loaded machine more, and the figure is 3.5 m across.
+    assert!(true_x.hypot(true_y) < 2.0, "({true_x}, {true_y})");
+    assert!(true_yaw.abs() < 0.7, "{true_yaw}");
 }
 
 /// A Hunter's 0x111 as the vendor lays it out: the speed in bytes 0-1, nothing in the yaw-rate
