@@ -1,6 +1,6 @@
-//! The SCOUT's battery as its manual gives it (and packs no source gives), and the rest-voltage curve that turns a pack
-//! voltage into a state of charge (the gateway's estimate where no smart battery reports one,
-//! and the simulator's truth).
+//! The SCOUT's battery as its manual gives it (and packs no source gives), and the rest-voltage
+//! curve that turns a pack voltage into a state of charge (the gateway's estimate where no smart
+//! battery reports one, and the simulator's truth).
 
 /// What is known of a model's battery.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -32,7 +32,6 @@ pub enum Model {
 }
 }
 
-listed! {
 /// How a model's wheels move it: what the gateway's mapping, odometry and simulator take.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Drive {
@@ -47,20 +46,6 @@ pub enum Drive {
     /// Steered front wheels (the Hunter): forward and a steering angle; a yaw rate only while
     /// moving, no tighter than its minimum turning radius.
     Ackermann,
-}
-}
-
-impl Drive {
-    /// In a few words, for docs and messages.
-    pub const fn describe(self) -> &'static str {
-        match self {
-            Self::SkidSteer => "skid-steer",
-            Self::Mecanum => "mecanum (it moves sideways)",
-            Self::Differential => "differential drive",
-            Self::Tracked => "tracked",
-            Self::Ackermann => "Ackermann steering (it turns only while moving)",
-        }
-    }
 }
 
 /// The Bunker's yaw-rate limit as its source writes it (just under pi/4, so kept, not rounded

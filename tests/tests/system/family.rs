@@ -135,8 +135,7 @@ fn a_tracers_command_is_where_the_vendor_puts_it_in_0x111() {
         seen.iter().all(|c| c[2] == 0 && c[3] == 0),
         "no sideways, no steering: {seen:?}"
     );
-    let seen = chassis.commands_until(|c| *c == [0, 0, 0, 0]);
-    assert_eq!(seen.last(), Some(&[0, 0, 0, 0]), "{seen:?}");
+    chassis.ends_at_zero();
     drop(drive);
 }
 
@@ -251,7 +250,6 @@ fn a_hunters_command_is_its_speed_and_steering_angle_in_0x111() {
         seen.iter().all(|c| c[1] == 0 && c[2] == 0),
         "no yaw rate, no sideways: {seen:?}"
     );
-    let seen = chassis.commands_until(|c| *c == [0, 0, 0, 0]);
-    assert_eq!(seen.last(), Some(&[0, 0, 0, 0]), "{seen:?}");
+    chassis.ends_at_zero();
     drop(drive);
 }

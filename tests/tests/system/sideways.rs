@@ -138,6 +138,12 @@ impl EmulatedChassis {
         (chassis, gateway, drive)
     }
 
+    /// Waits for zero on every field (what a client ending sends).
+    pub(crate) fn ends_at_zero(&self) {
+        let seen = self.commands_until(|c| *c == [0, 0, 0, 0]);
+        assert_eq!(seen.last(), Some(&[0, 0, 0, 0]), "{seen:?}");
+    }
+
     /// The motion commands it decoded, as (linear, angular, lateral, steering), until `done`
     /// says so of the newest or `LIMIT` passes.
     pub(crate) fn commands_until(&self, done: impl Fn(&[i64; 4]) -> bool) -> Vec<[i64; 4]> {
@@ -190,7 +196,6 @@ fn the_omnis_sideways_speed_is_where_the_vendor_puts_it_in_0x111() {
         "no yaw, no steering: {seen:?}"
     );
     // Then zero on every field when `scout drive` ends.
-    let seen = chassis.commands_until(|c| *c == [0, 0, 0, 0]);
-    assert_eq!(seen.last(), Some(&[0, 0, 0, 0]), "{seen:?}");
+    chassis.ends_at_zero();
     drop(drive);
 }
