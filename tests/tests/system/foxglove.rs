@@ -17,7 +17,8 @@ use std::time::{Duration, Instant};
 use nix::sys::signal::Signal;
 use scout_system_tests::{
     Background, Gateway, Sim, TempDir, chassis_stays_still, comes_to_rest, command, connect,
-    drive_until_moving, release_all, robot_name, run_with_input, scout, skip, wait_for_status,
+    drive_until_moving, release_all, robot_name, run_with_input, scout, skip, wait_for_state,
+    wait_for_status,
 };
 use serde_json::Value;
 
@@ -112,7 +113,7 @@ fn file_size(file: &Path) -> u64 {
     std::fs::metadata(file).map_or(0, |metadata| metadata.len())
 }
 
-/// Waits at most `limit` until `file` has grown `times` times (a chunk is synced every second).
+/// Waits at most `limit` until `file` has grown `times` times.
 fn wait_growth(file: &Path, times: u32, limit: Duration) {
     let deadline = Instant::now() + limit;
     let mut size = file_size(file);
@@ -129,6 +130,43 @@ fn wait_growth(file: &Path, times: u32, limit: Duration) {
             grown += 1;
             size = now;
         }
+    }
+}
+
+/// How many chunks of the MCAP file `bytes` are whole: a chunk being written has its length still
+/// the writer's placeholder (all ones), and a growing file may end inside a record.
+fn whole_chunks(bytes: &[u8]) -> usize {
+    const MAGIC: usize = 8;
+    const CHUNK: u8 = 0x06;
+    let mut at = MAGIC;
+    let mut chunks = 0;
+    while let Some(head) = bytes.get(at..at + 9) {
+        let length = u64::from_le_bytes(head[1..].try_into().expect("eight bytes"));
+        let end = usize::try_from(length)
+            .ok()
+            .and_then(|length| (at + 9).checked_add(length));
+        match end {
+            Some(end) if end <= bytes.len() => {
+                chunks += usize::from(head[0] == CHUNK);
+                at = end;
+            }
+            _ => break,
+        }
+    }
+    chunks
+}
+
+/// Waits at most `limit` until `file` holds `chunks` whole chunks (the recorder closes and syncs
+/// one a second). The file's growth says less: a chunk's header goes out when it is opened.
+fn wait_chunks(file: &Path, chunks: usize, limit: Duration) {
+    let deadline = Instant::now() + limit;
+    while whole_chunks(&std::fs::read(file).unwrap_or_default()) < chunks {
+        assert!(
+            Instant::now() < deadline,
+            "{} did not close {chunks} chunks",
+            file.display()
+        );
+        std::thread::sleep(Duration::from_millis(50));
     }
 }
 
@@ -178,7 +216,7 @@ fn a_recording_holds_every_channel_with_schemas_and_closes_with_its_index_on_sig
     drop(driver);
     release_all(&name);
     wait_for_status(&status, Duration::from_secs(5), |s| s["latched"] == false);
-    wait_growth(&file, 2, Duration::from_secs(10));
+    wait_chunks(&file, 1, Duration::from_secs(10));
 
     recorder.signal(Signal::SIGINT);
     assert_eq!(
@@ -318,7 +356,7 @@ fn a_recording_with_a_duration_ends_by_itself_and_one_cut_by_sigkill_reads_up_to
     // SIGKILL: no summary, but every synced chunk reads.
     let cut = dir.path().join("cut.mcap");
     let mut recorder = recorder(&name, &cut, &[]);
-    wait_growth(&cut, 3, Duration::from_secs(15));
+    wait_chunks(&cut, 2, Duration::from_secs(15));
     recorder.signal(Signal::SIGKILL);
     recorder.wait_exit(Duration::from_secs(5));
     let whole = mcap_report(&cut, false);
@@ -359,7 +397,7 @@ fn a_ros2_recording_is_a_bag_rosbags_reads_every_message_of() {
     let mut sim = Sim::start(&["--serial"]);
     let device = sim.port().to_owned();
     let _gateway = Gateway::start(&["--serial", &device, "--name", &name]);
-    connect(&name);
+    let states = connect(&name).subscribe().expect("subscribe");
     let mut recording = recorder(&name, &bag, &["--ros2"]);
     wait_growth(&file, 1, Duration::from_secs(10));
     let driver = drive_until_moving(
@@ -368,7 +406,12 @@ fn a_ros2_recording_is_a_bag_rosbags_reads_every_message_of() {
         &["--linear", "0.4", "--duration", "60"],
         Duration::from_secs(10),
     );
-    wait_growth(&file, 1, Duration::from_secs(10));
+    // Far enough for the recorded odometry to show it, then a chunk closed while driving.
+    wait_for_state(&states, Duration::from_secs(10), |s| {
+        s["odometry"]["x"].as_f64() > Some(0.1)
+    });
+    let closed = whole_chunks(&std::fs::read(&file).unwrap_or_default());
+    wait_chunks(&file, closed + 1, Duration::from_secs(10));
     drop(driver);
     recording.signal(Signal::SIGINT);
     assert_eq!(recording.wait_exit(Duration::from_secs(10)), Some(0));
@@ -420,7 +463,7 @@ fn a_ros2_recording_is_a_bag_rosbags_reads_every_message_of() {
     // stream up to its last whole chunk (`mcap recover` makes it whole for rosbags).
     let cut = dir.path().join("cut");
     let mut killed = recorder(&name, &cut, &["--ros2"]);
-    wait_growth(&cut.join("cut_0.mcap"), 2, Duration::from_secs(15));
+    wait_chunks(&cut.join("cut_0.mcap"), 2, Duration::from_secs(15));
     killed.signal(Signal::SIGKILL);
     killed.wait_exit(Duration::from_secs(5));
     let metadata = std::fs::read_to_string(cut.join("metadata.yaml")).expect("metadata.yaml");
