@@ -19,6 +19,7 @@ use std::time::Duration;
 
 use scout_interface::control::{ReleaseTarget, StopCause};
 use scout_protocol::FaultClear;
+use scout_protocol::v2::MotionModeV2;
 use serde::{Deserialize, Serialize};
 use tracing::info;
 
@@ -99,8 +100,9 @@ impl Sideways {
     }
 }
 
-/// How tight the chassis turns: in place (skid-steer, tracks, two driven wheels, mecanum), or
-/// only while moving and no tighter than a radius (steered wheels: the Hunter).
+/// How tight the chassis turns: in place (skid-steer, tracks, two driven wheels, mecanum), only
+/// while moving and no tighter than a radius (steered wheels: the Hunter), or in motion modes
+/// (four steered wheels: the Rangers).
 #[derive(Debug, Clone, PartialEq)]
 pub enum Turning {
     /// Any yaw rate at any speed, standing still included.
@@ -114,13 +116,22 @@ pub enum Turning {
         /// The refusal of a turn in place ("a hunter2 cannot turn in place...").
         in_place: String,
     },
+    /// In one motion mode at a time ([`crate::modes`]): dual Ackermann no tighter than
+    /// `min_radius`, parallel, or spinning in place. A drive no mode carries is brought to one
+    /// (and says `clamped`); one the mode the chassis reports does not carry ramps to zero,
+    /// the mode changes standing still ([`Output::mode`]), and it ramps up again once the
+    /// chassis reports the new mode taken ([`Arbiter::set_motion_mode`]).
+    Modes {
+        /// m, dual Ackermann's tightest turn.
+        min_radius: f64,
+    },
 }
 
 impl Turning {
     /// The fastest turn at `linear` m/s, rad/s (`None`: as fast as the caps allow).
     fn limit(&self, linear: f64) -> Option<f64> {
         match self {
-            Self::InPlace => None,
+            Self::InPlace | Self::Modes { .. } => None,
             Self::Radius { min_radius, .. } => Some(linear.abs() / min_radius),
         }
     }
@@ -338,6 +349,9 @@ pub struct Output {
     pub fault_clear: FaultClear,
     /// A cap or rate limit holds the output below what the selected client asked.
     pub limited: bool,
+    /// The motion mode the chassis is to be in ([`Turning::Modes`]; `None`: any, or it has
+    /// none). Another than the one it reports comes with zero speed: change to it standing still.
+    pub mode: Option<MotionModeV2>,
 }
 
 impl Output {
@@ -348,6 +362,7 @@ impl Output {
         angular: 0.0,
         fault_clear: FaultClear::None,
         limited: false,
+        mode: None,
     };
 }
 
@@ -484,6 +499,8 @@ pub struct Arbiter {
     global: Caps,
     sideways: Sideways,
     turning: Turning,
+    /// The motion mode the chassis reports it is settled in ([`Turning::Modes`]).
+    settled: Option<MotionModeV2>,
     stops: Vec<Stop>,
     /// The gap causes present now: their stops cannot be released.
     present: Vec<StopCause>,
@@ -523,6 +540,7 @@ impl Arbiter {
             global,
             sideways,
             turning: Turning::InPlace,
+            settled: None,
             stops: Vec::new(),
             present: Vec::new(),
             autonomy_armed: false,
@@ -550,6 +568,12 @@ impl Arbiter {
     /// How tight the chassis turns (the model decides it).
     pub fn set_turning(&mut self, turning: Turning) {
         self.turning = turning;
+    }
+
+    /// The motion mode the chassis reports it is settled in (0x291), `None` while it changes
+    /// ([`Turning::Modes`]). Nothing moves in a mode until the chassis reports it taken.
+    pub fn set_motion_mode(&mut self, settled: Option<MotionModeV2>) {
+        self.settled = settled;
     }
 
     /// Bars autonomy from taking control while `why` holds (a critical battery), or lifts the
@@ -1019,6 +1043,17 @@ impl Arbiter {
             .limit(clamped_linear)
             .map_or(angular_cap, |limit| limit.min(angular_cap));
         let clamped_angular = angular.clamp(-angular_cap, angular_cap);
+        // Four steered wheels move in one mode at a time.
+        let (clamped_linear, clamped_lateral, clamped_angular) = match self.turning {
+            Turning::Modes { min_radius } => crate::modes::one_mode(
+                (clamped_linear, clamped_lateral, clamped_angular),
+                min_radius,
+                linear_cap,
+            ),
+            Turning::InPlace | Turning::Radius { .. } => {
+                (clamped_linear, clamped_lateral, clamped_angular)
+            }
+        };
         let clamped =
             clamped_linear != linear || clamped_lateral != lateral || clamped_angular != angular;
         if let Some(lease) = self.sources[index].lease.as_mut() {
@@ -1434,6 +1469,17 @@ impl Arbiter {
             lateral.clamp(-sideways, sideways),
             clamped || lateral.abs() > sideways,
         );
+        // In motion modes: a drive the mode the chassis is in does not carry ramps to zero,
+        // asking for the mode that does (changed standing still).
+        let target = (linear, lateral, angular);
+        let ((linear, lateral, angular), mode) = match self.turning {
+            Turning::Modes { .. } => match self.settled {
+                Some(mode) if crate::modes::carries(mode, target) => (target, Some(mode)),
+                settled => ((0.0, 0.0, 0.0), crate::modes::wanted(target).or(settled)),
+            },
+            Turning::InPlace | Turning::Radius { .. } => (target, None),
+        };
+        let clamped = clamped || (linear, lateral, angular) != target;
         let dt = period.as_secs_f64();
         let limits = self.config.limits;
         let next_linear = ramp(
@@ -1463,6 +1509,16 @@ impl Arbiter {
             .turning
             .limit(next_linear)
             .map_or(next_angular, |limit| next_angular.clamp(-limit, limit));
+        // In motion modes, only what the mode the chassis is in carries: nothing while it
+        // changes (the ramp starts again from zero).
+        let (next_linear, next_lateral, next_angular) = match self.turning {
+            Turning::Modes { min_radius } => crate::modes::hold(
+                (next_linear, next_lateral, next_angular),
+                self.settled,
+                min_radius,
+            ),
+            Turning::InPlace | Turning::Radius { .. } => (next_linear, next_lateral, next_angular),
+        };
         self.output = Output {
             linear: next_linear,
             lateral: next_lateral,
@@ -1472,6 +1528,7 @@ impl Arbiter {
                 || next_linear != linear
                 || next_lateral != lateral
                 || next_angular != angular,
+            mode,
         };
         self.output
     }

@@ -502,7 +502,10 @@ impl GatewayConfig {
                 }
                 .with_overrides(&self.sim)
                 .map_err(|error| ConfigError::Invalid(format!("[sim]: {error}")))?;
-                DeviceSpec::Sim { params, protocol }
+                DeviceSpec::Sim {
+                    params: Box::new(params),
+                    protocol,
+                }
             }
         })
     }
@@ -772,11 +775,11 @@ mod tests {
 
     #[test]
     fn a_model_not_driven_yet_or_on_a_protocol_it_does_not_speak_is_refused() {
-        let refused = toml::from_str::<GatewayConfig>("model = \"ranger-mini-3\"")
+        let refused = toml::from_str::<GatewayConfig>("model = \"hunter-se\"")
             .expect_err("not driven yet")
             .to_string();
         assert!(
-            refused.contains("does not drive a ranger-mini-3 yet"),
+            refused.contains("does not drive a hunter-se yet"),
             "{refused}"
         );
         let tracer = |transport: &str, protocol: &str| {

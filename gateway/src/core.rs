@@ -24,7 +24,8 @@ use scout_protocol::link::{Outgoing, RxEvent};
 use scout_protocol::sequence::RollingCounter;
 use scout_protocol::units;
 use scout_protocol::v2::{
-    ControlModeV2, ErrorClearV2, LightsV2, MessageV2, MotionV2, SystemStateV2, VersionRequestForm,
+    ControlModeV2, ErrorClearV2, LightsV2, MessageV2, MotionModeStateV2, MotionModeV2, MotionV2,
+    SystemStateV2, VersionRequestForm,
 };
 use scout_protocol::version::Protocol;
 use scout_protocol::{
@@ -39,7 +40,7 @@ use crate::arbiter::{
 use crate::command_mode::CommandMode;
 use crate::config::{GatewayConfig, OnCritical, SafetyConfig};
 use crate::state::{PortCounters, Publish, StateTracker};
-use scout_protocol::model::Model;
+use scout_protocol::model::{FourWheel, Model};
 
 /// The state is published at least this often, frames or not: a subscriber sees that the
 /// gateway lives while the chassis is silent, and a late subscriber gets the latest state fast.
@@ -130,6 +131,11 @@ pub struct Core {
     model: Model,
     /// The protocol the arbiter was last told the chassis moves sideways in (or not).
     sideways_for: Option<Option<Protocol>>,
+    /// A Ranger's motion mode as it last reported it (0x291), since the port opened.
+    motion_mode: Option<MotionModeStateV2>,
+    /// The chassis last reported no motion (0x221 zero but the steering angle): a mode
+    /// changes only then.
+    at_rest: bool,
     period: Duration,
     light_period: Duration,
     stop_cycles: u32,
@@ -282,6 +288,8 @@ impl Core {
             max_angular: config.max_angular(),
             model: config.limits_model(),
             sideways_for: None,
+            motion_mode: None,
+            at_rest: false,
             period: config.command_period(),
             light_period: Duration::from_millis(light_period_ms),
             stop_cycles: timing.stop_cycles,
@@ -597,6 +605,9 @@ impl Core {
         self.command_mode.reset();
         self.version_asked = false;
         self.follow_up.clear();
+        self.motion_mode = None;
+        self.at_rest = false;
+        self.arbiter.set_motion_mode(None);
         let reconnect = std::mem::replace(&mut self.opened_before, true);
         let publish = self.tracker.handle_connected(now, reconnect);
         self.publish_if(publish);
@@ -659,7 +670,7 @@ impl Core {
 
     /// Something arrived from the port.
     pub fn handle_rx(&mut self, now: Duration, event: &RxEvent) {
-        let driven = as_driven(self.model, event);
+        let driven = as_driven(self.model, self.motion_mode, event);
         let event = driven.as_ref().unwrap_or(event);
         let publish = self.tracker.handle_rx(event, now);
         self.publish_if(publish);
@@ -691,8 +702,10 @@ impl Core {
                 MessageV2::MotionState(motion) => {
                     self.observe_report(now);
                     let rates = (motion.linear(), motion.lateral(), motion.angular());
+                    self.at_rest = rates == (0.0, 0.0, 0.0);
                     self.observe_motion(now, rates);
                 }
+                MessageV2::MotionModeState(mode) => self.observe_motion_mode(*mode),
                 MessageV2::MotionCommand(_)
                 | MessageV2::LightCommand(_)
                 | MessageV2::ControlMode(_)
@@ -702,6 +715,9 @@ impl Core {
                 | MessageV2::RcState(_)
                 | MessageV2::ActuatorHigh(_)
                 | MessageV2::ActuatorLow(_)
+                | MessageV2::SetMotionMode(_)
+                | MessageV2::MotorAngles(_)
+                | MessageV2::MotorSpeeds(_)
                 | MessageV2::Odometer(_)
                 | MessageV2::Version(_)
                 | MessageV2::VersionText(_)
@@ -710,6 +726,23 @@ impl Core {
             },
             RxEvent::Rejected(_) | RxEvent::Slcan(_) => {}
         }
+    }
+
+    /// A Ranger's 0x291: the arbiter drives only in the mode it reports settled, nothing while
+    /// it changes.
+    fn observe_motion_mode(&mut self, mode: MotionModeStateV2) {
+        if self.model.four_wheel().is_none() {
+            return;
+        }
+        if self.motion_mode != Some(mode) {
+            match mode.settled() {
+                Some(settled) => info!("the chassis is in {settled} mode"),
+                None => info!("the chassis is changing to {} mode", mode.mode),
+            }
+            self.status_due = true;
+        }
+        self.motion_mode = Some(mode);
+        self.arbiter.set_motion_mode(mode.settled());
     }
 
     /// What the current port has counted since it opened: bytes the stream decoder threw
@@ -967,6 +1000,19 @@ impl Core {
             self.follow_up
                 .push_back(Outgoing::V2(MessageV2::ErrorClear(code)));
         }
+        // A Ranger asked for another mode: only standing still, told so, not while it changes.
+        if let Some(wanted) = output.mode
+            && self.model.four_wheel().is_some()
+            && self
+                .motion_mode
+                .is_none_or(|mode| mode.settled().is_some_and(|m| m != wanted))
+            && self.at_rest
+            && (output.linear, output.lateral, output.angular) == (0.0, 0.0, 0.0)
+        {
+            debug!("asking the chassis for {wanted} mode (0x141)");
+            self.follow_up
+                .push_back(Outgoing::V2(MessageV2::SetMotionMode(wanted)));
+        }
         if self.shutdown == Some(0) {
             info!("leaving the chassis in standby (0x421 [00])");
             self.follow_up
@@ -1172,10 +1218,16 @@ impl Core {
                         steering,
                     )
                 };
-                match self.model.steering() {
+                match (self.model.four_wheel(), self.model.steering()) {
+                    (Some(ranger), _) => {
+                        let settled = self.motion_mode.and_then(|mode| mode.settled());
+                        let limits = (self.max_linear, self.max_angular);
+                        let (command, sent) = four_wheel_command(&ranger, settled, output, limits);
+                        (Outgoing::V2(MessageV2::MotionCommand(command)), sent)
+                    }
                     // A steered chassis takes a speed and its inner wheel's angle, never a
                     // yaw rate (vendor SDK `hunter_base.hpp`: angular 0, steering in 6-7).
-                    Some(steering) => {
+                    (None, Some(steering)) => {
                         let central = steering.central_for(output.linear, output.angular);
                         let command = within(
                             MotionV2::from_si(output.linear, 0.0)
@@ -1189,7 +1241,7 @@ impl Core {
                             (command.linear(), 0.0, angular),
                         )
                     }
-                    None => {
+                    (None, None) => {
                         let command = within(
                             MotionV2::from_si(output.linear, output.angular)
                                 .with_lateral(output.lateral),
@@ -1321,8 +1373,13 @@ fn error_clear_v2(code: FaultClear) -> Option<ErrorClearV2> {
 }
 
 /// How tight a chassis of `model` turns: a steered one only while moving, no tighter than its
-/// smallest circle; every other in place.
+/// smallest circle; a Ranger in its motion modes; every other in place.
 pub fn turning(model: Model) -> Turning {
+    if let Some(ranger) = model.four_wheel() {
+        return Turning::Modes {
+            min_radius: ranger.min_radius(),
+        };
+    }
     match model.steering() {
         None => Turning::InPlace,
         Some(steering) => {
@@ -1339,14 +1396,93 @@ pub fn turning(model: Model) -> Turning {
     }
 }
 
-/// A steered chassis' motion state as the rest of the gateway reads it: with the yaw rate its
-/// speed and steering angle make (the Hunter reports a steering angle where a SCOUT reports a
-/// yaw rate; its vendor driver derives the yaw rate so too). Any other event as it came.
-fn as_driven(model: Model, event: &RxEvent) -> Option<RxEvent> {
-    let steering = model.steering()?;
+/// A Ranger's 0x111 for `output` in the mode it reports `settled` (zero in any other, and
+/// while it changes), and the body velocity that command makes. `limits` are the gateway's
+/// (m/s, rad/s). Dual Ackermann: the speed and the inner wheels' angle; parallel: the wheels'
+/// speed and angle; spin: the yaw rate, in bytes 2-3 or, on a Mini 2.0, 4-5.
+fn four_wheel_command(
+    ranger: &FourWheel,
+    settled: Option<MotionModeV2>,
+    output: &Output,
+    (linear, angular): (f64, f64),
+) -> (MotionV2, (f64, f64, f64)) {
+    let velocity = (output.linear, output.lateral, output.angular);
+    let carried = settled.filter(|settled| crate::modes::carries(*settled, velocity));
+    match carried {
+        Some(MotionModeV2::DualAckermann) => {
+            let inner = ranger.inner_for(output.linear, output.angular);
+            let command = MotionV2::from_si(output.linear, 0.0)
+                .with_steering(inner)
+                .within(linear, 0.0, 0.0, ranger.max_inner);
+            let yaw = ranger.yaw_rate_from_inner(command.linear(), command.steering());
+            (command, (command.linear(), 0.0, yaw))
+        }
+        Some(MotionModeV2::Parallel) => {
+            let (speed, angle) = ranger.parallel_for(output.linear, output.lateral);
+            let command = MotionV2::from_si(speed, 0.0).with_steering(angle).within(
+                linear,
+                0.0,
+                0.0,
+                ranger.max_parallel,
+            );
+            let (forward, leftward) =
+                ranger.body_from_parallel(command.linear(), command.steering());
+            (command, (forward, leftward, 0.0))
+        }
+        Some(MotionModeV2::Spin) => {
+            let command = if ranger.spin_in_lateral {
+                MotionV2::from_si(0.0, 0.0)
+                    .with_lateral(output.angular)
+                    .within(0.0, 0.0, angular, 0.0)
+            } else {
+                MotionV2::from_si(0.0, output.angular).within(0.0, angular, 0.0, 0.0)
+            };
+            let yaw = if ranger.spin_in_lateral {
+                command.lateral()
+            } else {
+                command.angular()
+            };
+            (command, (0.0, 0.0, yaw))
+        }
+        Some(MotionModeV2::Park | MotionModeV2::SideSlip | MotionModeV2::Unknown(_)) | None => {
+            (MotionV2::default(), (0.0, 0.0, 0.0))
+        }
+    }
+}
+
+/// A steered chassis' motion state as the rest of the gateway reads it: a body velocity (the
+/// Hunter reports a steering angle where a SCOUT reports a yaw rate, and its vendor driver
+/// derives the yaw rate so too; a Ranger reports its wheels' speed and angle in the mode
+/// `mode` it last said it is in, its spin rate in bytes 2-3 as its vendor driver reads it).
+/// Any other event as it came.
+fn as_driven(model: Model, mode: Option<MotionModeStateV2>, event: &RxEvent) -> Option<RxEvent> {
     let RxEvent::V2(MessageV2::MotionState(motion)) = event else {
         return None;
     };
+    if let Some(ranger) = model.four_wheel() {
+        let (linear, lateral, angular) = match mode.map(|mode| mode.mode) {
+            Some(MotionModeV2::DualAckermann) => (
+                motion.linear(),
+                0.0,
+                ranger.yaw_rate_from_inner(motion.linear(), motion.steering()),
+            ),
+            Some(MotionModeV2::Parallel) => {
+                let (forward, leftward) =
+                    ranger.body_from_parallel(motion.linear(), motion.steering());
+                (forward, leftward, 0.0)
+            }
+            Some(MotionModeV2::Spin) => (0.0, 0.0, motion.angular()),
+            Some(MotionModeV2::Park | MotionModeV2::SideSlip | MotionModeV2::Unknown(_)) | None => {
+                (motion.linear(), motion.lateral(), motion.angular())
+            }
+        };
+        return Some(RxEvent::V2(MessageV2::MotionState(
+            MotionV2::from_si(linear, angular)
+                .with_lateral(lateral)
+                .with_steering(motion.steering()),
+        )));
+    }
+    let steering = model.steering()?;
     let angular = steering.yaw_rate_from_inner(motion.linear(), motion.steering());
     Some(RxEvent::V2(MessageV2::MotionState(MotionV2 {
         angular_mrad_s: MotionV2::from_si(0.0, angular).angular_mrad_s,

@@ -2032,9 +2032,10 @@ fn sideways_is_refused_where_the_chassis_or_its_protocol_cannot() {
 /// wheels never beyond their widest angle, and a stop is zero on every field at once.
 #[test]
 fn no_model_receives_more_than_its_limits_and_a_stop_is_zero_on_every_field() {
+    // The Rangers' fields depend on their mode: a_ranger_changes_mode_standing_still_... .
     for model in Model::ALL
         .into_iter()
-        .filter(|model| model.speaks(Protocol::V2))
+        .filter(|model| model.speaks(Protocol::V2) && model.four_wheel().is_none())
     {
         let gateway = GatewayConfig {
             model: Some(model),
@@ -2197,6 +2198,159 @@ fn a_hunter_steers_by_its_wheels_and_its_odometry_follows() {
         "{:?}",
         pair.chassis.actual()
     );
+}
+
+/// A Ranger driven forward with a turn, sideways, spinning and beyond its limits: the mode
+/// changes only standing still (the simulated firmware counts a change asked while moving),
+/// nothing moves it while it reports a change (it counts motion received then), each mode's
+/// fields are where its vendor puts them (the Mini 2.0's spin rate in bytes 4-5), no field
+/// goes beyond the model's limits, a stop is zero on every field at once, and the gateway's
+/// odometry follows the chassis' pose through every mode.
+#[test]
+fn a_ranger_changes_mode_standing_still_and_never_moves_while_it_changes() {
+    for model in [Model::RangerMini2, Model::RangerMini3] {
+        let ranger = GatewayConfig {
+            model: Some(model),
+            ..config(Protocol::V2)
+        };
+        let mut pair = Pair::with_firmware(Protocol::V2, Transport::Can, &ranger, Start::Clean);
+        pair.run(ms(200));
+        let four_wheel = model.four_wheel().expect("a Ranger");
+        let limits = model.limits();
+        let lease = pair.take(TELEOP, Class::Teleop).expect("a lease");
+        // linear, yaw-rate field, lateral, steering field, over everything sent.
+        let mut most = [0.0_f64; 4];
+        let mut drive = |pair: &mut Pair, (linear, lateral, angular): (f64, f64, f64), ticks| {
+            for _ in 0..ticks {
+                let request = Request::Drive {
+                    lease,
+                    linear,
+                    lateral,
+                    angular,
+                    ttl: None,
+                };
+                pair.request(TELEOP, &request)
+                    .unwrap_or_else(|refused| panic!("{model}: {refused:?}"));
+                let next = pair.now + TICK;
+                while pair.now < next {
+                    pair.step();
+                }
+                let sent = pair.chassis.stats().last_command.expect("commands");
+                for (most, sent) in
+                    most.iter_mut()
+                        .zip([sent.linear, sent.angular, sent.lateral, sent.steering])
+                {
+                    *most = most.max(sent.abs());
+                }
+            }
+        };
+        let close = |what: &str, actual: f64, wanted: f64| {
+            assert!(
+                (actual - wanted).abs() < 0.02,
+                "{model}: {what} {actual}, not {wanted}"
+            );
+        };
+        // Dual Ackermann, the mode it starts in: forward on a 1 m circle.
+        drive(&mut pair, (0.5, 0.0, 0.5), 200);
+        let actual = pair.chassis.actual();
+        close("dual Ackermann yaw rate", actual.angular, 0.5);
+        let sent = pair.chassis.stats().last_command.expect("commands");
+        close("inner angle", sent.steering, four_wheel.inner_for(0.5, 0.5));
+        assert_eq!(
+            (sent.angular, sent.lateral),
+            (0.0, 0.0),
+            "{model}: {sent:?}"
+        );
+        // Sideways: to a standstill, to parallel mode, then sideways.
+        drive(&mut pair, (0.0, 0.4, 0.0), 250);
+        assert_eq!(pair.chassis.stats().motion_mode, "parallel", "{model}");
+        close("sideways", pair.chassis.actual().lateral, 0.4);
+        // Forward and sideways at once, in the same mode.
+        drive(&mut pair, (0.3, -0.3, 0.0), 150);
+        let actual = pair.chassis.actual();
+        close("diagonal forward", actual.linear, 0.3);
+        close("diagonal sideways", actual.lateral, -0.3);
+        // Turning in place: spin mode.
+        drive(&mut pair, (0.0, 0.0, 1.0), 250);
+        assert_eq!(pair.chassis.stats().motion_mode, "spin", "{model}");
+        close("spin", pair.chassis.actual().angular, 1.0);
+        let sent = pair.chassis.stats().last_command.expect("commands");
+        let (spin_field, other) = if four_wheel.spin_in_lateral {
+            (sent.lateral, sent.angular)
+        } else {
+            (sent.angular, sent.lateral)
+        };
+        assert_eq!(other, 0.0, "{model}: {sent:?}");
+        close("spin field", spin_field, 1.0);
+        // The odometry followed every mode.
+        let (odometry, truth) = (pair.last_state().odometry, pair.chassis.pose());
+        let error = (odometry.x - truth.x).hypot(odometry.y - truth.y);
+        assert!(
+            error < 0.05,
+            "{model}: odometry {odometry:?}, truth {truth:?}"
+        );
+        assert!(
+            scout_protocol::kinematics::wrap_angle(odometry.yaw - truth.yaw).abs() < 0.05,
+            "{model}: odometry {odometry:?}, truth {truth:?}"
+        );
+        // Beyond its limits on every axis (a turn faster than it drives spins in place).
+        for velocity in [
+            (40.0, 0.0, 0.0),
+            (0.0, 0.0, 40.0),
+            (0.0, 40.0, 0.0),
+            (40.0, 0.0, 40.0),
+        ] {
+            drive(&mut pair, velocity, 300);
+        }
+        let [linear, angular, lateral, steering] = most;
+        let spin_most = if four_wheel.spin_in_lateral {
+            lateral
+        } else {
+            angular
+        };
+        assert!(
+            linear <= limits.linear && linear > limits.linear - 0.001,
+            "{model}: {most:?}"
+        );
+        assert!(
+            spin_most <= limits.angular && spin_most > limits.angular - 0.001,
+            "{model}: {most:?}"
+        );
+        let widest = four_wheel.max_inner.max(four_wheel.max_parallel);
+        assert!(steering <= widest, "{model}: {most:?}");
+        if four_wheel.spin_in_lateral {
+            assert_eq!(
+                angular, 0.0,
+                "{model}: the Mini 2.0's yaw-rate field stays zero"
+            );
+        } else {
+            assert_eq!(lateral, 0.0, "{model}: {most:?}");
+        }
+        let stats = pair.chassis.stats();
+        assert_eq!(
+            stats.ignored.mode_changing, 0,
+            "{model}: motion while changing"
+        );
+        assert_eq!(
+            stats.mode_changes_refused, 0,
+            "{model}: a change asked while moving"
+        );
+        assert!(stats.mode_changes >= 4, "{model}: {}", stats.mode_changes);
+        pair.request(
+            TELEOP,
+            &Request::Stop {
+                reason: "person".into(),
+            },
+        )
+        .expect("stop");
+        pair.step();
+        let sent = pair.chassis.stats().last_command.expect("commands");
+        assert_eq!(
+            (sent.linear, sent.angular, sent.lateral, sent.steering),
+            (0.0, 0.0, 0.0, 0.0),
+            "{model}: a stop at once"
+        );
+    }
 }
 
 #[test]

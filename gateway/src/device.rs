@@ -38,8 +38,8 @@ pub enum DeviceSpec {
     },
     /// The simulated chassis, in-process, with the firmware of `protocol`.
     Sim {
-        /// Its parameters.
-        params: SimParams,
+        /// Its parameters (boxed: they outweigh every other way in).
+        params: Box<SimParams>,
         /// Its firmware's protocol.
         protocol: Protocol,
     },
@@ -101,7 +101,7 @@ impl DeviceSpec {
             Self::GsUsb { serial, detach } => Port::open_gs_usb(serial.as_deref(), *detach)?,
             Self::Sim { params, protocol } => {
                 // The model's clock reads zero at `epoch`, the gateway's time of opening.
-                let chassis = Chassis::new(params.clone(), Transport::Sim);
+                let chassis = Chassis::new(SimParams::clone(params), Transport::Sim);
                 let chassis = Box::new(match protocol {
                     Protocol::V1 => chassis,
                     Protocol::V2 => chassis.with_protocol_v2(),

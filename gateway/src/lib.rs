@@ -15,6 +15,7 @@
 //! - [`stop_endpoint`]: the stop socket beside iceoryx2, which is also the robot name's lock.
 //! - [`identity`]: who a requesting process is, by the operating system; the operator role.
 //! - [`share`]: request budgets: a token bucket per client, a share of the stop endpoint per user.
+//! - [`modes`]: a Ranger's motion modes: which one a command needs, and what each carries.
 //! - [`config`]: the configuration file and its lookup.
 //! - [`lock`]: one gateway per device.
 //! - [`run_dir`]: where the locks, the unclean-exit marker and the black box live, trusted only
@@ -33,6 +34,7 @@ pub mod device;
 pub mod driver;
 pub mod identity;
 pub mod lock;
+pub mod modes;
 pub mod monitor;
 pub mod run_dir;
 pub mod share;

@@ -600,9 +600,7 @@ impl StateTracker {
         if message.is_command() {
             return self.foreign_command(message.name(), message.can_id());
         }
-        if let MessageV2::MotionState(motion) = message
-            && let Some(sign) = Sign::of_motion_state(motion)
-        {
+        if let Some(sign) = Sign::of_v2_message(message) {
             self.check_model(sign);
         }
         let accept = self.accepts(Protocol::V2, message.can_id());
@@ -624,7 +622,7 @@ impl StateTracker {
                 let rates = (motion.linear(), motion.lateral(), motion.angular());
                 self.integrate_rates(rates, now, translate);
             }
-            MessageV2::Odometer(odometer) => {
+            MessageV2::Odometer(odometer) if self.odometer_rolls_forward() => {
                 self.integrate_odometer(odometer.left_mm, odometer.right_mm, now);
             }
             MessageV2::SystemState(system) => {
@@ -652,7 +650,17 @@ impl StateTracker {
         Publish::Yes
     }
 
+    /// Whether the wheel odometers (0x311) measure forward motion: not on a Ranger, whose
+    /// wheels roll sideways in parallel mode and round its centre spinning (its motion state
+    /// is integrated instead, as its vendor driver does).
+    fn odometer_rolls_forward(&self) -> bool {
+        self.model.and_then(Model::four_wheel).is_none()
+    }
+
     fn odometer_fresh(&self, now: Duration) -> bool {
+        if !self.odometer_rolls_forward() {
+            return false;
+        }
         let odometer = &self.state.odometer.received;
         odometer.valid && now.saturating_sub(Duration::from_nanos(odometer.at_ns)) <= ODOMETER_FRESH
     }

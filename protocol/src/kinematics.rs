@@ -99,6 +99,75 @@ impl crate::model::Steering {
     }
 }
 
+/// Four-wheel steering in its modes (the Rangers), from the geometry: in dual Ackermann both
+/// axles steer mirrored, so the turn's centre is abreast of the body's centre and the inner
+/// wheels sit half the wheelbase ahead of and behind it, half the track inside the body's
+/// circle: tan(inner) = (wheelbase / 2) / (radius - track / 2), the angle 0x111 carries
+/// (agilexrobotics/ranger_ros2 `CalculateSteeringAngle`, checked against it; its odometry
+/// reads the angle back with a front-wheel model instead, which is where its owners see half
+/// of every rotation lost, ranger_ros2#21). In parallel mode every wheel points one way, the
+/// body moves that way without turning. Angles are positive to the left, as for the Hunter.
+impl crate::model::FourWheel {
+    /// Dual Ackermann's tightest turn, m: the body centre's radius with the inner wheels at
+    /// their widest (0.4764 m for a Ranger Mini, the source's `min_turn_radius`).
+    pub fn min_radius(&self) -> f64 {
+        self.wheelbase / 2.0 / self.max_inner.tan() + self.track / 2.0
+    }
+
+    /// Dual Ackermann: the inner wheels' angle that turns at `angular` rad/s at `linear` m/s,
+    /// within the widest (straight ahead when either is zero).
+    pub fn inner_for(&self, linear: f64, angular: f64) -> f64 {
+        if linear == 0.0 || angular == 0.0 {
+            return 0.0;
+        }
+        let radius = linear / angular;
+        let inside = radius.abs() - self.track / 2.0;
+        let magnitude = if inside <= 0.0 {
+            self.max_inner
+        } else {
+            (self.wheelbase / 2.0 / inside).atan().min(self.max_inner)
+        };
+        magnitude.copysign(radius)
+    }
+
+    /// Dual Ackermann: the yaw rate at `linear` m/s with the inner wheels at `inner` rad.
+    pub fn yaw_rate_from_inner(&self, linear: f64, inner: f64) -> f64 {
+        let magnitude = inner.abs();
+        if magnitude == 0.0 {
+            return 0.0;
+        }
+        let radius = self.wheelbase / 2.0 / magnitude.tan() + self.track / 2.0;
+        (linear / radius).copysign(linear * inner)
+    }
+
+    /// Parallel mode: the wheels' speed and angle that move the body `linear` m/s forward and
+    /// `lateral` m/s leftward. The angle stays within a quarter turn, the speed is negative
+    /// backing up; straight sideways points the wheels left and drives them at `lateral`.
+    pub fn parallel_for(&self, linear: f64, lateral: f64) -> (f64, f64) {
+        let angle = if linear == 0.0 {
+            if lateral == 0.0 {
+                return (0.0, 0.0);
+            }
+            core::f64::consts::FRAC_PI_2
+        } else {
+            (lateral / linear).atan()
+        };
+        let speed = if linear == 0.0 {
+            lateral
+        } else {
+            linear.hypot(lateral).copysign(linear)
+        };
+        (speed, angle.clamp(-self.max_parallel, self.max_parallel))
+    }
+
+    /// Parallel mode: the body's forward and leftward speeds, m/s, with the wheels at `speed`
+    /// m/s and `angle` rad.
+    pub fn body_from_parallel(&self, speed: f64, angle: f64) -> (f64, f64) {
+        let (sin, cos) = angle.sin_cos();
+        (speed * cos, speed * sin)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -130,6 +199,55 @@ mod tests {
         assert!((hunter.yaw_rate(-0.5, hunter.central_for(-0.5, 0.2)) - 0.2).abs() < 1e-12);
         // Tighter than it turns: the widest angle.
         assert_eq!(hunter.central_for(0.1, 5.0), hunter.max_central);
+    }
+
+    #[test]
+    fn the_rangers_modes_are_its_geometry() {
+        let ranger = crate::model::Model::RangerMini3
+            .four_wheel()
+            .expect("a four-wheel-steered model");
+        // The source's min_turn_radius, from its widest inner angle.
+        assert!(
+            (ranger.min_radius() - 0.4764).abs() < 0.0005,
+            "{}",
+            ranger.min_radius()
+        );
+        // ranger_ros2 CalculateSteeringAngle: atan((L/2) / (R - W/2)), signed by v x w.
+        let inner = ranger.inner_for(0.5, 0.5);
+        assert!((inner - (0.247f64 / (1.0 - 0.182)).atan()).abs() < 1e-12);
+        assert!(ranger.inner_for(-0.5, 0.5) < 0.0 && ranger.inner_for(0.5, -0.5) < 0.0);
+        assert!(ranger.inner_for(-0.5, -0.5) > 0.0);
+        assert_eq!(ranger.inner_for(0.0, 0.5), 0.0);
+        assert_eq!(ranger.inner_for(0.1, 5.0), ranger.max_inner);
+        for (linear, angular) in [
+            (0.5, 0.5),
+            (-0.5, 0.5),
+            (0.3, -0.2),
+            (-1.0, -2.0),
+            (1.5, 0.1),
+        ] {
+            let back = ranger.yaw_rate_from_inner(linear, ranger.inner_for(linear, angular));
+            assert!((back - angular).abs() < 1e-9, "{linear} {angular}: {back}");
+        }
+        // Parallel: any direction, the wheels within a quarter turn.
+        for (linear, lateral) in [
+            (0.3, 0.4),
+            (-0.3, 0.4),
+            (0.3, -0.4),
+            (-0.3, -0.4),
+            (0.0, 0.5),
+            (0.0, -0.5),
+            (0.5, 0.0),
+        ] {
+            let (speed, angle) = ranger.parallel_for(linear, lateral);
+            assert!(angle.abs() <= ranger.max_parallel);
+            let (x, y) = ranger.body_from_parallel(speed, angle);
+            assert!(
+                (x - linear).abs() < 1e-3 && (y - lateral).abs() < 1e-3,
+                "{linear} {lateral}: {x} {y}"
+            );
+        }
+        assert_eq!(ranger.parallel_for(0.0, 0.0), (0.0, 0.0));
     }
 
     #[test]

@@ -191,6 +191,19 @@ pub fn decode_can(frame: &CanFrame) -> RxEvent {
     can::decode(frame).map_err(RxError::from).into()
 }
 
+/// Decodes one CAN frame as a protocol v2 chassis hears it from its host: every v2 id as v2.
+/// The ids both protocols use mean the host's v2 commands here (0x141 sets a Ranger's motion
+/// mode; as v1 it is light feedback, which no host sends).
+pub fn decode_can_v2(frame: &CanFrame) -> RxEvent {
+    if v2::is_v2_id(frame.id()) {
+        return match v2::decode(frame) {
+            Ok(message) => RxEvent::V2(message),
+            Err(error) => RxEvent::Rejected(RxError::V2(error)),
+        };
+    }
+    decode_can(frame)
+}
+
 /// The decoder of a byte-stream transport (serial or slcan). Fixed buffers, no allocation.
 #[derive(Debug, Clone)]
 pub enum StreamFraming {
@@ -212,7 +225,18 @@ impl StreamFraming {
     }
 
     /// Feeds received bytes, calling `on_event` for each event they complete.
-    pub fn push(&mut self, bytes: &[u8], mut on_event: impl FnMut(RxEvent)) {
+    pub fn push(&mut self, bytes: &[u8], on_event: impl FnMut(RxEvent)) {
+        self.push_with(bytes, decode_can, on_event);
+    }
+
+    /// As [`StreamFraming::push`], each CAN frame decoded by `decode` ([`decode_can_v2`] for a
+    /// v2 chassis).
+    pub fn push_with(
+        &mut self,
+        bytes: &[u8],
+        decode: fn(&CanFrame) -> RxEvent,
+        mut on_event: impl FnMut(RxEvent),
+    ) {
         match self {
             Self::Serial(decoder) => {
                 for result in decoder.push_all(bytes) {
@@ -223,7 +247,7 @@ impl StreamFraming {
                 for byte in bytes {
                     match decoder.push(*byte) {
                         None => {}
-                        Some(Ok(Slcan::Frame { frame, .. })) => on_event(decode_can(&frame)),
+                        Some(Ok(Slcan::Frame { frame, .. })) => on_event(decode(&frame)),
                         Some(Ok(Slcan::ExtendedFrame { id })) => {
                             on_event(RxEvent::Rejected(RxError::ForeignFrame(id)));
                         }

@@ -29,6 +29,10 @@ pub enum Model {
     BunkerPro,
     /// Hunter 2.0, Ackermann steering (v2 only).
     Hunter2,
+    /// Ranger Mini 2.0, four steered wheels with motion modes (v2 only).
+    RangerMini2,
+    /// Ranger Mini 3.0, four steered wheels with motion modes (v2 only).
+    RangerMini3,
 }
 }
 
@@ -46,6 +50,10 @@ pub enum Drive {
     /// Steered front wheels (the Hunter): forward and a steering angle; a yaw rate only while
     /// moving, no tighter than its minimum turning radius.
     Ackermann,
+    /// Four steered wheels in motion modes (the Rangers): dual Ackermann (forward and a yaw
+    /// rate, no tighter than a radius), parallel (forward and sideways) or spin (a yaw rate in
+    /// place), one mode at a time, changed standing still.
+    FourWheelSteering,
 }
 
 /// The Bunker's yaw-rate limit as its source writes it (just under pi/4, so kept, not rounded
@@ -84,6 +92,26 @@ pub struct Steering {
     pub rate: f64,
 }
 
+/// A four-wheel-steered model's steering (the Rangers, [`Drive::FourWheelSteering`]): what
+/// turns a body velocity into a mode's speed and wheel angle and back (`kinematics`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FourWheel {
+    /// Front to rear axle, m.
+    pub wheelbase: f64,
+    /// Between the left and right wheels, m.
+    pub track: f64,
+    /// The widest inner-wheel angle in dual Ackermann, rad (what 0x111's steering carries).
+    pub max_inner: f64,
+    /// The widest wheel angle in parallel mode, rad.
+    pub max_parallel: f64,
+    /// The spin rate goes in 0x111's bytes 4-5 (the lateral field), not 2-3.
+    pub spin_in_lateral: bool,
+    /// How fast the wheels turn, rad/s.
+    pub rate: f64,
+    /// How long a mode change takes, s (the simulator's).
+    pub mode_change: f64,
+}
+
 /// A model's geometry.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Geometry {
@@ -109,6 +137,8 @@ impl Model {
             Self::BunkerMini => "bunker-mini",
             Self::BunkerPro => "bunker-pro",
             Self::Hunter2 => "hunter2",
+            Self::RangerMini2 => "ranger-mini-2",
+            Self::RangerMini3 => "ranger-mini-3",
         }
     }
 
@@ -120,6 +150,7 @@ impl Model {
             Self::Tracer | Self::TracerMini => Drive::Differential,
             Self::Bunker | Self::BunkerMini | Self::BunkerPro => Drive::Tracked,
             Self::Hunter2 => Drive::Ackermann,
+            Self::RangerMini2 | Self::RangerMini3 => Drive::FourWheelSteering,
         }
     }
 
@@ -145,7 +176,43 @@ impl Model {
             | Self::TracerMini
             | Self::Bunker
             | Self::BunkerMini
-            | Self::BunkerPro => None,
+            | Self::BunkerPro
+            | Self::RangerMini2
+            | Self::RangerMini3 => None,
+        }
+    }
+
+    /// Its four-wheel steering, for a Ranger ([`Drive::FourWheelSteering`]). Ranger Mini 2.0
+    /// and 3.0 alike: wheelbase 0.494 m, track 0.364 m, the inner wheel at most 0.6981 rad in
+    /// dual Ackermann (`max_steer_angle_ackermann`, which with this geometry gives the
+    /// source's `min_turn_radius` 0.4764 m) and every wheel at most 1.570 rad in parallel,
+    /// checked against agilexrobotics/ranger_ros2 `ranger_params.hpp` `RangerMiniV2Params`
+    /// and `RangerMiniV3Params` (commit a297495). The Mini 2.0 takes its spin rate in bytes
+    /// 4-5 (agilexrobotics/ugv_sdk PR 10, as agilex-family-notes reads it; not in the SDK
+    /// commit fd728d4 this project read, whose Ranger path puts it in bytes 2-3, where the Mini
+    /// 3.0 takes it). The wheels' turning rate and a mode change's duration are in no source:
+    /// 1.0 rad/s and 1.0 s are assumed (the simulator's).
+    pub const fn four_wheel(self) -> Option<FourWheel> {
+        match self {
+            Self::RangerMini2 | Self::RangerMini3 => Some(FourWheel {
+                wheelbase: 0.494,
+                track: 0.364,
+                max_inner: 0.6981,
+                max_parallel: 1.570,
+                spin_in_lateral: matches!(self, Self::RangerMini2),
+                rate: 1.0,
+                mode_change: 1.0,
+            }),
+            Self::Scout
+            | Self::Scout2
+            | Self::ScoutMini
+            | Self::ScoutMiniOmni
+            | Self::Tracer
+            | Self::TracerMini
+            | Self::Bunker
+            | Self::BunkerMini
+            | Self::BunkerPro
+            | Self::Hunter2 => None,
         }
     }
 
@@ -156,6 +223,7 @@ impl Model {
         match self.drive() {
             Drive::SkidSteer | Drive::Mecanum => 4,
             Drive::Ackermann => 3,
+            Drive::FourWheelSteering => 4,
             Drive::Differential | Drive::Tracked => 2,
         }
     }
@@ -164,9 +232,14 @@ impl Model {
     /// `TracerRobot` is `TracerBaseV2`); the SCOUTs and Bunkers speak both.
     pub const fn speaks(self, protocol: crate::version::Protocol) -> bool {
         match (self, protocol) {
-            (Self::Tracer | Self::TracerMini | Self::Hunter2, crate::version::Protocol::V1) => {
-                false
-            }
+            (
+                Self::Tracer
+                | Self::TracerMini
+                | Self::Hunter2
+                | Self::RangerMini2
+                | Self::RangerMini3,
+                crate::version::Protocol::V1,
+            ) => false,
             (
                 Self::Scout
                 | Self::Scout2
@@ -177,7 +250,9 @@ impl Model {
                 | Self::Bunker
                 | Self::BunkerMini
                 | Self::BunkerPro
-                | Self::Hunter2,
+                | Self::Hunter2
+                | Self::RangerMini2
+                | Self::RangerMini3,
                 _,
             ) => true,
         }
@@ -208,6 +283,8 @@ impl Model {
             Self::BunkerMini => 8,
             Self::BunkerPro => 9,
             Self::Hunter2 => 10,
+            Self::RangerMini2 => 11,
+            Self::RangerMini3 => 12,
         }
     }
 
@@ -268,6 +345,13 @@ impl Model {
                 angular: HUNTER2_MAX_YAW_RATE,
                 lateral: 0.0,
             },
+            // ranger_ros2 `ranger_params.hpp`: 1.5 m/s (the wheels' speed, so sideways too in
+            // parallel mode) and 4.8 rad/s spinning.
+            Self::RangerMini2 | Self::RangerMini3 => Limits {
+                linear: 1.5,
+                angular: 4.8,
+                lateral: 1.5,
+            },
         }
     }
 
@@ -316,6 +400,12 @@ impl Model {
                 wheel_radius: 0.165,
                 gear_ratio: 30.0,
             },
+            // The track is ranger_ros2's; the wheel and gearbox are in no source (assumed).
+            Self::RangerMini2 | Self::RangerMini3 => Geometry {
+                track: 0.364,
+                wheel_radius: 0.09,
+                gear_ratio: 1.0,
+            },
         }
     }
 
@@ -331,7 +421,9 @@ impl Model {
             | Self::Bunker
             | Self::BunkerMini
             | Self::BunkerPro
-            | Self::Hunter2 => crate::battery::UNKNOWN_BATTERY,
+            | Self::Hunter2
+            | Self::RangerMini2
+            | Self::RangerMini3 => crate::battery::UNKNOWN_BATTERY,
         }
     }
 }
@@ -363,6 +455,14 @@ impl Sign {
             crate::v2::id::MOTOR_ANGLES => Some(Self::SteeringAngles),
             crate::v2::id::MOTION_MODE_STATE => Some(Self::MotionMode),
             _ => None,
+        }
+    }
+
+    /// What a decoded v2 message says: its id, or a motion state's fields.
+    pub const fn of_v2_message(message: &crate::v2::MessageV2) -> Option<Self> {
+        match message {
+            crate::v2::MessageV2::MotionState(motion) => Self::of_motion_state(motion),
+            other => Self::of_v2_id(other.can_id()),
         }
     }
 
@@ -401,12 +501,13 @@ impl Sign {
 
 impl Model {
     /// Whether a chassis of this model may send what `sign` says, by how its wheels move it:
-    /// mecanum wheels move sideways, steered wheels report their angles, and nothing this
-    /// gateway drives has motion modes.
+    /// mecanum wheels move sideways, steered wheels report their angles, and the Rangers
+    /// alone have motion modes.
     pub const fn may_send(self, sign: Sign) -> bool {
         match (self.drive(), sign) {
             (Drive::Mecanum, Sign::Lateral)
-            | (Drive::Ackermann, Sign::Steering | Sign::SteeringAngles) => true,
+            | (Drive::Ackermann, Sign::Steering | Sign::SteeringAngles)
+            | (Drive::FourWheelSteering, _) => true,
             (Drive::SkidSteer | Drive::Differential | Drive::Tracked, _)
             | (Drive::Mecanum, Sign::Steering | Sign::SteeringAngles | Sign::MotionMode)
             | (Drive::Ackermann, Sign::Lateral | Sign::MotionMode) => false,
@@ -415,17 +516,12 @@ impl Model {
 }
 
 listed! {
-/// AgileX models this gateway knows by name but does not drive yet: their steering (and the
-/// Ranger's motion modes) need a mapping of their own (issue 48), and driving one as a SCOUT
-/// would be wrong.
+/// AgileX models this gateway knows by name but does not drive yet: driving one as another
+/// model would be wrong (issue 48).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum NotYet {
     /// Hunter SE, Ackermann steering.
     HunterSe,
-    /// Ranger Mini 2.0, four-wheel steering with motion modes.
-    RangerMini2,
-    /// Ranger Mini 3.0, four-wheel steering with motion modes.
-    RangerMini3,
 }
 }
 
@@ -434,8 +530,6 @@ impl NotYet {
     pub const fn name(self) -> &'static str {
         match self {
             Self::HunterSe => "hunter-se",
-            Self::RangerMini2 => "ranger-mini-2",
-            Self::RangerMini3 => "ranger-mini-3",
         }
     }
 
@@ -445,9 +539,6 @@ impl NotYet {
             Self::HunterSe => {
                 "its steering geometry (no source this project has gives its wheelbase, track \
                  and steering limits)"
-            }
-            Self::RangerMini2 | Self::RangerMini3 => {
-                "four-wheel steering with motion modes (the mode handshake of 0x141 and 0x291)"
             }
         }
     }
@@ -522,15 +613,15 @@ mod tests {
         assert_eq!(
             refused,
             "not a model: give one of scout, scout2, scout-mini, scout-mini-omni, tracer, \
-             tracer-mini, bunker, bunker-mini, bunker-pro, hunter2"
+             tracer-mini, bunker, bunker-mini, bunker-pro, hunter2, ranger-mini-2, ranger-mini-3"
         );
-        let ranger = Model::parse("ranger-mini-2").expect_err("not driven yet");
-        assert_eq!(ranger, UnknownModel(Some(NotYet::RangerMini2)));
+        let hunter = Model::parse("hunter-se").expect_err("not driven yet");
+        assert_eq!(hunter, UnknownModel(Some(NotYet::HunterSe)));
         assert!(
-            ranger.to_string().starts_with(
-                "the gateway does not drive a ranger-mini-2 yet: it needs four-wheel steering"
+            hunter.to_string().starts_with(
+                "the gateway does not drive a hunter-se yet: it needs its steering geometry"
             ),
-            "{ranger}"
+            "{hunter}"
         );
         for model in NotYet::ALL {
             assert_eq!(Model::from_name(model.name()), None, "{}", model.name());
@@ -559,21 +650,20 @@ mod tests {
             assert!(limits.linear > 0.0 && limits.angular > 0.0, "{model}");
             // v2's int16 in mm/s and mrad/s holds ±32.767: every limit fits.
             assert!(limits.linear < 32.0 && limits.angular < 32.0, "{model}");
+            let modes = model.drive() == Drive::FourWheelSteering;
             assert_eq!(
                 limits.lateral > 0.0,
-                model.drive() == Drive::Mecanum,
-                "{model}: sideways only on mecanum wheels"
+                model.drive() == Drive::Mecanum || modes,
+                "{model}: sideways only on mecanum wheels and in parallel mode"
             );
             assert!(model.speaks(crate::version::Protocol::V2), "{model}");
             let steers = model.drive() == Drive::Ackermann;
             assert_eq!(model.steering().is_some(), steers, "{model}");
+            assert_eq!(model.four_wheel().is_some(), modes, "{model}");
             for sign in [Sign::Steering, Sign::SteeringAngles] {
-                assert_eq!(model.may_send(sign), steers, "{model}");
+                assert_eq!(model.may_send(sign), steers || modes, "{model}");
             }
-            assert!(
-                !model.may_send(Sign::MotionMode),
-                "{model}: no motion modes"
-            );
+            assert_eq!(model.may_send(Sign::MotionMode), modes, "{model}");
             let geometry = model.geometry();
             assert!(
                 geometry.track > 0.0 && geometry.wheel_radius > 0.0,

@@ -22,6 +22,9 @@ pub mod id {
     pub const MOTION_COMMAND: u16 = 0x111;
     /// Light command, host to chassis.
     pub const LIGHT_COMMAND: u16 = 0x121;
+    /// Motion-mode set, host to chassis: a Ranger's dual Ackermann, parallel, spin... (ugv_sdk
+    /// `CAN_MSG_SET_MOTION_MODE_ID`, `SetMotionModeFrame`: the mode in byte 0).
+    pub const SET_MOTION_MODE: u16 = 0x141;
     /// Control-mode set, host to chassis: standby, CAN, UART.
     pub const CONTROL_MODE: u16 = 0x421;
     /// Error clear, host to chassis.
@@ -45,7 +48,7 @@ pub mod id {
     /// Wheel odometers, chassis to host.
     pub const ODOMETER: u16 = 0x311;
     /// Steering motors' angles, chassis to host: a chassis with steered wheels (ugv_sdk
-    /// `CAN_MSG_MOTOR_ANGLE_INFO`). Not decoded: this project drives no such chassis yet.
+    /// `CAN_MSG_MOTOR_ANGLE_INFO`).
     pub const MOTOR_ANGLES: u16 = 0x271;
     /// Wheel motors' speeds of a steered chassis (ugv_sdk `CAN_MSG_MOTOR_SPEED_INFO`).
     pub const MOTOR_SPEEDS: u16 = 0x281;
@@ -117,6 +120,18 @@ mod field {
         pub const DRIVER_TEMPERATURE: Range<usize> = 2..4;
         pub const MOTOR_TEMPERATURE: usize = 4;
         pub const DRIVER_STATE: usize = 5;
+    }
+
+    /// 0x271 and 0x281: one value per wheel, front left, front right, rear left, rear right.
+    pub mod wheels {
+        use super::Range;
+        pub const WHEEL: [Range<usize>; 4] = [0..2, 2..4, 4..6, 6..8];
+    }
+
+    /// 0x291.
+    pub mod motion_mode {
+        pub const MODE: usize = 0;
+        pub const CHANGING: usize = 1;
     }
 
     /// 0x311.
@@ -200,6 +215,24 @@ raw_enum! {
         Motor3 = 0x03 => "motor_3",
         /// Motor 4's error.
         Motor4 = 0x04 => "motor_4",
+    }
+}
+
+raw_enum! {
+    /// A Ranger's motion mode (0x141 byte 0, 0x291 byte 0), as the vendor SDK numbers them
+    /// (ugv_sdk `ranger_interface.hpp` `MotionMode`; agilex-family-notes: Ranger Mini 2.0 and
+    /// 3.0; the Mini 1.0 numbers side slip 3).
+    MotionModeV2 {
+        /// Both axles steer, mirrored: turns on a circle no tighter than its minimum radius.
+        DualAckermann = 0x00 => "dual_ackermann",
+        /// Every wheel at one angle: moves in any direction without turning.
+        Parallel = 0x01 => "parallel",
+        /// The wheels tangent to a circle about the centre: turns in place.
+        Spin = 0x02 => "spin",
+        /// The wheels set to hold the robot still.
+        Park = 0x03 => "park",
+        /// Straight sideways.
+        SideSlip = 0x04 => "side_slip",
     }
 }
 
@@ -734,6 +767,81 @@ impl OdometerV2 {
     }
 }
 
+/// 0x271 (steering angles, mrad) or 0x281 (wheel speeds, mm/s) of a steered chassis' four
+/// wheels: front left, front right, rear left, rear right (ugv_sdk `MoterAngleFrame`
+/// `angle_5..8` and `MoterSpeedFrame` `speed_1..4`, each x0.001).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct WheelsV2(pub [i16; 4]);
+
+impl WheelsV2 {
+    fn parse(data: &[u8; 8]) -> Self {
+        Self(field::wheels::WHEEL.map(|range| i16_at(data, range)))
+    }
+
+    fn emit(&self, data: &mut [u8; 8]) {
+        for (range, value) in field::wheels::WHEEL.into_iter().zip(self.0) {
+            put(data, range, &value.to_be_bytes());
+        }
+    }
+
+    /// Each wheel's value in SI units (rad or m/s).
+    pub fn si(&self) -> [f64; 4] {
+        self.0.map(|value| f64::from(value) / 1000.0)
+    }
+}
+
+/// 0x291: a Ranger's motion mode and whether it is changing it (ugv_sdk `MotionModeStateFrame`);
+/// bytes 2-7 no source names, kept as received.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct MotionModeStateV2 {
+    /// The mode it is in, or changing to.
+    pub mode: MotionModeV2,
+    /// Byte 1: not zero while the wheels turn to the mode; nothing may move it meanwhile.
+    pub changing: u8,
+    /// Bytes 2-7.
+    pub reserved: [u8; 6],
+}
+
+impl MotionModeStateV2 {
+    /// `mode`, settled (`changing` false) or not.
+    pub const fn new(mode: MotionModeV2, changing: bool) -> Self {
+        Self {
+            mode,
+            changing: changing as u8,
+            reserved: [0; 6],
+        }
+    }
+
+    fn parse(data: &[u8; 8]) -> Self {
+        use field::motion_mode::*;
+        let mut reserved = [0; 6];
+        reserved.copy_from_slice(&data[CHANGING + 1..]);
+        Self {
+            mode: MotionModeV2::from_raw(data[MODE]),
+            changing: data[CHANGING],
+            reserved,
+        }
+    }
+
+    fn emit(&self, data: &mut [u8; 8]) {
+        use field::motion_mode::*;
+        data[MODE] = self.mode.raw();
+        data[CHANGING] = self.changing;
+        data[CHANGING + 1..].copy_from_slice(&self.reserved);
+    }
+
+    /// The mode the chassis is settled in: `None` while it changes.
+    pub const fn settled(&self) -> Option<MotionModeV2> {
+        if self.changing != 0 {
+            None
+        } else {
+            Some(self.mode)
+        }
+    }
+}
+
 /// 0x41A: versions as major.minor pairs (high byte major).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
@@ -835,6 +943,8 @@ pub enum MessageV2 {
     MotionCommand(MotionV2),
     /// 0x121.
     LightCommand(LightsV2),
+    /// 0x141.
+    SetMotionMode(MotionModeV2),
     /// 0x421.
     ControlMode(ControlModeV2),
     /// 0x441.
@@ -853,6 +963,12 @@ pub enum MessageV2 {
     ActuatorHigh(ActuatorHighV2),
     /// 0x261..=0x264.
     ActuatorLow(ActuatorLowV2),
+    /// 0x271: the steering angles of a steered chassis' wheels, mrad.
+    MotorAngles(WheelsV2),
+    /// 0x281: the wheel speeds of a steered chassis, mm/s.
+    MotorSpeeds(WheelsV2),
+    /// 0x291.
+    MotionModeState(MotionModeStateV2),
     /// 0x311.
     Odometer(OdometerV2),
     /// 0x41A.
@@ -909,6 +1025,7 @@ pub const fn is_v2_id(id: u16) -> bool {
         id,
         id::MOTION_COMMAND
             | id::LIGHT_COMMAND
+            | id::SET_MOTION_MODE
             | id::CONTROL_MODE
             | id::ERROR_CLEAR
             | id::VERSION_REQUEST
@@ -919,6 +1036,9 @@ pub const fn is_v2_id(id: u16) -> bool {
             | id::RC_STATE
             | 0x251..=0x254
             | 0x261..=0x264
+            | id::MOTOR_ANGLES
+            | id::MOTOR_SPEEDS
+            | id::MOTION_MODE_STATE
             | id::ODOMETER
             | id::VERSION_BINARY
             | id::BMS
@@ -932,6 +1052,7 @@ impl MessageV2 {
         match self {
             Self::MotionCommand(_) => id::MOTION_COMMAND,
             Self::LightCommand(_) => id::LIGHT_COMMAND,
+            Self::SetMotionMode(_) => id::SET_MOTION_MODE,
             Self::ControlMode(_) => id::CONTROL_MODE,
             Self::ErrorClear(_) => id::ERROR_CLEAR,
             Self::VersionRequest(VersionRequestForm::Binary) => id::VERSION_REQUEST,
@@ -944,6 +1065,9 @@ impl MessageV2 {
             Self::RcState(_) => id::RC_STATE,
             Self::ActuatorHigh(m) => id::ACTUATOR_HIGH + (m.motor as u16).saturating_sub(1),
             Self::ActuatorLow(m) => id::ACTUATOR_LOW + (m.motor as u16).saturating_sub(1),
+            Self::MotorAngles(_) => id::MOTOR_ANGLES,
+            Self::MotorSpeeds(_) => id::MOTOR_SPEEDS,
+            Self::MotionModeState(_) => id::MOTION_MODE_STATE,
             Self::Odometer(_) => id::ODOMETER,
             Self::Version(_) => id::VERSION_BINARY,
             Self::Bms(_) => id::BMS,
@@ -956,6 +1080,7 @@ impl MessageV2 {
         match self {
             Self::MotionCommand(_) => "motion_command",
             Self::LightCommand(_) => "light_command",
+            Self::SetMotionMode(_) => "set_motion_mode",
             Self::ControlMode(_) => "control_mode",
             Self::ErrorClear(_) => "error_clear",
             Self::VersionRequest(_) => "version_request",
@@ -965,6 +1090,9 @@ impl MessageV2 {
             Self::RcState(_) => "rc_state",
             Self::ActuatorHigh(_) => "actuator_high",
             Self::ActuatorLow(_) => "actuator_low",
+            Self::MotorAngles(_) => "motor_angles",
+            Self::MotorSpeeds(_) => "motor_speeds",
+            Self::MotionModeState(_) => "motion_mode_state",
             Self::Odometer(_) => "odometer",
             Self::Version(_) => "version",
             Self::VersionText(_) => "version_text",
@@ -980,12 +1108,16 @@ impl MessageV2 {
             Self::SystemState(s) => Some(s.count),
             Self::RcState(r) => Some(r.count),
             Self::MotionCommand(_)
+            | Self::SetMotionMode(_)
             | Self::ControlMode(_)
             | Self::ErrorClear(_)
             | Self::VersionRequest(_)
             | Self::MotionState(_)
             | Self::ActuatorHigh(_)
             | Self::ActuatorLow(_)
+            | Self::MotorAngles(_)
+            | Self::MotorSpeeds(_)
+            | Self::MotionModeState(_)
             | Self::Odometer(_)
             | Self::Version(_)
             | Self::VersionText(_)
@@ -1000,6 +1132,7 @@ impl MessageV2 {
             self,
             Self::MotionCommand(_)
                 | Self::LightCommand(_)
+                | Self::SetMotionMode(_)
                 | Self::ControlMode(_)
                 | Self::ErrorClear(_)
                 | Self::VersionRequest(_)
@@ -1013,6 +1146,7 @@ impl MessageV2 {
         match self {
             Self::MotionCommand(m) | Self::MotionState(m) => m.emit(&mut data),
             Self::LightCommand(m) | Self::LightState(m) => m.emit(&mut data),
+            Self::SetMotionMode(mode) => data[field::CODE] = mode.raw(),
             Self::ControlMode(mode) => data[field::CODE] = mode.raw(),
             Self::ErrorClear(code) => data[field::CODE] = code.raw(),
             Self::VersionRequest(_) => data[field::CODE] = 0x01,
@@ -1020,6 +1154,8 @@ impl MessageV2 {
             Self::RcState(m) => m.emit(&mut data),
             Self::ActuatorHigh(m) => m.emit(&mut data),
             Self::ActuatorLow(m) => m.emit(&mut data),
+            Self::MotorAngles(m) | Self::MotorSpeeds(m) => m.emit(&mut data),
+            Self::MotionModeState(m) => m.emit(&mut data),
             Self::Odometer(m) => m.emit(&mut data),
             Self::Version(m) => m.emit(&mut data),
             Self::VersionText(text) | Self::BmsAlarm(text) => data = *text,
@@ -1053,6 +1189,7 @@ pub fn decode(frame: &CanFrame) -> Result<MessageV2, V2Error> {
     Ok(match id {
         id::MOTION_COMMAND => MessageV2::MotionCommand(MotionV2::parse(&data)),
         id::LIGHT_COMMAND => MessageV2::LightCommand(LightsV2::parse(&data)),
+        id::SET_MOTION_MODE => MessageV2::SetMotionMode(MotionModeV2::from_raw(code)),
         id::CONTROL_MODE => MessageV2::ControlMode(ControlModeV2::from_raw(code)),
         id::ERROR_CLEAR => MessageV2::ErrorClear(ErrorClearV2::from_raw(code)),
         id::VERSION_REQUEST => MessageV2::VersionRequest(VersionRequestForm::Binary),
@@ -1064,6 +1201,9 @@ pub fn decode(frame: &CanFrame) -> Result<MessageV2, V2Error> {
         id::RC_STATE => MessageV2::RcState(RcStateV2::parse(&data)),
         0x251..=0x254 => MessageV2::ActuatorHigh(ActuatorHighV2::parse((id - 0x250) as u8, &data)),
         0x261..=0x264 => MessageV2::ActuatorLow(ActuatorLowV2::parse((id - 0x260) as u8, &data)),
+        id::MOTOR_ANGLES => MessageV2::MotorAngles(WheelsV2::parse(&data)),
+        id::MOTOR_SPEEDS => MessageV2::MotorSpeeds(WheelsV2::parse(&data)),
+        id::MOTION_MODE_STATE => MessageV2::MotionModeState(MotionModeStateV2::parse(&data)),
         id::ODOMETER => MessageV2::Odometer(OdometerV2::parse(&data)),
         id::VERSION_BINARY => MessageV2::Version(VersionV2::parse(&data)),
         id::BMS => MessageV2::Bms(BmsV2::parse(&data)),
@@ -1082,6 +1222,31 @@ mod tests {
 
     fn decoded(id: u16, data: &[u8]) -> MessageV2 {
         decode(&frame(id, data)).unwrap_or_else(|e| panic!("0x{id:03X}: {e}"))
+    }
+
+    #[test]
+    fn a_rangers_mode_frames_as_the_vendor_sdk_lays_them_out() {
+        // ugv_sdk `agilex_msg_parser_v2.c`: 0x141 the mode in byte 0 of eight; 0x291 the mode
+        // and the changing flag in bytes 0 and 1; 0x271 four int16 big-endian x0.001 rad.
+        let spin = MessageV2::SetMotionMode(MotionModeV2::Spin).encode();
+        assert_eq!(
+            (spin.id(), spin.data()),
+            (0x141, &[2, 0, 0, 0, 0, 0, 0, 0][..])
+        );
+        let changing = decoded(0x291, &[1, 1, 0, 0, 0, 0, 0, 0]);
+        assert_eq!(
+            changing,
+            MessageV2::MotionModeState(MotionModeStateV2::new(MotionModeV2::Parallel, true))
+        );
+        let MessageV2::MotionModeState(state) = changing else {
+            unreachable!()
+        };
+        assert_eq!(state.settled(), None);
+        let settled = MotionModeStateV2::new(MotionModeV2::DualAckermann, false);
+        assert_eq!(settled.settled(), Some(MotionModeV2::DualAckermann));
+        let angles = decoded(0x271, &[0x01, 0xF4, 0xFE, 0x0C, 0, 0, 0, 0]);
+        assert_eq!(angles, MessageV2::MotorAngles(WheelsV2([500, -500, 0, 0])));
+        assert!(!angles.is_command());
     }
 
     #[test]

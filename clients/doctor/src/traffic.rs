@@ -77,9 +77,9 @@ impl Traffic {
                 match message {
                     MessageV2::SystemState(state) => self.last_system_v2 = Some(*state),
                     MessageV2::RcState(rc) => self.last_rc_v2 = Some(*rc),
-                    MessageV2::MotionState(motion) => self.sign(Sign::of_motion_state(motion)),
                     _ => {}
                 }
+                self.sign(Sign::of_v2_message(message));
             }
             RxEvent::Rejected(error) => {
                 if let Some(id) = error.can_id() {
@@ -122,16 +122,20 @@ impl Traffic {
             sent.join(", "),
             first.suggests()
         );
-        if self
-            .signs
-            .iter()
-            .all(|sign| Model::ScoutMiniOmni.may_send(*sign))
-        {
+        let models: Vec<&str> = Model::ALL
+            .into_iter()
+            .filter(|model| self.signs.iter().all(|sign| model.may_send(*sign)))
+            .map(Model::name)
+            .collect();
+        if !models.is_empty() {
             return Check::warn(
                 "model",
                 detail,
-                "if it is a SCOUT MINI OMNI, start the gateway with --model scout-mini-omni: as \
-                 another model it refuses to drive it",
+                format!(
+                    "start the gateway with the model it is, --model {}: as another model it \
+                     refuses to drive it",
+                    models.join(" or --model ")
+                ),
             );
         }
         Check::fail(
@@ -650,16 +654,24 @@ mod tests {
                 .is_some_and(|fix| fix.contains("--model scout-mini-omni")),
             "{check:?}"
         );
-        // A motion mode: a Ranger, which the gateway refuses to drive.
-        let error = RxError::Can(scout_protocol::can::CanError::UnknownId { id: 0x291 });
-        traffic.handle(&RxEvent::Rejected(error), 40 * MS);
-        traffic.handle(&RxEvent::Rejected(error), 60 * MS);
+        // A motion mode: a Ranger, named as the model to give.
+        let mode = scout_protocol::v2::MotionModeStateV2::new(
+            scout_protocol::v2::MotionModeV2::DualAckermann,
+            false,
+        );
+        traffic.handle(&RxEvent::V2(MessageV2::MotionModeState(mode)), 40 * MS);
+        traffic.handle(&RxEvent::V2(MessageV2::MotionModeState(mode)), 60 * MS);
         let check = find(&traffic);
-        assert_eq!(check.verdict, Verdict::Fail, "{check:?}");
+        assert_eq!(check.verdict, Verdict::Warn, "{check:?}");
         assert!(
             check
                 .detail
                 .contains("a sideways speed (0x221), a motion mode (0x291)"),
+            "{check:?}"
+        );
+        let fix = check.fix.as_deref().unwrap_or_default();
+        assert!(
+            fix.contains("--model ranger-mini-2 or --model ranger-mini-3") && !fix.contains("omni"),
             "{check:?}"
         );
     }

@@ -17,8 +17,8 @@ use scout_protocol::{
 use serde::Serialize;
 
 use scout_protocol::Transport;
-use scout_protocol::model::{Model, Steering};
-use scout_protocol::v2::MessageV2;
+use scout_protocol::model::{FourWheel, Model, Steering};
+use scout_protocol::v2::{MessageV2, MotionModeV2};
 
 #[path = "chassis_v2.rs"]
 mod v2;
@@ -54,6 +54,19 @@ pub struct SimParams {
     pub max_steering: f64,
     /// How fast a steered chassis turns its wheels, rad/s.
     pub steering_rate: f64,
+    /// Four steered wheels in motion modes (a Ranger; protocol v2): 0x141 sets the mode, only
+    /// standing still, and the change takes `mode_change`, reported in 0x291, during which 0x111
+    /// moves nothing; 0x111 then carries the wheels' speed and angle (`wheelbase`,
+    /// `max_steering` the inner wheels' widest in dual Ackermann, `max_parallel_steering`) or
+    /// the spin rate. It starts in dual Ackermann.
+    pub motion_modes: bool,
+    /// The widest wheel angle in parallel mode, rad.
+    pub max_parallel_steering: f64,
+    /// Spinning takes its rate in 0x111's bytes 4-5 (a Ranger Mini 2.0), not 2-3.
+    pub spin_in_lateral: bool,
+    /// How long a mode change takes.
+    #[serde(with = "millis")]
+    pub mode_change: Duration,
     /// Linear acceleration limit, m/s².
     pub linear_acceleration: f64,
     /// Angular acceleration limit, rad/s².
@@ -101,6 +114,10 @@ impl Default for SimParams {
             max_central_steering: 0.0,
             max_steering: 0.0,
             steering_rate: 0.0,
+            motion_modes: false,
+            max_parallel_steering: 0.0,
+            spin_in_lateral: false,
+            mode_change: Duration::from_secs(1),
             linear_acceleration: 1.0,
             angular_acceleration: 1.5,
             battery_voltage: 26.0,
@@ -143,6 +160,36 @@ impl SimParams {
             ..Self::default()
         }
         .with_steering(model.steering())
+        .with_four_wheel(model.four_wheel())
+    }
+
+    fn with_four_wheel(self, ranger: Option<FourWheel>) -> Self {
+        match ranger {
+            None => self,
+            Some(ranger) => Self {
+                motion_modes: true,
+                wheelbase: ranger.wheelbase,
+                max_steering: ranger.max_inner,
+                max_parallel_steering: ranger.max_parallel,
+                spin_in_lateral: ranger.spin_in_lateral,
+                steering_rate: ranger.rate,
+                mode_change: Duration::from_secs_f64(ranger.mode_change),
+                ..self
+            },
+        }
+    }
+
+    /// The four-wheel steering of a Ranger (`motion_modes`), else `None`.
+    pub fn four_wheel(&self) -> Option<FourWheel> {
+        self.motion_modes.then_some(FourWheel {
+            wheelbase: self.wheelbase,
+            track: self.track_width,
+            max_inner: self.max_steering,
+            max_parallel: self.max_parallel_steering,
+            spin_in_lateral: self.spin_in_lateral,
+            rate: self.steering_rate,
+            mode_change: self.mode_change.as_secs_f64(),
+        })
     }
 
     fn with_steering(self, steering: Option<Steering>) -> Self {
@@ -158,9 +205,9 @@ impl SimParams {
         }
     }
 
-    /// The steering of a steered chassis (a wheelbase set), else `None`.
+    /// The steering of a front-steered chassis (a wheelbase set, no motion modes), else `None`.
     pub fn steering(&self) -> Option<Steering> {
-        (self.wheelbase > 0.0).then_some(Steering {
+        (self.wheelbase > 0.0 && !self.motion_modes).then_some(Steering {
             wheelbase: self.wheelbase,
             track: self.track_width,
             max_central: self.max_central_steering,
@@ -254,6 +301,9 @@ impl Battery {
 const BATTERY_WARNING_VOLTS: f64 = battery::SCOUT_BATTERY.warning_volts;
 const BATTERY_CUTOFF_VOLTS: f64 = battery::SCOUT_BATTERY.cutoff_volts;
 const BATTERY_OVERVOLTAGE_VOLTS: f64 = 30.0;
+/// How far a Ranger's wheels may point from where they are told and still roll, rad (an
+/// assumption: no source says what its firmware does while its wheels turn).
+const ALIGNED: f64 = 0.2;
 /// Driver temperature thresholds (fault table of 0x151).
 const OVERTEMP_WARNING_C: f64 = 55.0;
 const OVERTEMP_PROTECTION_C: f64 = 65.0;
@@ -406,6 +456,8 @@ pub enum Ignored {
     Inhibited,
     /// Protocol v2: the chassis is not in CAN command mode (standby until 0x421 `[01]`).
     NotCommandMode,
+    /// A Ranger is changing its motion mode (0x291 says so).
+    ModeChanging,
 }
 
 /// Statistics for tests and people: what the chassis received and did.
@@ -427,6 +479,12 @@ pub struct SimStats {
     pub actual: Speeds,
     /// The inner wheel's steering angle, rad (a steered chassis).
     pub steering: f64,
+    /// A Ranger's motion mode (`dual_ackermann`, `parallel`, `spin`...; empty for any other).
+    pub motion_mode: &'static str,
+    /// A Ranger's mode changes made.
+    pub mode_changes: u64,
+    /// A Ranger's mode changes refused: asked while it moved, or while it changed.
+    pub mode_changes_refused: u64,
     /// Ground-truth pose.
     pub pose: Pose,
     /// Battery voltage, V.
@@ -453,6 +511,8 @@ pub struct IgnoredCounts {
     pub inhibited: u64,
     /// Protocol v2: not in CAN command mode (standby).
     pub standby: u64,
+    /// A Ranger: motion asked for (not zero) while it changes its mode.
+    pub mode_changing: u64,
 }
 
 /// Summary of the intervals between motion commands, in ms.
@@ -510,6 +570,12 @@ pub struct Chassis {
     /// A steered chassis' inner-wheel angle now and the one commanded, rad.
     steering: f64,
     target_steering: f64,
+    /// A Ranger's motion mode, and until when it changes to it.
+    motion_mode: MotionModeV2,
+    changing_until: Option<Duration>,
+    /// A Ranger's wheel speed (m/s, dual Ackermann and parallel) and spin rate (rad/s) now.
+    wheel_speed: f64,
+    spin_rate: f64,
     pose: Pose,
     motors: [MotorState; 4],
     /// The pack: its charge and what the chassis measures of it.
@@ -587,6 +653,10 @@ impl Chassis {
             actual: Speeds::default(),
             steering: 0.0,
             target_steering: 0.0,
+            motion_mode: MotionModeV2::DualAckermann,
+            changing_until: None,
+            wheel_speed: 0.0,
+            spin_rate: 0.0,
             pose: Pose::default(),
             motors: [motor; 4],
             estop: false,
@@ -860,6 +930,11 @@ impl Chassis {
         };
         stats.actual = self.actual;
         stats.steering = self.steering;
+        stats.motion_mode = if self.params.motion_modes {
+            self.motion_mode.name()
+        } else {
+            ""
+        };
         stats.pose = self.pose;
         stats.battery_voltage = self.battery_voltage;
         stats.battery_percent = self.battery.charge_percent;
@@ -944,7 +1019,9 @@ impl Chassis {
         self.now = at;
         let target = self.target_at(at);
         let previous = self.actual;
-        if self.estop {
+        if let Some(ranger) = self.params.four_wheel() {
+            self.step_four_wheel(&ranger, target, at, dt);
+        } else if self.estop {
             self.actual = Speeds::default();
         } else {
             self.actual.linear += ramp(
@@ -963,6 +1040,7 @@ impl Chassis {
         }
         if let Some(steering) = self.params.steering() {
             // The wheels turn at their rate; the yaw is what they and the speed make.
+            // (A Ranger's are stepped above.)
             self.steering += ramp(self.target_steering - self.steering, steering.rate * dt);
             self.actual.angular = steering.yaw_rate_from_inner(self.actual.linear, self.steering);
         }
@@ -985,6 +1063,153 @@ impl Chassis {
         self.update_latches();
     }
 
+    /// A Ranger's step: the mode change ends when its time is up; meanwhile, and in e-stop,
+    /// nothing moves; the wheels speed up and turn at their rates, and the body moves as its
+    /// mode makes them move it.
+    fn step_four_wheel(&mut self, ranger: &FourWheel, target: Speeds, at: Duration, dt: f64) {
+        if self.changing_until.is_some_and(|until| at >= until) {
+            self.changing_until = None;
+        }
+        // The wheels roll only once they point (nearly) where they are told: a turn of the
+        // wheels from straight ahead to sideways does not drag the body forward meanwhile.
+        let aligned = (self.target_steering - self.steering).abs() <= ALIGNED;
+        let still = self.estop || self.changing_until.is_some();
+        let (speed, spin) = if still {
+            (0.0, 0.0)
+        } else {
+            (if aligned { target.linear } else { 0.0 }, target.angular)
+        };
+        if self.estop {
+            (self.wheel_speed, self.spin_rate) = (0.0, 0.0);
+        }
+        self.wheel_speed += ramp(
+            speed - self.wheel_speed,
+            self.params.linear_acceleration * dt,
+        );
+        self.spin_rate += ramp(spin - self.spin_rate, self.params.angular_acceleration * dt);
+        self.steering += ramp(self.target_steering - self.steering, ranger.rate * dt);
+        self.actual = match self.motion_mode {
+            MotionModeV2::DualAckermann => Speeds {
+                linear: self.wheel_speed,
+                lateral: 0.0,
+                angular: ranger.yaw_rate_from_inner(self.wheel_speed, self.steering),
+            },
+            MotionModeV2::Parallel => {
+                let (linear, lateral) = ranger.body_from_parallel(self.wheel_speed, self.steering);
+                Speeds {
+                    linear,
+                    lateral,
+                    angular: 0.0,
+                }
+            }
+            MotionModeV2::Spin => Speeds {
+                linear: 0.0,
+                lateral: 0.0,
+                angular: self.spin_rate,
+            },
+            MotionModeV2::Park | MotionModeV2::SideSlip | MotionModeV2::Unknown(_) => {
+                Speeds::default()
+            }
+        };
+    }
+
+    /// A Ranger's 0x141: the mode changes, taking `mode_change`, only standing still and not
+    /// while it changes already; the wheels turn to it.
+    fn set_motion_mode(&mut self, now: Duration, mode: MotionModeV2) {
+        if self.params.four_wheel().is_none() {
+            self.stats.rejected += 1;
+            return;
+        }
+        if mode == self.motion_mode && self.changing_until.is_none() {
+            return;
+        }
+        let moving = self.wheel_speed.abs() > STANDSTILL || self.spin_rate.abs() > STANDSTILL;
+        let known = !matches!(mode, MotionModeV2::Unknown(_));
+        if moving || self.changing_until.is_some() || !known {
+            self.stats.mode_changes_refused += 1;
+            return;
+        }
+        self.motion_mode = mode;
+        self.changing_until = Some(now + self.params.mode_change);
+        self.stats.mode_changes += 1;
+        self.target = Speeds::default();
+        self.target_steering = 0.0;
+    }
+
+    /// A Ranger's 0x111 in the mode it is in: the wheels' speed and angle, or the spin rate
+    /// (bytes 2-3, or 4-5 on a Mini 2.0: the other field then means nothing). Nothing while
+    /// it changes its mode.
+    fn four_wheel_target(
+        &mut self,
+        ranger: &FourWheel,
+        command: &scout_protocol::v2::MotionV2,
+    ) -> Option<Ignored> {
+        let (max_linear, max_angular) = (self.params.max_linear, self.params.max_angular);
+        if self.changing_until.is_some() {
+            self.target = Speeds::default();
+            if *command != scout_protocol::v2::MotionV2::default() {
+                self.stats.ignored.mode_changing += 1;
+            }
+            return Some(Ignored::ModeChanging);
+        }
+        let speed = command.linear().clamp(-max_linear, max_linear);
+        let spin = if ranger.spin_in_lateral {
+            command.lateral()
+        } else {
+            command.angular()
+        };
+        self.target = Speeds::default();
+        match self.motion_mode {
+            MotionModeV2::DualAckermann => {
+                self.target.linear = speed;
+                self.target_steering = command
+                    .steering()
+                    .clamp(-ranger.max_inner, ranger.max_inner);
+            }
+            MotionModeV2::Parallel => {
+                self.target.linear = speed;
+                self.target_steering = command
+                    .steering()
+                    .clamp(-ranger.max_parallel, ranger.max_parallel);
+            }
+            MotionModeV2::Spin => {
+                self.target.angular = spin.clamp(-max_angular, max_angular);
+                self.target_steering = 0.0;
+            }
+            MotionModeV2::Park | MotionModeV2::SideSlip | MotionModeV2::Unknown(_) => {}
+        }
+        None
+    }
+
+    /// A Ranger's 0x221 (its wheels' speed and angle, or its spin rate) and 0x291.
+    fn four_wheel_state(
+        &self,
+    ) -> (
+        scout_protocol::v2::MotionV2,
+        scout_protocol::v2::MotionModeStateV2,
+    ) {
+        let spinning = self.motion_mode == MotionModeV2::Spin;
+        let motion = scout_protocol::v2::MotionV2 {
+            linear_mm_s: to_i16(if spinning {
+                0.0
+            } else {
+                self.wheel_speed * 1000.0
+            }),
+            angular_mrad_s: to_i16(if spinning {
+                self.spin_rate * 1000.0
+            } else {
+                0.0
+            }),
+            lateral_mm_s: 0,
+            steering_mrad: to_i16(self.steering * 1000.0),
+        };
+        let mode = scout_protocol::v2::MotionModeStateV2::new(
+            self.motion_mode,
+            self.changing_until.is_some(),
+        );
+        (motion, mode)
+    }
+
     fn step_motors(&mut self, acceleration: f64, dt: f64) {
         let half_track = self.params.track_width / 2.0;
         // Sideways motion is left out: which way each mecanum wheel then turns is in no source.
@@ -996,6 +1221,8 @@ impl Chassis {
             60.0 / (2.0 * std::f64::consts::PI * self.params.wheel_radius) * self.params.gear_ratio;
         let ambient = self.params.ambient_temperature;
         let mut total_current = 0.5; // electronics
+        // Wheels dragged sideways to turn (skid-steer, tracks) draw most; steered ones do not.
+        let scrub = if self.params.motion_modes { 0.0 } else { 5.0 };
         for motor in Motor::ALL {
             // 1 front-right, 2 front-left, 3 rear-left, 4 rear-right; left shafts turn the other
             // way for forward motion (vendor SDK; unverified on hardware).
@@ -1007,7 +1234,7 @@ impl Chassis {
             state.rpm = shaft_sign * wheel * rpm_per_mps;
             let moving = wheel.abs() > STANDSTILL || angular.abs() > STANDSTILL;
             let load = if moving {
-                0.4 + 1.2 * wheel.abs() + 5.0 * angular.abs()
+                0.4 + 1.2 * wheel.abs() + scrub * angular.abs()
             } else {
                 0.0
             };

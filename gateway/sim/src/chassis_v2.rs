@@ -145,6 +145,10 @@ impl Chassis {
                 self.clear_error_v2(code);
                 None
             }
+            MessageV2::SetMotionMode(mode) => {
+                self.set_motion_mode(now, mode);
+                None
+            }
             MessageV2::VersionRequest(VersionRequestForm::Binary) => {
                 firmware.replies.push(MessageV2::Version(VERSION));
                 None
@@ -166,6 +170,9 @@ impl Chassis {
             | MessageV2::RcState(_)
             | MessageV2::ActuatorHigh(_)
             | MessageV2::ActuatorLow(_)
+            | MessageV2::MotorAngles(_)
+            | MessageV2::MotorSpeeds(_)
+            | MessageV2::MotionModeState(_)
             | MessageV2::Odometer(_)
             | MessageV2::Version(_)
             | MessageV2::VersionText(_)
@@ -208,6 +215,17 @@ impl Chassis {
             }
         }
         self.last_valid_motion = Some(now);
+        if let Some(ranger) = self.params.four_wheel() {
+            let ignored = self.four_wheel_target(&ranger, &command);
+            if ignored.is_some() {
+                return ignored;
+            }
+            if self.drive_inhibited() {
+                self.stats.ignored.inhibited += 1;
+                return Some(Ignored::Inhibited);
+            }
+            return None;
+        }
         self.target = Speeds {
             linear: command.linear().clamp(-max_linear, max_linear),
             lateral: command.lateral().clamp(-max_lateral, max_lateral),
@@ -358,6 +376,7 @@ impl Chassis {
         );
         let bms = self.params.bms.then(|| self.bms_v2()).into_iter().flatten();
         let (steered, steering) = (self.params.steering().is_some(), self.steering);
+        let ranger = self.params.four_wheel().map(|_| self.four_wheel_state());
         let Some(firmware) = self.v2.as_mut() else {
             return Vec::new();
         };
@@ -368,12 +387,20 @@ impl Chassis {
             true => (0.0, steering),
             false => (actual.angular * yaw_scale, 0.0),
         };
-        let mut frames = vec![MessageV2::MotionState(MotionV2 {
-            linear_mm_s: super::to_i16(actual.linear * 1000.0 * distance_scale),
-            angular_mrad_s: super::to_i16(angular * 1000.0),
-            lateral_mm_s: super::to_i16(actual.lateral * 1000.0 * distance_scale),
-            steering_mrad: super::to_i16(steering * 1000.0),
-        })];
+        let mut frames = match ranger {
+            // A Ranger reports its wheels and its mode; no wheel odometer (nothing reads it:
+            // agilex-family-notes, and in parallel mode its wheels do not roll forward).
+            Some((motion, mode)) => vec![
+                MessageV2::MotionState(motion),
+                MessageV2::MotionModeState(mode),
+            ],
+            None => vec![MessageV2::MotionState(MotionV2 {
+                linear_mm_s: super::to_i16(actual.linear * 1000.0 * distance_scale),
+                angular_mrad_s: super::to_i16(angular * 1000.0),
+                lateral_mm_s: super::to_i16(actual.lateral * 1000.0 * distance_scale),
+                steering_mrad: super::to_i16(steering * 1000.0),
+            })],
+        };
         for (mut high, low) in motors {
             // 1 and 4 are on the right (as in v1's numbering); a 4096-count encoder per turn.
             let side = if matches!(high.motor, 1 | 4) {
@@ -396,10 +423,12 @@ impl Chassis {
             reserved: [0; 2],
             count: firmware.light_count.next_count(),
         }));
-        frames.push(MessageV2::Odometer(OdometerV2 {
-            left_mm: mm(left * distance_scale),
-            right_mm: mm(right * distance_scale),
-        }));
+        if ranger.is_none() {
+            frames.push(MessageV2::Odometer(OdometerV2 {
+                left_mm: mm(left * distance_scale),
+                right_mm: mm(right * distance_scale),
+            }));
+        }
         if firmware.tick.is_multiple_of(SLOW_EVERY) {
             frames.extend(bms);
             if let Some(system) = system {

@@ -19,7 +19,7 @@ use crate::replay::Replay;
 use crate::script::{HELP, SimCommand};
 use scout_io::{Incoming, Port};
 use scout_protocol::Transport;
-use scout_protocol::link::{RxEvent, StreamFraming, decode_can};
+use scout_protocol::link::{RxEvent, StreamFraming, decode_can, decode_can_v2};
 pub use scout_protocol::version::Protocol;
 
 /// How the simulator is reached and what it simulates.
@@ -268,7 +268,7 @@ impl Simulator<'_> {
             match endpoint.port.read(&mut buffer, wait) {
                 Ok(Incoming::Timeout) => {}
                 Ok(Incoming::Bytes(n)) => self.receive_bytes(&buffer[..n])?,
-                Ok(Incoming::Frame(frame)) => self.receive(decode_can(&frame))?,
+                Ok(Incoming::Frame(frame)) => self.receive(self.decoder()(&frame))?,
                 Ok(Incoming::Foreign(_) | Incoming::BusError(_) | Incoming::Malformed(_)) => {
                     self.chassis.handle_rejected(self.now())
                 }
@@ -377,10 +377,20 @@ impl Simulator<'_> {
         Ok(())
     }
 
+    /// How a frame from the host is read: by a v2 chassis with v2's meaning of the ids both
+    /// protocols use (0x141 sets a Ranger's mode).
+    fn decoder(&self) -> fn(&CanFrame) -> RxEvent {
+        match self.options.protocol {
+            Protocol::V1 => decode_can,
+            Protocol::V2 => decode_can_v2,
+        }
+    }
+
     fn receive_bytes(&mut self, bytes: &[u8]) -> anyhow::Result<()> {
         let mut events = Vec::new();
+        let decode = self.decoder();
         if let Some(framing) = self.framing.as_mut() {
-            framing.push(bytes, |event| events.push(event));
+            framing.push_with(bytes, decode, |event| events.push(event));
         }
         events.into_iter().try_for_each(|event| self.receive(event))
     }

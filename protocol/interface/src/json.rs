@@ -92,6 +92,14 @@ pub fn message_fields_v2(message: &MessageV2) -> Value {
         MessageV2::MotionCommand(m) | MessageV2::MotionState(m) => motion(m),
         MessageV2::LightCommand(l) | MessageV2::LightState(l) => lights(l),
         MessageV2::ControlMode(mode) => json!({ "control_mode": mode.name(), "raw": mode.raw() }),
+        MessageV2::SetMotionMode(mode) => json!({ "motion_mode": mode.name(), "raw": mode.raw() }),
+        MessageV2::MotionModeState(state) => json!({
+            "motion_mode": state.mode.name(),
+            "raw": state.mode.raw(),
+            "changing": state.changing != 0,
+        }),
+        MessageV2::MotorAngles(wheels) => json!({ "steering": wheels.si() }),
+        MessageV2::MotorSpeeds(wheels) => json!({ "speeds": wheels.si() }),
         MessageV2::ErrorClear(code) => json!({ "clear": code.name(), "raw": code.raw() }),
         MessageV2::VersionRequest(form) => json!({
             "form": match form {

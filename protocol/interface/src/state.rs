@@ -694,8 +694,14 @@ impl StatePayload {
                 self.firmware.received = received;
                 self.firmware.text = FixedText::new(&text);
             }
+            // A Ranger's wheels and mode: read by the gateway (its odometry and arbiter), not
+            // kept in the state (yet).
+            MessageV2::MotorAngles(_)
+            | MessageV2::MotorSpeeds(_)
+            | MessageV2::MotionModeState(_) => {}
             MessageV2::MotionCommand(_)
             | MessageV2::LightCommand(_)
+            | MessageV2::SetMotionMode(_)
             | MessageV2::ControlMode(_)
             | MessageV2::ErrorClear(_)
             | MessageV2::VersionRequest(_) => return false,

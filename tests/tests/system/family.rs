@@ -253,3 +253,139 @@ fn a_hunters_command_is_its_speed_and_steering_angle_in_0x111() {
     chassis.ends_at_zero();
     drop(drive);
 }
+
+/// A Ranger Mini 2.0 on its simulator drives a figure of every mode, each leg ending on the
+/// gateway's odometry as a planner's would: 1 m forward (dual Ackermann), 0.8 m to the left
+/// (parallel), a quarter turn in place (spin), a quarter circle forward (dual Ackermann). The
+/// odometry ends within 2 % of the path of the simulator's pose; the simulated firmware saw no
+/// mode change asked while it moved and no motion while it changed.
+#[test]
+fn a_ranger_drives_every_mode_and_its_odometry_follows() {
+    let name = robot_name("ranger-figure");
+    let _dir = TempDir::new(&name);
+    let mut sim = Sim::start(&["--slcan", "--protocol", "v2", "--model", "ranger-mini-2"]);
+    let port = sim.port().to_owned();
+    let _gateway = Gateway::start(&[
+        "--slcan",
+        &port,
+        "--model",
+        "ranger-mini-2",
+        "--name",
+        &name,
+    ]);
+    let robot = connect(&name);
+    let states = robot.subscribe().expect("state");
+    wait_for_state(&states, LIMIT, |s| s["link"]["state"] == "ok");
+    let mut drive = robot
+        .controller("figure", Some(Class::Teleop))
+        .expect("a controller");
+    let deadline = Instant::now() + LIMIT;
+    while drive.take_control().is_err() {
+        assert!(Instant::now() < deadline, "no control of {name}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    type Done<'a> = &'a dyn Fn((f64, f64, f64, f64)) -> bool;
+    let mut leg = |(linear, lateral, angular): (f64, f64, f64), done: Done<'_>| {
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while !done(odometry(&states)) {
+            assert!(
+                Instant::now() < deadline,
+                "the leg ({linear}, {lateral}, {angular}) took too long: odometry {:?}",
+                odometry(&states)
+            );
+            drive
+                .drive_body(linear, lateral, angular, None)
+                .expect("a drive");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    };
+    let turned_to = |heading: f64| {
+        move |(_, _, yaw, _): (f64, f64, f64, f64)| {
+            (heading - yaw + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+                - std::f64::consts::PI
+                <= 0.0
+        }
+    };
+    leg((0.5, 0.0, 0.0), &|(x, _, _, _)| x >= 1.0);
+    leg((0.0, 0.4, 0.0), &|(_, y, _, _)| y >= 0.8);
+    leg((0.0, 0.0, 0.8), &turned_to(std::f64::consts::FRAC_PI_2));
+    leg((0.4, 0.0, 0.4), &turned_to(std::f64::consts::PI));
+    let path = 1.0 + 0.8 + std::f64::consts::FRAC_PI_2;
+    drive.stop("figure done").expect("a stop");
+    wait_for_state(&states, LIMIT, |s| {
+        s["motion"]["linear"]
+            .as_f64()
+            .is_some_and(|v| v.abs() < 0.001)
+            && s["motion"]["angular"]
+                .as_f64()
+                .is_some_and(|v| v.abs() < 0.001)
+    });
+    let (x, y, yaw, _) = odometry(&states);
+    let stats = sim.stats();
+    let value = |key: &str| stats["pose"][key].as_f64().expect("a pose");
+    let (true_x, true_y, true_yaw) = (value("x"), value("y"), value("yaw"));
+    eprintln!(
+        "ranger-mini-2: odometry ({x:.3}, {y:.3}, {yaw:.3}), truth ({true_x:.3}, {true_y:.3}, \
+         {true_yaw:.3}) over {path:.2} m"
+    );
+    let position = (x - true_x).hypot(y - true_y) / path;
+    let turned = ((yaw - true_yaw + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+        - std::f64::consts::PI)
+        .abs()
+        / std::f64::consts::TAU;
+    assert_within(position, turned);
+    // It went where the legs say: about 1 m ahead and 0.8 m to the left before the turns
+    // (the last quarter circle of 1 m radius adds about 1 m each way), facing backwards.
+    assert!(true_yaw.abs() > 2.5, "{true_yaw}");
+    assert_eq!(stats["ignored"]["mode_changing"], 0, "{stats}");
+    assert_eq!(stats["mode_changes_refused"], 0, "{stats}");
+    assert!(stats["mode_changes"].as_u64() >= Some(3), "{stats}");
+}
+
+/// A Ranger Mini 2.0's spin and a Ranger Mini 3.0's turn as the vendor lays them out, read by
+/// a chassis emulated apart from this project (`v2_chassis.py --motion-modes`): the Mini 2.0
+/// is asked for spin mode (0x141 `[02]`) and then spins by bytes 4-5, never by the yaw-rate
+/// field (ugv_sdk PR 10), and nothing moves it while it changes; the Mini 3.0 turns in dual
+/// Ackermann, the mode it reports, with its speed and inner wheels' angle; zero on every field
+/// when the client ends.
+#[test]
+fn a_rangers_mode_and_command_are_where_the_vendor_puts_them() {
+    let (chassis, _gateway, drive) =
+        EmulatedChassis::driven("ranger-mini-2", &["--angular", "0.5"]);
+    let seen = chassis.commands_until(|c| c[2] == 500);
+    assert_eq!(seen.last().map(|c| c[2]), Some(500), "{seen:?}");
+    assert!(
+        seen.iter().all(|c| c[0] == 0 && c[1] == 0 && c[3] == 0),
+        "the spin rate in bytes 4-5 alone: {seen:?}"
+    );
+    let events = chassis.events();
+    assert!(
+        events.contains(&serde_json::json!({ "set_motion_mode": 2 })),
+        "{events:?}"
+    );
+    assert!(
+        events
+            .iter()
+            .all(|event| event.get("moved_while_changing").is_none()),
+        "{events:?}"
+    );
+    chassis.ends_at_zero();
+    drop(drive);
+
+    let (chassis, _gateway, drive) =
+        EmulatedChassis::driven("ranger-mini-3", &["--linear", "0.3", "--angular", "0.3"]);
+    let ranger = Model::RangerMini3.four_wheel().expect("a Ranger");
+    let mrad = (ranger.inner_for(0.3, 0.3) * 1000.0).round() as i64;
+    let seen = chassis.commands_until(|c| c[0] == 300 && (c[3] - mrad).abs() <= 1);
+    let last = seen.last().copied().unwrap_or_default();
+    assert!(
+        last[0] == 300 && (last[3] - mrad).abs() <= 1,
+        "{mrad} mrad: {seen:?}"
+    );
+    assert!(
+        seen.iter().all(|c| c[1] == 0 && c[2] == 0),
+        "no yaw rate, no sideways: {seen:?}"
+    );
+    chassis.ends_at_zero();
+    drop(drive);
+}

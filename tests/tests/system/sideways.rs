@@ -4,6 +4,7 @@
 
 use std::time::Duration;
 
+use scout_protocol::model::Model;
 use scout_system_tests::{Gateway, connect, robot_name, scout, wait_for_state};
 
 const LIMIT: Duration = Duration::from_secs(10);
@@ -91,21 +92,35 @@ fn a_chassis_that_does_not_move_sideways_refuses_it_whole_and_says_why() {
 pub(crate) struct EmulatedChassis {
     child: std::process::Child,
     lines: std::sync::mpsc::Receiver<String>,
+    /// What it printed other than motion commands (a Ranger's mode requests), in order.
+    events: std::cell::RefCell<Vec<serde_json::Value>>,
     pub(crate) port: String,
 }
 
 impl EmulatedChassis {
-    pub(crate) fn start() -> Self {
+    /// The emulator with `args` (`--motion-modes`: a Ranger).
+    pub(crate) fn start(args: &[&str]) -> Self {
         let script =
             std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/system/v2_chassis.py");
         let mut child = std::process::Command::new("python3")
             .arg(script)
+            .args(args)
             .stdout(std::process::Stdio::piped())
             .spawn()
             .expect("python3 runs the emulated chassis");
         let lines = scout_system_tests::line_reader(child.stdout.take().expect("stdout"));
         let port = lines.recv_timeout(LIMIT).expect("the emulator's port");
-        Self { child, lines, port }
+        Self {
+            child,
+            lines,
+            events: std::cell::RefCell::default(),
+            port,
+        }
+    }
+
+    /// What it printed other than motion commands so far (read by [`Self::commands_until`]).
+    pub(crate) fn events(&self) -> Vec<serde_json::Value> {
+        self.events.borrow().clone()
     }
 
     /// An emulated chassis with a gateway for `model` on protocol v2 on it (its link up) and
@@ -114,7 +129,10 @@ impl EmulatedChassis {
         model: &str,
         drive: &[&str],
     ) -> (Self, Gateway, scout_system_tests::Background) {
-        let chassis = Self::start();
+        let modes = Model::from_name(model)
+            .and_then(Model::four_wheel)
+            .is_some();
+        let chassis = Self::start(if modes { &["--motion-modes"] } else { &[] });
         let name = robot_name(&format!("{model}-wire"));
         let args = [
             "--slcan",
@@ -154,6 +172,10 @@ impl EmulatedChassis {
             .recv_timeout(deadline.saturating_duration_since(std::time::Instant::now()))
         {
             let json: serde_json::Value = serde_json::from_str(&line).expect("a JSON line");
+            if json.get("linear_mm_s").is_none() {
+                self.events.borrow_mut().push(json);
+                continue;
+            }
             let field = |name: &str| json[name].as_i64().expect("a field");
             let command = [
                 field("linear_mm_s"),

@@ -9,6 +9,11 @@ command mode, 26.0 V) and 0x221 (the last motion command, while fresh). Each 0x1
 differ from the one before is printed as a JSON line: {"linear_mm_s", "angular_mrad_s",
 "lateral_mm_s", "steering_mrad"}, big-endian int16 from bytes 0-1, 2-3, 4-5, 6-7. Standard
 library only; ends on SIGTERM or after 60 s.
+
+With --motion-modes it is a Ranger (`SetMotionModeFrame`, `MotionModeStateFrame`): it reports
+0x291 (its mode in byte 0, byte 1 set while changing) every 20 ms, starting in dual Ackermann
+(0); a 0x141 is printed as {"set_motion_mode": mode} and, standing still, changes the mode in
+0.2 s; a 0x111 that is not zero while it changes is printed as {"moved_while_changing": [...]}.
 """
 
 import json
@@ -24,6 +29,9 @@ MOTION_COMMAND = 0x111
 CONTROL_MODE_CONFIG = 0x421
 SYSTEM_STATE = 0x211
 MOTION_STATE = 0x221
+SET_MOTION_MODE = 0x141
+MOTION_MODE_STATE = 0x291
+MODE_CHANGE = 0.2
 CAN_COMMAND_MODE = 0x01
 COMMAND_TIMEOUT = 0.5
 PERIOD = 0.02
@@ -53,6 +61,8 @@ def main() -> None:
     command_at = 0.0
     printed = None
     count = 0
+    modes = "--motion-modes" in sys.argv[1:]
+    mode, changing_until = 0, 0.0
     pending = b""
     start = time.monotonic()
     next_report = start
@@ -78,8 +88,17 @@ def main() -> None:
                 data = bytes.fromhex(line[5 : 5 + 2 * length].decode())
                 if can_id == CONTROL_MODE_CONFIG and data[:1] == bytes([CAN_COMMAND_MODE]):
                     control_mode = CAN_COMMAND_MODE
+                elif modes and can_id == SET_MOTION_MODE and len(data) == 8:
+                    print(json.dumps({"set_motion_mode": data[0]}), flush=True)
+                    now = time.monotonic()
+                    fresh = now - command_at <= COMMAND_TIMEOUT
+                    still = not fresh or command == (0, 0, 0, 0)
+                    if still and now >= changing_until and data[0] != mode:
+                        mode, changing_until = data[0], now + MODE_CHANGE
                 elif can_id == MOTION_COMMAND and len(data) == 8:
                     fields = struct.unpack(">hhhh", data)
+                    if modes and time.monotonic() < changing_until and fields != (0, 0, 0, 0):
+                        print(json.dumps({"moved_while_changing": fields}), flush=True)
                     if control_mode == CAN_COMMAND_MODE:
                         command, command_at = fields, time.monotonic()
                     if fields != printed:
@@ -94,7 +113,11 @@ def main() -> None:
             system = struct.pack(">BBHHBB", 0, control_mode, 260, 0, 0, count)
             fresh = now - command_at <= COMMAND_TIMEOUT
             motion = struct.pack(">hhhh", *(command if fresh else (0, 0, 0, 0)))
-            write(master, frame_line(SYSTEM_STATE, system) + frame_line(MOTION_STATE, motion))
+            frames = frame_line(SYSTEM_STATE, system) + frame_line(MOTION_STATE, motion)
+            if modes:
+                mode_state = bytes([mode, 1 if now < changing_until else 0]) + bytes(6)
+                frames += frame_line(MOTION_MODE_STATE, mode_state)
+            write(master, frames)
     sys.stdout.flush()
 
 
