@@ -1468,3 +1468,63 @@ proptest! {
         }
     }
 }
+
+proptest! {
+    /// Whatever a client asks of a chassis in motion modes (a Ranger), with the chassis taking
+    /// a mode some ticks after it is asked for standing still: every tick's output is what the
+    /// mode it reports carries, and nothing while it changes.
+    #[test]
+    fn a_chassis_in_motion_modes_moves_only_in_the_mode_it_reports(
+        asks in prop::collection::vec((
+            -2.0f64..2.0,
+            prop_oneof![Just(0.0), -2.0f64..2.0],
+            prop_oneof![Just(0.0), -5.0f64..5.0],
+            1u8..40,
+        ), 1..30),
+        change in 1u8..60,
+    ) {
+        let mut bench = Bench::sideways(1.5);
+        bench.arbiter.set_turning(Turning::Modes { min_radius: 0.4764 });
+        let mut settled = Some(MotionModeV2::DualAckermann);
+        let mut changing: Option<(MotionModeV2, u8)> = None;
+        bench.arbiter.set_motion_mode(settled);
+        let joy = client("joy", 1);
+        let lease = bench.take(&joy, Class::Teleop);
+        for (linear, lateral, angular, ticks) in asks {
+            for _ in 0..ticks {
+                let drive = Request::Drive { lease, linear, lateral, angular, ttl: None };
+                bench.request(&joy, drive).expect("taken or clamped, never refused");
+                let output = bench.tick();
+                let velocity = (output.linear, output.lateral, output.angular);
+                match settled {
+                    Some(mode) => prop_assert!(
+                        crate::modes::carries(mode, velocity),
+                        "{velocity:?} in {mode}"
+                    ),
+                    None => prop_assert_eq!(velocity, (0.0, 0.0, 0.0), "while changing"),
+                }
+                // The chassis: takes the mode asked for once still, `change` ticks later.
+                match changing.as_mut() {
+                    Some((mode, left)) => {
+                        *left -= 1;
+                        if *left == 0 {
+                            settled = Some(*mode);
+                            changing = None;
+                        }
+                    }
+                    // As the core asks (`Core::follow_up_v2`): with the output at zero.
+                    None => {
+                        if let Some(wanted) = output.mode
+                            && Some(wanted) != settled
+                            && velocity == (0.0, 0.0, 0.0)
+                        {
+                            settled = None;
+                            changing = Some((wanted, change));
+                        }
+                    }
+                }
+                bench.arbiter.set_motion_mode(settled);
+            }
+        }
+    }
+}

@@ -133,8 +133,8 @@ pub struct Core {
     sideways_for: Option<Option<Protocol>>,
     /// A Ranger's motion mode as it last reported it (0x291), since the port opened.
     motion_mode: Option<MotionModeStateV2>,
-    /// The chassis last reported no motion (0x221 zero but the steering angle): a mode
-    /// changes only then.
+    /// The chassis last reported no motion (0x221 zero on every field but the steering angle,
+    /// as received): a mode changes only then.
     at_rest: bool,
     period: Duration,
     light_period: Duration,
@@ -670,6 +670,15 @@ impl Core {
 
     /// Something arrived from the port.
     pub fn handle_rx(&mut self, now: Duration, event: &RxEvent) {
+        if let RxEvent::V2(MessageV2::MotionState(motion)) = event {
+            // Every field as it came: where a Ranger reports its spin rate is read from the
+            // vendor's driver, not from a chassis.
+            self.at_rest = (
+                motion.linear_mm_s,
+                motion.angular_mrad_s,
+                motion.lateral_mm_s,
+            ) == (0, 0, 0);
+        }
         let driven = as_driven(self.model, self.motion_mode, event);
         let event = driven.as_ref().unwrap_or(event);
         let publish = self.tracker.handle_rx(event, now);
@@ -702,7 +711,6 @@ impl Core {
                 MessageV2::MotionState(motion) => {
                     self.observe_report(now);
                     let rates = (motion.linear(), motion.lateral(), motion.angular());
-                    self.at_rest = rates == (0.0, 0.0, 0.0);
                     self.observe_motion(now, rates);
                 }
                 MessageV2::MotionModeState(mode) => self.observe_motion_mode(*mode),

@@ -17,7 +17,9 @@ use scout_interface::{Class, LightsSetting, StatePayload, StatusPayload, Transpo
 use scout_protocol::link::{Outgoing, RxEvent};
 use scout_protocol::model::Model;
 use scout_protocol::units::MAX_LINEAR_SPEED;
-use scout_protocol::v2::{ControlModeV2, ErrorBitsV2, MessageV2, MotionV2, SystemStateV2};
+use scout_protocol::v2::{
+    ControlModeV2, ErrorBitsV2, MessageV2, MotionModeV2, MotionV2, SystemStateV2,
+};
 use scout_protocol::version::Protocol;
 use scout_protocol::{Counted, Light, LightCommand, LightMode, Message, MotionFeedback};
 use scout_sim::chassis::{Injection, Protection};
@@ -2273,6 +2275,11 @@ fn a_ranger_changes_mode_standing_still_and_never_moves_while_it_changes() {
         // Turning in place: spin mode.
         drive(&mut pair, (0.0, 0.0, 1.0), 250);
         assert_eq!(pair.chassis.stats().motion_mode, "spin", "{model}");
+        assert_eq!(
+            pair.last_state().motion.mode(),
+            Some((MotionModeV2::Spin, false)),
+            "{model}: the state says the mode"
+        );
         close("spin", pair.chassis.actual().angular, 1.0);
         let sent = pair.chassis.stats().last_command.expect("commands");
         let (spin_field, other) = if four_wheel.spin_in_lateral {

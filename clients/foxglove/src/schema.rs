@@ -58,7 +58,7 @@ pub fn state() -> Value {
     }));
     let motion = nullable(json!({
         "linear": number(), "angular": number(), "lateral": number(), "steering": number(),
-        "age_ms": number(),
+        "mode": nullable_of("string"), "mode_changing": boolean(), "age_ms": number(),
     }));
     let motor = nullable(json!({
         "motor": integer(), "current": number(), "rpm": integer(),

@@ -1120,7 +1120,9 @@ impl Chassis {
             self.stats.rejected += 1;
             return;
         }
-        if mode == self.motion_mode && self.changing_until.is_none() {
+        // Asked again for the mode it is in or changing to (the host repeats it until 0x291
+        // says so): nothing to do.
+        if mode == self.motion_mode {
             return;
         }
         let moving = self.wheel_speed.abs() > STANDSTILL || self.spin_rate.abs() > STANDSTILL;

@@ -690,7 +690,7 @@ pub struct LightsRequest {
 
 /// A request from a client to the gateway's arbiter.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::ControlRequest.v11")]
+#[type_name("scout::ControlRequest.v12")]
 #[repr(C)]
 pub struct ControlRequest {
     /// [`RequestKind`] as `u8`.
@@ -734,7 +734,7 @@ pub struct ControlRequest {
 
 /// The gateway's answer to one request.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("scout::ControlResponse.v11")]
+#[type_name("scout::ControlResponse.v12")]
 #[repr(C)]
 pub struct ControlResponse {
     /// The request's `seq`.
@@ -841,7 +841,7 @@ pub struct SourcePayload {
 
 /// The arbiter's status, published on every change and at least once a second.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::StatusPayload.v11")]
+#[type_name("scout::StatusPayload.v12")]
 #[repr(C)]
 pub struct StatusPayload {
     /// Rises by one with every publication.

@@ -266,6 +266,8 @@ pub fn state_field(state: &StatePayload, key: &str, now_ns: u64) -> Option<Value
                     "angular": motion.angular(),
                     "lateral": motion.lateral(),
                     "steering": motion.steering(),
+                    "mode": motion.mode().map(|(mode, _)| mode.name()),
+                    "mode_changing": motion.mode().is_some_and(|(_, changing)| changing),
                 })
             })
         }

@@ -38,9 +38,9 @@ pub mod state;
 pub mod stop_socket;
 pub mod text;
 
-/// The layout version in every payload's iceoryx2 type name (`scout::StatePayload.v11`). Raise it
+/// The layout version in every payload's iceoryx2 type name (`scout::StatePayload.v12`). Raise it
 /// when a payload changes: the sizes pinned below stop the build until it is raised.
-pub const LAYOUT_VERSION: u32 = 11;
+pub const LAYOUT_VERSION: u32 = 12;
 
 pub use control::{
     Accepted, Class, ControlRequest, ControlResponse, LightsSetting, Rejection, RejectionKind,
@@ -67,7 +67,7 @@ macro_rules! pin_layout {
     };
 }
 
-pin_layout!(state::StatePayload, 1008, 8);
+pin_layout!(state::StatePayload, 1016, 8);
 pin_layout!(control::StatusPayload, 6840, 8);
 pin_layout!(control::ControlRequest, 216, 8);
 pin_layout!(control::ControlResponse, 200, 8);

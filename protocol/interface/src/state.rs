@@ -6,7 +6,9 @@
 
 use iceoryx2::prelude::ZeroCopySend;
 use scout_protocol::model::Model;
-use scout_protocol::v2::{ControlModeV2, DriverStateV2, ErrorBitsV2, MessageV2, SwitchPosition};
+use scout_protocol::v2::{
+    ControlModeV2, DriverStateV2, ErrorBitsV2, MessageV2, MotionModeV2, SwitchPosition,
+};
 use scout_protocol::version::Protocol;
 use scout_protocol::{
     ChassisState, ControlMode, FaultBits, Light, LightCommand, LightMode, Message, Severity,
@@ -164,8 +166,13 @@ pub struct MotionPayload {
     /// Leftward, mm/s (v2, MINI OMNI; 0 otherwise).
     pub lateral_mm_s: i16,
     /// The inner wheel's steering angle, mrad, positive to the left (v2, a steered chassis:
-    /// the Hunter; 0 otherwise). Its yaw rate is in `angular_mrad_s`.
+    /// the Hunter, a Ranger; 0 otherwise). Its yaw rate is in `angular_mrad_s`.
     pub steering_mrad: i16,
+    /// A Ranger's motion mode as 0x291 last said it (`MotionModeV2` raw; see `mode_state`).
+    pub mode: u8,
+    /// 0: no motion mode reported (any chassis but a Ranger), 1: settled in `mode`, 2:
+    /// changing to it.
+    pub mode_state: u8,
 }
 
 /// One motor: v1's 0x200..0x203, or v2's 0x251..0x254 (speed, current, encoder) and
@@ -483,7 +490,7 @@ pub struct CommandPayload {
 
 /// The chassis state a gateway publishes on every decoded feedback frame and link change.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::StatePayload.v11")]
+#[type_name("scout::StatePayload.v12")]
 #[repr(C)]
 pub struct StatePayload {
     /// Increases by one with every publication.
@@ -555,6 +562,8 @@ impl StatePayload {
                     angular_mrad_s: motion.angular_mrad_s,
                     lateral_mm_s: 0,
                     steering_mrad: 0,
+                    mode: 0,
+                    mode_state: 0,
                 };
             }
             Message::MotorFeedback(motor) => {
@@ -604,7 +613,12 @@ impl StatePayload {
                     angular_mrad_s: motion.angular_mrad_s,
                     lateral_mm_s: motion.lateral_mm_s,
                     steering_mrad: motion.steering_mrad,
+                    ..self.motion
                 };
+            }
+            MessageV2::MotionModeState(mode) => {
+                self.motion.mode = mode.mode.raw();
+                self.motion.mode_state = if mode.changing != 0 { 2 } else { 1 };
             }
             MessageV2::LightState(lights) => {
                 self.lights = LightsPayload {
@@ -694,11 +708,8 @@ impl StatePayload {
                 self.firmware.received = received;
                 self.firmware.text = FixedText::new(&text);
             }
-            // A Ranger's wheels and mode: read by the gateway (its odometry and arbiter), not
-            // kept in the state (yet).
-            MessageV2::MotorAngles(_)
-            | MessageV2::MotorSpeeds(_)
-            | MessageV2::MotionModeState(_) => {}
+            // A Ranger's wheels: decoded, not kept in the state (yet).
+            MessageV2::MotorAngles(_) | MessageV2::MotorSpeeds(_) => {}
             MessageV2::MotionCommand(_)
             | MessageV2::LightCommand(_)
             | MessageV2::SetMotionMode(_)
@@ -814,6 +825,11 @@ impl MotionPayload {
     /// rad, the inner wheel's steering angle (a steered chassis).
     pub fn steering(&self) -> f64 {
         f64::from(self.steering_mrad) / 1000.0
+    }
+
+    /// A Ranger's motion mode, once reported, and whether it is changing to it.
+    pub fn mode(&self) -> Option<(MotionModeV2, bool)> {
+        (self.mode_state != 0).then(|| (MotionModeV2::from_raw(self.mode), self.mode_state == 2))
     }
 }
 

@@ -308,6 +308,13 @@ fn a_ranger_drives_every_mode_and_its_odometry_follows() {
     };
     leg((0.5, 0.0, 0.0), &|(x, _, _, _)| x >= 1.0);
     leg((0.0, 0.4, 0.0), &|(_, y, _, _)| y >= 0.8);
+    let sideways = wait_for_state(&states, LIMIT, |_| true);
+    assert_eq!(
+        sideways["motion"]["mode"], "parallel",
+        "{}",
+        sideways["motion"]
+    );
+    assert_eq!(sideways["motion"]["mode_changing"], false);
     leg((0.0, 0.0, 0.8), &turned_to(std::f64::consts::FRAC_PI_2));
     leg((0.4, 0.0, 0.4), &turned_to(std::f64::consts::PI));
     let path = 1.0 + 0.8 + std::f64::consts::FRAC_PI_2;

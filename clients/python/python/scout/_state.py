@@ -62,13 +62,17 @@ class System:
 @dataclass(frozen=True)
 class Motion:
     """The speeds the chassis reports (v1 0x131, v2 0x221): m/s and rad/s; lateral on a MINI
-    OMNI; steering (rad, the inner wheel's angle, positive to the left) on a Hunter, whose
-    yaw rate the gateway derives from it."""
+    OMNI and a Ranger; steering (rad, positive to the left) on a Hunter and a Ranger, whose
+    yaw rate (and a Ranger's sideways speed) the gateway derives from it; mode, a Ranger's
+    motion mode ("dual_ackermann", "parallel", "spin"...; None on any other chassis), and
+    whether it is changing to it."""
 
     linear: float
     angular: float
     lateral: float
     steering: float
+    mode: Optional[str]
+    mode_changing: bool
     age_ms: float
 
 
