@@ -2028,6 +2028,59 @@ fn sideways_is_refused_where_the_chassis_or_its_protocol_cannot() {
     }
 }
 
+/// Drives at `velocity` (forward, sideways, yaw rate) as teleop under `lease` for `ticks`
+/// ticks, the command taken or clamped, never refused; keeps in `most` the largest of each
+/// field sent (forward, yaw-rate field, sideways field, steering field).
+fn drive_ticks(
+    pair: &mut Pair,
+    lease: u64,
+    (linear, lateral, angular): (f64, f64, f64),
+    ticks: u32,
+    most: &mut [f64; 4],
+) {
+    for _ in 0..ticks {
+        let drive = Request::Drive {
+            lease,
+            linear,
+            lateral,
+            angular,
+            ttl: None,
+        };
+        if let Err(refused) = pair.request(TELEOP, &drive) {
+            panic!("capped, not refused: {refused:?}");
+        }
+        let next = pair.now + TICK;
+        while pair.now < next {
+            pair.step();
+        }
+        let sent = pair.chassis.stats().last_command.expect("commands");
+        for (most, sent) in
+            most.iter_mut()
+                .zip([sent.linear, sent.angular, sent.lateral, sent.steering])
+        {
+            *most = most.max(sent.abs());
+        }
+    }
+}
+
+/// A person's stop: the very next frame is zero on every field.
+fn stops_at_once_on_every_field(pair: &mut Pair, model: Model) {
+    pair.request(
+        TELEOP,
+        &Request::Stop {
+            reason: "person".into(),
+        },
+    )
+    .expect("stop");
+    pair.step();
+    let sent = pair.chassis.stats().last_command.expect("commands");
+    assert_eq!(
+        (sent.linear, sent.angular, sent.lateral, sent.steering),
+        (0.0, 0.0, 0.0, 0.0),
+        "{model}: a stop at once"
+    );
+}
+
 /// For every model on v2: asked far beyond its limits on every axis it moves, what goes on the
 /// wire is at most its limits (a limit off the wire's unit rounds down: the SCOUT's 0.5235
 /// rad/s is 523 mrad/s), a steered one never gets a yaw rate in the yaw-rate field and its
@@ -2064,29 +2117,13 @@ fn no_model_receives_more_than_its_limits_and_a_stop_is_zero_on_every_field() {
             (0.0, 0.0, 0.0, 125),
             (40.0, -lateral, -40.0, 25),
         ] {
-            for _ in 0..ticks {
-                let drive = Request::Drive {
-                    lease,
-                    linear,
-                    lateral,
-                    angular,
-                    ttl: None,
-                };
-                if let Err(refused) = pair.request(TELEOP, &drive) {
-                    panic!("{model}: capped, not refused: {refused:?}");
-                }
-                let next = pair.now + TICK;
-                while pair.now < next {
-                    pair.step();
-                }
-                let sent = pair.chassis.stats().last_command.expect("commands");
-                for (most, sent) in
-                    most.iter_mut()
-                        .zip([sent.linear, sent.angular, sent.lateral, sent.steering])
-                {
-                    *most = most.max(sent.abs());
-                }
-            }
+            drive_ticks(
+                &mut pair,
+                lease,
+                (linear, lateral, angular),
+                ticks,
+                &mut most,
+            );
         }
         let [linear, angular, lateral, steered] = most;
         assert!(
@@ -2114,20 +2151,7 @@ fn no_model_receives_more_than_its_limits_and_a_stop_is_zero_on_every_field() {
                 assert_eq!(steered, 0.0, "{model}: nothing in the steering field");
             }
         }
-        pair.request(
-            TELEOP,
-            &Request::Stop {
-                reason: "person".into(),
-            },
-        )
-        .expect("stop");
-        pair.step();
-        let sent = pair.chassis.stats().last_command.expect("commands");
-        assert_eq!(
-            (sent.linear, sent.angular, sent.lateral, sent.steering),
-            (0.0, 0.0, 0.0, 0.0),
-            "{model}: a stop at once"
-        );
+        stops_at_once_on_every_field(&mut pair, model);
     }
 }
 
@@ -2222,29 +2246,8 @@ fn a_ranger_changes_mode_standing_still_and_never_moves_while_it_changes() {
         let lease = pair.take(TELEOP, Class::Teleop).expect("a lease");
         // linear, yaw-rate field, lateral, steering field, over everything sent.
         let mut most = [0.0_f64; 4];
-        let mut drive = |pair: &mut Pair, (linear, lateral, angular): (f64, f64, f64), ticks| {
-            for _ in 0..ticks {
-                let request = Request::Drive {
-                    lease,
-                    linear,
-                    lateral,
-                    angular,
-                    ttl: None,
-                };
-                pair.request(TELEOP, &request)
-                    .unwrap_or_else(|refused| panic!("{model}: {refused:?}"));
-                let next = pair.now + TICK;
-                while pair.now < next {
-                    pair.step();
-                }
-                let sent = pair.chassis.stats().last_command.expect("commands");
-                for (most, sent) in
-                    most.iter_mut()
-                        .zip([sent.linear, sent.angular, sent.lateral, sent.steering])
-                {
-                    *most = most.max(sent.abs());
-                }
-            }
+        let mut drive = |pair: &mut Pair, velocity: (f64, f64, f64), ticks: u32| {
+            drive_ticks(pair, lease, velocity, ticks, &mut most);
         };
         let close = |what: &str, actual: f64, wanted: f64| {
             assert!(
@@ -2343,20 +2346,7 @@ fn a_ranger_changes_mode_standing_still_and_never_moves_while_it_changes() {
             "{model}: a change asked while moving"
         );
         assert!(stats.mode_changes >= 4, "{model}: {}", stats.mode_changes);
-        pair.request(
-            TELEOP,
-            &Request::Stop {
-                reason: "person".into(),
-            },
-        )
-        .expect("stop");
-        pair.step();
-        let sent = pair.chassis.stats().last_command.expect("commands");
-        assert_eq!(
-            (sent.linear, sent.angular, sent.lateral, sent.steering),
-            (0.0, 0.0, 0.0, 0.0),
-            "{model}: a stop at once"
-        );
+        stops_at_once_on_every_field(&mut pair, model);
     }
 }
 

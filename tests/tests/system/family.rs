@@ -10,6 +10,7 @@ use std::time::{Duration, Instant};
 use scout_clients::Class;
 use scout_system_tests::{Sim, TempDir};
 
+use scout_protocol::kinematics;
 use scout_protocol::model::{Drive, Model};
 use scout_protocol::version::Protocol;
 use scout_system_tests::{Gateway, connect, robot_name, scout, wait_for_state};
@@ -146,6 +147,84 @@ fn odometry(states: &scout_clients::client::StateSubscriber) -> (f64, f64, f64, 
     (value("x"), value("y"), value("yaw"), value("distance"))
 }
 
+/// A figure driven by a client as teleop, each leg ending on the gateway's odometry as a
+/// planner's would.
+struct Figure {
+    states: scout_clients::client::StateSubscriber,
+    drive: scout_clients::control::Controller,
+}
+
+impl Figure {
+    /// Control of `robot` taken, its state read from `states`.
+    fn start(
+        robot: &scout_clients::client::Robot,
+        states: scout_clients::client::StateSubscriber,
+    ) -> Self {
+        let mut drive = robot
+            .controller("figure", Some(Class::Teleop))
+            .expect("a controller");
+        let deadline = Instant::now() + LIMIT;
+        while drive.take_control().is_err() {
+            assert!(Instant::now() < deadline, "no control");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        Self { states, drive }
+    }
+
+    /// The newest odometry: x, y, yaw, distance.
+    fn odometry(&self) -> (f64, f64, f64, f64) {
+        odometry(&self.states)
+    }
+
+    /// Drives at `velocity` (forward, sideways, yaw rate) until `done` says so of the
+    /// odometry (at most 20 s).
+    fn leg(
+        &mut self,
+        (linear, lateral, angular): (f64, f64, f64),
+        done: &dyn Fn((f64, f64, f64, f64)) -> bool,
+    ) {
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while !done(self.odometry()) {
+            assert!(
+                Instant::now() < deadline,
+                "the leg ({linear}, {lateral}, {angular}) took too long: odometry {:?}",
+                self.odometry()
+            );
+            self.drive
+                .drive_body(linear, lateral, angular, None)
+                .expect("a drive");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// Stops, waits for the chassis to rest, and checks the odometry ends within 2 % of `path`
+    /// (m) of the simulator's pose; returns the simulator's statistics.
+    fn closes(mut self, sim: &mut Sim, model: &str, path: f64) -> serde_json::Value {
+        self.drive.stop("figure done").expect("a stop");
+        wait_for_state(&self.states, LIMIT, |s| {
+            let still = |key: &str| s["motion"][key].as_f64().is_some_and(|v| v.abs() < 0.001);
+            still("linear") && still("angular")
+        });
+        let (x, y, yaw, _) = self.odometry();
+        let stats = sim.stats();
+        let value = |key: &str| stats["pose"][key].as_f64().expect("a pose");
+        let (true_x, true_y, true_yaw) = (value("x"), value("y"), value("yaw"));
+        eprintln!(
+            "{model}: odometry ({x:.3}, {y:.3}, {yaw:.3}), truth ({true_x:.3}, {true_y:.3}, \
+             {true_yaw:.3}) over {path:.2} m"
+        );
+        let position = (x - true_x).hypot(y - true_y) / path;
+        let turned = kinematics::wrap_angle(yaw - true_yaw).abs() / std::f64::consts::TAU;
+        assert_within(position, turned);
+        stats
+    }
+}
+
+/// A leg's end: the odometry's heading at or past `heading` (turning left).
+fn turned_to(heading: f64) -> impl Fn((f64, f64, f64, f64)) -> bool {
+    move |(_, _, yaw, _)| kinematics::wrap_angle(heading - yaw) <= 0.0
+}
+
 /// A Hunter drives a rounded square on its simulator at 0.8 m/s (four sides of 1 m, each
 /// followed by a quarter turn on a 1.5 m circle, steering on the gateway's odometry as a planner would): the
 /// odometry ends within 2 % of the path of the simulator's pose. It refuses to turn in place.
@@ -172,57 +251,22 @@ fn a_hunter_drives_a_rounded_square_and_its_odometry_follows() {
     let said = format!("{stdout}{stderr}");
     assert_eq!(code, Some(4), "{said}");
     assert!(said.contains("a hunter2 cannot turn in place"), "{said}");
-    let mut drive = robot
-        .controller("figure", Some(Class::Teleop))
-        .expect("a controller");
-    let deadline = Instant::now() + LIMIT;
-    while drive.take_control().is_err() {
-        assert!(Instant::now() < deadline, "no control of {name}");
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    let mut figure = Figure::start(&robot, states);
     const SPEED: f64 = 0.8;
     const RADIUS: f64 = 1.5;
-    let mut leg = |speeds: (f64, f64), done: &dyn Fn((f64, f64, f64, f64)) -> bool| {
-        let deadline = Instant::now() + Duration::from_secs(20);
-        while !done(odometry(&states)) {
-            assert!(Instant::now() < deadline, "a leg took too long");
-            drive.drive(speeds.0, speeds.1).expect("a drive");
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    };
     let mut path = 0.0;
     for corner in 1..=4 {
-        let start = odometry(&states).3;
-        leg((SPEED, 0.0), &|(_, _, _, distance)| distance - start >= 1.0);
-        let heading = f64::from(corner) * std::f64::consts::FRAC_PI_2;
-        leg((SPEED, SPEED / RADIUS), &|(_, _, yaw, _)| {
-            let left = (heading - yaw + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
-                - std::f64::consts::PI;
-            left <= 0.0
+        let start = figure.odometry().3;
+        figure.leg((SPEED, 0.0, 0.0), &|(_, _, _, distance)| {
+            distance - start >= 1.0
         });
+        let heading = f64::from(corner) * std::f64::consts::FRAC_PI_2;
+        figure.leg((SPEED, 0.0, SPEED / RADIUS), &turned_to(heading));
         path += 1.0 + RADIUS * std::f64::consts::FRAC_PI_2;
     }
-    // Stop, and let the chassis come to rest before comparing.
-    drive.stop("figure done").expect("a stop");
-    wait_for_state(&states, LIMIT, |s| {
-        s["motion"]["linear"]
-            .as_f64()
-            .is_some_and(|v| v.abs() < 0.001)
-    });
-    let (x, y, yaw, _) = odometry(&states);
-    let truth = sim.stats()["pose"].clone();
-    let value = |key: &str| truth[key].as_f64().expect("a pose");
+    let stats = figure.closes(&mut sim, "hunter2", path);
+    let value = |key: &str| stats["pose"][key].as_f64().expect("a pose");
     let (true_x, true_y, true_yaw) = (value("x"), value("y"), value("yaw"));
-    eprintln!(
-        "hunter2: odometry ({x:.3}, {y:.3}, {yaw:.3}), truth ({true_x:.3}, {true_y:.3}, \
-         {true_yaw:.3}) over {path:.2} m"
-    );
-    let position = (x - true_x).hypot(y - true_y) / path;
-    let turned = ((yaw - true_yaw + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
-        - std::f64::consts::PI)
-        .abs()
-        / std::f64::consts::TAU;
-    assert_within(position, turned);
     // It went round (each leg ended on the odometry, or the test would have failed there): back
     // near where it started and facing about the way it started. Loose bounds: each leg ends a
     // client's poll late, on a loaded machine more, and the figure is 3.5 m across.
@@ -235,20 +279,29 @@ fn a_hunter_drives_a_rounded_square_and_its_odometry_follows() {
 /// the client ends.
 #[test]
 fn a_hunters_command_is_its_speed_and_steering_angle_in_0x111() {
-    let (chassis, _gateway, drive) =
-        EmulatedChassis::driven("hunter2", &["--linear", "0.3", "--angular", "0.2"]);
     let steering = Model::Hunter2.steering().expect("steered");
     let inner = steering.inner_from_central(steering.central_for(0.3, 0.2));
+    steers_in_0x111(Model::Hunter2, 0.2, inner);
+}
+
+/// `model` driven at 0.3 m/s turning at `angular` rad/s, on the emulated chassis: 0x111 carries
+/// the speed in bytes 0-1 and `inner` (the inner wheel's angle, rad) in bytes 6-7, nothing in
+/// the yaw-rate and sideways fields; zero on every field when the client ends.
+fn steers_in_0x111(model: Model, angular: f64, inner: f64) {
+    let (chassis, _gateway, drive) = EmulatedChassis::driven(
+        model.name(),
+        &["--linear", "0.3", "--angular", &angular.to_string()],
+    );
     let mrad = (inner * 1000.0).round() as i64;
     let seen = chassis.commands_until(|c| c[0] == 300 && (c[3] - mrad).abs() <= 1);
     let last = seen.last().copied().unwrap_or_default();
     assert!(
         last[0] == 300 && (last[3] - mrad).abs() <= 1,
-        "{mrad} mrad: {seen:?}"
+        "{model}: {mrad} mrad: {seen:?}"
     );
     assert!(
         seen.iter().all(|c| c[1] == 0 && c[2] == 0),
-        "no yaw rate, no sideways: {seen:?}"
+        "{model}: no yaw rate, no sideways: {seen:?}"
     );
     chassis.ends_at_zero();
     drop(drive);
@@ -276,71 +329,21 @@ fn a_ranger_drives_every_mode_and_its_odometry_follows() {
     let robot = connect(&name);
     let states = robot.subscribe().expect("state");
     wait_for_state(&states, LIMIT, |s| s["link"]["state"] == "ok");
-    let mut drive = robot
-        .controller("figure", Some(Class::Teleop))
-        .expect("a controller");
-    let deadline = Instant::now() + LIMIT;
-    while drive.take_control().is_err() {
-        assert!(Instant::now() < deadline, "no control of {name}");
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    type Done<'a> = &'a dyn Fn((f64, f64, f64, f64)) -> bool;
-    let mut leg = |(linear, lateral, angular): (f64, f64, f64), done: Done<'_>| {
-        let deadline = Instant::now() + Duration::from_secs(20);
-        while !done(odometry(&states)) {
-            assert!(
-                Instant::now() < deadline,
-                "the leg ({linear}, {lateral}, {angular}) took too long: odometry {:?}",
-                odometry(&states)
-            );
-            drive
-                .drive_body(linear, lateral, angular, None)
-                .expect("a drive");
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    };
-    let turned_to = |heading: f64| {
-        move |(_, _, yaw, _): (f64, f64, f64, f64)| {
-            (heading - yaw + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
-                - std::f64::consts::PI
-                <= 0.0
-        }
-    };
-    leg((0.5, 0.0, 0.0), &|(x, _, _, _)| x >= 1.0);
-    leg((0.0, 0.4, 0.0), &|(_, y, _, _)| y >= 0.8);
-    let sideways = wait_for_state(&states, LIMIT, |_| true);
+    let mut figure = Figure::start(&robot, states);
+    figure.leg((0.5, 0.0, 0.0), &|(x, _, _, _)| x >= 1.0);
+    figure.leg((0.0, 0.4, 0.0), &|(_, y, _, _)| y >= 0.8);
+    let sideways = wait_for_state(&figure.states, LIMIT, |_| true);
     assert_eq!(
         sideways["motion"]["mode"], "parallel",
         "{}",
         sideways["motion"]
     );
     assert_eq!(sideways["motion"]["mode_changing"], false);
-    leg((0.0, 0.0, 0.8), &turned_to(std::f64::consts::FRAC_PI_2));
-    leg((0.4, 0.0, 0.4), &turned_to(std::f64::consts::PI));
+    figure.leg((0.0, 0.0, 0.8), &turned_to(std::f64::consts::FRAC_PI_2));
+    figure.leg((0.4, 0.0, 0.4), &turned_to(std::f64::consts::PI));
     let path = 1.0 + 0.8 + std::f64::consts::FRAC_PI_2;
-    drive.stop("figure done").expect("a stop");
-    wait_for_state(&states, LIMIT, |s| {
-        s["motion"]["linear"]
-            .as_f64()
-            .is_some_and(|v| v.abs() < 0.001)
-            && s["motion"]["angular"]
-                .as_f64()
-                .is_some_and(|v| v.abs() < 0.001)
-    });
-    let (x, y, yaw, _) = odometry(&states);
-    let stats = sim.stats();
-    let value = |key: &str| stats["pose"][key].as_f64().expect("a pose");
-    let (true_x, true_y, true_yaw) = (value("x"), value("y"), value("yaw"));
-    eprintln!(
-        "ranger-mini-2: odometry ({x:.3}, {y:.3}, {yaw:.3}), truth ({true_x:.3}, {true_y:.3}, \
-         {true_yaw:.3}) over {path:.2} m"
-    );
-    let position = (x - true_x).hypot(y - true_y) / path;
-    let turned = ((yaw - true_yaw + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
-        - std::f64::consts::PI)
-        .abs()
-        / std::f64::consts::TAU;
-    assert_within(position, turned);
+    let stats = figure.closes(&mut sim, "ranger-mini-2", path);
+    let true_yaw = stats["pose"]["yaw"].as_f64().expect("a pose");
     // It went where the legs say: about 1 m ahead and 0.8 m to the left before the turns
     // (the last quarter circle of 1 m radius adds about 1 m each way), facing backwards.
     assert!(true_yaw.abs() > 2.5, "{true_yaw}");
@@ -379,20 +382,6 @@ fn a_rangers_mode_and_command_are_where_the_vendor_puts_them() {
     chassis.ends_at_zero();
     drop(drive);
 
-    let (chassis, _gateway, drive) =
-        EmulatedChassis::driven("ranger-mini-3", &["--linear", "0.3", "--angular", "0.3"]);
     let ranger = Model::RangerMini3.four_wheel().expect("a Ranger");
-    let mrad = (ranger.inner_for(0.3, 0.3) * 1000.0).round() as i64;
-    let seen = chassis.commands_until(|c| c[0] == 300 && (c[3] - mrad).abs() <= 1);
-    let last = seen.last().copied().unwrap_or_default();
-    assert!(
-        last[0] == 300 && (last[3] - mrad).abs() <= 1,
-        "{mrad} mrad: {seen:?}"
-    );
-    assert!(
-        seen.iter().all(|c| c[1] == 0 && c[2] == 0),
-        "no yaw rate, no sideways: {seen:?}"
-    );
-    chassis.ends_at_zero();
-    drop(drive);
+    steers_in_0x111(Model::RangerMini3, 0.3, ranger.inner_for(0.3, 0.3));
 }
