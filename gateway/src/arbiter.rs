@@ -1029,6 +1029,19 @@ impl Arbiter {
                 why: in_place.clone(),
             });
         }
+        // A chassis someone parked (or put in a mode the gateway does not drive in) is not
+        // taken out of it by a client's drive.
+        if let (Turning::Modes { .. }, Some(mode)) = (&self.turning, self.settled)
+            && !crate::modes::leavable(mode)
+            && (linear, lateral, angular) != (0.0, 0.0, 0.0)
+        {
+            return Err(Rejection::NotAllowed {
+                why: format!(
+                    "the chassis is in {mode} mode (0x291), which the gateway does not take it \
+                     out of: change its mode on the chassis (its RC) to drive"
+                ),
+            });
+        }
         let caps = self.config.caps(class).unwrap_or(self.global);
         let (linear_cap, angular_cap, lateral_cap) = (
             caps.linear.min(self.global.linear),
@@ -1046,9 +1059,9 @@ impl Arbiter {
         // Four steered wheels move in one mode at a time.
         let (clamped_linear, clamped_lateral, clamped_angular) = match self.turning {
             Turning::Modes { min_radius } => crate::modes::one_mode(
-                (clamped_linear, clamped_lateral, clamped_angular),
+                (linear, lateral, angular),
                 min_radius,
-                linear_cap,
+                (linear_cap, lateral_cap, angular_cap),
             ),
             Turning::InPlace | Turning::Radius { .. } => {
                 (clamped_linear, clamped_lateral, clamped_angular)

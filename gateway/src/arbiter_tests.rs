@@ -1469,6 +1469,39 @@ proptest! {
     }
 }
 
+#[test]
+fn a_parked_chassis_in_motion_modes_refuses_a_drive_and_stands_still() {
+    let mut bench = Bench::sideways(1.5);
+    bench
+        .arbiter
+        .set_turning(Turning::Modes { min_radius: 0.4764 });
+    bench.arbiter.set_motion_mode(Some(MotionModeV2::Park));
+    let joy = client("joy", 1);
+    let lease = bench.take(&joy, Class::Teleop);
+    let refused = bench.drive_body(&joy, lease, 0.3, 0.0).expect_err("parked");
+    assert_eq!(refused.kind(), RejectionKind::NotAllowed);
+    assert!(
+        refused
+            .to_string()
+            .starts_with("the chassis is in park mode (0x291)"),
+        "{refused}"
+    );
+    assert_eq!(
+        bench.drive_body(&joy, lease, 0.0, 0.0),
+        Ok(Accepted::default())
+    );
+    let output = bench.tick();
+    assert_eq!(
+        (output.linear, output.lateral, output.angular),
+        (0.0, 0.0, 0.0)
+    );
+    assert_eq!(
+        output.mode,
+        Some(MotionModeV2::Park),
+        "no other mode asked for"
+    );
+}
+
 proptest! {
     /// Whatever a client asks of a chassis in motion modes (a Ranger), with the chassis taking
     /// a mode some ticks after it is asked for standing still: every tick's output is what the

@@ -39,6 +39,7 @@ use crate::arbiter::{
 };
 use crate::command_mode::CommandMode;
 use crate::config::{GatewayConfig, OnCritical, SafetyConfig};
+use crate::modes::Handshake;
 use crate::state::{PortCounters, Publish, StateTracker};
 use scout_protocol::model::{FourWheel, Model};
 
@@ -131,11 +132,8 @@ pub struct Core {
     model: Model,
     /// The protocol the arbiter was last told the chassis moves sideways in (or not).
     sideways_for: Option<Option<Protocol>>,
-    /// A Ranger's motion mode as it last reported it (0x291), since the port opened.
-    motion_mode: Option<MotionModeStateV2>,
-    /// The chassis last reported no motion (0x221 zero on every field but the steering angle,
-    /// as received): a mode changes only then.
-    at_rest: bool,
+    /// A Ranger's motion mode: what it reports, what was asked, whether it stands still.
+    handshake: Handshake,
     period: Duration,
     light_period: Duration,
     stop_cycles: u32,
@@ -288,8 +286,7 @@ impl Core {
             max_angular: config.max_angular(),
             model: config.limits_model(),
             sideways_for: None,
-            motion_mode: None,
-            at_rest: false,
+            handshake: Handshake::default(),
             period: config.command_period(),
             light_period: Duration::from_millis(light_period_ms),
             stop_cycles: timing.stop_cycles,
@@ -605,8 +602,7 @@ impl Core {
         self.command_mode.reset();
         self.version_asked = false;
         self.follow_up.clear();
-        self.motion_mode = None;
-        self.at_rest = false;
+        self.handshake.reset();
         self.arbiter.set_motion_mode(None);
         let reconnect = std::mem::replace(&mut self.opened_before, true);
         let publish = self.tracker.handle_connected(now, reconnect);
@@ -670,16 +666,12 @@ impl Core {
 
     /// Something arrived from the port.
     pub fn handle_rx(&mut self, now: Duration, event: &RxEvent) {
-        if let RxEvent::V2(MessageV2::MotionState(motion)) = event {
-            // Every field as it came: where a Ranger reports its spin rate is read from the
-            // vendor's driver, not from a chassis.
-            self.at_rest = (
-                motion.linear_mm_s,
-                motion.angular_mrad_s,
-                motion.lateral_mm_s,
-            ) == (0, 0, 0);
+        if let RxEvent::V2(MessageV2::MotionState(motion)) = event
+            && self.model.four_wheel().is_some()
+        {
+            self.handshake.handle_motion_state(now, motion);
         }
-        let driven = as_driven(self.model, self.motion_mode, event);
+        let driven = as_driven(self.model, self.handshake.reported(), event);
         let event = driven.as_ref().unwrap_or(event);
         let publish = self.tracker.handle_rx(event, now);
         self.publish_if(publish);
@@ -713,7 +705,7 @@ impl Core {
                     let rates = (motion.linear(), motion.lateral(), motion.angular());
                     self.observe_motion(now, rates);
                 }
-                MessageV2::MotionModeState(mode) => self.observe_motion_mode(*mode),
+                MessageV2::MotionModeState(mode) => self.observe_motion_mode(now, *mode),
                 MessageV2::MotionCommand(_)
                 | MessageV2::LightCommand(_)
                 | MessageV2::ControlMode(_)
@@ -737,20 +729,24 @@ impl Core {
     }
 
     /// A Ranger's 0x291: the arbiter drives only in the mode it reports settled, nothing while
-    /// it changes.
-    fn observe_motion_mode(&mut self, mode: MotionModeStateV2) {
+    /// it changes; a mode it takes unasked latches a stop.
+    fn observe_motion_mode(&mut self, now: Duration, mode: MotionModeStateV2) {
         if self.model.four_wheel().is_none() {
             return;
         }
-        if self.motion_mode != Some(mode) {
+        if self.handshake.is_news(&mode) {
             match mode.settled() {
                 Some(settled) => info!("the chassis is in {settled} mode"),
                 None => info!("the chassis is changing to {} mode", mode.mode),
             }
             self.status_due = true;
         }
-        self.motion_mode = Some(mode);
-        self.arbiter.set_motion_mode(mode.settled());
+        if let Some(why) = self.handshake.handle_report(mode) {
+            warn!("{why}");
+            self.arbiter
+                .handle_gap(now, StopCause::ChassisMode, &why, false);
+        }
+        self.arbiter.set_motion_mode(self.handshake.settled(now));
     }
 
     /// What the current port has counted since it opened: bytes the stream decoder threw
@@ -928,13 +924,16 @@ impl Core {
                 }
                 None => {
                     self.update_sideways();
+                    if self.model.four_wheel().is_some() {
+                        self.arbiter.set_motion_mode(self.handshake.settled(now));
+                    }
                     self.arbiter.poll_output(now, self.period)
                 }
             };
             self.status_due = true;
             if let Some(frame) = self.motion(&output, now) {
                 if let Outgoing::V2(_) = frame {
-                    self.follow_up_v2(&output);
+                    self.follow_up_v2(&output, now);
                 }
                 return Some(frame);
             }
@@ -1003,21 +1002,19 @@ impl Core {
 
     /// Protocol v2: what follows a motion command in the same tick (the error clear the
     /// output asks for; standby after the last zero at exit).
-    fn follow_up_v2(&mut self, output: &Output) {
+    fn follow_up_v2(&mut self, output: &Output, now: Duration) {
         if let Some(code) = error_clear_v2(output.fault_clear) {
             self.follow_up
                 .push_back(Outgoing::V2(MessageV2::ErrorClear(code)));
         }
-        // A Ranger asked for another mode: only standing still, told so, not while it changes.
-        if let Some(wanted) = output.mode
-            && self.model.four_wheel().is_some()
-            && self
-                .motion_mode
-                .is_none_or(|mode| mode.settled().is_some_and(|m| m != wanted))
-            && self.at_rest
-            && (output.linear, output.lateral, output.angular) == (0.0, 0.0, 0.0)
+        // A Ranger asked for another mode: only standing still, not while it changes; nothing
+        // moves until it has taken it.
+        let velocity = (output.linear, output.lateral, output.angular);
+        if self.model.four_wheel().is_some()
+            && let Some(wanted) = self.handshake.poll_request(now, output.mode, velocity)
         {
             debug!("asking the chassis for {wanted} mode (0x141)");
+            self.arbiter.set_motion_mode(None);
             self.follow_up
                 .push_back(Outgoing::V2(MessageV2::SetMotionMode(wanted)));
         }
@@ -1228,9 +1225,12 @@ impl Core {
                 };
                 match (self.model.four_wheel(), self.model.steering()) {
                     (Some(ranger), _) => {
-                        let settled = self.motion_mode.and_then(|mode| mode.settled());
-                        let limits = (self.max_linear, self.max_angular);
+                        let settled = self.handshake.settled(now);
+                        // No spin beyond the model's rate, whatever the configuration says.
+                        let angular = self.max_angular.min(self.model.limits().angular);
+                        let limits = (self.max_linear, angular);
                         let (command, sent) = four_wheel_command(&ranger, settled, output, limits);
+                        self.handshake.handle_sent(now, sent);
                         (Outgoing::V2(MessageV2::MotionCommand(command)), sent)
                     }
                     // A steered chassis takes a speed and its inner wheel's angle, never a
@@ -1478,6 +1478,11 @@ fn as_driven(model: Model, mode: Option<MotionModeStateV2>, event: &RxEvent) -> 
                 let (forward, leftward) =
                     ranger.body_from_parallel(motion.linear(), motion.steering());
                 (forward, leftward, 0.0)
+            }
+            // The vendor's driver reads the spin rate in bytes 2-3 on every Ranger; a Mini 2.0,
+            // commanded in bytes 4-5, may report it there too (unverified): either is read.
+            Some(MotionModeV2::Spin) if ranger.spin_in_lateral && motion.angular_mrad_s == 0 => {
+                (0.0, 0.0, motion.lateral())
             }
             Some(MotionModeV2::Spin) => (0.0, 0.0, motion.angular()),
             Some(MotionModeV2::Park | MotionModeV2::SideSlip | MotionModeV2::Unknown(_)) | None => {

@@ -1,5 +1,6 @@
 //! A Ranger's motion modes, without I/O: the mode a body velocity needs, whether the mode the
-//! chassis is in carries it, and how a velocity no mode carries is brought to one.
+//! chassis is in carries it, how a velocity no mode carries is brought to one, and the
+//! handshake that changes the mode ([`Handshake`]).
 //!
 //! Mode selection as the vendor's driver does it (agilexrobotics/ranger_ros2
 //! `ranger_messenger.cpp` `TwistCmdCallback`): sideways is parallel, a turn tighter than the
@@ -8,10 +9,16 @@
 //! Ackermann for the wheels to point the way they already do), and a velocity is only ever
 //! carried in a mode the chassis reports it is in (0x291), never while it changes.
 
-use scout_protocol::v2::MotionModeV2;
+use std::time::Duration;
+
+use scout_protocol::v2::{MotionModeStateV2, MotionModeV2, MotionV2};
 
 /// A body velocity: m/s forward, m/s leftward, rad/s counter-clockwise.
 pub type Velocity = (f64, f64, f64);
+
+/// Below this a speed (m/s) or a yaw rate (rad/s) is zero: half of the wire's unit, what rounds
+/// to nothing in 0x111. Noise in a client's command never asks for a mode change.
+pub const RESOLUTION: f64 = 0.0005;
 
 /// The mode that carries `velocity` (`None` for zero, which every mode carries).
 pub fn wanted(velocity: Velocity) -> Option<MotionModeV2> {
@@ -41,19 +48,31 @@ pub fn carries(mode: MotionModeV2, (linear, lateral, angular): Velocity) -> bool
     }
 }
 
-/// `velocity` as one mode carries it, the wheels no faster than `speed` m/s: sideways keeps
-/// its direction and drops the turn (parallel mode does not turn); a turn tighter than
-/// `min_radius` m spins in place and drops the forward speed (as the vendor's driver does).
-/// Whatever changed is the caller's to answer as clamped.
-pub fn one_mode(velocity: Velocity, min_radius: f64, speed: f64) -> Velocity {
-    match velocity {
-        (linear, lateral, _) if lateral != 0.0 => {
-            let wheels = linear.hypot(lateral);
-            let scale = if wheels > speed { speed / wheels } else { 1.0 };
-            (linear * scale, lateral * scale, 0.0)
-        }
-        (linear, _, angular) if linear.abs() < min_radius * angular.abs() => (0.0, 0.0, angular),
-        (linear, _, angular) => (linear, 0.0, angular),
+/// `velocity` as one mode carries it, within `caps` (m/s forward, m/s sideways, rad/s; the
+/// wheels no faster than the forward cap): below [`RESOLUTION`] a component is zero; sideways
+/// keeps its direction, scaled once to every cap, and drops the turn (parallel mode does not
+/// turn); a turn tighter than `min_radius` m spins in place and drops the forward speed (as
+/// the vendor's driver does). Whatever changed is the caller's to answer as clamped.
+pub fn one_mode(velocity: Velocity, min_radius: f64, caps: Velocity) -> Velocity {
+    let quiet = |value: f64| if value.abs() < RESOLUTION { 0.0 } else { value };
+    let (linear, lateral, angular) = (quiet(velocity.0), quiet(velocity.1), quiet(velocity.2));
+    let (linear_cap, lateral_cap, angular_cap) = caps;
+    if lateral != 0.0 {
+        let scale = [
+            linear_cap / linear.abs(),
+            lateral_cap / lateral.abs(),
+            linear_cap / linear.hypot(lateral),
+        ]
+        .into_iter()
+        .fold(1.0, f64::min);
+        return (linear * scale, lateral * scale, 0.0);
+    }
+    let linear = linear.clamp(-linear_cap, linear_cap);
+    let angular = angular.clamp(-angular_cap, angular_cap);
+    if linear.abs() < min_radius * angular.abs() {
+        (0.0, 0.0, angular)
+    } else {
+        (linear, 0.0, angular)
     }
 }
 
@@ -75,12 +94,234 @@ pub fn hold(output: Velocity, settled: Option<MotionModeV2>, min_radius: f64) ->
     }
 }
 
+/// How long a chassis may take to say it is changing to a mode asked for (0x291): meanwhile
+/// nothing moves, and nothing is asked again.
+pub const REQUEST_WAIT: Duration = Duration::from_millis(500);
+/// How long the chassis must have reported standing still, and nothing been sent that moves it,
+/// before its mode is changed.
+pub const STILL_FOR: Duration = Duration::from_millis(100);
+/// What counts as standing still in 0x221's speed and rate fields, mm/s or mrad/s.
+pub const STILL_WITHIN: u16 = 5;
+
+/// A mode change as the gateway makes it with a Ranger, sans-IO: what the chassis reports
+/// (0x291, 0x221) and what was sent in; the mode the arbiter may drive in, and when to ask
+/// for another (0x141), out. A mode is asked for only standing still, in a mode the gateway
+/// may leave (never park, side slip or one no source names: someone put it there), at most
+/// once a [`REQUEST_WAIT`]; from the ask until the chassis says it took it, or the wait ends,
+/// the arbiter drives in no mode. A mode the chassis takes unasked is reported once.
+#[derive(Debug, Clone, Default)]
+pub struct Handshake {
+    /// 0x291 as last reported, since the port opened.
+    reported: Option<MotionModeStateV2>,
+    /// The mode asked for last, and when (cleared when the chassis reports taking it, or the
+    /// wait ends).
+    pending: Option<(MotionModeV2, Duration)>,
+    /// The mode asked for last, kept: a late report of taking it is no surprise.
+    asked: Option<MotionModeV2>,
+    /// The last 0x221 said standing still.
+    still: bool,
+    /// When the chassis last reported moving, or a command that moves it went out.
+    moved_at: Option<Duration>,
+}
+
+impl Handshake {
+    /// A new port: nothing reported, nothing asked.
+    pub fn reset(&mut self) {
+        *self = Self::default();
+    }
+
+    /// 0x221 as received (every field as it came: where a Ranger Mini 2.0 reports its spin rate
+    /// is the vendor driver's reading, not a chassis').
+    pub fn handle_motion_state(&mut self, now: Duration, motion: &MotionV2) {
+        self.still = [
+            motion.linear_mm_s,
+            motion.angular_mrad_s,
+            motion.lateral_mm_s,
+        ]
+        .iter()
+        .all(|value| value.unsigned_abs() <= STILL_WITHIN);
+        if !self.still {
+            self.moved_at = Some(now);
+        }
+    }
+
+    /// A motion command went out at `sent` (forward, sideways, yaw rate).
+    pub fn handle_sent(&mut self, now: Duration, sent: Velocity) {
+        if sent != (0.0, 0.0, 0.0) {
+            self.moved_at = Some(now);
+        }
+    }
+
+    /// 0x291. Returns `Some(why)` when the chassis left the mode it was settled in for one the
+    /// gateway did not ask for (its RC, its own doing): a stop's reason.
+    pub fn handle_report(&mut self, report: MotionModeStateV2) -> Option<String> {
+        let before = self.reported.replace(report);
+        if self.pending.is_some_and(|(mode, _)| mode == report.mode) {
+            self.pending = None;
+        }
+        let left = before.and_then(|before| before.settled());
+        match left {
+            Some(left) if left != report.mode && self.asked != Some(report.mode) => Some(format!(
+                "the chassis left {left} mode for {} mode unasked (0x291): check who changed it \
+                 (its RC), then release the stop and take control again",
+                report.mode
+            )),
+            _ => None,
+        }
+    }
+
+    /// 0x291 as last reported since the port opened.
+    pub fn reported(&self) -> Option<MotionModeStateV2> {
+        self.reported
+    }
+
+    /// Whether 0x291 says something new (its mode, or whether it changes), for the log.
+    pub fn is_news(&self, report: &MotionModeStateV2) -> bool {
+        self.reported.map(|r| (r.mode, r.changing != 0))
+            != Some((report.mode, report.changing != 0))
+    }
+
+    /// The mode the arbiter may drive in at `now`: the one the chassis reports settled in,
+    /// none while it changes, before it has said, or while a mode asked for is pending.
+    pub fn settled(&mut self, now: Duration) -> Option<MotionModeV2> {
+        if self.pending.is_some_and(|(_, at)| now >= at + REQUEST_WAIT) {
+            self.pending = None;
+        }
+        match self.pending {
+            Some(_) => None,
+            None => self.reported.and_then(|report| report.settled()),
+        }
+    }
+
+    /// Whether to ask for `wanted` (the arbiter's [`crate::arbiter::Output::mode`]) now, with
+    /// `output` going out: only another mode than the one reported settled, one the gateway may
+    /// leave, standing still, nothing pending. A `Some` is sent as 0x141 and is pending.
+    pub fn poll_request(
+        &mut self,
+        now: Duration,
+        wanted: Option<MotionModeV2>,
+        output: Velocity,
+    ) -> Option<MotionModeV2> {
+        let wanted = wanted?;
+        let leavable = match self.reported {
+            None => true,
+            Some(report) => match report.settled() {
+                Some(mode) => mode != wanted && leavable(mode),
+                None => false,
+            },
+        };
+        let still = self.still
+            && output == (0.0, 0.0, 0.0)
+            && self.moved_at.is_none_or(|at| now >= at + STILL_FOR);
+        if !leavable || !still || self.pending.is_some() {
+            return None;
+        }
+        self.pending = Some((wanted, now));
+        self.asked = Some(wanted);
+        Some(wanted)
+    }
+}
+
+/// Whether the gateway may take the chassis out of `mode` by itself: the modes it drives in,
+/// not park, side slip or one no source names.
+pub fn leavable(mode: MotionModeV2) -> bool {
+    match mode {
+        MotionModeV2::DualAckermann | MotionModeV2::Parallel | MotionModeV2::Spin => true,
+        MotionModeV2::Park | MotionModeV2::SideSlip | MotionModeV2::Unknown(_) => false,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use proptest::prelude::*;
 
     const RADIUS: f64 = 0.4764;
+    const CAPS: Velocity = (1.5, 1.5, 4.8);
+    const MS: Duration = Duration::from_millis(1);
+
+    fn report(mode: MotionModeV2, changing: bool) -> MotionModeStateV2 {
+        MotionModeStateV2::new(mode, changing)
+    }
+
+    fn still() -> MotionV2 {
+        MotionV2::default()
+    }
+
+    #[test]
+    fn a_mode_is_asked_standing_still_and_nothing_moves_until_it_is_taken() {
+        let mut handshake = Handshake::default();
+        let zero = (0.0, 0.0, 0.0);
+        // Nothing reported yet: no mode to drive in; asked once standing still.
+        assert_eq!(handshake.settled(Duration::ZERO), None);
+        assert_eq!(
+            handshake.handle_report(report(MotionModeV2::DualAckermann, false)),
+            None
+        );
+        assert_eq!(
+            handshake.settled(Duration::ZERO),
+            Some(MotionModeV2::DualAckermann)
+        );
+        let spin = Some(MotionModeV2::Spin);
+        // Not reported still yet, then still but a moving command went out just now.
+        assert_eq!(handshake.poll_request(Duration::ZERO, spin, zero), None);
+        handshake.handle_motion_state(10 * MS, &still());
+        handshake.handle_sent(20 * MS, (0.02, 0.0, 0.0));
+        assert_eq!(handshake.poll_request(40 * MS, spin, zero), None);
+        assert_eq!(
+            handshake.poll_request(120 * MS, spin, (0.01, 0.0, 0.0)),
+            None
+        );
+        assert_eq!(handshake.poll_request(120 * MS, spin, zero), spin);
+        // Pending: no mode to drive in, even the one still reported, and no second ask.
+        assert_eq!(handshake.settled(140 * MS), None);
+        assert_eq!(handshake.poll_request(140 * MS, spin, zero), None);
+        assert_eq!(
+            handshake.handle_report(report(MotionModeV2::DualAckermann, false)),
+            None
+        );
+        assert_eq!(handshake.settled(160 * MS), None);
+        // Taken: changing, then settled.
+        assert_eq!(
+            handshake.handle_report(report(MotionModeV2::Spin, true)),
+            None
+        );
+        assert_eq!(handshake.settled(180 * MS), None);
+        assert_eq!(
+            handshake.handle_report(report(MotionModeV2::Spin, false)),
+            None
+        );
+        assert_eq!(handshake.settled(200 * MS), spin);
+        // Unasked: the chassis leaves spin for parallel by itself.
+        let why = handshake
+            .handle_report(report(MotionModeV2::Parallel, false))
+            .expect("unasked");
+        assert!(
+            why.starts_with("the chassis left spin mode for parallel mode unasked"),
+            "{why}"
+        );
+        // Parked by someone: never left by the gateway.
+        handshake.handle_report(report(MotionModeV2::Park, false));
+        assert_eq!(handshake.poll_request(1000 * MS, spin, zero), None);
+    }
+
+    #[test]
+    fn a_mode_the_chassis_does_not_take_is_asked_again_after_the_wait() {
+        let mut handshake = Handshake::default();
+        handshake.handle_report(report(MotionModeV2::DualAckermann, false));
+        handshake.handle_motion_state(Duration::ZERO, &still());
+        let parallel = Some(MotionModeV2::Parallel);
+        let zero = (0.0, 0.0, 0.0);
+        assert_eq!(handshake.poll_request(200 * MS, parallel, zero), parallel);
+        assert_eq!(handshake.settled(699 * MS), None);
+        assert_eq!(handshake.poll_request(699 * MS, parallel, zero), None);
+        // The wait over: the reported mode is driven in again, and asked again.
+        assert_eq!(
+            handshake.settled(700 * MS),
+            Some(MotionModeV2::DualAckermann)
+        );
+        assert_eq!(handshake.poll_request(700 * MS, parallel, zero), parallel);
+    }
 
     #[test]
     fn the_vendors_selection() {
@@ -92,11 +333,19 @@ mod tests {
         assert_eq!(wanted((0.0, 0.0, 0.0)), None);
         // Turning faster than it drives (ranger_ros2#23: its wheels at 45 degrees, not moving):
         // a spin in place, said to be clamped.
-        assert_eq!(one_mode((0.1, 0.0, 1.0), RADIUS, 1.5), (0.0, 0.0, 1.0));
-        assert_eq!(one_mode((0.5, 0.0, 1.0), RADIUS, 1.5), (0.5, 0.0, 1.0));
-        assert_eq!(one_mode((0.3, 0.4, 0.5), RADIUS, 1.5), (0.3, 0.4, 0.0));
-        let (linear, lateral, _) = one_mode((1.5, 1.5, 0.0), RADIUS, 1.5);
+        assert_eq!(one_mode((0.1, 0.0, 1.0), RADIUS, CAPS), (0.0, 0.0, 1.0));
+        assert_eq!(one_mode((0.5, 0.0, 1.0), RADIUS, CAPS), (0.5, 0.0, 1.0));
+        assert_eq!(one_mode((0.3, 0.4, 0.5), RADIUS, CAPS), (0.3, 0.4, 0.0));
+        let (linear, lateral, _) = one_mode((1.5, 1.5, 0.0), RADIUS, CAPS);
         assert!((linear.hypot(lateral) - 1.5).abs() < 1e-12 && linear == lateral);
+        // One scale for both axes: the direction asked (3:1) kept under a sideways cap.
+        let (linear, lateral, _) = one_mode((3.0, 1.0, 0.0), RADIUS, (1.5, 0.2, 4.8));
+        assert!(
+            (linear / lateral - 3.0).abs() < 1e-9 && lateral <= 0.2,
+            "{linear} {lateral}"
+        );
+        // Noise below the wire's unit asks for no mode.
+        assert_eq!(one_mode((0.5, 1e-12, 1e-9), RADIUS, CAPS), (0.5, 0.0, 0.0));
         // Straight ahead goes on in parallel mode.
         assert!(carries(MotionModeV2::Parallel, (0.5, 0.0, 0.0)));
         assert!(!carries(MotionModeV2::DualAckermann, (0.0, 0.0, 0.5)));
@@ -111,7 +360,7 @@ mod tests {
             angular in prop_oneof![Just(0.0), -5.0f64..5.0],
             mode in 0u8..6,
         ) {
-            let velocity = one_mode((linear, lateral, angular), RADIUS, 1.5);
+            let velocity = one_mode((linear, lateral, angular), RADIUS, CAPS);
             match wanted(velocity) {
                 Some(mode) => prop_assert!(carries(mode, velocity), "{velocity:?} in {mode}"),
                 None => prop_assert_eq!(velocity, (0.0, 0.0, 0.0)),
