@@ -2292,6 +2292,25 @@ fn a_ranger_changes_mode_standing_still_and_never_moves_while_it_changes() {
         };
         assert_eq!(other, 0.0, "{model}: {sent:?}");
         close("spin field", spin_field, 1.0);
+        // The other way round: spinning clockwise, backing up on a circle to the right, backing
+        // up diagonally to the left; the dual Ackermann angle never past its own widest.
+        drive(&mut pair, (0.0, 0.0, -0.8), 200);
+        close("clockwise spin", pair.chassis.actual().angular, -0.8);
+        for _ in 0..250 {
+            drive(&mut pair, (-0.4, 0.0, 0.4), 1);
+            let sent = pair.chassis.stats().last_command.expect("commands");
+            assert!(
+                sent.steering.abs() <= four_wheel.max_inner,
+                "{model}: {sent:?}"
+            );
+        }
+        let actual = pair.chassis.actual();
+        close("backing up", actual.linear, -0.4);
+        close("backing up, turning", actual.angular, 0.4);
+        drive(&mut pair, (-0.3, 0.2, 0.0), 300);
+        let actual = pair.chassis.actual();
+        close("backing up diagonally", actual.linear, -0.3);
+        close("to the left", actual.lateral, 0.2);
         // The odometry followed every mode.
         let (odometry, truth) = (pair.last_state().odometry, pair.chassis.pose());
         let error = (odometry.x - truth.x).hypot(odometry.y - truth.y);
