@@ -1014,7 +1014,6 @@ impl Core {
             && let Some(wanted) = self.handshake.poll_request(now, output.mode, velocity)
         {
             debug!("asking the chassis for {wanted} mode (0x141)");
-            self.arbiter.set_motion_mode(None);
             self.follow_up
                 .push_back(Outgoing::V2(MessageV2::SetMotionMode(wanted)));
         }

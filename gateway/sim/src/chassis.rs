@@ -18,7 +18,7 @@ use serde::Serialize;
 
 use scout_protocol::Transport;
 use scout_protocol::model::{FourWheel, Model, Steering};
-use scout_protocol::v2::{MessageV2, MotionModeV2};
+use scout_protocol::v2::{MessageV2, MotionModeStateV2, MotionModeV2, MotionV2};
 
 #[path = "chassis_v2.rs"]
 mod v2;
@@ -1141,15 +1141,11 @@ impl Chassis {
     /// A Ranger's 0x111 in the mode it is in: the wheels' speed and angle, or the spin rate
     /// (bytes 2-3, or 4-5 on a Mini 2.0: the other field then means nothing). Nothing while
     /// it changes its mode.
-    fn four_wheel_target(
-        &mut self,
-        ranger: &FourWheel,
-        command: &scout_protocol::v2::MotionV2,
-    ) -> Option<Ignored> {
+    fn four_wheel_target(&mut self, ranger: &FourWheel, command: &MotionV2) -> Option<Ignored> {
         let (max_linear, max_angular) = (self.params.max_linear, self.params.max_angular);
         if self.changing_until.is_some() {
             self.target = Speeds::default();
-            if *command != scout_protocol::v2::MotionV2::default() {
+            if *command != MotionV2::default() {
                 self.stats.ignored.mode_changing += 1;
             }
             return Some(Ignored::ModeChanging);
@@ -1184,14 +1180,9 @@ impl Chassis {
     }
 
     /// A Ranger's 0x221 (its wheels' speed and angle, or its spin rate) and 0x291.
-    fn four_wheel_state(
-        &self,
-    ) -> (
-        scout_protocol::v2::MotionV2,
-        scout_protocol::v2::MotionModeStateV2,
-    ) {
+    fn four_wheel_state(&self) -> (MotionV2, MotionModeStateV2) {
         let spinning = self.motion_mode == MotionModeV2::Spin;
-        let motion = scout_protocol::v2::MotionV2 {
+        let motion = MotionV2 {
             linear_mm_s: to_i16(if spinning {
                 0.0
             } else {
@@ -1205,10 +1196,7 @@ impl Chassis {
             lateral_mm_s: 0,
             steering_mrad: to_i16(self.steering * 1000.0),
         };
-        let mode = scout_protocol::v2::MotionModeStateV2::new(
-            self.motion_mode,
-            self.changing_until.is_some(),
-        );
+        let mode = MotionModeStateV2::new(self.motion_mode, self.changing_until.is_some());
         (motion, mode)
     }
 

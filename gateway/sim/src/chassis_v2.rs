@@ -216,27 +216,23 @@ impl Chassis {
         }
         self.last_valid_motion = Some(now);
         if let Some(ranger) = self.params.four_wheel() {
-            let ignored = self.four_wheel_target(&ranger, &command);
-            if ignored.is_some() {
-                return ignored;
+            if let Some(ignored) = self.four_wheel_target(&ranger, &command) {
+                return Some(ignored);
             }
-            if self.drive_inhibited() {
-                self.stats.ignored.inhibited += 1;
-                return Some(Ignored::Inhibited);
+        } else {
+            self.target = Speeds {
+                linear: command.linear().clamp(-max_linear, max_linear),
+                lateral: command.lateral().clamp(-max_lateral, max_lateral),
+                angular: command.angular().clamp(-max_angular, max_angular),
+            };
+            if let Some(steering) = self.params.steering() {
+                // A steered chassis turns by its wheels' angle; its yaw-rate field means
+                // nothing.
+                self.target.angular = 0.0;
+                self.target_steering = command
+                    .steering()
+                    .clamp(-steering.max_inner, steering.max_inner);
             }
-            return None;
-        }
-        self.target = Speeds {
-            linear: command.linear().clamp(-max_linear, max_linear),
-            lateral: command.lateral().clamp(-max_lateral, max_lateral),
-            angular: command.angular().clamp(-max_angular, max_angular),
-        };
-        if let Some(steering) = self.params.steering() {
-            // A steered chassis turns by its wheels' angle; its yaw-rate field means nothing.
-            self.target.angular = 0.0;
-            self.target_steering = command
-                .steering()
-                .clamp(-steering.max_inner, steering.max_inner);
         }
         if self.drive_inhibited() {
             self.stats.ignored.inhibited += 1;
