@@ -352,6 +352,9 @@ pub struct Output {
     /// The motion mode the chassis is to be in ([`Turning::Modes`]; `None`: any, or it has
     /// none). Another than the one it reports comes with zero speed: change to it standing still.
     pub mode: Option<MotionModeV2>,
+    /// A client's fresh command asks to move, whatever holds the output back (a mode change,
+    /// the brake, [`Arbiter::set_held`]): a Hunter's brake is released for it alone.
+    pub drive: bool,
 }
 
 impl Output {
@@ -363,6 +366,7 @@ impl Output {
         fault_clear: FaultClear::None,
         limited: false,
         mode: None,
+        drive: false,
     };
 }
 
@@ -501,6 +505,8 @@ pub struct Arbiter {
     turning: Turning,
     /// The motion mode the chassis reports it is settled in ([`Turning::Modes`]).
     settled: Option<MotionModeV2>,
+    /// The chassis cannot move yet (its brake not reported released): the output is zero.
+    held: bool,
     stops: Vec<Stop>,
     /// The gap causes present now: their stops cannot be released.
     present: Vec<StopCause>,
@@ -541,6 +547,7 @@ impl Arbiter {
             sideways,
             turning: Turning::InPlace,
             settled: None,
+            held: false,
             stops: Vec::new(),
             present: Vec::new(),
             autonomy_armed: false,
@@ -574,6 +581,13 @@ impl Arbiter {
     /// ([`Turning::Modes`]). Nothing moves in a mode until the chassis reports it taken.
     pub fn set_motion_mode(&mut self, settled: Option<MotionModeV2>) {
         self.settled = settled;
+    }
+
+    /// Whether the chassis cannot move yet (a Hunter's parking brake, until it reports it
+    /// released): the output stays zero, and ramps up from zero once it can. A held drive
+    /// still says [`Output::drive`], which is what releases the brake.
+    pub fn set_held(&mut self, held: bool) {
+        self.held = held;
     }
 
     /// Bars autonomy from taking control while `why` holds (a critical battery), or lifts the
@@ -1485,6 +1499,7 @@ impl Arbiter {
         // In motion modes: a drive the mode the chassis is in does not carry ramps to zero,
         // asking for the mode that does (changed standing still).
         let target = (linear, lateral, angular);
+        let drive = target != (0.0, 0.0, 0.0);
         let ((linear, lateral, angular), mode) = match self.turning {
             Turning::Modes { .. } => match self.settled {
                 Some(mode) if crate::modes::carries(mode, target) => (target, Some(mode)),
@@ -1532,6 +1547,10 @@ impl Arbiter {
             ),
             Turning::InPlace | Turning::Radius { .. } => (next_linear, next_lateral, next_angular),
         };
+        let (next_linear, next_lateral, next_angular) = match self.held {
+            true => (0.0, 0.0, 0.0),
+            false => (next_linear, next_lateral, next_angular),
+        };
         self.output = Output {
             linear: next_linear,
             lateral: next_lateral,
@@ -1542,6 +1561,7 @@ impl Arbiter {
                 || next_lateral != lateral
                 || next_angular != angular,
             mode,
+            drive,
         };
         self.output
     }

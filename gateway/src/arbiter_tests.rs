@@ -1561,3 +1561,38 @@ proptest! {
         }
     }
 }
+
+proptest! {
+    /// Whatever a client asks, and whenever the chassis holds (a Hunter's brake not reported
+    /// released): every held tick's output is zero on every field and still says a drive is
+    /// asked (which is what releases the brake); once released, the output ramps up from zero,
+    /// never jumping past one tick's acceleration.
+    #[test]
+    fn a_held_chassis_gets_zero_and_ramps_up_from_it_once_released(
+        asks in prop::collection::vec((-2.0f64..2.0, -2.0f64..2.0, 1u8..20, any::<bool>()), 1..30),
+    ) {
+        let mut bench = Bench::new();
+        let joy = client("joy", 1);
+        let lease = bench.take(&joy, Class::Teleop);
+        let mut before = 0.0_f64;
+        let acceleration = ArbiterConfig::default().limits.linear_acceleration;
+        for (linear, angular, ticks, held) in asks {
+            bench.arbiter.set_held(held);
+            for _ in 0..ticks {
+                let drive = Request::Drive { lease, linear, lateral: 0.0, angular, ttl: None };
+                bench.request(&joy, drive).expect("taken or clamped, never refused");
+                let output = bench.tick();
+                prop_assert_eq!(output.drive, linear != 0.0 || angular != 0.0);
+                if held {
+                    prop_assert_eq!((output.linear, output.lateral, output.angular), (0.0, 0.0, 0.0));
+                }
+                let step = (output.linear - before).abs();
+                prop_assert!(
+                    output.linear.abs() <= before.abs() || step <= acceleration * TICK.as_secs_f64() + 1e-9,
+                    "{before} to {}", output.linear
+                );
+                before = output.linear;
+            }
+        }
+    }
+}

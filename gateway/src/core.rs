@@ -24,8 +24,8 @@ use scout_protocol::link::{Outgoing, RxEvent};
 use scout_protocol::sequence::RollingCounter;
 use scout_protocol::units;
 use scout_protocol::v2::{
-    ControlModeV2, ErrorClearV2, LightsV2, MessageV2, MotionModeStateV2, MotionModeV2, MotionV2,
-    SystemStateV2, VersionRequestForm,
+    BrakeV2, ControlModeV2, ErrorClearV2, LightsV2, MessageV2, MotionModeStateV2, MotionModeV2,
+    MotionV2, SystemStateV2, VersionRequestForm,
 };
 use scout_protocol::version::Protocol;
 use scout_protocol::{
@@ -37,6 +37,7 @@ use tracing::{debug, info, warn};
 use crate::arbiter::{
     Accepted, Answer, Arbiter, Caps, LightsSetting, Origin, Output, Sideways, Turning,
 };
+use crate::brake::ParkingBrake;
 use crate::command_mode::CommandMode;
 use crate::config::{GatewayConfig, OnCritical, SafetyConfig};
 use crate::modes::Handshake;
@@ -134,6 +135,8 @@ pub struct Core {
     sideways_for: Option<Option<Protocol>>,
     /// A Ranger's motion mode: what it reports, what was asked, whether it stands still.
     handshake: Handshake,
+    /// A Hunter's parking brake: what it reports, what was asked, whether it stands still.
+    brake: ParkingBrake,
     period: Duration,
     light_period: Duration,
     stop_cycles: u32,
@@ -287,6 +290,7 @@ impl Core {
             model: config.limits_model(),
             sideways_for: None,
             handshake: Handshake::default(),
+            brake: ParkingBrake::default(),
             period: config.command_period(),
             light_period: Duration::from_millis(light_period_ms),
             stop_cycles: timing.stop_cycles,
@@ -468,6 +472,24 @@ impl Core {
                 .handle_gap(now, StopCause::ChassisMode, &lost.reason, false);
             self.status_due = true;
         }
+        if self.model.parking_brake() {
+            self.observe_brake(now, system.brake());
+        }
+    }
+
+    /// A Hunter's 0x211 byte 6: the arbiter drives only once the chassis reports its brake
+    /// released; locked unasked during a drive latches a stop.
+    fn observe_brake(&mut self, now: Duration, brake: BrakeV2) {
+        if self.brake.reported() != Some(brake) {
+            info!("the chassis' parking brake is {brake} (0x211 byte 6)");
+            self.status_due = true;
+        }
+        if let Some(why) = self.brake.handle_report(brake) {
+            warn!("{why}");
+            self.arbiter
+                .handle_gap(now, StopCause::ChassisMode, &why, false);
+        }
+        self.arbiter.set_held(!self.brake.released(now));
     }
 
     /// A motion report at `now`: reports that stand for more time than the gateway's clock
@@ -604,6 +626,8 @@ impl Core {
         self.follow_up.clear();
         self.handshake.reset();
         self.arbiter.set_motion_mode(None);
+        self.brake.reset();
+        self.arbiter.set_held(self.model.parking_brake());
         let reconnect = std::mem::replace(&mut self.opened_before, true);
         let publish = self.tracker.handle_connected(now, reconnect);
         self.publish_if(publish);
@@ -666,10 +690,13 @@ impl Core {
 
     /// Something arrived from the port.
     pub fn handle_rx(&mut self, now: Duration, event: &RxEvent) {
-        if let RxEvent::V2(MessageV2::MotionState(motion)) = event
-            && self.model.four_wheel().is_some()
-        {
-            self.handshake.handle_motion_state(now, motion);
+        if let RxEvent::V2(MessageV2::MotionState(motion)) = event {
+            if self.model.four_wheel().is_some() {
+                self.handshake.handle_motion_state(now, motion);
+            }
+            if self.model.parking_brake() {
+                self.brake.handle_motion_state(now, motion);
+            }
         }
         let driven = as_driven(self.model, self.handshake.reported(), event);
         let event = driven.as_ref().unwrap_or(event);
@@ -716,6 +743,7 @@ impl Core {
                 | MessageV2::ActuatorHigh(_)
                 | MessageV2::ActuatorLow(_)
                 | MessageV2::SetMotionMode(_)
+                | MessageV2::Brake(_)
                 | MessageV2::MotorAngles(_)
                 | MessageV2::MotorSpeeds(_)
                 | MessageV2::Odometer(_)
@@ -927,6 +955,9 @@ impl Core {
                     if self.model.four_wheel().is_some() {
                         self.arbiter.set_motion_mode(self.handshake.settled(now));
                     }
+                    if self.model.parking_brake() {
+                        self.arbiter.set_held(!self.brake.released(now));
+                    }
                     self.arbiter.poll_output(now, self.period)
                 }
             };
@@ -1016,6 +1047,17 @@ impl Core {
             debug!("asking the chassis for {wanted} mode (0x141)");
             self.follow_up
                 .push_back(Outgoing::V2(MessageV2::SetMotionMode(wanted)));
+        }
+        // A Hunter's brake: released for a client's drive, locked once idle standing still.
+        if self.model.parking_brake() {
+            if let Some(why) = self.brake.poll_unanswered(now) {
+                warn!("{why}");
+            }
+            if let Some(brake) = self.brake.poll_request(now, output.drive, velocity) {
+                debug!("asking the chassis for its parking brake {brake} (0x131)");
+                self.follow_up
+                    .push_back(Outgoing::V2(MessageV2::Brake(brake)));
+            }
         }
         if self.shutdown == Some(0) {
             info!("leaving the chassis in standby (0x421 [00])");
@@ -1235,14 +1277,23 @@ impl Core {
                     // A steered chassis takes a speed and its inner wheel's angle, never a
                     // yaw rate (vendor SDK `hunter_base.hpp`: angular 0, steering in 6-7).
                     (None, Some(steering)) => {
-                        let central = steering.central_for(output.linear, output.angular);
+                        // Nothing moves with the brake not reported released, whatever the
+                        // output.
+                        let (linear, angular) =
+                            match self.model.parking_brake() && !self.brake.released(now) {
+                                true => (0.0, 0.0),
+                                false => (output.linear, output.angular),
+                            };
+                        let central = steering.central_for(linear, angular);
                         let command = within(
-                            MotionV2::from_si(output.linear, 0.0)
+                            MotionV2::from_si(linear, 0.0)
                                 .with_steering(steering.inner_from_central(central)),
                             steering.max_inner,
                         );
                         let angular =
                             steering.yaw_rate_from_inner(command.linear(), command.steering());
+                        self.brake
+                            .handle_sent(now, (command.linear(), 0.0, angular));
                         (
                             Outgoing::V2(MessageV2::MotionCommand(command)),
                             (command.linear(), 0.0, angular),

@@ -18,7 +18,7 @@ use scout_protocol::link::{Outgoing, RxEvent};
 use scout_protocol::model::Model;
 use scout_protocol::units::MAX_LINEAR_SPEED;
 use scout_protocol::v2::{
-    ControlModeV2, ErrorBitsV2, MessageV2, MotionModeV2, MotionV2, SystemStateV2,
+    BrakeV2, ControlModeV2, ErrorBitsV2, MessageV2, MotionModeV2, MotionV2, SystemStateV2,
 };
 use scout_protocol::version::Protocol;
 use scout_protocol::{Counted, Light, LightCommand, LightMode, Message, MotionFeedback};
@@ -2224,6 +2224,129 @@ fn a_hunter_steers_by_its_wheels_and_its_odometry_follows() {
         "{:?}",
         pair.chassis.actual()
     );
+}
+
+/// The 0x131 frames sent, with when.
+fn brake_requests(pair: &Pair) -> Vec<(Duration, BrakeV2)> {
+    pair.v2_others()
+        .into_iter()
+        .filter_map(|(at, message)| match message {
+            MessageV2::Brake(brake) => Some((at, brake)),
+            _ => None,
+        })
+        .collect()
+}
+
+/// A Hunter's parking brake (the simulated one starts locked, as the vendor's manual says a
+/// Hunter must be released before it runs): nothing asks to release it until a client drives,
+/// nothing moves until the chassis reports it released, it is locked once nobody drives and
+/// the chassis stands still, a lock the chassis makes during a drive is a stop a client that
+/// keeps streaming does not get past, and a release of that stop releases no brake.
+#[test]
+fn a_hunters_brake_is_released_only_for_a_drive_and_locked_when_idle() {
+    let hunter = GatewayConfig {
+        model: Some(Model::Hunter2),
+        ..config(Protocol::V2)
+    };
+    let mut pair = Pair::with_firmware(Protocol::V2, Transport::Can, &hunter, Start::Clean);
+    pair.run(Duration::from_secs(2));
+    assert!(brake_requests(&pair).is_empty(), "nothing asked at start");
+    assert_eq!(pair.chassis.stats().brake, "locked");
+    let lease = pair.take(TELEOP, Class::Teleop).expect("a lease");
+    let ahead = Request::Drive {
+        lease,
+        linear: 0.5,
+        lateral: 0.0,
+        angular: 0.0,
+        ttl: None,
+    };
+    pair.request(TELEOP, &ahead).expect("a drive");
+    let asked_at = pair.now;
+    pair.run_until(ms(500), |pair| pair.chassis.stats().brake == "released");
+    let released = brake_requests(&pair);
+    assert_eq!(released.len(), 1, "{released:?}");
+    assert_eq!(released[0].1, BrakeV2::Released);
+    // Nothing moving went out before the ask, nor reached the chassis with its brake locked.
+    let first_moving = pair
+        .motion_commands()
+        .into_iter()
+        .filter(|(at, motion)| *at >= asked_at && motion.linear != 0.0)
+        .map(|(at, _)| at)
+        .min();
+    assert!(
+        first_moving.is_none_or(|first| first > released[0].0),
+        "{first_moving:?}"
+    );
+    assert_eq!(pair.chassis.stats().ignored.brake_locked, 0);
+    for _ in 0..100 {
+        pair.request(TELEOP, &ahead).expect("driving");
+        let next = pair.now + TICK;
+        while pair.now < next {
+            pair.step();
+        }
+    }
+    assert!(
+        pair.chassis.actual().linear > 0.4,
+        "{:?}",
+        pair.chassis.actual()
+    );
+    // The drive ends: the chassis stops, and a second later the brake is locked.
+    pair.run(Duration::from_secs(3));
+    assert_eq!(pair.chassis.stats().brake, "locked");
+    let asked: Vec<BrakeV2> = brake_requests(&pair).into_iter().map(|(_, b)| b).collect();
+    assert_eq!(asked, [BrakeV2::Released, BrakeV2::Locked]);
+    // Driving again, the chassis (its RC, a fault) locks the brake: a stop, and a client that
+    // keeps streaming stays still, its brake locked.
+    pair.leases.remove(&TELEOP.1);
+    pair.stream(TELEOP, Class::Teleop, 0.5, Duration::from_secs(2));
+    assert!(pair.chassis.actual().linear > 0.4);
+    let at = pair.now - pair.epoch;
+    pair.chassis
+        .handle_v2(at, MessageV2::Brake(BrakeV2::Locked));
+    pair.keep_streaming(TELEOP, 0.5, ms(300));
+    assert_eq!(
+        pair.stops(),
+        [("gateway".to_owned(), StopCause::ChassisMode)]
+    );
+    let reason = pair.stop_reason(StopCause::ChassisMode);
+    assert!(
+        reason.starts_with("the chassis locked its parking brake unasked"),
+        "{reason}"
+    );
+    let before = brake_requests(&pair).len();
+    pair.keep_streaming(TELEOP, 0.5, Duration::from_secs(2));
+    assert_eq!(pair.chassis.actual().linear, 0.0);
+    assert_eq!(pair.chassis.stats().brake, "locked");
+    // Released by the operator: nothing released, nothing moves, until a client takes control
+    // and drives.
+    release_and_check_nothing_restarts(&mut pair, TELEOP);
+    let asked: Vec<BrakeV2> = brake_requests(&pair)[before..]
+        .iter()
+        .map(|(_, b)| *b)
+        .collect();
+    assert_eq!(asked, [BrakeV2::Released], "only for the new drive");
+}
+
+/// No model without a parking brake is ever sent 0x131.
+#[test]
+fn only_a_model_with_a_brake_is_sent_one() {
+    for model in Model::ALL
+        .into_iter()
+        .filter(|model| model.speaks(Protocol::V2) && !model.parking_brake())
+    {
+        let gateway = GatewayConfig {
+            model: Some(model),
+            ..config(Protocol::V2)
+        };
+        let mut pair = Pair::with_firmware(Protocol::V2, Transport::Can, &gateway, Start::Clean);
+        pair.run(ms(200));
+        let lease = pair.take(TELEOP, Class::Teleop).expect("a lease");
+        let mut most = [0.0; 4];
+        drive_ticks(&mut pair, lease, (0.5, 0.0, 0.0), 100, &mut most);
+        pair.run(Duration::from_secs(2));
+        assert!(brake_requests(&pair).is_empty(), "{model}");
+        assert!(most[0] > 0.4, "{model} drove: {most:?}");
+    }
 }
 
 /// A Ranger driven forward with a turn, sideways, spinning and beyond its limits: the mode

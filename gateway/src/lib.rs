@@ -16,6 +16,8 @@
 //! - [`identity`]: who a requesting process is, by the operating system; the operator role.
 //! - [`share`]: request budgets: a token bucket per client, a share of the stop endpoint per user.
 //! - [`modes`]: a Ranger's motion modes: which one a command needs, and what each carries.
+//! - [`brake`]: a Hunter's parking brake: released for a client's drive, locked when idle.
+//! - [`standstill`]: whether the chassis stands still (a mode changes, a brake locks only so).
 //! - [`config`]: the configuration file and its lookup.
 //! - [`lock`]: one gateway per device.
 //! - [`run_dir`]: where the locks, the unclean-exit marker and the black box live, trusted only
@@ -27,6 +29,7 @@
 pub mod arbiter;
 pub mod battery;
 pub mod blackbox;
+pub mod brake;
 pub mod command_mode;
 pub mod config;
 pub mod core;
@@ -38,6 +41,7 @@ pub mod modes;
 pub mod monitor;
 pub mod run_dir;
 pub mod share;
+pub mod standstill;
 pub mod state;
 pub mod stop_endpoint;
 pub mod wait;

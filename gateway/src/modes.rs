@@ -13,6 +13,8 @@ use std::time::Duration;
 
 use scout_protocol::v2::{MotionModeStateV2, MotionModeV2, MotionV2};
 
+use crate::standstill::Standstill;
+
 /// A body velocity: m/s forward, m/s leftward, rad/s counter-clockwise.
 pub type Velocity = (f64, f64, f64);
 
@@ -97,18 +99,14 @@ pub fn hold(output: Velocity, settled: Option<MotionModeV2>, min_radius: f64) ->
 /// How long a chassis may take to say it is changing to a mode asked for (0x291): meanwhile
 /// nothing moves, and nothing is asked again.
 pub const REQUEST_WAIT: Duration = Duration::from_millis(500);
-/// How long the chassis must have reported standing still, and nothing been sent that moves it,
-/// before its mode is changed.
-pub const STILL_FOR: Duration = Duration::from_millis(100);
-/// What counts as standing still in 0x221's speed and rate fields, mm/s or mrad/s.
-pub const STILL_WITHIN: u16 = 5;
 
 /// A mode change as the gateway makes it with a Ranger, sans-IO: what the chassis reports
 /// (0x291, 0x221) and what was sent in; the mode the arbiter may drive in, and when to ask
-/// for another (0x141), out. A mode is asked for only standing still, in a mode the gateway
-/// may leave (never park, side slip or one no source names: someone put it there), at most
-/// once a [`REQUEST_WAIT`]; from the ask until the chassis says it took it, or the wait ends,
-/// the arbiter drives in no mode. A mode the chassis takes unasked is reported once.
+/// for another (0x141), out. A mode is asked for only standing still ([`Standstill`]), in a
+/// mode the gateway may leave (never park, side slip or one no source names: someone put it
+/// there), at most once a [`REQUEST_WAIT`]; from the ask until the chassis says it took it, or
+/// the wait ends, the arbiter drives in no mode. A mode the chassis takes unasked is reported
+/// once.
 #[derive(Debug, Clone, Default)]
 pub struct Handshake {
     /// 0x291 as last reported, since the port opened.
@@ -118,10 +116,8 @@ pub struct Handshake {
     pending: Option<(MotionModeV2, Duration)>,
     /// The mode asked for last, kept: a late report of taking it is no surprise.
     asked: Option<MotionModeV2>,
-    /// The last 0x221 said standing still.
-    still: bool,
-    /// When the chassis last reported moving, or a command that moves it went out.
-    moved_at: Option<Duration>,
+    /// Whether it stands still.
+    standstill: Standstill,
 }
 
 impl Handshake {
@@ -130,26 +126,14 @@ impl Handshake {
         *self = Self::default();
     }
 
-    /// 0x221 as received (every field as it came: where a Ranger Mini 2.0 reports its spin rate
-    /// is the vendor driver's reading, not a chassis').
+    /// 0x221 as received.
     pub fn handle_motion_state(&mut self, now: Duration, motion: &MotionV2) {
-        self.still = [
-            motion.linear_mm_s,
-            motion.angular_mrad_s,
-            motion.lateral_mm_s,
-        ]
-        .iter()
-        .all(|value| value.unsigned_abs() <= STILL_WITHIN);
-        if !self.still {
-            self.moved_at = Some(now);
-        }
+        self.standstill.handle_motion_state(now, motion);
     }
 
     /// A motion command went out at `sent` (forward, sideways, yaw rate).
     pub fn handle_sent(&mut self, now: Duration, sent: Velocity) {
-        if sent != (0.0, 0.0, 0.0) {
-            self.moved_at = Some(now);
-        }
+        self.standstill.handle_sent(now, sent);
     }
 
     /// 0x291. Returns `Some(why)` when the chassis left the mode it was settled in for one the
@@ -210,10 +194,7 @@ impl Handshake {
                 None => false,
             },
         };
-        let still = self.still
-            && output == (0.0, 0.0, 0.0)
-            && self.moved_at.is_none_or(|at| now >= at + STILL_FOR);
-        if !leavable || !still || self.pending.is_some() {
+        if !leavable || !self.standstill.is_still(now, output) || self.pending.is_some() {
             return None;
         }
         self.pending = Some((wanted, now));

@@ -216,6 +216,26 @@ impl Model {
         }
     }
 
+    /// Whether it has a parking brake the host locks and releases (0x131, reported in 0x211
+    /// byte 6): the Hunter 2.0 (its protocol sheet and manual; a maintainer: "none of the
+    /// other vehicles has a brake function", westonrobot/ugv_sdk PR 10).
+    pub const fn parking_brake(self) -> bool {
+        match self {
+            Self::Hunter2 => true,
+            Self::Scout
+            | Self::Scout2
+            | Self::ScoutMini
+            | Self::ScoutMiniOmni
+            | Self::Tracer
+            | Self::TracerMini
+            | Self::Bunker
+            | Self::BunkerMini
+            | Self::BunkerPro
+            | Self::RangerMini2
+            | Self::RangerMini3 => false,
+        }
+    }
+
     /// How many actuators (motor drivers) report on protocol v2 (0x251.., 0x261..): four on
     /// the SCOUTs, two on the Tracers and Bunkers (agilex-family-notes' table; the Tracer's
     /// driver reads two, agilexrobotics/tracer_ros2 `tracer_messenger.hpp`).

@@ -25,6 +25,10 @@ pub mod id {
     /// Motion-mode set, host to chassis: a Ranger's dual Ackermann, parallel, spin... (ugv_sdk
     /// `CAN_MSG_SET_MOTION_MODE_ID`, `SetMotionModeFrame`: the mode in byte 0).
     pub const SET_MOTION_MODE: u16 = 0x141;
+    /// Parking brake, host to chassis: a Hunter's lock or release in byte 0 (ugv_sdk
+    /// `CAN_MSG_BRAKING_COMMAND_ID`, `BrakeModeConfigFrame`; the Hunter 2.0 protocol sheet:
+    /// "speed control needs the brake released"). v1's motion feedback has the same id.
+    pub const BRAKE: u16 = 0x131;
     /// Control-mode set, host to chassis: standby, CAN, UART.
     pub const CONTROL_MODE: u16 = 0x421;
     /// Error clear, host to chassis.
@@ -233,6 +237,18 @@ raw_enum! {
         Park = 0x03 => "park",
         /// Straight sideways.
         SideSlip = 0x04 => "side_slip",
+    }
+}
+
+raw_enum! {
+    /// A Hunter's parking brake: asked in 0x131 byte 0, reported in 0x211 byte 6 (ugv_sdk
+    /// `AgxBrakeMode`: 0 unlock, 1 lock; the Hunter 2.0 manual's table 3.1: "0x00 Brake
+    /// unlocked state, 0x01 Brake locked state").
+    BrakeV2 {
+        /// Free: the wheels may turn.
+        Released = 0x00 => "released",
+        /// Holding the wheels.
+        Locked = 0x01 => "locked",
     }
 }
 
@@ -554,13 +570,18 @@ pub struct SystemStateV2 {
     pub battery_decivolts: u16,
     /// The error bits.
     pub errors: ErrorBitsV2,
-    /// Byte 6 (reserved on a SCOUT; HUNTER's parking brake).
+    /// Byte 6: reserved on a SCOUT, a Hunter's parking brake ([`SystemStateV2::brake`]).
     pub reserved: u8,
     /// The rolling count (byte 7).
     pub count: u8,
 }
 
 impl SystemStateV2 {
+    /// Byte 6 read as a Hunter's parking brake (on other models it is reserved, 0).
+    pub const fn brake(&self) -> BrakeV2 {
+        BrakeV2::from_raw(self.reserved)
+    }
+
     /// Battery voltage, V.
     pub fn battery_voltage(&self) -> f64 {
         f64::from(self.battery_decivolts) / 10.0
@@ -945,6 +966,8 @@ pub enum MessageV2 {
     LightCommand(LightsV2),
     /// 0x141.
     SetMotionMode(MotionModeV2),
+    /// 0x131.
+    Brake(BrakeV2),
     /// 0x421.
     ControlMode(ControlModeV2),
     /// 0x441.
@@ -1026,6 +1049,7 @@ pub const fn is_v2_id(id: u16) -> bool {
         id::MOTION_COMMAND
             | id::LIGHT_COMMAND
             | id::SET_MOTION_MODE
+            | id::BRAKE
             | id::CONTROL_MODE
             | id::ERROR_CLEAR
             | id::VERSION_REQUEST
@@ -1053,6 +1077,7 @@ impl MessageV2 {
             Self::MotionCommand(_) => id::MOTION_COMMAND,
             Self::LightCommand(_) => id::LIGHT_COMMAND,
             Self::SetMotionMode(_) => id::SET_MOTION_MODE,
+            Self::Brake(_) => id::BRAKE,
             Self::ControlMode(_) => id::CONTROL_MODE,
             Self::ErrorClear(_) => id::ERROR_CLEAR,
             Self::VersionRequest(VersionRequestForm::Binary) => id::VERSION_REQUEST,
@@ -1081,6 +1106,7 @@ impl MessageV2 {
             Self::MotionCommand(_) => "motion_command",
             Self::LightCommand(_) => "light_command",
             Self::SetMotionMode(_) => "set_motion_mode",
+            Self::Brake(_) => "brake",
             Self::ControlMode(_) => "control_mode",
             Self::ErrorClear(_) => "error_clear",
             Self::VersionRequest(_) => "version_request",
@@ -1109,6 +1135,7 @@ impl MessageV2 {
             Self::RcState(r) => Some(r.count),
             Self::MotionCommand(_)
             | Self::SetMotionMode(_)
+            | Self::Brake(_)
             | Self::ControlMode(_)
             | Self::ErrorClear(_)
             | Self::VersionRequest(_)
@@ -1133,6 +1160,7 @@ impl MessageV2 {
             Self::MotionCommand(_)
                 | Self::LightCommand(_)
                 | Self::SetMotionMode(_)
+                | Self::Brake(_)
                 | Self::ControlMode(_)
                 | Self::ErrorClear(_)
                 | Self::VersionRequest(_)
@@ -1147,6 +1175,7 @@ impl MessageV2 {
             Self::MotionCommand(m) | Self::MotionState(m) => m.emit(&mut data),
             Self::LightCommand(m) | Self::LightState(m) => m.emit(&mut data),
             Self::SetMotionMode(mode) => data[field::CODE] = mode.raw(),
+            Self::Brake(brake) => data[field::CODE] = brake.raw(),
             Self::ControlMode(mode) => data[field::CODE] = mode.raw(),
             Self::ErrorClear(code) => data[field::CODE] = code.raw(),
             Self::VersionRequest(_) => data[field::CODE] = 0x01,
@@ -1190,6 +1219,7 @@ pub fn decode(frame: &CanFrame) -> Result<MessageV2, V2Error> {
         id::MOTION_COMMAND => MessageV2::MotionCommand(MotionV2::parse(&data)),
         id::LIGHT_COMMAND => MessageV2::LightCommand(LightsV2::parse(&data)),
         id::SET_MOTION_MODE => MessageV2::SetMotionMode(MotionModeV2::from_raw(code)),
+        id::BRAKE => MessageV2::Brake(BrakeV2::from_raw(code)),
         id::CONTROL_MODE => MessageV2::ControlMode(ControlModeV2::from_raw(code)),
         id::ERROR_CLEAR => MessageV2::ErrorClear(ErrorClearV2::from_raw(code)),
         id::VERSION_REQUEST => MessageV2::VersionRequest(VersionRequestForm::Binary),
@@ -1247,6 +1277,27 @@ mod tests {
         let angles = decoded(0x271, &[0x01, 0xF4, 0xFE, 0x0C, 0, 0, 0, 0]);
         assert_eq!(angles, MessageV2::MotorAngles(WheelsV2([500, -500, 0, 0])));
         assert!(!angles.is_command());
+    }
+
+    #[test]
+    fn a_hunters_brake_as_the_vendor_lays_it_out() {
+        // ugv_sdk `agilex_msg_parser_v2.c` `AgxMsgBrakeModeConfig`: 0x131, the mode in byte 0
+        // of eight (`BRAKE_MODE_UNLOCK` 0, `BRAKE_MODE_LOCK` 1).
+        let lock = MessageV2::Brake(BrakeV2::Locked).encode();
+        assert_eq!(
+            (lock.id(), lock.data()),
+            (0x131, &[1, 0, 0, 0, 0, 0, 0, 0][..])
+        );
+        assert_eq!(
+            decoded(0x131, &[0, 0, 0, 0, 0, 0, 0, 0]),
+            MessageV2::Brake(BrakeV2::Released)
+        );
+        assert!(MessageV2::Brake(BrakeV2::Released).is_command());
+        // The Hunter 2.0 manual's table 3.1: 0x211 byte 6, 0x01 the brake locked.
+        let MessageV2::SystemState(system) = decoded(0x211, &[0, 1, 0x00, 0xFA, 0, 0, 1, 7]) else {
+            unreachable!()
+        };
+        assert_eq!(system.brake(), BrakeV2::Locked);
     }
 
     #[test]
@@ -1486,8 +1537,8 @@ mod tests {
             Err(V2Error::UnknownId { id: 0x151 })
         );
         assert_eq!(
-            decode(&frame(0x131, &[0; 8])),
-            Err(V2Error::UnknownId { id: 0x131 })
+            decode(&frame(0x130, &[0; 8])),
+            Err(V2Error::UnknownId { id: 0x130 })
         );
         assert_eq!(
             decode(&frame(0x211, &[0; 7])),

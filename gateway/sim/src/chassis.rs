@@ -67,6 +67,9 @@ pub struct SimParams {
     /// How long a mode change takes.
     #[serde(with = "millis")]
     pub mode_change: Duration,
+    /// A parking brake (a Hunter; protocol v2): it starts locked, 0x131 locks or releases
+    /// it, 0x211 byte 6 reports it, and while it is locked 0x111 moves nothing.
+    pub parking_brake: bool,
     /// Linear acceleration limit, m/s².
     pub linear_acceleration: f64,
     /// Angular acceleration limit, rad/s².
@@ -118,6 +121,7 @@ impl Default for SimParams {
             max_parallel_steering: 0.0,
             spin_in_lateral: false,
             mode_change: Duration::from_secs(1),
+            parking_brake: false,
             linear_acceleration: 1.0,
             angular_acceleration: 1.5,
             battery_voltage: 26.0,
@@ -157,6 +161,7 @@ impl SimParams {
             wheel_radius: geometry.wheel_radius,
             gear_ratio: geometry.gear_ratio,
             actuators: model.actuators(),
+            parking_brake: model.parking_brake(),
             ..Self::default()
         }
         .with_steering(model.steering())
@@ -458,6 +463,8 @@ pub enum Ignored {
     NotCommandMode,
     /// A Ranger is changing its motion mode (0x291 says so).
     ModeChanging,
+    /// A Hunter's parking brake is locked (0x211 byte 6 says so).
+    BrakeLocked,
 }
 
 /// Statistics for tests and people: what the chassis received and did.
@@ -485,6 +492,10 @@ pub struct SimStats {
     pub mode_changes: u64,
     /// A Ranger's mode changes refused: asked while it moved, or while it changed.
     pub mode_changes_refused: u64,
+    /// A Hunter's parking brake (`locked`, `released`; empty for any other).
+    pub brake: &'static str,
+    /// A Hunter's parking brake changes made (0x131 locking or releasing it).
+    pub brake_changes: u64,
     /// Ground-truth pose.
     pub pose: Pose,
     /// Battery voltage, V.
@@ -513,6 +524,8 @@ pub struct IgnoredCounts {
     pub standby: u64,
     /// A Ranger: motion asked for (not zero) while it changes its mode.
     pub mode_changing: u64,
+    /// A Hunter: a speed asked for while its parking brake is locked.
+    pub brake_locked: u64,
 }
 
 /// Summary of the intervals between motion commands, in ms.
@@ -573,6 +586,8 @@ pub struct Chassis {
     /// A Ranger's motion mode, and until when it changes to it.
     motion_mode: MotionModeV2,
     changing_until: Option<Duration>,
+    /// A Hunter's parking brake holds the wheels.
+    brake_locked: bool,
     /// A Ranger's wheel speed (m/s, dual Ackermann and parallel) and spin rate (rad/s) now.
     wheel_speed: f64,
     spin_rate: f64,
@@ -643,6 +658,7 @@ impl Chassis {
         Self {
             battery: Battery::new(&params),
             battery_voltage: params.battery_voltage,
+            brake_locked: params.parking_brake,
             params,
             transport,
             now: Duration::ZERO,
@@ -870,7 +886,7 @@ impl Chassis {
         let fresh = self
             .last_valid_motion
             .is_some_and(|at| now.saturating_sub(at) < self.params.command_timeout);
-        if fresh && !self.drive_inhibited() {
+        if fresh && !self.drive_inhibited() && !self.brake_locked {
             self.target
         } else {
             Speeds::default()
@@ -934,6 +950,11 @@ impl Chassis {
             self.motion_mode.name()
         } else {
             ""
+        };
+        stats.brake = match (self.params.parking_brake, self.brake_locked) {
+            (false, _) => "",
+            (true, true) => "locked",
+            (true, false) => "released",
         };
         stats.pose = self.pose;
         stats.battery_voltage = self.battery_voltage;

@@ -9,9 +9,9 @@ use std::time::Duration;
 
 use scout_protocol::sequence::RollingCounter;
 use scout_protocol::v2::{
-    ActuatorHighV2, ActuatorLowV2, BmsV2, ControlModeV2, DriverStateV2, ErrorBitsV2, ErrorClearV2,
-    LightsV2, MessageV2, MotionV2, OdometerV2, RcStateV2, SwitchPosition, SystemStateV2,
-    VersionRequestForm, VersionV2,
+    ActuatorHighV2, ActuatorLowV2, BmsV2, BrakeV2, ControlModeV2, DriverStateV2, ErrorBitsV2,
+    ErrorClearV2, LightsV2, MessageV2, MotionV2, OdometerV2, RcStateV2, SwitchPosition,
+    SystemStateV2, VersionRequestForm, VersionV2,
 };
 use scout_protocol::{ChassisState, Fault, LightCommand, Motor};
 
@@ -149,6 +149,10 @@ impl Chassis {
                 self.set_motion_mode(now, mode);
                 None
             }
+            MessageV2::Brake(brake) => {
+                self.set_brake(brake);
+                None
+            }
             MessageV2::VersionRequest(VersionRequestForm::Binary) => {
                 firmware.replies.push(MessageV2::Version(VERSION));
                 None
@@ -238,7 +242,28 @@ impl Chassis {
             self.stats.ignored.inhibited += 1;
             return Some(Ignored::Inhibited);
         }
+        if self.brake_locked && command.linear_mm_s != 0 {
+            self.stats.ignored.brake_locked += 1;
+            return Some(Ignored::BrakeLocked);
+        }
         None
+    }
+
+    /// A Hunter's 0x131: the brake locks (the wheels stop turning) or releases; anything else,
+    /// or on a chassis without one, is rejected.
+    fn set_brake(&mut self, brake: BrakeV2) {
+        let locked = match (self.params.parking_brake, brake) {
+            (true, BrakeV2::Locked) => true,
+            (true, BrakeV2::Released) => false,
+            (false, _) | (true, BrakeV2::Unknown(_)) => {
+                self.stats.rejected += 1;
+                return;
+            }
+        };
+        if locked != self.brake_locked {
+            self.stats.brake_changes += 1;
+        }
+        self.brake_locked = locked;
     }
 
     /// 0x441: every latched error, or one motor's communication fault.
@@ -296,7 +321,7 @@ impl Chassis {
             control_mode: firmware.mode,
             battery_decivolts: tenths_u16(self.battery_voltage),
             errors: ErrorBitsV2(errors),
-            reserved: 0,
+            reserved: u8::from(self.params.parking_brake && self.brake_locked),
             count: 0,
         })
     }

@@ -4,7 +4,7 @@ use std::time::Duration;
 
 use scout_protocol::model::Model;
 use scout_protocol::v2::{
-    BmsV2, ControlModeV2, ErrorClearV2, MessageV2, MotionV2, SwitchPosition, VersionRequestForm,
+    BmsV2, BrakeV2, ControlModeV2, ErrorClearV2, MessageV2, MotionV2, SwitchPosition, VersionRequestForm,
 };
 use scout_protocol::{ChassisState, Transport};
 
@@ -177,6 +177,7 @@ fn a_tracer_or_a_bunker_reports_two_actuators() {
 fn a_hunter_steers_by_its_wheels_angle_and_reports_it() {
     let mut chassis = chassis(Model::Hunter2);
     chassis.handle_v2(ms(0), TAKE);
+    chassis.handle_v2(ms(0), MessageV2::Brake(BrakeV2::Released));
     // A yaw rate in the yaw-rate field turns nothing; the steering field turns the wheels.
     let (now, _) = drive(&mut chassis, go(0.5, 0.5), ms(0), ms(1000));
     assert_eq!(chassis.stats().steering, 0.0);
@@ -208,6 +209,44 @@ fn a_hunter_steers_by_its_wheels_angle_and_reports_it() {
     let wide = MessageV2::MotionCommand(MotionV2::from_si(0.5, 0.0).with_steering(-1.5));
     drive(&mut chassis, wide, ms(3000), ms(2000));
     assert_eq!(chassis.stats().steering, -steering.max_inner);
+}
+
+/// The brake reported by 0x211 byte 6, from the frames of a drive.
+fn brake_reported(frames: &[MessageV2]) -> Option<BrakeV2> {
+    frames.iter().rev().find_map(|f| match f {
+        MessageV2::SystemState(system) => Some(system.brake()),
+        _ => None,
+    })
+}
+
+#[test]
+fn a_hunters_parking_brake_starts_locked_and_holds_it_until_released() {
+    let mut chassis = chassis(Model::Hunter2);
+    chassis.handle_v2(ms(0), TAKE);
+    let (now, frames) = drive(&mut chassis, go(0.5, 0.0), ms(0), ms(500));
+    assert_eq!(brake_reported(&frames), Some(BrakeV2::Locked));
+    assert_eq!(chassis.actual().linear, 0.0);
+    assert_eq!(chassis.stats().ignored.brake_locked, 25);
+    assert_eq!(
+        chassis.handle_v2(now, go(0.5, 0.0)),
+        Some(Ignored::BrakeLocked)
+    );
+    chassis.handle_v2(now, MessageV2::Brake(BrakeV2::Released));
+    let (now, frames) = drive(&mut chassis, go(0.5, 0.0), now, ms(1000));
+    assert_eq!(brake_reported(&frames), Some(BrakeV2::Released));
+    assert!(chassis.actual().linear > 0.4, "{:?}", chassis.actual());
+    // Locked while moving: it stops (at its deceleration) and stays so.
+    chassis.handle_v2(now, MessageV2::Brake(BrakeV2::Locked));
+    drive(&mut chassis, go(0.5, 0.0), now, ms(1000));
+    assert_eq!(chassis.actual().linear, 0.0);
+    let stats = chassis.stats();
+    assert_eq!((stats.brake, stats.brake_changes), ("locked", 2));
+    // A model without one rejects 0x131 and reports nothing in byte 6.
+    let mut scout = chassis_v2_plain();
+    scout.handle_v2(ms(0), MessageV2::Brake(BrakeV2::Locked));
+    assert_eq!((scout.stats().rejected, scout.stats().brake), (1, ""));
+    let (_, frames) = drive(&mut scout, go(0.5, 0.0), ms(0), ms(200));
+    assert_eq!(brake_reported(&frames), Some(BrakeV2::Released));
 }
 
 #[test]

@@ -112,7 +112,9 @@ wire_enum! {
         /// The CAN bus or adapter failed (write errors, bus-off, error-passive).
         LinkFault = 10 => "link_fault",
         /// A protocol v2 chassis is not, or no longer, in CAN command mode: it did not take
-        /// 0x421, or fell back to standby (the RC's own takeover is `rc_override`).
+        /// 0x421, or fell back to standby (the RC's own takeover is `rc_override`); or it
+        /// changed how it is driven unasked (a Ranger's motion mode, a Hunter's parking brake
+        /// locked during a drive).
         ChassisMode = 11 => "chassis_mode",
     }
 }

@@ -93,6 +93,7 @@ pub fn message_fields_v2(message: &MessageV2) -> Value {
         MessageV2::LightCommand(l) | MessageV2::LightState(l) => lights(l),
         MessageV2::ControlMode(mode) => json!({ "control_mode": mode.name(), "raw": mode.raw() }),
         MessageV2::SetMotionMode(mode) => json!({ "motion_mode": mode.name(), "raw": mode.raw() }),
+        MessageV2::Brake(brake) => json!({ "brake": brake.name(), "raw": brake.raw() }),
         MessageV2::MotionModeState(state) => json!({
             "motion_mode": state.mode.name(),
             "raw": state.mode.raw(),
@@ -115,6 +116,8 @@ pub fn message_fields_v2(message: &MessageV2) -> Value {
             "error_bits": state.errors.0,
             "errors": state.errors.names().collect::<Vec<_>>(),
             "unknown_error_bits": state.errors.unknown(),
+            // Reserved on a SCOUT; a Hunter's parking brake (0 released, 1 locked).
+            "byte_6": state.reserved,
         }),
         MessageV2::RcState(rc) => json!({
             "swa": rc.swa.name(),

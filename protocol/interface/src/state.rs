@@ -713,6 +713,7 @@ impl StatePayload {
             MessageV2::MotionCommand(_)
             | MessageV2::LightCommand(_)
             | MessageV2::SetMotionMode(_)
+            | MessageV2::Brake(_)
             | MessageV2::ControlMode(_)
             | MessageV2::ErrorClear(_)
             | MessageV2::VersionRequest(_) => return false,

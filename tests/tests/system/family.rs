@@ -272,23 +272,36 @@ fn a_hunter_drives_a_rounded_square_and_its_odometry_follows() {
     // client's poll late, on a loaded machine more, and the figure is 3.5 m across.
     assert!(true_x.hypot(true_y) < 2.0, "({true_x}, {true_y})");
     assert!(true_yaw.abs() < 0.7, "{true_yaw}");
+    // Its parking brake was released for the drive, and no speed reached it locked.
+    assert_eq!(stats["ignored"]["brake_locked"], 0, "{stats}");
+    assert!(stats["brake_changes"].as_u64() >= Some(1), "{stats}");
 }
 
 /// A Hunter's 0x111 as the vendor lays it out: the speed in bytes 0-1, nothing in the yaw-rate
 /// field, the inner wheel's angle for the asked turn in bytes 6-7; zero on every field when
-/// the client ends.
+/// the client ends. Its parking brake (locked at start, reported in 0x211 byte 6) is released
+/// with 0x131 `[00]` before any speed reaches it, and locked with 0x131 `[01]` once the client
+/// has ended and the chassis stands still.
 #[test]
 fn a_hunters_command_is_its_speed_and_steering_angle_in_0x111() {
     let steering = Model::Hunter2.steering().expect("steered");
     let inner = steering.inner_from_central(steering.central_for(0.3, 0.2));
-    steers_in_0x111(Model::Hunter2, 0.2, inner);
+    let (chassis, _gateway) = steers_in_0x111(Model::Hunter2, 0.2, inner);
+    let locked = serde_json::json!({ "brake": 1 });
+    assert!(chassis.wait_event(&locked), "{:?}", chassis.events());
+    let events = chassis.events();
+    assert_eq!(
+        events,
+        [serde_json::json!({ "brake": 0 }), locked],
+        "released once, locked once, nothing moved while locked"
+    );
 }
 
 /// `model` driven at 0.3 m/s turning at `angular` rad/s, on the emulated chassis: 0x111 carries
 /// the speed in bytes 0-1 and `inner` (the inner wheel's angle, rad) in bytes 6-7, nothing in
 /// the yaw-rate and sideways fields; zero on every field when the client ends.
-fn steers_in_0x111(model: Model, angular: f64, inner: f64) {
-    let (chassis, _gateway, drive) = EmulatedChassis::driven(
+fn steers_in_0x111(model: Model, angular: f64, inner: f64) -> (EmulatedChassis, Gateway) {
+    let (chassis, gateway, drive) = EmulatedChassis::driven(
         model.name(),
         &["--linear", "0.3", "--angular", &angular.to_string()],
     );
@@ -305,6 +318,7 @@ fn steers_in_0x111(model: Model, angular: f64, inner: f64) {
     );
     chassis.ends_at_zero();
     drop(drive);
+    (chassis, gateway)
 }
 
 /// A Ranger Mini 2.0 on its simulator drives a figure of every mode, each leg ending on the

@@ -129,10 +129,14 @@ impl EmulatedChassis {
         model: &str,
         drive: &[&str],
     ) -> (Self, Gateway, scout_system_tests::Background) {
-        let modes = Model::from_name(model)
-            .and_then(Model::four_wheel)
-            .is_some();
-        let chassis = Self::start(if modes { &["--motion-modes"] } else { &[] });
+        let model_named = Model::from_name(model);
+        let modes = model_named.and_then(Model::four_wheel).is_some();
+        let brake = model_named.is_some_and(Model::parking_brake);
+        let chassis = Self::start(match (modes, brake) {
+            (true, _) => &["--motion-modes"],
+            (false, true) => &["--brake"],
+            (false, false) => &[],
+        });
         let name = robot_name(&format!("{model}-wire"));
         let args = [
             "--slcan",
@@ -160,6 +164,25 @@ impl EmulatedChassis {
     pub(crate) fn ends_at_zero(&self) {
         let seen = self.commands_until(|c| *c == [0, 0, 0, 0]);
         assert_eq!(seen.last(), Some(&[0, 0, 0, 0]), "{seen:?}");
+    }
+
+    /// Reads what it prints until it has printed `wanted` (other than a motion command), or
+    /// `LIMIT` passes; returns whether it did.
+    pub(crate) fn wait_event(&self, wanted: &serde_json::Value) -> bool {
+        let deadline = std::time::Instant::now() + LIMIT;
+        while !self.events.borrow().contains(wanted) {
+            let Ok(line) = self
+                .lines
+                .recv_timeout(deadline.saturating_duration_since(std::time::Instant::now()))
+            else {
+                return false;
+            };
+            let json: serde_json::Value = serde_json::from_str(&line).expect("a JSON line");
+            if json.get("linear_mm_s").is_none() {
+                self.events.borrow_mut().push(json);
+            }
+        }
+        true
     }
 
     /// The motion commands it decoded, as (linear, angular, lateral, steering), until `done`

@@ -14,6 +14,11 @@ With --motion-modes it is a Ranger (`SetMotionModeFrame`, `MotionModeStateFrame`
 0x291 (its mode in byte 0, byte 1 set while changing) every 20 ms, starting in dual Ackermann
 (0); a 0x141 is printed as {"set_motion_mode": mode} and, standing still, changes the mode in
 0.2 s; a 0x111 that is not zero while it changes is printed as {"moved_while_changing": [...]}.
+
+With --brake it is a Hunter (`BrakeModeConfigFrame`; the Hunter 2.0 manual's 0x211 byte 6):
+its parking brake starts locked (1) and is reported in 0x211 byte 6; a 0x131 is printed as
+{"brake": byte 0} and sets it (0 released, 1 locked); a 0x111 with a speed while it is locked
+is printed as {"moved_while_locked": [...]} and moves nothing.
 """
 
 import json
@@ -31,6 +36,7 @@ SYSTEM_STATE = 0x211
 MOTION_STATE = 0x221
 SET_MOTION_MODE = 0x141
 MOTION_MODE_STATE = 0x291
+BRAKE_COMMAND = 0x131
 MODE_CHANGE = 0.2
 CAN_COMMAND_MODE = 0x01
 COMMAND_TIMEOUT = 0.5
@@ -63,6 +69,8 @@ def main() -> None:
     count = 0
     modes = "--motion-modes" in sys.argv[1:]
     mode, changing_until = 0, 0.0
+    has_brake = "--brake" in sys.argv[1:]
+    brake = 1 if has_brake else 0
     pending = b""
     start = time.monotonic()
     next_report = start
@@ -95,8 +103,15 @@ def main() -> None:
                     still = not fresh or command == (0, 0, 0, 0)
                     if still and now >= changing_until and data[0] != mode:
                         mode, changing_until = data[0], now + MODE_CHANGE
+                elif has_brake and can_id == BRAKE_COMMAND and len(data) == 8:
+                    print(json.dumps({"brake": data[0]}), flush=True)
+                    if data[0] in (0, 1):
+                        brake = data[0]
                 elif can_id == MOTION_COMMAND and len(data) == 8:
                     fields = struct.unpack(">hhhh", data)
+                    if brake and fields[0] != 0:
+                        print(json.dumps({"moved_while_locked": fields}), flush=True)
+                        fields = (0, 0, 0, fields[3])
                     if modes and time.monotonic() < changing_until and fields != (0, 0, 0, 0):
                         print(json.dumps({"moved_while_changing": fields}), flush=True)
                     if control_mode == CAN_COMMAND_MODE:
@@ -110,7 +125,7 @@ def main() -> None:
             next_report += PERIOD
             count = (count + 1) % 256
             # vehicle_state 0 (normal), control_mode, battery_voltage (0.1 V), error_code, reserved, count
-            system = struct.pack(">BBHHBB", 0, control_mode, 260, 0, 0, count)
+            system = struct.pack(">BBHHBB", 0, control_mode, 260, 0, brake, count)
             fresh = now - command_at <= COMMAND_TIMEOUT
             motion = struct.pack(">hhhh", *(command if fresh else (0, 0, 0, 0)))
             frames = frame_line(SYSTEM_STATE, system) + frame_line(MOTION_STATE, motion)
