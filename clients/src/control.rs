@@ -5,8 +5,8 @@ use std::time::{Duration, Instant};
 
 use iceoryx2::port::subscriber::Subscriber;
 use scout_interface::control::{
-    Accepted, Class, LightsSetting, MAX_CLIENT_NAME, Rejected, RejectionKind, ReleaseTarget,
-    Request, StatusPayload,
+    Accepted, Class, DriveMode, LightsSetting, MAX_CLIENT_NAME, Rejected, RejectionKind,
+    ReleaseTarget, Request, StatusPayload,
 };
 use scout_interface::services::{self, ControlPort, Ipc, RequestError, Role, Way};
 use scout_interface::stop_socket::{Ask, StopClient, StopSocketError};
@@ -351,6 +351,33 @@ impl Controller {
         angular: f64,
         ttl: Option<Duration>,
     ) -> Result<Accepted, ControlError> {
+        self.drive_request(linear, lateral, angular, ttl, None)
+    }
+
+    /// Drives at a body velocity in motion mode `mode`, on a chassis that has them (a Ranger:
+    /// [`DriveMode::Park`] with zero velocity parks it). A velocity the mode does not carry
+    /// (a yaw rate in parallel mode, a speed in spin mode) is refused, saying so; so is a mode
+    /// on a chassis without modes. The chassis changes mode standing still: the drive ramps
+    /// down, the mode changes, and it ramps up again.
+    pub fn drive_in_mode(
+        &mut self,
+        mode: DriveMode,
+        linear: f64,
+        lateral: f64,
+        angular: f64,
+        ttl: Option<Duration>,
+    ) -> Result<Accepted, ControlError> {
+        self.drive_request(linear, lateral, angular, ttl, Some(mode))
+    }
+
+    fn drive_request(
+        &mut self,
+        linear: f64,
+        lateral: f64,
+        angular: f64,
+        ttl: Option<Duration>,
+        mode: Option<DriveMode>,
+    ) -> Result<Accepted, ControlError> {
         let Some(lease) = self.lease else {
             return Err(ControlError::Rejected(Rejected {
                 kind: Some(RejectionKind::NoControl),
@@ -363,6 +390,7 @@ impl Controller {
             lateral,
             angular,
             ttl,
+            mode,
         })
     }
 

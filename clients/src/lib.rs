@@ -30,7 +30,7 @@ pub const ERROR_KINDS: &[failure::KindOf] = &[
 
 pub use scout_interface as interface;
 pub use scout_interface::control::{
-    Accepted, Class, Rejected, RejectionKind, ReleaseTarget, Request, StopCause,
+    Accepted, Class, DriveMode, Rejected, RejectionKind, ReleaseTarget, Request, StopCause,
 };
 pub use scout_interface::services::monotonic_ns;
 pub use scout_interface::{StatePayload, StatusPayload};

@@ -5,6 +5,7 @@
 
 use std::time::Duration;
 
+use scout_interface::control::DriveMode;
 use zenoh::Wait;
 
 pub use scout_interface::remote::*;
@@ -213,6 +214,30 @@ impl RemoteController {
         angular: f64,
         ttl: Duration,
     ) -> Result<Option<RemoteAnswer>, RemoteError> {
+        self.drive_command(linear, lateral, angular, ttl, None)
+    }
+
+    /// [`RemoteController::drive_body`] in motion mode `mode`, on a chassis that has them (a
+    /// Ranger; [`DriveMode::Park`] with zero velocity parks it).
+    pub fn drive_in_mode(
+        &mut self,
+        mode: DriveMode,
+        linear: f64,
+        lateral: f64,
+        angular: f64,
+        ttl: Duration,
+    ) -> Result<Option<RemoteAnswer>, RemoteError> {
+        self.drive_command(linear, lateral, angular, ttl, Some(mode))
+    }
+
+    fn drive_command(
+        &mut self,
+        linear: f64,
+        lateral: f64,
+        angular: f64,
+        ttl: Duration,
+        mode: Option<DriveMode>,
+    ) -> Result<Option<RemoteAnswer>, RemoteError> {
         self.seq += 1;
         let command = RemoteCommand {
             seq: Some(self.seq),
@@ -221,6 +246,7 @@ impl RemoteController {
             lateral: (lateral != 0.0).then_some(lateral),
             angular: Some(angular),
             ttl_ms: Some(u32::try_from(ttl.as_millis()).unwrap_or(u32::MAX)),
+            mode: mode.map(|mode| mode.name().to_owned()),
             ..RemoteCommand::default()
         };
         let payload = to_json(&command);

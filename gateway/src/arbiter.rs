@@ -17,7 +17,7 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use scout_interface::control::{ReleaseTarget, StopCause};
+use scout_interface::control::{DriveMode, ReleaseTarget, StopCause};
 use scout_protocol::FaultClear;
 use scout_protocol::v2::MotionModeV2;
 use serde::{Deserialize, Serialize};
@@ -431,6 +431,8 @@ struct Command {
     linear: f64,
     lateral: f64,
     angular: f64,
+    /// The motion mode the client named (a Ranger).
+    mode: Option<MotionModeV2>,
     clamped: bool,
     expires: Duration,
 }
@@ -505,6 +507,8 @@ pub struct Arbiter {
     turning: Turning,
     /// The motion mode the chassis reports it is settled in ([`Turning::Modes`]).
     settled: Option<MotionModeV2>,
+    /// Whether the gateway may take the chassis out of it (its own park, not someone else's).
+    may_leave: bool,
     /// The chassis cannot move yet (its brake not reported released): the output is zero.
     held: bool,
     stops: Vec<Stop>,
@@ -547,6 +551,7 @@ impl Arbiter {
             sideways,
             turning: Turning::InPlace,
             settled: None,
+            may_leave: false,
             held: false,
             stops: Vec::new(),
             present: Vec::new(),
@@ -578,9 +583,12 @@ impl Arbiter {
     }
 
     /// The motion mode the chassis reports it is settled in (0x291), `None` while it changes
-    /// ([`Turning::Modes`]). Nothing moves in a mode until the chassis reports it taken.
-    pub fn set_motion_mode(&mut self, settled: Option<MotionModeV2>) {
+    /// ([`Turning::Modes`]), and whether the gateway may take it out of it
+    /// ([`crate::modes::Handshake::may_leave`]). Nothing moves in a mode until the chassis
+    /// reports it taken; a drive in one it may not leave is refused.
+    pub fn set_motion_mode(&mut self, settled: Option<MotionModeV2>, may_leave: bool) {
         self.settled = settled;
+        self.may_leave = may_leave;
     }
 
     /// Whether the chassis cannot move yet (a Hunter's parking brake, until it reports it
@@ -759,9 +767,18 @@ impl Arbiter {
                 lateral,
                 angular,
                 ttl,
+                mode,
             } => {
                 let index = self.admit(now, origin)?;
-                self.drive(now, index, lease, (linear, lateral, angular), ttl, sent)
+                let mode = mode.map(DriveMode::motion_mode);
+                self.drive(
+                    now,
+                    index,
+                    lease,
+                    (linear, lateral, angular, mode),
+                    ttl,
+                    sent,
+                )
             }
             Request::Relinquish => {
                 let index = self.admit(now, origin)?;
@@ -997,7 +1014,7 @@ impl Arbiter {
         now: Duration,
         index: usize,
         lease_id: u64,
-        (linear, lateral, angular): (f64, f64, f64),
+        (linear, lateral, angular, mode): (f64, f64, f64, Option<MotionModeV2>),
         ttl: Option<Duration>,
         sent: Duration,
     ) -> Answer {
@@ -1043,10 +1060,15 @@ impl Arbiter {
                 why: in_place.clone(),
             });
         }
+        if mode.is_some() && !matches!(self.turning, Turning::Modes { .. }) {
+            return Err(Rejection::NotAllowed {
+                why: "this chassis has no motion modes (a Ranger's): drive without one".into(),
+            });
+        }
         // A chassis someone parked (or put in a mode the gateway does not drive in) is not
         // taken out of it by a client's drive.
         if let (Turning::Modes { .. }, Some(mode)) = (&self.turning, self.settled)
-            && !crate::modes::leavable(mode)
+            && !self.may_leave
             && (linear, lateral, angular) != (0.0, 0.0, 0.0)
         {
             return Err(Rejection::NotAllowed {
@@ -1070,14 +1092,18 @@ impl Arbiter {
             .limit(clamped_linear)
             .map_or(angular_cap, |limit| limit.min(angular_cap));
         let clamped_angular = angular.clamp(-angular_cap, angular_cap);
-        // Four steered wheels move in one mode at a time.
-        let (clamped_linear, clamped_lateral, clamped_angular) = match self.turning {
-            Turning::Modes { min_radius } => crate::modes::one_mode(
-                (linear, lateral, angular),
-                min_radius,
-                (linear_cap, lateral_cap, angular_cap),
-            ),
-            Turning::InPlace | Turning::Radius { .. } => {
+        // Four steered wheels move in one mode at a time: the one named, or one that carries
+        // the velocity.
+        let caps = (linear_cap, lateral_cap, angular_cap);
+        let (clamped_linear, clamped_lateral, clamped_angular) = match (&self.turning, mode) {
+            (Turning::Modes { min_radius }, Some(mode)) => {
+                crate::modes::in_mode(mode, (linear, lateral, angular), *min_radius, caps)
+                    .map_err(|why| Rejection::NotAllowed { why })?
+            }
+            (Turning::Modes { min_radius }, None) => {
+                crate::modes::one_mode((linear, lateral, angular), *min_radius, caps)
+            }
+            (Turning::InPlace | Turning::Radius { .. }, _) => {
                 (clamped_linear, clamped_lateral, clamped_angular)
             }
         };
@@ -1089,6 +1115,7 @@ impl Arbiter {
                 linear: clamped_linear,
                 lateral: clamped_lateral,
                 angular: clamped_angular,
+                mode,
                 clamped,
                 expires: sent + life,
             });
@@ -1487,23 +1514,33 @@ impl Arbiter {
             };
             return self.output;
         }
-        let (linear, lateral, angular, clamped) = target.map_or((0.0, 0.0, 0.0, false), |c| {
-            (c.linear, c.lateral, c.angular, c.clamped)
-        });
+        let (linear, lateral, angular, named, clamped) = target
+            .map_or((0.0, 0.0, 0.0, None, false), |c| {
+                (c.linear, c.lateral, c.angular, c.mode, c.clamped)
+            });
         // Sideways no faster than the chassis goes now (it may have stopped being able to).
         let sideways = self.sideways.limit();
         let (lateral, clamped) = (
             lateral.clamp(-sideways, sideways),
             clamped || lateral.abs() > sideways,
         );
-        // In motion modes: a drive the mode the chassis is in does not carry ramps to zero,
-        // asking for the mode that does (changed standing still).
+        // In motion modes: a drive the mode the chassis is in does not carry (or in another
+        // mode than the one the client named) ramps to zero, asking for the mode that does
+        // (changed standing still).
         let target = (linear, lateral, angular);
         let drive = target != (0.0, 0.0, 0.0);
         let ((linear, lateral, angular), mode) = match self.turning {
             Turning::Modes { .. } => match self.settled {
-                Some(mode) if crate::modes::carries(mode, target) => (target, Some(mode)),
-                settled => ((0.0, 0.0, 0.0), crate::modes::wanted(target).or(settled)),
+                Some(mode)
+                    if named.is_none_or(|named| named == mode)
+                        && crate::modes::carries(mode, target) =>
+                {
+                    (target, Some(mode))
+                }
+                settled => (
+                    (0.0, 0.0, 0.0),
+                    named.or_else(|| crate::modes::wanted(target)).or(settled),
+                ),
             },
             Turning::InPlace | Turning::Radius { .. } => (target, None),
         };

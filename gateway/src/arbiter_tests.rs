@@ -3,7 +3,7 @@
 use std::time::Duration;
 
 use proptest::prelude::*;
-use scout_interface::control::{RejectionKind, ReleaseTarget, StopCause};
+use scout_interface::control::{DriveMode, RejectionKind, ReleaseTarget, StopCause};
 use scout_protocol::FaultClear;
 use scout_protocol::units::{DEFAULT_MAX_ANGULAR_SPEED, MAX_LINEAR_SPEED};
 
@@ -105,6 +105,7 @@ impl Bench {
                 lateral,
                 angular: 0.0,
                 ttl: None,
+                mode: None,
             },
         )
     }
@@ -224,6 +225,7 @@ fn turn(bench: &mut Bench, who: &Origin, lease: u64, linear: f64, angular: f64) 
             lateral: 0.0,
             angular,
             ttl: None,
+            mode: None,
         },
     )
 }
@@ -332,7 +334,8 @@ fn nothing_drives_without_taking_control() {
                 linear: 1.0,
                 lateral: 0.0,
                 angular: 0.0,
-                ttl: None
+                ttl: None,
+                mode: None,
             }
         ),
         Some(RejectionKind::NoControl)
@@ -443,6 +446,7 @@ fn a_command_lives_from_when_it_was_sent() {
         lateral: 0.0,
         angular: 0.0,
         ttl: Some(ms(100)),
+        mode: None,
     };
     // Queued for 150 ms (a stalled gateway): past its 100 ms life on arrival.
     let late = bench
@@ -853,6 +857,7 @@ fn a_command_stamped_in_the_future_is_refused_and_counted() {
         lateral: 0.0,
         angular: 0.0,
         ttl: None,
+        mode: None,
     };
     let ahead = bench.now + Duration::from_secs(10);
     let refused = bench
@@ -943,6 +948,7 @@ fn drive_sent(bench: &mut Bench, who: &Origin, lease: u64, linear: f64, ago: Dur
         lateral: 0.0,
         angular: 0.0,
         ttl: None,
+        mode: None,
     };
     bench
         .arbiter
@@ -1079,7 +1085,8 @@ fn a_gap_ends_every_lease_and_disarms_autonomy() {
                 linear: 0.1,
                 lateral: 0.0,
                 angular: 0.0,
-                ttl: None
+                ttl: None,
+                mode: None,
             }
         ),
         Some(RejectionKind::NoControl)
@@ -1475,7 +1482,9 @@ fn a_parked_chassis_in_motion_modes_refuses_a_drive_and_stands_still() {
     bench
         .arbiter
         .set_turning(Turning::Modes { min_radius: 0.4764 });
-    bench.arbiter.set_motion_mode(Some(MotionModeV2::Park));
+    bench
+        .arbiter
+        .set_motion_mode(Some(MotionModeV2::Park), false);
     let joy = client("joy", 1);
     let lease = bench.take(&joy, Class::Teleop);
     let refused = bench.drive_body(&joy, lease, 0.3, 0.0).expect_err("parked");
@@ -1502,6 +1511,96 @@ fn a_parked_chassis_in_motion_modes_refuses_a_drive_and_stands_still() {
     );
 }
 
+/// A client that names a mode is driven in it (not in another that would carry its
+/// velocity), told what the mode does not do, and may park the chassis; a chassis without
+/// modes refuses a named one.
+#[test]
+fn a_named_mode_is_the_one_driven_in_and_what_it_cannot_do_is_refused() {
+    let mut bench = Bench::sideways(1.5);
+    bench
+        .arbiter
+        .set_turning(Turning::Modes { min_radius: 0.4764 });
+    bench
+        .arbiter
+        .set_motion_mode(Some(MotionModeV2::DualAckermann), true);
+    let joy = client("joy", 1);
+    let lease = bench.take(&joy, Class::Teleop);
+    let drive = |linear: f64, angular: f64, mode: DriveMode| Request::Drive {
+        lease,
+        linear,
+        lateral: 0.0,
+        angular,
+        ttl: None,
+        mode: Some(mode),
+    };
+    // Straight ahead, which dual Ackermann carries, named parallel: nothing moves until the
+    // chassis is in parallel mode, which is asked for.
+    bench
+        .request(&joy, drive(0.5, 0.0, DriveMode::Parallel))
+        .expect("taken");
+    let output = bench.tick();
+    assert_eq!(
+        (output.linear, output.mode),
+        (0.0, Some(MotionModeV2::Parallel))
+    );
+    bench
+        .arbiter
+        .set_motion_mode(Some(MotionModeV2::Parallel), true);
+    bench
+        .request(&joy, drive(0.5, 0.0, DriveMode::Parallel))
+        .expect("taken");
+    let output = bench.tick();
+    assert!(output.linear > 0.0, "{output:?}");
+    assert_eq!(output.mode, Some(MotionModeV2::Parallel));
+    // What the mode does not do is refused, saying so.
+    let refused = bench
+        .request(&joy, drive(0.5, 0.3, DriveMode::Parallel))
+        .expect_err("a turn in parallel mode");
+    assert_eq!(refused.kind(), RejectionKind::NotAllowed);
+    assert!(
+        refused
+            .to_string()
+            .starts_with("parallel mode does not turn"),
+        "{refused}"
+    );
+    // Parking: asked once the output is at zero (the drive ramps down first).
+    let output = (0..50)
+        .map(|_| {
+            bench
+                .request(&joy, drive(0.0, 0.0, DriveMode::Park))
+                .expect("taken");
+            bench.tick()
+        })
+        .last()
+        .expect("ticks");
+    assert_eq!(
+        (output.linear, output.mode),
+        (0.0, Some(MotionModeV2::Park))
+    );
+    // No modes: refused.
+    let mut plain = Bench::new();
+    let lease = plain.take(&joy, Class::Teleop);
+    let refused = plain
+        .request(
+            &joy,
+            Request::Drive {
+                lease,
+                linear: 0.5,
+                lateral: 0.0,
+                angular: 0.0,
+                ttl: None,
+                mode: Some(DriveMode::DualAckermann),
+            },
+        )
+        .expect_err("no modes");
+    assert!(
+        refused
+            .to_string()
+            .starts_with("this chassis has no motion modes"),
+        "{refused}"
+    );
+}
+
 proptest! {
     /// Whatever a client asks of a chassis in motion modes (a Ranger), with the chassis taking
     /// a mode some ticks after it is asked for standing still: every tick's output is what the
@@ -1520,12 +1619,12 @@ proptest! {
         bench.arbiter.set_turning(Turning::Modes { min_radius: 0.4764 });
         let mut settled = Some(MotionModeV2::DualAckermann);
         let mut changing: Option<(MotionModeV2, u8)> = None;
-        bench.arbiter.set_motion_mode(settled);
+        bench.arbiter.set_motion_mode(settled, true);
         let joy = client("joy", 1);
         let lease = bench.take(&joy, Class::Teleop);
         for (linear, lateral, angular, ticks) in asks {
             for _ in 0..ticks {
-                let drive = Request::Drive { lease, linear, lateral, angular, ttl: None };
+                let drive = Request::Drive { lease, linear, lateral, angular, ttl: None, mode: None };
                 bench.request(&joy, drive).expect("taken or clamped, never refused");
                 let output = bench.tick();
                 let velocity = (output.linear, output.lateral, output.angular);
@@ -1556,7 +1655,7 @@ proptest! {
                         }
                     }
                 }
-                bench.arbiter.set_motion_mode(settled);
+                bench.arbiter.set_motion_mode(settled, true);
             }
         }
     }
@@ -1579,7 +1678,7 @@ proptest! {
         for (linear, angular, ticks, held) in asks {
             bench.arbiter.set_held(held);
             for _ in 0..ticks {
-                let drive = Request::Drive { lease, linear, lateral: 0.0, angular, ttl: None };
+                let drive = Request::Drive { lease, linear, lateral: 0.0, angular, ttl: None, mode: None };
                 bench.request(&joy, drive).expect("taken or clamped, never refused");
                 let output = bench.tick();
                 prop_assert_eq!(output.drive, linear != 0.0 || angular != 0.0);

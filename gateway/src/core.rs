@@ -625,7 +625,7 @@ impl Core {
         self.version_asked = false;
         self.follow_up.clear();
         self.handshake.reset();
-        self.arbiter.set_motion_mode(None);
+        self.arbiter.set_motion_mode(None, false);
         self.brake.reset();
         self.arbiter.set_held(self.model.parking_brake());
         let reconnect = std::mem::replace(&mut self.opened_before, true);
@@ -774,7 +774,8 @@ impl Core {
             self.arbiter
                 .handle_gap(now, StopCause::ChassisMode, &why, false);
         }
-        self.arbiter.set_motion_mode(self.handshake.settled(now));
+        self.arbiter
+            .set_motion_mode(self.handshake.settled(now), self.handshake.may_leave());
     }
 
     /// What the current port has counted since it opened: bytes the stream decoder threw
@@ -953,7 +954,10 @@ impl Core {
                 None => {
                     self.update_sideways();
                     if self.model.four_wheel().is_some() {
-                        self.arbiter.set_motion_mode(self.handshake.settled(now));
+                        self.arbiter.set_motion_mode(
+                            self.handshake.settled(now),
+                            self.handshake.may_leave(),
+                        );
                     }
                     if self.model.parking_brake() {
                         self.arbiter.set_held(!self.brake.released(now));

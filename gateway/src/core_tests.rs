@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use proptest::prelude::*;
 use scout_interface::control::{
-    Accepted, ControlRequest, Rejected, RejectionKind, ReleaseTarget, Request, StopCause,
+    Accepted, ControlRequest, DriveMode, Rejected, RejectionKind, ReleaseTarget, Request, StopCause,
 };
 use scout_interface::services::Way;
 use scout_interface::state::{BatteryLevel, LinkState};
@@ -304,6 +304,7 @@ impl Pair {
                 lateral: 0.0,
                 angular: 0.0,
                 ttl: None,
+                mode: None,
             },
         )
     }
@@ -1941,6 +1942,7 @@ impl Pair {
                 lateral,
                 angular: 0.0,
                 ttl: None,
+                mode: None,
             };
             self.request(client, &drive)?;
             let next = self.now + TICK;
@@ -2045,6 +2047,7 @@ fn drive_ticks(
             lateral,
             angular,
             ttl: None,
+            mode: None,
         };
         if let Err(refused) = pair.request(TELEOP, &drive) {
             panic!("capped, not refused: {refused:?}");
@@ -2173,6 +2176,7 @@ fn a_hunter_steers_by_its_wheels_and_its_odometry_follows() {
         lateral: 0.0,
         angular,
         ttl: None,
+        mode: None,
     };
     let refused = pair.request(TELEOP, &turn(0.0, 0.3)).expect_err("in place");
     assert_eq!(refused.kind, Some(RejectionKind::NotAllowed));
@@ -2259,6 +2263,7 @@ fn a_hunters_brake_is_released_only_for_a_drive_and_locked_when_idle() {
         lateral: 0.0,
         angular: 0.0,
         ttl: None,
+        mode: None,
     };
     pair.request(TELEOP, &ahead).expect("a drive");
     let asked_at = pair.now;
@@ -2347,6 +2352,52 @@ fn only_a_model_with_a_brake_is_sent_one() {
         assert!(brake_requests(&pair).is_empty(), "{model}");
         assert!(most[0] > 0.4, "{model} drove: {most:?}");
     }
+}
+
+/// A client names a Ranger's mode: straight ahead in parallel mode (which the gateway would
+/// not pick for it), then park; a drive without a mode afterwards takes it out of the park the
+/// client asked for, and nothing moved while it changed.
+#[test]
+fn a_ranger_drives_in_the_mode_a_client_names_and_parks_when_asked() {
+    let ranger = GatewayConfig {
+        model: Some(Model::RangerMini3),
+        ..config(Protocol::V2)
+    };
+    let mut pair = Pair::with_firmware(Protocol::V2, Transport::Can, &ranger, Start::Clean);
+    pair.run(ms(200));
+    let lease = pair.take(TELEOP, Class::Teleop).expect("a lease");
+    let drive = |pair: &mut Pair, linear: f64, mode: Option<DriveMode>, ticks: u32| {
+        for _ in 0..ticks {
+            let request = Request::Drive {
+                lease,
+                linear,
+                lateral: 0.0,
+                angular: 0.0,
+                ttl: None,
+                mode,
+            };
+            pair.request(TELEOP, &request).expect("taken");
+            let next = pair.now + TICK;
+            while pair.now < next {
+                pair.step();
+            }
+        }
+    };
+    drive(&mut pair, 0.4, Some(DriveMode::Parallel), 150);
+    let stats = pair.chassis.stats();
+    assert_eq!(stats.motion_mode, "parallel");
+    assert!(stats.actual.linear > 0.3, "{:?}", stats.actual);
+    drive(&mut pair, 0.0, Some(DriveMode::Park), 150);
+    assert_eq!(pair.chassis.stats().motion_mode, "park");
+    drive(&mut pair, 0.4, None, 150);
+    let stats = pair.chassis.stats();
+    assert_eq!(stats.motion_mode, "dual_ackermann");
+    assert!(stats.actual.linear > 0.3, "{:?}", stats.actual);
+    assert_eq!(
+        (stats.ignored.mode_changing, stats.mode_changes_refused),
+        (0, 0)
+    );
+    assert!(pair.stops().is_empty(), "{:?}", pair.stops());
 }
 
 /// A Ranger driven forward with a turn, sideways, spinning and beyond its limits: the mode

@@ -78,6 +78,50 @@ pub fn one_mode(velocity: Velocity, min_radius: f64, caps: Velocity) -> Velocity
     }
 }
 
+/// `velocity` in the mode a client named, within `caps` and `min_radius` as [`one_mode`]
+/// brings it (below [`RESOLUTION`] zero; sideways scaled once to every cap; dual Ackermann no
+/// tighter than `min_radius`), or why that mode cannot carry it: a client that names a mode is
+/// told what the mode does not do, never driven in another.
+pub fn in_mode(
+    mode: MotionModeV2,
+    velocity: Velocity,
+    min_radius: f64,
+    caps: Velocity,
+) -> Result<Velocity, String> {
+    let quiet = |value: f64| if value.abs() < RESOLUTION { 0.0 } else { value };
+    let (linear, lateral, angular) = (quiet(velocity.0), quiet(velocity.1), quiet(velocity.2));
+    let (linear_cap, _, angular_cap) = caps;
+    let refused = |what: &str| Err(format!("{mode} mode {what}"));
+    match mode {
+        MotionModeV2::DualAckermann if lateral != 0.0 => {
+            refused("does not move sideways: ask parallel mode, or no mode")
+        }
+        MotionModeV2::DualAckermann if linear == 0.0 && angular != 0.0 => {
+            refused("does not turn in place: ask spin mode, or no mode")
+        }
+        MotionModeV2::DualAckermann => {
+            let linear = linear.clamp(-linear_cap, linear_cap);
+            let limit = (linear.abs() / min_radius).min(angular_cap);
+            Ok((linear, 0.0, angular.clamp(-limit, limit)))
+        }
+        MotionModeV2::Parallel if angular != 0.0 => {
+            refused("does not turn: ask without a yaw rate, or no mode")
+        }
+        MotionModeV2::Parallel => Ok(one_mode((linear, lateral, 0.0), min_radius, caps)),
+        MotionModeV2::Spin if linear != 0.0 || lateral != 0.0 => {
+            refused("turns in place: ask without a forward or sideways speed, or no mode")
+        }
+        MotionModeV2::Spin => Ok((0.0, 0.0, angular.clamp(-angular_cap, angular_cap))),
+        MotionModeV2::Park if (linear, lateral, angular) != (0.0, 0.0, 0.0) => {
+            refused("holds the robot still: ask zero velocity, or another mode to move")
+        }
+        MotionModeV2::Park => Ok((0.0, 0.0, 0.0)),
+        MotionModeV2::SideSlip | MotionModeV2::Unknown(_) => {
+            refused("is not one the gateway drives in (dual_ackermann, parallel, spin, park)")
+        }
+    }
+}
+
 /// `output` as the chassis in `settled` (`None`: changing, or not reported yet) carries it this
 /// tick: in dual Ackermann no tighter than `min_radius` at the speed it goes now, in parallel
 /// without a turn, spinning without moving off; changing, nothing at all.
@@ -145,11 +189,16 @@ impl Handshake {
         }
         let left = before.and_then(|before| before.settled());
         match left {
-            Some(left) if left != report.mode && self.asked != Some(report.mode) => Some(format!(
-                "the chassis left {left} mode for {} mode unasked (0x291): check who changed it \
-                 (its RC), then release the stop and take control again",
-                report.mode
-            )),
+            Some(left) if left != report.mode && self.asked != Some(report.mode) => {
+                // Someone else's mode now: what the gateway asked before no longer holds (a
+                // park of its own the RC left and came back to is the RC's).
+                self.asked = None;
+                Some(format!(
+                    "the chassis left {left} mode for {} mode unasked (0x291): check who \
+                     changed it (its RC), then release the stop and take control again",
+                    report.mode
+                ))
+            }
             _ => None,
         }
     }
@@ -190,7 +239,7 @@ impl Handshake {
         let leavable = match self.reported {
             None => true,
             Some(report) => match report.settled() {
-                Some(mode) => mode != wanted && leavable(mode),
+                Some(mode) => mode != wanted && self.may_leave(),
                 None => false,
             },
         };
@@ -201,10 +250,18 @@ impl Handshake {
         self.asked = Some(wanted);
         Some(wanted)
     }
+
+    /// Whether the gateway may take the chassis out of the mode it reports settled in: one it
+    /// drives in ([`leavable`]), or park when a client asked for it through the gateway.
+    pub fn may_leave(&self) -> bool {
+        self.reported
+            .and_then(|report| report.settled())
+            .is_some_and(|mode| leavable(mode) || self.asked == Some(mode))
+    }
 }
 
 /// Whether the gateway may take the chassis out of `mode` by itself: the modes it drives in,
-/// not park, side slip or one no source names.
+/// not park, side slip or one no source names (someone put it there).
 pub fn leavable(mode: MotionModeV2) -> bool {
     match mode {
         MotionModeV2::DualAckermann | MotionModeV2::Parallel | MotionModeV2::Spin => true,
@@ -333,7 +390,92 @@ mod tests {
         assert!(!carries(MotionModeV2::Park, (0.1, 0.0, 0.0)));
     }
 
+    #[test]
+    fn a_named_mode_carries_what_it_does_and_says_what_it_does_not() {
+        use MotionModeV2::*;
+        let ahead = (0.5, 0.0, 0.0);
+        assert_eq!(in_mode(Parallel, ahead, RADIUS, CAPS), Ok(ahead));
+        assert_eq!(in_mode(DualAckermann, ahead, RADIUS, CAPS), Ok(ahead));
+        // Held to its circle, as without a mode.
+        let (_, _, angular) = in_mode(DualAckermann, (0.1, 0.0, 1.0), RADIUS, CAPS).expect("held");
+        assert!((angular - 0.1 / RADIUS).abs() < 1e-12, "{angular}");
+        assert_eq!(
+            in_mode(Spin, (0.0, 0.0, 9.0), RADIUS, CAPS),
+            Ok((0.0, 0.0, 4.8))
+        );
+        assert_eq!(
+            in_mode(Park, (0.0, 0.0, 0.0), RADIUS, CAPS),
+            Ok((0.0, 0.0, 0.0))
+        );
+        for (mode, velocity, why) in [
+            (Parallel, (0.5, 0.0, 0.2), "parallel mode does not turn"),
+            (
+                DualAckermann,
+                (0.5, 0.2, 0.0),
+                "dual_ackermann mode does not move sideways",
+            ),
+            (
+                DualAckermann,
+                (0.0, 0.0, 0.5),
+                "dual_ackermann mode does not turn in place",
+            ),
+            (Spin, (0.1, 0.0, 0.5), "spin mode turns in place"),
+            (Park, (0.1, 0.0, 0.0), "park mode holds the robot still"),
+            (
+                SideSlip,
+                (0.0, 0.1, 0.0),
+                "side_slip mode is not one the gateway drives in",
+            ),
+        ] {
+            let refused = in_mode(mode, velocity, RADIUS, CAPS).expect_err("refused");
+            assert!(refused.starts_with(why), "{refused}");
+        }
+    }
+
+    #[test]
+    fn park_is_left_only_when_the_gateway_asked_for_it() {
+        let mut handshake = Handshake::default();
+        let zero = (0.0, 0.0, 0.0);
+        handshake.handle_motion_state(Duration::ZERO, &still());
+        // Someone parked it: not left.
+        handshake.handle_report(report(MotionModeV2::Park, false));
+        assert!(!handshake.may_leave());
+        let ahead = Some(MotionModeV2::DualAckermann);
+        assert_eq!(handshake.poll_request(200 * MS, ahead, zero), None);
+        // Out of it by its RC, then parked by a client's request through the gateway: left.
+        handshake.handle_report(report(MotionModeV2::DualAckermann, false));
+        assert!(handshake.may_leave());
+        let park = Some(MotionModeV2::Park);
+        assert_eq!(handshake.poll_request(400 * MS, park, zero), park);
+        handshake.handle_report(report(MotionModeV2::Park, false));
+        assert!(handshake.may_leave());
+        // Out of it by its RC and parked again by it: the RC's park, not left.
+        handshake.handle_report(report(MotionModeV2::Parallel, false));
+        handshake.handle_report(report(MotionModeV2::Park, false));
+        assert!(!handshake.may_leave());
+        // Parked by a client again: left for a drive.
+        handshake.handle_report(report(MotionModeV2::DualAckermann, false));
+        assert_eq!(handshake.poll_request(600 * MS, park, zero), park);
+        handshake.handle_report(report(MotionModeV2::Park, false));
+        assert_eq!(handshake.poll_request(800 * MS, ahead, zero), ahead);
+    }
+
     proptest! {
+        #[test]
+        fn a_named_mode_carries_whatever_it_takes_within_the_caps(
+            linear in prop_oneof![Just(0.0), -2.0f64..2.0],
+            lateral in prop_oneof![Just(0.0), -2.0f64..2.0],
+            angular in prop_oneof![Just(0.0), -6.0f64..6.0],
+            mode in 0u8..6,
+        ) {
+            let mode = MotionModeV2::from_raw(mode);
+            if let Ok(velocity) = in_mode(mode, (linear, lateral, angular), RADIUS, CAPS) {
+                prop_assert!(carries(mode, velocity), "{velocity:?} in {mode}");
+                prop_assert!(velocity.0.hypot(velocity.1) <= CAPS.0 + 1e-9, "{velocity:?}");
+                prop_assert!(velocity.2.abs() <= CAPS.2 + 1e-9, "{velocity:?}");
+            }
+        }
+
         #[test]
         fn one_mode_is_carried_by_the_mode_it_wants_and_changing_moves_nothing(
             linear in -2.0f64..2.0,

@@ -12,7 +12,7 @@ use scout_clients::control::{ControlError, Controller, Lights, Stopper};
 use scout_clients::interface::control::{StopPayload, UNKNOWN_UID};
 use scout_clients::interface::control::{parse_fault_clear, parse_light_text};
 use scout_clients::interface::stop_socket::StopSocketError;
-use scout_clients::{Accepted, Class, ReleaseTarget, StopCause};
+use scout_clients::{Accepted, Class, DriveMode, ReleaseTarget, StopCause};
 use scout_protocol::{Light, LightCommand};
 
 use scout_clients::remote::{RemoteController, RemoteError, SessionSettings, peer_client_name};
@@ -65,6 +65,10 @@ pub struct DriveArgs {
     /// SCOUT MINI OMNI on protocol v2); any other refuses it.
     #[arg(long, allow_hyphen_values = true, default_value_t = 0.0)]
     lateral: f64,
+    /// The motion mode to drive in, on a chassis that has them (a Ranger): dual_ackermann,
+    /// parallel, spin, or park (with no speed: parks it). Default: the gateway picks it.
+    #[arg(long, value_name = "MODE")]
+    mode: Option<DriveMode>,
     /// How long to drive, s (default: until Ctrl-C).
     #[arg(long, value_name = "S")]
     duration: Option<f64>,
@@ -106,7 +110,12 @@ pub fn drive(args: &DriveArgs) -> anyhow::Result<ExitCode> {
     let mut last: Option<String> = None;
     let mut last_answer = Ok(Accepted::default());
     while !stop.load(Ordering::Relaxed) && duration.is_none_or(|d| start.elapsed() < d) {
-        let answer = controller.drive_body(args.linear, args.lateral, args.angular, None);
+        let answer = match args.mode {
+            Some(mode) => {
+                controller.drive_in_mode(mode, args.linear, args.lateral, args.angular, None)
+            }
+            None => controller.drive_body(args.linear, args.lateral, args.angular, None),
+        };
         match &answer {
             Err(ControlError::NoAnswer { .. } | ControlError::Client(_)) => {
                 return Err(answer.map(|_| ()).unwrap_err().into());
@@ -173,7 +182,14 @@ fn drive_remote(
     let mut next = start;
     let mut last: Option<String> = None;
     while !stop.load(Ordering::Relaxed) && duration.is_none_or(|d| start.elapsed() < d) {
-        match controller.drive_body(args.linear, args.lateral, args.angular, REMOTE_DRIVE_LIFE) {
+        let (linear, lateral, angular) = (args.linear, args.lateral, args.angular);
+        let answer = match args.mode {
+            Some(mode) => {
+                controller.drive_in_mode(mode, linear, lateral, angular, REMOTE_DRIVE_LIFE)
+            }
+            None => controller.drive_body(linear, lateral, angular, REMOTE_DRIVE_LIFE),
+        };
+        match answer {
             Ok(Some(answer)) => {
                 let text = match (&answer.reason, answer.clamped) {
                     (Some(reason), _) => reason.clone(),

@@ -23,7 +23,9 @@ use scout_clients::interface::control::parse_light_text;
 use scout_clients::interface::json::{STATE_KEYS, state_field, state_json, status_json};
 use scout_clients::interface::services::ServiceError;
 use scout_clients::interface::stop_socket::StopSocketError;
-use scout_clients::{Accepted, Class, ReleaseTarget, StatePayload, StatusPayload, monotonic_ns};
+use scout_clients::{
+    Accepted, Class, DriveMode, ReleaseTarget, StatePayload, StatusPayload, monotonic_ns,
+};
 use scout_protocol::FaultClear;
 use scout_protocol::message::{Light, LightCommand};
 
@@ -537,16 +539,23 @@ impl NativeController {
         self.call(py, Controller::take_control)
     }
 
-    #[pyo3(signature = (linear, angular, lateral=0.0))]
+    #[pyo3(signature = (linear, angular, lateral=0.0, mode=None))]
     fn drive<'py>(
         &self,
         py: Python<'py>,
         linear: f64,
         angular: f64,
         lateral: f64,
+        mode: Option<String>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        self.call(py, move |controller| {
-            controller.drive_body(linear, lateral, angular, None)
+        let mode = mode
+            .as_deref()
+            .map(str::parse::<DriveMode>)
+            .transpose()
+            .map_err(|error| PyValueError::new_err(error.to_string()))?;
+        self.call(py, move |controller| match mode {
+            Some(mode) => controller.drive_in_mode(mode, linear, lateral, angular, None),
+            None => controller.drive_body(linear, lateral, angular, None),
         })
     }
 

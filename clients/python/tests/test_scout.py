@@ -386,6 +386,38 @@ def test_an_omni_drives_sideways_and_a_scout_refuses_it_whole(robot: scout.Robot
         started.stop()
 
 
+def test_a_ranger_drives_in_the_mode_named_and_refuses_what_it_does_not_carry(
+    robot: scout.Robot,
+) -> None:
+    with robot.controller("pytest-mode", scout.Class.TELEOP) as controller:
+        controller.take_control()
+        with pytest.raises(scout.Rejected) as refused:
+            controller.drive(0.3, 0.0, mode="parallel")
+        assert refused.value.cause == "not_allowed"
+        assert "no motion modes" in refused.value.reason
+        with pytest.raises(ValueError, match="sideways_please"):
+            controller.drive(0.3, 0.0, mode="sideways_please")
+    started = Gateway(robot_name("ranger"), "--protocol", "v2", "--model", "ranger-mini-3")
+    try:
+        ranger = started.connect()
+        until(lambda: ranger.next(timeout=1.0).chassis.model == "ranger-mini-3", 5.0, "a Ranger")
+        with ranger.controller("pytest-ranger", scout.Class.TELEOP) as controller:
+            controller.take_control()
+            with pytest.raises(scout.Rejected) as refused:
+                controller.drive(0.3, 0.5, mode="parallel")
+            assert refused.value.reason.startswith("parallel mode does not turn")
+            deadline = time.monotonic() + 8.0
+            while True:
+                controller.drive(0.3, 0.0, mode="parallel")
+                state = ranger.next(timeout=1.0)
+                if state.odometry.x > 0.2:
+                    break
+                assert time.monotonic() < deadline, "the Ranger never moved in parallel mode"
+            assert state.motion is not None and state.motion.mode == "parallel"
+    finally:
+        started.stop()
+
+
 def test_status_is_the_scout_status_json_schema(robot: scout.Robot) -> None:
     until(lambda: robot.latest() is not None, 5.0, "a first state")
     cli = scout_cli("status", "--name", robot.name, "--json")

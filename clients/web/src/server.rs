@@ -932,6 +932,7 @@ fn control_thread(robot: &str, client: &str, slot: &Slot, answers: &mpsc::Unboun
                     lateral: 0.0,
                     angular,
                     ttl: Some(ttl),
+                    mode: None,
                 };
                 let result = controller.request_sent_at(&request, sent);
                 if let Err(error) = &result {

@@ -4,7 +4,8 @@ use std::time::Duration;
 
 use scout_protocol::model::Model;
 use scout_protocol::v2::{
-    BmsV2, BrakeV2, ControlModeV2, ErrorClearV2, MessageV2, MotionV2, SwitchPosition, VersionRequestForm,
+    BmsV2, BrakeV2, ControlModeV2, ErrorClearV2, MessageV2, MotionV2, SwitchPosition,
+    VersionRequestForm,
 };
 use scout_protocol::{ChassisState, Transport};
 

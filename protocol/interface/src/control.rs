@@ -6,6 +6,7 @@
 use std::time::Duration;
 
 use iceoryx2::prelude::ZeroCopySend;
+use scout_protocol::v2::MotionModeV2;
 use scout_protocol::{FaultClear, Light, LightCommand, LightMode};
 
 use crate::state::LightPayload;
@@ -120,6 +121,33 @@ wire_enum! {
 }
 
 wire_enum! {
+    /// The motion mode a client asks a chassis that has them (a Ranger) to drive in; without
+    /// one the gateway picks it from the velocity. On the wire: 0 none.
+    DriveMode {
+        /// Both axles steer: forward with or without a turn, no tighter than its circle.
+        DualAckermann = 1 => "dual_ackermann",
+        /// Every wheel at one angle: forward, sideways or diagonally, without a turn.
+        Parallel = 2 => "parallel",
+        /// Turning in place.
+        Spin = 3 => "spin",
+        /// The wheels set to hold it still: nothing moves.
+        Park = 4 => "park",
+    }
+}
+
+impl DriveMode {
+    /// The chassis' mode (0x141, 0x291).
+    pub const fn motion_mode(self) -> MotionModeV2 {
+        match self {
+            Self::DualAckermann => MotionModeV2::DualAckermann,
+            Self::Parallel => MotionModeV2::Parallel,
+            Self::Spin => MotionModeV2::Spin,
+            Self::Park => MotionModeV2::Park,
+        }
+    }
+}
+
+wire_enum! {
     /// A controlling client's class: teleop overrides autonomy.
     Class {
         /// A person driving: overrides autonomy.
@@ -164,6 +192,8 @@ pub enum Request {
         angular: f64,
         /// The command's life.
         ttl: Option<Duration>,
+        /// The motion mode to drive in (a Ranger; `None`: the gateway picks it).
+        mode: Option<DriveMode>,
     },
     /// Latch a safety stop, owned by this client's name.
     Stop {
@@ -232,7 +262,9 @@ impl Request {
                 lateral,
                 angular,
                 ttl,
+                mode,
             } => {
+                wire.mode = mode.map_or(0, DriveMode::raw);
                 wire.lease = *lease;
                 wire.linear = *linear;
                 wire.lateral = *lateral;
@@ -283,6 +315,14 @@ impl Request {
                 lateral: wire.lateral,
                 angular: wire.angular,
                 ttl: (wire.ttl_ms > 0).then(|| Duration::from_millis(u64::from(wire.ttl_ms))),
+                mode: match wire.mode {
+                    0 => None,
+                    raw => Some(DriveMode::from_raw(raw).ok_or_else(|| {
+                        Rejection::Malformed(format!(
+                            "unknown motion mode {raw} (dual_ackermann, parallel, spin or park)"
+                        ))
+                    })?),
+                },
             },
             RequestKind::Stop => Self::Stop {
                 reason: match wire.reason.as_str() {
@@ -692,7 +732,7 @@ pub struct LightsRequest {
 
 /// A request from a client to the gateway's arbiter.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::ControlRequest.v12")]
+#[type_name("scout::ControlRequest.v13")]
 #[repr(C)]
 pub struct ControlRequest {
     /// [`RequestKind`] as `u8`.
@@ -705,6 +745,8 @@ pub struct ControlRequest {
     pub lights: LightsRequest,
     /// [`ReleaseScope`] byte, for release.
     pub release_scope: u8,
+    /// [`DriveMode`] byte (0: none, the gateway picks), for drive.
+    pub mode: u8,
     /// The owner whose stops a release names.
     pub owner: FixedText<MAX_CLIENT_NAME>,
     /// The remote peer a stop or release is sent for: read only from the gateway's own zenoh
@@ -736,7 +778,7 @@ pub struct ControlRequest {
 
 /// The gateway's answer to one request.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("scout::ControlResponse.v12")]
+#[type_name("scout::ControlResponse.v13")]
 #[repr(C)]
 pub struct ControlResponse {
     /// The request's `seq`.
@@ -843,7 +885,7 @@ pub struct SourcePayload {
 
 /// The arbiter's status, published on every change and at least once a second.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::StatusPayload.v12")]
+#[type_name("scout::StatusPayload.v13")]
 #[repr(C)]
 pub struct StatusPayload {
     /// Rises by one with every publication.
@@ -991,6 +1033,17 @@ mod tests {
             panic!("bad brightness accepted")
         };
         assert_eq!(why, "front brightness 101 is above 100");
+        let mode = ControlRequest {
+            mode: 9,
+            ..wire(RequestKind::Drive.raw())
+        };
+        let Err(Rejection::Malformed(why)) = Request::decode(&mode) else {
+            panic!("an unknown mode accepted")
+        };
+        assert_eq!(
+            why,
+            "unknown motion mode 9 (dual_ackermann, parallel, spin or park)"
+        );
     }
 
     #[test]
@@ -1029,14 +1082,18 @@ mod tests {
                 speed.clone(),
                 speed.clone(),
                 speed,
-                prop::option::of(1u64..100_000)
+                prop::option::of(1u64..100_000),
+                prop::option::of(prop::sample::select(DriveMode::ALL.to_vec())),
             )
-                .prop_map(|(lease, linear, lateral, angular, ttl)| Request::Drive {
-                    lease,
-                    linear,
-                    lateral,
-                    angular,
-                    ttl: ttl.map(Duration::from_millis),
+                .prop_map(|(lease, linear, lateral, angular, ttl, mode)| {
+                    Request::Drive {
+                        lease,
+                        linear,
+                        lateral,
+                        angular,
+                        ttl: ttl.map(Duration::from_millis),
+                        mode,
+                    }
                 }),
             "[a-z ]{1,64}".prop_map(|reason| Request::Stop { reason }),
             (target, any::<u64>())
@@ -1099,6 +1156,7 @@ mod tests {
                 lateral: 0.0,
                 angular: 0.0,
                 ttl: None,
+                mode: None,
             },
             Request::Stop { reason: "x".into() },
             Request::Release {

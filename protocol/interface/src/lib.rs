@@ -38,13 +38,13 @@ pub mod state;
 pub mod stop_socket;
 pub mod text;
 
-/// The layout version in every payload's iceoryx2 type name (`scout::StatePayload.v12`). Raise it
+/// The layout version in every payload's iceoryx2 type name (`scout::StatePayload.v13`). Raise it
 /// when a payload changes: the sizes pinned below stop the build until it is raised.
-pub const LAYOUT_VERSION: u32 = 12;
+pub const LAYOUT_VERSION: u32 = 13;
 
 pub use control::{
-    Accepted, Class, ControlRequest, ControlResponse, LightsSetting, Rejection, RejectionKind,
-    Request, RequestKind, StatusPayload,
+    Accepted, Class, ControlRequest, ControlResponse, DriveMode, LightsSetting, Rejection,
+    RejectionKind, Request, RequestKind, StatusPayload,
 };
 pub use scout_protocol::Transport;
 pub use services::{Ipc, Role, ServiceError};

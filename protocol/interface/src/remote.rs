@@ -5,8 +5,8 @@
 use serde::{Deserialize, Serialize};
 
 use crate::control::{
-    BadLight, Class, LightsSetting, ReleaseTarget, Request, UnknownName, parse_fault_clear,
-    parse_light,
+    BadLight, Class, DriveMode, LightsSetting, ReleaseTarget, Request, UnknownName,
+    parse_fault_clear, parse_light,
 };
 use crate::services::prefix;
 use crate::services::{ControlPortError, RequestError};
@@ -375,6 +375,9 @@ pub enum CommandError {
     /// `class` is not a class's name.
     #[error(transparent)]
     Class(UnknownName),
+    /// `mode` is not a motion mode's name.
+    #[error(transparent)]
+    Mode(UnknownName),
     /// The command needs control the peer does not hold (the text says what to do).
     #[error("{0}")]
     NoControl(&'static str),
@@ -491,6 +494,10 @@ pub struct RemoteCommand {
     pub lateral: Option<f64>,
     /// drive: the command's life, ms.
     pub ttl_ms: Option<u32>,
+    /// drive: the motion mode to drive in, on a chassis that has them (`dual_ackermann`,
+    /// `parallel`, `spin`, `park`; absent: the gateway picks it). Left out when absent.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mode: Option<String>,
     /// estop: why.
     pub reason: Option<String>,
     /// release: the newest stop id the peer saw in the status (`newest_stop`): a stop latched
@@ -551,6 +558,12 @@ impl RemoteCommand {
                     ));
                 };
                 let ttl = self.ttl_ms.map(|ms| Duration::from_millis(u64::from(ms)));
+                let mode = self
+                    .mode
+                    .as_deref()
+                    .map(str::parse::<DriveMode>)
+                    .transpose()
+                    .map_err(CommandError::Mode)?;
                 (
                     permission(class),
                     Request::Drive {
@@ -559,6 +572,7 @@ impl RemoteCommand {
                         lateral: self.lateral.unwrap_or(0.0),
                         angular,
                         ttl,
+                        mode,
                     },
                 )
             }
@@ -975,10 +989,30 @@ mod tests {
                     linear: 0.5,
                     lateral: 0.0,
                     angular: 0.0,
-                    ttl: None
+                    ttl: None,
+                    mode: None,
                 }
             ))
         );
+        let spin = command(r#"{"linear":0,"angular":0.5,"mode":"spin"}"#)
+            .request(RemoteKind::Drive, Some((9, Class::Teleop)));
+        assert!(
+            matches!(
+                spin,
+                Ok((
+                    Permission::Teleop,
+                    Request::Drive {
+                        mode: Some(DriveMode::Spin),
+                        ..
+                    }
+                ))
+            ),
+            "{spin:?}"
+        );
+        let bogus = command(r#"{"linear":0,"angular":0,"mode":"crab"}"#)
+            .request(RemoteKind::Drive, Some((9, Class::Teleop)))
+            .expect_err("an unknown mode");
+        assert!(bogus.to_string().contains("crab"), "{bogus}");
         let stop = command("{}").request(RemoteKind::Estop, None);
         assert_eq!(
             stop.ok(),

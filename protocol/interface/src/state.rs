@@ -490,7 +490,7 @@ pub struct CommandPayload {
 
 /// The chassis state a gateway publishes on every decoded feedback frame and link change.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::StatePayload.v12")]
+#[type_name("scout::StatePayload.v13")]
 #[repr(C)]
 pub struct StatePayload {
     /// Increases by one with every publication.

@@ -258,13 +258,25 @@ class Controller:
         back after a stop, a release, a takeover or silence ended it."""
         return Answer._from(self._native.take_control())
 
-    def drive(self, linear: float, angular: float, lateral: float = 0.0) -> Answer:
+    def drive(
+        self,
+        linear: float,
+        angular: float,
+        lateral: float = 0.0,
+        mode: Optional[str] = None,
+    ) -> Answer:
         """Drives at `linear` m/s and `angular` rad/s, and `lateral` m/s to the left (a SCOUT
-        MINI OMNI on protocol v2; any other chassis refuses a sideways speed, saying why),
+        MINI OMNI or a Ranger; any other chassis refuses a sideways speed, saying why),
         clamped to the class' caps (see `Answer.clamped`). Send it every 20-100 ms: silence
-        stops the robot."""
+        stops the robot.
+
+        `mode` names a Ranger's motion mode to drive in: "dual_ackermann", "parallel",
+        "spin", or "park" (with zero speeds: parks it); None lets the gateway pick it from the
+        velocity. A velocity the mode does not carry (a yaw rate in parallel mode) is refused
+        with the reason (`Rejected`, `cause` "not_allowed"), as is a mode on a chassis
+        without modes; an unknown name raises ValueError."""
         return Answer._from(
-            self._native.drive(float(linear), float(angular), float(lateral))
+            self._native.drive(float(linear), float(angular), float(lateral), mode)
         )
 
     def heartbeat(self, period: float = 0.5) -> Answer:

@@ -36,8 +36,10 @@ class NativeController:
         """The lease it holds."""
     def take_control(self) -> Dict[str, Any]:
         """Takes control as its class."""
-    def drive(self, linear: float, angular: float, lateral: float = 0.0) -> Dict[str, Any]:
-        """Drives (m/s, rad/s, m/s leftward)."""
+    def drive(
+        self, linear: float, angular: float, lateral: float = 0.0, mode: Optional[str] = None
+    ) -> Dict[str, Any]:
+        """Drives (m/s, rad/s, m/s leftward), in motion mode `mode` if named."""
     def heartbeat(self, period: float) -> Dict[str, Any]:
         """Registers a heartbeat of `period` seconds (0 drops it)."""
     def resume(self) -> Dict[str, Any]:
