@@ -915,6 +915,7 @@ fn control_thread(robot: &str, client: &str, slot: &Slot, answers: &mpsc::Unboun
             }
             Action::Drive {
                 linear,
+                lateral,
                 angular,
                 sent,
                 ttl,
@@ -925,11 +926,11 @@ fn control_thread(robot: &str, client: &str, slot: &Slot, answers: &mpsc::Unboun
                 let Some(lease) = controller.lease() else {
                     continue;
                 };
-                // The page drives forward and turning; sideways is not on it yet.
+                // Sideways where the chassis moves sideways: the arbiter refuses it elsewhere.
                 let request = Request::Drive {
                     lease,
                     linear,
-                    lateral: 0.0,
+                    lateral,
                     angular,
                     ttl: Some(ttl),
                     mode: None,

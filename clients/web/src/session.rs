@@ -49,6 +49,9 @@ pub enum Message {
         sent_ms: u64,
         /// m/s.
         linear: f64,
+        /// m/s leftward (absent: 0; only a chassis that moves sideways takes another).
+        #[serde(default)]
+        lateral: f64,
         /// rad/s.
         angular: f64,
         /// Its life, ms (at most [`MAX_WEB_LIFE`]).
@@ -99,6 +102,8 @@ pub enum Action {
     Drive {
         /// m/s.
         linear: f64,
+        /// m/s leftward.
+        lateral: f64,
         /// rad/s.
         angular: f64,
         /// When the browser sent it, on this host's clock.
@@ -246,13 +251,14 @@ impl Session {
                 seq,
                 sent_ms,
                 linear,
+                lateral,
                 angular,
                 ttl_ms,
-            } => (seq, sent_ms, linear, angular, ttl_ms),
+            } => (seq, sent_ms, (linear, lateral, angular), ttl_ms),
         };
         self.spend(now)?;
-        let (seq, sent_ms, linear, angular, ttl_ms) = drive;
-        if !(linear.is_finite() && angular.is_finite()) {
+        let (seq, sent_ms, (linear, lateral, angular), ttl_ms) = drive;
+        if !(linear.is_finite() && lateral.is_finite() && angular.is_finite()) {
             return Err(Refused::NotFinite);
         }
         let ttl = ttl_ms.map_or(MAX_WEB_LIFE, |ms| {
@@ -264,6 +270,7 @@ impl Session {
         self.timing.accept(checked);
         Ok(Action::Drive {
             linear,
+            lateral,
             angular,
             sent: checked.sent,
             ttl,
@@ -330,6 +337,7 @@ mod tests {
             first,
             Action::Drive {
                 linear: 0.4,
+                lateral: 0.0,
                 angular: 0.0,
                 sent: now,
                 ttl: 250 * MS
@@ -484,6 +492,25 @@ mod tests {
         }
         let not_finite = r#"{"op":"drive","seq":1,"sent_ms":0,"linear":1e999,"angular":0}"#;
         assert!(page.handle_message(Duration::ZERO, not_finite).is_err());
+        let sideways =
+            r#"{"op":"drive","seq":2,"sent_ms":0,"linear":0,"lateral":1e999,"angular":0}"#;
+        assert!(page.handle_message(Duration::ZERO, sideways).is_err());
+    }
+
+    #[test]
+    fn a_drive_carries_its_sideways_speed_and_zero_without_one() {
+        let mut page = session(Role::Drive);
+        page.handle_message(Duration::ZERO, r#"{"op":"take"}"#)
+            .expect("taken");
+        let sideways = r#"{"op":"drive","seq":1,"sent_ms":0,"linear":0,"lateral":-0.3,"angular":0,"ttl_ms":250}"#;
+        assert!(matches!(
+            page.handle_message(Duration::ZERO, sideways),
+            Ok(Action::Drive { lateral, .. }) if lateral == -0.3
+        ));
+        assert!(matches!(
+            page.handle_message(Duration::ZERO, &drive(2, 0)),
+            Ok(Action::Drive { lateral, .. }) if lateral == 0.0
+        ));
     }
 
     proptest! {

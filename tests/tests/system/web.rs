@@ -200,6 +200,35 @@ fn the_page_in_a_real_browser_drives_stops_and_refuses_as_the_rules_say() {
     );
 }
 
+/// On a chassis that moves sideways (a SCOUT MINI OMNI on its simulator), the page in a real
+/// browser shows its sideways controls, and holding one drives it to the left; on the SCOUT of
+/// the test above they are hidden (`web_browser.py`).
+#[test]
+fn the_page_drives_sideways_where_the_chassis_moves_sideways() {
+    let test = "the_page_drives_sideways_where_the_chassis_moves_sideways";
+    if browser_missing(test).is_some() {
+        return;
+    }
+    let served = Served::start_on(
+        "web-omni",
+        &["--sim", "--protocol", "v2", "--model", "scout-mini-omni"],
+        &[],
+    );
+    let mut browser = Command::new(python());
+    browser
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/system/web_sideways.py"))
+        .args([&served.url, &served.token])
+        .env("SE_OFFLINE", "true");
+    let output = run_with_input(browser, b"", Duration::from_secs(120));
+    assert!(
+        output.status.success(),
+        "the browser checks failed:\n{}{}\nscout web's log:\n{}",
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr),
+        std::fs::read_to_string(&served.log).unwrap_or_default()
+    );
+}
+
 #[test]
 fn scout_web_listens_on_loopback_only_and_needs_a_gateway() {
     let (code, _, stderr) =

@@ -233,6 +233,8 @@ try:
                      "return [r.top, r.bottom, innerHeight, innerWidth]")
     assert rect[0] >= 0 and rect[1] <= rect[2] and rect[3] == 390, rect
     phone.save_screenshot(os.path.join(SHOTS, "phone-ready.png"))
+    # A SCOUT does not move sideways: the page offers no sideways controls.
+    assert not phone.find_element(By.ID, "sidepad").is_displayed(), "sideways on a SCOUT"
 
     # Holding the forward control for 1 s drives; letting go stops.
     forward = phone.find_element(By.CSS_SELECTOR, "#pad button[aria-label=forward]")
