@@ -21,7 +21,7 @@ use tracing::{info, warn};
 
 use crate::cdr::CdrError;
 use crate::config::{Middleware, Ros2Config};
-use crate::msgs::PlanarTwist;
+use crate::msgs::Command;
 use crate::publish::{Clocks, Messages, Topic};
 use crate::stream::{Action, CmdVelStream, Ignored, Origin, Outcome};
 use scout_clients::client::{ClientError, Robot};
@@ -29,6 +29,7 @@ use scout_clients::control::ControlError;
 use scout_clients::failure::{Failure, FailureKind};
 use scout_interface::control::ReleaseTarget;
 use scout_interface::robot::RobotName;
+use scout_protocol::model::Model;
 
 /// Why the bridge stopped.
 #[derive(Debug, thiserror::Error)]
@@ -142,8 +143,8 @@ pub struct CmdVel {
     /// Its publisher, sequence number and source time; `None` when the middleware could not
     /// tell (over zenoh: no rmw_zenoh attachment).
     pub origin: Option<Origin>,
-    /// The speeds, or why the payload is no message of the topic's type.
-    pub twist: Result<PlanarTwist, CdrError>,
+    /// What it asks, or why the payload is no message of the topic's type.
+    pub command: Result<Command, CdrError>,
 }
 
 /// The two services.
@@ -447,6 +448,10 @@ fn drive(
     counters: &Counters,
     halt: &dyn Fn() -> bool,
 ) -> Result<(), BridgeError> {
+    // The chassis' model, for its wheelbase (an Ackermann drive's steering angle made a yaw
+    // rate): the newest state's, read when one arrives.
+    let states = gateway.subscribe()?;
+    let mut model = None;
     let mut drivers = Vec::new();
     let topics = &config.cmd_vel;
     for topic in topics {
@@ -476,8 +481,28 @@ fn drive(
             }
             continue;
         };
-        let twist = match message.twist {
-            Ok(twist) => twist,
+        let twist = match message.command {
+            Ok(Command::Twist(twist)) => twist,
+            Ok(Command::Ackermann(drive)) => {
+                if let Ok(Some(state)) = states.try_latest() {
+                    model = state.chassis.model().or(model);
+                }
+                match model.and_then(Model::steering) {
+                    Some(steering) => drive.twist(steering.wheelbase),
+                    None => {
+                        let count = Counters::add(&counters.cmd_vel_rejected);
+                        if count.is_power_of_two() {
+                            let model = model.map_or("chassis of unknown model", Model::name);
+                            warn!(
+                                "ros2: {name}: an AckermannDriveStamped steers a chassis by its \
+                                 front wheels (a hunter2); this {model} does not: publish a \
+                                 Twist on a cmd_vel topic ({count} refused so far)"
+                            );
+                        }
+                        continue;
+                    }
+                }
+            }
             Err(error) => {
                 let count = Counters::add(&counters.cmd_vel_malformed);
                 if count.is_power_of_two() {

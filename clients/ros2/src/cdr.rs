@@ -143,7 +143,6 @@ impl<'a> Reader<'a> {
         self.take::<8>().map(f64::from_le_bytes)
     }
 
-    #[cfg(test)]
     pub fn f32(&mut self) -> Result<f32, CdrError> {
         self.take::<4>().map(f32::from_le_bytes)
     }

@@ -6,6 +6,8 @@ use std::time::Duration;
 use scout_interface::control::{Class, MAX_CLIENT_NAME};
 use serde::{Deserialize, Serialize};
 
+use crate::cdr::CdrError;
+use crate::msgs::{self, Command, MessageType};
 use crate::publish::Topic;
 use crate::rmw::Distro;
 use crate::stream::Pauses;
@@ -143,6 +145,29 @@ pub struct CmdVelTopic {
     /// geometry_msgs/TwistStamped instead of Twist (Nav2 on Jazzy and later can send it).
     #[serde(default)]
     pub stamped: bool,
+    /// ackermann_msgs/AckermannDriveStamped instead of Twist: a chassis that steers its front
+    /// wheels (the Hunter); its speed and steering angle are made a twist with its wheelbase.
+    #[serde(default)]
+    pub ackermann: bool,
+}
+
+impl CmdVelTopic {
+    /// The message type it carries.
+    pub fn message(&self) -> MessageType {
+        match (self.ackermann, self.stamped) {
+            (true, _) => msgs::ACKERMANN_DRIVE_STAMPED,
+            (false, true) => msgs::TWIST_STAMPED,
+            (false, false) => msgs::TWIST,
+        }
+    }
+
+    /// Its payload decoded ([`CmdVelTopic::message`]).
+    pub fn decode(&self, bytes: &[u8]) -> Result<Command, CdrError> {
+        match self.ackermann {
+            true => msgs::decode_ackermann(bytes).map(Command::Ackermann),
+            false => msgs::decode_twist(bytes, self.stamped).map(Command::Twist),
+        }
+    }
 }
 
 fn autonomy() -> Class {
@@ -196,6 +221,7 @@ impl Default for Ros2Config {
                 topic: "cmd_vel".into(),
                 class: Class::Autonomy,
                 stamped: false,
+                ackermann: false,
             }],
             new_stream_after_ms: 500,
             blocked_pause_ms: 2000,
@@ -239,6 +265,11 @@ pub enum Ros2ConfigError {
     Duplicate(String),
     #[error("gear_ratio must be a positive number, found {0}")]
     BadGearRatio(f64),
+    #[error(
+        "cmd_vel topic {0} is both `stamped` and `ackermann`: an AckermannDriveStamped is stamped \
+         already; give `ackermann = true` alone"
+    )]
+    StampedAckermann(String),
     #[error(
         "new_stream_after_ms must be 500..=10000 (at least a command's longest life) and \
          blocked_pause_ms new_stream_after_ms..=60000, found {0} and {1}"
@@ -325,6 +356,9 @@ impl Ros2Config {
                     why: "it must start with `/`",
                 });
             }
+        }
+        if let Some(both) = self.cmd_vel.iter().find(|c| c.stamped && c.ackermann) {
+            return Err(Ros2ConfigError::StampedAckermann(both.topic.clone()));
         }
         let mut seen = std::collections::BTreeSet::new();
         let drives = self.cmd_vel.iter().map(|c| c.topic.as_str());
@@ -461,12 +495,35 @@ mod tests {
     }
 
     #[test]
+    fn an_ackermann_topic_carries_its_type_and_is_not_also_stamped() {
+        let mut config: Ros2Config = toml::from_str(
+            r#"
+            [[cmd_vel]]
+            topic = "ackermann_cmd"
+            ackermann = true
+            "#,
+        )
+        .expect("valid TOML");
+        config.validate().expect("valid");
+        assert_eq!(config.cmd_vel[0].message(), msgs::ACKERMANN_DRIVE_STAMPED);
+        config.cmd_vel[0].stamped = true;
+        assert_eq!(
+            config.validate().map_err(|e| e.to_string()),
+            Err(
+                "cmd_vel topic ackermann_cmd is both `stamped` and `ackermann`: an \
+                 AckermannDriveStamped is stamped already; give `ackermann = true` alone"
+                    .into()
+            )
+        );
+    }
+
+    #[test]
     fn the_example_file_is_valid_and_states_the_defaults() {
         let path =
             std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/scout-ros2.toml");
         let example = Ros2Config::load(Some(&path)).expect("the example loads");
         example.validate().expect("the example is valid");
-        // What it marks as not the default: the namespace and the second cmd_vel topic.
+        // What it marks as not the default: the namespace and the cmd_vel topics after the first.
         let defaults = Ros2Config {
             namespace: String::new(),
             cmd_vel: example.cmd_vel[..1].to_vec(),
@@ -511,6 +568,7 @@ mod tests {
                         topic: "/odom".into(),
                         class: Class::Teleop,
                         stamped: false,
+                        ackermann: false,
                     }],
                     ..Default::default()
                 },

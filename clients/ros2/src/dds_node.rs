@@ -24,8 +24,10 @@ use tracing::{info, warn};
 use crate::bridge::{BridgeError, Call, CmdVel, Counters, Publishers, Senders, ServiceKind};
 use crate::cdr::{CdrError, ENCAPSULATION};
 use crate::config::Ros2Config;
-use crate::dds_wire::{TriggerCall, TriggerReply, TriggerResponse, Twist, TwistStamped, Whole};
-use crate::msgs::{MessageType, PlanarTwist};
+use crate::dds_wire::{
+    AckermannDriveStamped, TriggerCall, TriggerReply, TriggerResponse, Twist, TwistStamped, Whole,
+};
+use crate::msgs::{AckermannDrive, Command, MessageType, PlanarTwist};
 use crate::publish::Topic;
 use crate::rmw::Distro;
 use crate::ros_discovery::{self, NodeEntities};
@@ -286,10 +288,11 @@ impl std::fmt::Debug for DdsNode {
     }
 }
 
-/// A cmd_vel reader of either type.
+/// A cmd_vel reader of its topic's type.
 enum CmdVelReader {
     Twist(SimpleDataReaderCdr<Whole<Twist>>),
     Stamped(SimpleDataReaderCdr<Whole<TwistStamped>>),
+    Ackermann(SimpleDataReaderCdr<Whole<AckermannDriveStamped>>),
 }
 
 impl CmdVelReader {
@@ -297,6 +300,7 @@ impl CmdVelReader {
         match self {
             Self::Twist(reader) => reader.guid(),
             Self::Stamped(reader) => reader.guid(),
+            Self::Ackermann(reader) => reader.guid(),
         }
     }
 }
@@ -448,11 +452,7 @@ fn make_cmd_vel_readers(
 ) -> Result<Vec<CmdVelReader>, BridgeError> {
     let mut readers = Vec::new();
     for cmd_vel in &config.cmd_vel {
-        let message = if cmd_vel.stamped {
-            crate::msgs::TWIST_STAMPED
-        } else {
-            crate::msgs::TWIST
-        };
+        let message = cmd_vel.message();
         let dds_topic = participant
             .create_topic(
                 dds_name("rt", &config.resolve(&cmd_vel.topic), ""),
@@ -461,7 +461,13 @@ fn make_cmd_vel_readers(
                 TopicKind::NoKey,
             )
             .map_err(dds_error("making the cmd_vel topic"))?;
-        readers.push(if cmd_vel.stamped {
+        readers.push(if cmd_vel.ackermann {
+            CmdVelReader::Ackermann(
+                subscriber
+                    .create_simple_datareader_no_key(&dds_topic, None)
+                    .map_err(dds_error("subscribing to cmd_vel"))?,
+            )
+        } else if cmd_vel.stamped {
             CmdVelReader::Stamped(
                 subscriber
                     .create_simple_datareader_no_key(&dds_topic, None)
@@ -563,6 +569,10 @@ fn register(
                 poll.registry()
                     .register(reader, token, Interest::READABLE)?;
             }
+            CmdVelReader::Ackermann(reader) => {
+                poll.registry()
+                    .register(reader, token, Interest::READABLE)?;
+            }
         }
     }
     for (index, service) in services.iter_mut().enumerate() {
@@ -630,34 +640,46 @@ fn take_twists(topic: usize, reader: &CmdVelReader, senders: &Senders) {
     match reader {
         CmdVelReader::Twist(reader) => reader.drain_read_notifications(),
         CmdVelReader::Stamped(reader) => reader.drain_read_notifications(),
+        CmdVelReader::Ackermann(reader) => reader.drain_read_notifications(),
     }
     loop {
         let taken = match reader {
             CmdVelReader::Twist(reader) => reader.try_take_one().map(|sample| {
                 sample.map(|sample| {
                     let origin = origin(&sample);
-                    (PlanarTwist::from(&sample.into_value().0), origin)
+                    (
+                        Command::Twist(PlanarTwist::from(&sample.into_value().0)),
+                        origin,
+                    )
                 })
             }),
             CmdVelReader::Stamped(reader) => reader.try_take_one().map(|sample| {
                 sample.map(|sample| {
                     let origin = origin(&sample);
-                    (PlanarTwist::from(&sample.into_value().0.twist), origin)
+                    let twist = PlanarTwist::from(&sample.into_value().0.twist);
+                    (Command::Twist(twist), origin)
+                })
+            }),
+            CmdVelReader::Ackermann(reader) => reader.try_take_one().map(|sample| {
+                sample.map(|sample| {
+                    let origin = origin(&sample);
+                    let drive = AckermannDrive::from(&sample.into_value().0);
+                    (Command::Ackermann(drive), origin)
                 })
             }),
         };
         match taken {
-            Ok(Some((twist, origin))) => senders.twist(CmdVel {
+            Ok(Some((command, origin))) => senders.twist(CmdVel {
                 topic,
                 origin,
-                twist: Ok(twist),
+                command: Ok(command),
             }),
             Ok(None) => break,
             // A sample that is no message of the type: counted as malformed by the bridge.
             Err(error) => senders.twist(CmdVel {
                 topic,
                 origin: None,
-                twist: Err(CdrError::Malformed(format!("{error:?}"))),
+                command: Err(CdrError::Malformed(format!("{error:?}"))),
             }),
         }
     }

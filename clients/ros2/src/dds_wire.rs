@@ -6,7 +6,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::cdr::CdrError;
-use crate::msgs::PlanarTwist;
+use crate::msgs::{AckermannDrive, PlanarTwist};
 
 /// `builtin_interfaces/Time`.
 #[derive(Debug, Clone, Copy, Serialize, Deserialize)]
@@ -42,6 +42,32 @@ pub struct Twist {
 pub struct TwistStamped {
     header: Header,
     pub(crate) twist: Twist,
+}
+
+/// `ackermann_msgs/AckermannDrive`.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+struct AckermannDriveFields {
+    steering_angle: f32,
+    steering_angle_velocity: f32,
+    speed: f32,
+    acceleration: f32,
+    jerk: f32,
+}
+
+/// `ackermann_msgs/AckermannDriveStamped`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct AckermannDriveStamped {
+    header: Header,
+    drive: AckermannDriveFields,
+}
+
+impl From<&AckermannDriveStamped> for AckermannDrive {
+    fn from(message: &AckermannDriveStamped) -> Self {
+        AckermannDrive {
+            speed: f64::from(message.drive.speed),
+            steering_angle: f64::from(message.drive.steering_angle),
+        }
+    }
 }
 
 impl From<&Twist> for PlanarTwist {
@@ -231,6 +257,12 @@ pub fn decode_cmd_vel(bytes: &[u8], stamped: bool) -> Result<PlanarTwist, CdrErr
     } else {
         decode::<Whole<Twist>>(bytes).map(|Whole(message)| PlanarTwist::from(&message))
     }
+}
+
+/// Decodes an AckermannDriveStamped as the bridge's DDS reader does: the fuzz target's entry.
+pub fn decode_ackermann(bytes: &[u8]) -> Result<AckermannDrive, CdrError> {
+    decode::<Whole<AckermannDriveStamped>>(bytes)
+        .map(|Whole(message)| AckermannDrive::from(&message))
 }
 
 /// Decodes a Trigger request as the bridge's DDS service does (either service mapping): the

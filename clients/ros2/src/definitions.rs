@@ -11,7 +11,7 @@ const SEPARATOR: &str =
 /// Every definition: `package/Type` and its fields (constants where the message has them).
 /// The fields as the ROS 2 interface packages declare them (Humble to Kilted alike; Iron added
 /// two BatteryState technology constants, which change neither the bytes nor the type hash).
-const DEFINITIONS: [(&str, &str); 19] = [
+const DEFINITIONS: [(&str, &str); 21] = [
     ("builtin_interfaces/Time", "int32 sec\nuint32 nanosec\n"),
     (
         "std_msgs/Header",
@@ -104,6 +104,16 @@ const DEFINITIONS: [(&str, &str); 19] = [
     (
         "diagnostic_msgs/DiagnosticArray",
         "std_msgs/Header header\ndiagnostic_msgs/DiagnosticStatus[] status\n",
+    ),
+    // ros-drivers/ackermann_msgs (ROS 2 releases): the fields, without the comments.
+    (
+        "ackermann_msgs/AckermannDrive",
+        "float32 steering_angle\nfloat32 steering_angle_velocity\nfloat32 speed\n\
+         float32 acceleration\nfloat32 jerk\n",
+    ),
+    (
+        "ackermann_msgs/AckermannDriveStamped",
+        "std_msgs/Header header\nackermann_msgs/AckermannDrive drive\n",
     ),
 ];
 

@@ -29,6 +29,13 @@ pub const TWIST_STAMPED: MessageType = MessageType {
     dds_name: "geometry_msgs::msg::dds_::TwistStamped_",
     hash: "RIHS01_5f0fcd4f81d5d06ad9b4c4c63e3ea51b82d6ae4d0558f1d475229b1121db6f64",
 };
+/// ros-drivers/ackermann_msgs: what a car-like robot's planners publish (its hash as rosbags
+/// computes it from the fields).
+pub const ACKERMANN_DRIVE_STAMPED: MessageType = MessageType {
+    name: "ackermann_msgs/msg/AckermannDriveStamped",
+    dds_name: "ackermann_msgs::msg::dds_::AckermannDriveStamped_",
+    hash: "RIHS01_48ca7612a08d3bb72744fd98b71b7cf2ea24c6ad50fa4e1aa0bbad963c90d8cf",
+};
 pub const TF_MESSAGE: MessageType = MessageType {
     name: "tf2_msgs/msg/TFMessage",
     dds_name: "tf2_msgs::msg::dds_::TFMessage_",
@@ -59,10 +66,11 @@ pub const TRIGGER: MessageType = MessageType {
 };
 
 /// Every type the bridge speaks, for the hash test.
-pub const ALL: [MessageType; 8] = [
+pub const ALL: [MessageType; 9] = [
     ODOMETRY,
     TWIST,
     TWIST_STAMPED,
+    ACKERMANN_DRIVE_STAMPED,
     TF_MESSAGE,
     BATTERY_STATE,
     JOINT_STATE,
@@ -280,6 +288,55 @@ pub struct PlanarTwist {
     pub angular: f64,
 }
 
+/// What a topic that drives carries, decoded: a twist, or an Ackermann drive (made a twist
+/// with the chassis' wheelbase, which the decoder does not know).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Command {
+    Twist(PlanarTwist),
+    Ackermann(AckermannDrive),
+}
+
+/// The part of an `ackermann_msgs/AckermannDrive` the bridge takes: the speed (m/s, forward)
+/// and the steering angle (rad, positive to the left: the message's "virtual angle", a
+/// bicycle's front wheel). Its `steering_angle_velocity`, `acceleration` and `jerk` are not
+/// used: the gateway's own limits and ramps apply.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AckermannDrive {
+    pub speed: f64,
+    pub steering_angle: f64,
+}
+
+impl AckermannDrive {
+    /// The body velocity it asks of a chassis whose axles are `wheelbase` m apart: the speed,
+    /// and the yaw rate of a bicycle at that steering angle, `speed * tan(angle) / wheelbase`
+    /// (the inverse of the gateway's steering from a yaw rate).
+    pub fn twist(&self, wheelbase: f64) -> PlanarTwist {
+        PlanarTwist {
+            linear: self.speed,
+            lateral: 0.0,
+            angular: self.speed * self.steering_angle.tan() / wheelbase,
+        }
+    }
+}
+
+/// Reads an `ackermann_msgs/AckermannDriveStamped`.
+pub fn decode_ackermann(bytes: &[u8]) -> Result<AckermannDrive, CdrError> {
+    let mut r = Reader::new(bytes)?;
+    r.i32()?;
+    r.u32()?;
+    r.skip_string()?;
+    let steering_angle = r.f32()?;
+    r.f32()?;
+    let speed = r.f32()?;
+    r.f32()?;
+    r.f32()?;
+    r.finish()?;
+    Ok(AckermannDrive {
+        speed: f64::from(speed),
+        steering_angle: f64::from(steering_angle),
+    })
+}
+
 /// Writes a planar `Twist` (what a recording's `/cmd_vel` carries).
 pub fn encode_twist(twist: PlanarTwist) -> Vec<u8> {
     let mut w = Writer::new();
@@ -324,6 +381,8 @@ mod tests {
     const TWIST: &str = "00010000333333333333d33f00000000000000000000000000000000000000000000000000000000000000009a9999999999c93f";
     const TRIGGER_RESPONSE: &str = "00010000010000000800000073746f7070656400";
     const TWIST_STAMPED: &str = "0001000005000000fa0000000a000000626173655f6c696e6b000000000000000000e0bf0000000000000000000000000000000000000000000000000000000000000000000000000000d03f";
+    /// rosbags' AckermannDriveStamped: stamp (1, 2), "base_link", steering 0.25, speed 0.5.
+    const ACKERMANN: &str = "0001000001000000020000000a000000626173655f6c696e6b0000000000803e000000000000003f0000000000000000";
 
     fn hex(text: &str) -> Vec<u8> {
         (0..text.len())
@@ -450,6 +509,36 @@ mod tests {
     }
 
     #[test]
+    fn an_ackermann_drive_from_rosbags_decodes_and_is_a_bicycles_twist() {
+        let drive = decode_ackermann(&hex(ACKERMANN)).expect("decodes");
+        assert_eq!(
+            drive,
+            AckermannDrive {
+                speed: 0.5,
+                steering_angle: 0.25
+            }
+        );
+        assert!(decode_ackermann(&hex(ACKERMANN)[..30]).is_err());
+        assert!(decode_ackermann(&hex(TWIST)).is_err());
+        // The Hunter 2.0's 0.650 m wheelbase: 0.5 m/s at 0.25 rad turns at 0.196 rad/s.
+        let twist = drive.twist(0.650);
+        assert_eq!((twist.linear, twist.lateral), (0.5, 0.0));
+        assert!((twist.angular - 0.5 * 0.25_f64.tan() / 0.650).abs() < 1e-12);
+        // Backing up with the wheels to the left turns clockwise, as a car does.
+        let back = AckermannDrive {
+            speed: -0.5,
+            steering_angle: 0.25,
+        };
+        assert!(back.twist(0.650).angular < 0.0);
+        // The DDS reader's decoder reads the same.
+        #[cfg(feature = "dds")]
+        assert_eq!(
+            crate::dds_wire::decode_ackermann(&hex(ACKERMANN)),
+            Ok(drive)
+        );
+    }
+
+    #[test]
     fn a_twist_written_is_rosbags_own() {
         let twist = PlanarTwist {
             linear: 0.3,
@@ -479,6 +568,7 @@ mod tests {
         fn any_bytes_decode_or_fail_cleanly(bytes in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..128)) {
             let _ = decode_twist(&bytes, false);
             let _ = decode_twist(&bytes, true);
+            let _ = decode_ackermann(&bytes);
             let _ = crate::rmw::parse_attachment(&bytes);
         }
 

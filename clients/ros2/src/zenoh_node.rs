@@ -215,13 +215,10 @@ pub fn start(
     let mut subscribers = Vec::new();
     for (index, cmd_vel) in config.cmd_vel.iter().enumerate() {
         let name = config.resolve(&cmd_vel.topic);
-        let (message, stamped) = if cmd_vel.stamped {
-            (msgs::TWIST_STAMPED, true)
-        } else {
-            (msgs::TWIST, false)
-        };
+        let message = cmd_vel.message();
         declared.declare(&session, EntityKind::Subscription, &name, &message, config)?;
         let senders = senders.clone();
+        let topic = cmd_vel.clone();
         subscribers.push(
             session
                 .declare_subscriber(rmw::subscription_key(config.domain, &name, &message))
@@ -237,7 +234,7 @@ pub fn start(
                     senders.twist(CmdVel {
                         topic: index,
                         origin,
-                        twist: msgs::decode_twist(&sample.payload().to_bytes(), stamped),
+                        command: topic.decode(&sample.payload().to_bytes()),
                     });
                 })
                 .wait()

@@ -1,5 +1,5 @@
-//! Fuzzes what peers on the network send the gateway's bridges: a ROS 2 cmd_vel (CDR, plain and
-//! stamped, as the rmw_zenoh path and the DDS reader each decode it) with its rmw_zenoh
+//! Fuzzes what peers on the network send the gateway's bridges: a ROS 2 cmd_vel (CDR, plain,
+//! stamped and AckermannDriveStamped, as the rmw_zenoh path and the DDS reader each decode it) with its rmw_zenoh
 //! attachment, a std_srvs/Trigger request (both paths), and a zenoh remote command (its key and
 //! JSON payload down to the arbiter request it makes).
 #![no_main]
@@ -14,6 +14,8 @@ fuzz_target!(|input: &[u8]| {
     let _ = msgs::decode_twist(input, true);
     let _ = dds_wire::decode_cmd_vel(input, false);
     let _ = dds_wire::decode_cmd_vel(input, true);
+    let _ = msgs::decode_ackermann(input);
+    let _ = dds_wire::decode_ackermann(input);
     let _ = msgs::decode_trigger_request(input);
     let _ = dds_wire::decode_trigger_request(input);
     let _ = rmw::parse_attachment(input);

@@ -389,6 +389,90 @@ fn a_ros_2_node_sees_the_graph_reads_odometry_and_drives_through_the_arbiter() {
     let _ = std::fs::remove_file(&router_settings);
 }
 
+/// A Hunter driven by an `ackermann_msgs/AckermannDriveStamped` topic (`ackermann = true`): the
+/// bridge subscribes with the type's hash as rosbags computes it, and the chassis goes at the
+/// speed asked and turns at the yaw rate the steering angle makes with its wheelbase (the
+/// inner wheel's angle on the wire is the gateway's, from that rate).
+#[test]
+fn a_hunter_drives_from_an_ackermann_topic() {
+    let test = "a_hunter_drives_from_an_ackermann_topic";
+    if let Some(why) = standin_missing() {
+        assert!(
+            std::env::var_os("SCOUT_REQUIRE_ROS2_STANDIN").is_none(),
+            "{test}: {why}"
+        );
+        return skip(test, &why);
+    }
+    let name = robot_name("ros2-ackermann");
+    let domain = std::process::id() % 200 + 11;
+    let mut sim = Sim::start(&["--slcan", "--protocol", "v2", "--model", "hunter2"]);
+    let device = sim.port().to_owned();
+    let _gateway = Gateway::start(&["--slcan", &device, "--model", "hunter2", "--name", &name]);
+    connect(&name);
+    let (router, _router_process, router_settings) = rmw_zenohd(&name);
+    let settings = std::env::temp_dir().join(format!("{name}-ros2.toml"));
+    std::fs::write(
+        &settings,
+        "[[cmd_vel]]\ntopic = \"ackermann_cmd\"\nclass = \"teleop\"\nackermann = true\n",
+    )
+    .expect("write the bridge's settings");
+    let mut node = RosNode::start(&router, domain);
+    let started = Instant::now();
+    let _bridge = Bridge::start(&[
+        "ros2",
+        "--name",
+        &name,
+        "--connect",
+        &router,
+        "--domain",
+        &domain.to_string(),
+        "--config",
+        &settings.display().to_string(),
+    ]);
+    let deadline = Instant::now() + LIMIT;
+    loop {
+        let graph = node.ask(json!({"cmd": "graph", "domain": domain}));
+        let subscribed = graph["entities"].as_array().is_some_and(|entities| {
+            entities.iter().any(|e| {
+                e["kind"] == "MS"
+                    && e["topic"] == "/ackermann_cmd"
+                    && e["type"] == "ackermann_msgs/msg/AckermannDriveStamped"
+            })
+        });
+        if subscribed {
+            assert_eq!(graph["problems"], json!([]), "{graph}");
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "no ackermann subscription: {graph}"
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    std::thread::sleep(BLOCKED_PAUSE.saturating_sub(started.elapsed()));
+    node.ask(json!({"cmd": "publish", "topic": "/ackermann_cmd", "linear": 0.5, "steering": 0.2}));
+    moving(&mut sim, LIMIT);
+    let wanted = 0.5 * 0.2_f64.tan() / 0.650;
+    let deadline = Instant::now() + LIMIT;
+    loop {
+        let actual = sim.stats()["actual"].clone();
+        let linear = actual["linear"].as_f64().unwrap_or_default();
+        let angular = actual["angular"].as_f64().unwrap_or_default();
+        if (linear - 0.5).abs() < 0.01 && (angular - wanted).abs() < 0.01 {
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "not at 0.5 m/s turning at {wanted} rad/s: {actual}"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    node.ask(json!({"cmd": "quiet"}));
+    comes_to_rest(&mut sim, LIMIT);
+    let _ = std::fs::remove_file(&settings);
+    let _ = std::fs::remove_file(&router_settings);
+}
+
 #[test]
 fn scout_ros2_says_what_is_missing() {
     let (code, _, stderr) = scout(&[

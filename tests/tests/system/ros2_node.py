@@ -12,7 +12,8 @@ on standard input, answering each with one JSON line on standard output:
   {"cmd": "publish", "topic": "/cmd_vel", "linear": 0.5, "angular": 0.0, "rate": 20,
    "humble": false}
       starts publishing a Twist at that rate (with the attachment), until "quiet"; on Humble's
-      key (no type hash) with "humble"
+      key (no type hash) with "humble"; with "steering" (rad) instead of "angular", an
+      ackermann_msgs/msg/AckermannDriveStamped of speed "linear"
   {"cmd": "quiet"}
       stops publishing
   {"cmd": "call", "service": "/scout/estop"}
@@ -82,6 +83,21 @@ def register_trigger():
 
 
 register_trigger()
+
+
+def register_ackermann():
+    """ackermann_msgs (ros-drivers/ackermann_msgs), which rosbags does not carry: its fields."""
+    types = {}
+    types.update(get_types_from_msg(
+        "float32 steering_angle\nfloat32 steering_angle_velocity\nfloat32 speed\n"
+        "float32 acceleration\nfloat32 jerk\n", "ackermann_msgs/msg/AckermannDrive"))
+    types.update(get_types_from_msg(
+        "std_msgs/Header header\nackermann_msgs/AckermannDrive drive\n",
+        "ackermann_msgs/msg/AckermannDriveStamped"))
+    STORE.register(types)
+
+
+register_ackermann()
 
 
 def dds_name(type_name):
@@ -283,14 +299,23 @@ class Node:
 
     def publish(self, command):
         self.quiet({})
-        type_name = "geometry_msgs/msg/Twist"
-        Twist = STORE.types[type_name]
-        Vector3 = STORE.types["geometry_msgs/msg/Vector3"]
-        payload = STORE.serialize_cdr(
-            Twist(linear=Vector3(x=command["linear"], y=0.0, z=0.0),
-                  angular=Vector3(x=0.0, y=0.0, z=command["angular"])),
-            type_name,
-        )
+        if "steering" in command:
+            type_name = "ackermann_msgs/msg/AckermannDriveStamped"
+            Stamped = STORE.types[type_name]
+            Drive = STORE.types["ackermann_msgs/msg/AckermannDrive"]
+            Header = STORE.types["std_msgs/msg/Header"]
+            Time = STORE.types["builtin_interfaces/msg/Time"]
+            message = Stamped(
+                header=Header(stamp=Time(sec=0, nanosec=0), frame_id="base_link"),
+                drive=Drive(steering_angle=command["steering"], steering_angle_velocity=0.0,
+                            speed=command["linear"], acceleration=0.0, jerk=0.0))
+        else:
+            type_name = "geometry_msgs/msg/Twist"
+            Twist = STORE.types[type_name]
+            Vector3 = STORE.types["geometry_msgs/msg/Vector3"]
+            message = Twist(linear=Vector3(x=command["linear"], y=0.0, z=0.0),
+                            angular=Vector3(x=0.0, y=0.0, z=command["angular"]))
+        payload = STORE.serialize_cdr(message, type_name)
         publisher = self.session.declare_publisher(
             data_key(command.get("topic", "/cmd_vel"), type_name, command.get("humble", False)))
         attachments = Attachments()
