@@ -2230,6 +2230,111 @@ fn a_hunter_steers_by_its_wheels_and_its_odometry_follows() {
     );
 }
 
+/// Drives under `lease` at `velocity` (forward, sideways, yaw rate) every 20 ms for `ticks`,
+/// never taking control again; returns the answers.
+fn stream_velocity(
+    pair: &mut Pair,
+    lease: u64,
+    (linear, lateral, angular): (f64, f64, f64),
+    ticks: u32,
+) -> Vec<Result<Accepted, Rejected>> {
+    (0..ticks)
+        .map(|_| {
+            let drive = Request::Drive {
+                lease,
+                linear,
+                lateral,
+                angular,
+                ttl: None,
+                mode: None,
+            };
+            let answer = pair.request(TELEOP, &drive);
+            let next = pair.now + TICK;
+            while pair.now < next {
+                pair.step();
+            }
+            answer
+        })
+        .collect()
+}
+
+/// For every model on v2, driven on the axes it moves on (sideways where it moves sideways,
+/// forward with a turn elsewhere): a lost link stops it, a client that keeps streaming across
+/// the loss, the reconnection and the operator's release moves nothing on any axis (the wire
+/// zero on every field), and only a new take of control drives it again.
+#[test]
+fn on_every_model_a_gap_and_a_release_restart_nothing_on_any_axis() {
+    for model in Model::ALL
+        .into_iter()
+        .filter(|model| model.speaks(Protocol::V2))
+    {
+        let gateway = GatewayConfig {
+            model: Some(model),
+            ..config(Protocol::V2)
+        };
+        let mut pair = Pair::with_firmware(Protocol::V2, Transport::Can, &gateway, Start::Clean);
+        pair.run(ms(200));
+        let velocity = if model.limits().lateral > 0.0 {
+            (0.0, 0.4, 0.0)
+        } else {
+            (0.5, 0.0, 0.3)
+        };
+        let moving = |pair: &Pair| {
+            let actual = pair.chassis.actual();
+            actual.linear.abs() + actual.lateral.abs() + actual.angular.abs() > 0.2
+        };
+        let still = |pair: &Pair, why: &str| {
+            let actual = pair.chassis.actual();
+            let sent = pair.chassis.stats().last_command.expect("commands");
+            assert_eq!(
+                (actual.linear, actual.lateral, actual.angular),
+                (0.0, 0.0, 0.0),
+                "{model}: {why}"
+            );
+            assert_eq!(
+                (sent.linear, sent.lateral, sent.angular),
+                (0.0, 0.0, 0.0),
+                "{model}: {why}: the wire"
+            );
+        };
+        let lease = pair.take(TELEOP, Class::Teleop).expect("a lease");
+        stream_velocity(&mut pair, lease, velocity, 150);
+        assert!(moving(&pair), "{model}: {:?}", pair.chassis.actual());
+        pair.unplug();
+        assert_eq!(
+            pair.stops(),
+            [("gateway".into(), StopCause::LinkLost)],
+            "{model}"
+        );
+        stream_velocity(&mut pair, lease, velocity, 50);
+        pair.plugged = true;
+        pair.run_until(Duration::from_secs(3), |p| {
+            p.last_state().link.state() == LinkState::Ok
+        });
+        let answers = stream_velocity(&mut pair, lease, velocity, 100);
+        assert!(answers.iter().all(Result::is_err), "{model}: refused");
+        still(&pair, "after the link came back");
+        pair.request(
+            OPERATOR,
+            &Request::Release {
+                target: ReleaseTarget::All,
+                through: u64::MAX,
+            },
+        )
+        .expect("released");
+        let answers = stream_velocity(&mut pair, lease, velocity, 100);
+        assert!(answers.iter().all(Result::is_err), "{model}: revoked");
+        still(&pair, "after the release");
+        let lease = pair.take(TELEOP, Class::Teleop).expect("taken again");
+        stream_velocity(&mut pair, lease, velocity, 200);
+        assert!(
+            moving(&pair),
+            "{model}: a new take drives: {:?}",
+            pair.chassis.actual()
+        );
+    }
+}
+
 /// The 0x131 frames sent, with when.
 fn brake_requests(pair: &Pair) -> Vec<(Duration, BrakeV2)> {
     pair.v2_others()
