@@ -228,9 +228,10 @@ impl StateTracker {
         self.opened_at = Some(now);
         self.other_protocol_reported = false;
         self.last_feedback = None;
-        // Another chassis, or the same after a power cycle: its mode is said anew.
+        // Another chassis, or the same after a power cycle: its mode and wheels are said anew.
         self.state.motion.mode = 0;
         self.state.motion.mode_state = 0;
+        self.state.motion.wheels_reported = 0;
         self.counted_by_closed_ports = PortCounters {
             discarded_bytes: self.state.link.discarded_bytes,
             overflowed_frames: self.state.link.overflowed_frames,

@@ -166,6 +166,24 @@ impl crate::model::FourWheel {
         let (sin, cos) = angle.sin_cos();
         (speed * cos, speed * sin)
     }
+
+    /// Each wheel's angle (rad, within a quarter turn) and speed (m/s, negative rolling
+    /// backwards) when the body moves at `linear` m/s forward, `lateral` m/s leftward and
+    /// `angular` rad/s, in the order front left, front right, rear left, rear right (the
+    /// simulator's: which wheel 0x271 and 0x281 name first, no source says). Each wheel rolls
+    /// along its own velocity as a point of the rigid body: the same in every mode.
+    pub fn wheels(&self, linear: f64, lateral: f64, angular: f64) -> [(f64, f64); 4] {
+        let (x, y) = (self.wheelbase / 2.0, self.track / 2.0);
+        [(x, y), (x, -y), (-x, y), (-x, -y)].map(|(x, y)| {
+            let (forward, leftward) = (linear - angular * y, lateral + angular * x);
+            let speed = forward.hypot(leftward);
+            match (forward, leftward) {
+                (0.0, 0.0) => (0.0, 0.0),
+                (0.0, _) => (core::f64::consts::FRAC_PI_2, leftward),
+                _ => ((leftward / forward).atan(), speed.copysign(forward)),
+            }
+        })
+    }
 }
 
 #[cfg(test)]
@@ -199,6 +217,38 @@ mod tests {
         assert!((hunter.yaw_rate(-0.5, hunter.central_for(-0.5, 0.2)) - 0.2).abs() < 1e-12);
         // Tighter than it turns: the widest angle.
         assert_eq!(hunter.central_for(0.1, 5.0), hunter.max_central);
+    }
+
+    #[test]
+    fn each_rangers_wheel_points_where_its_mode_says() {
+        let ranger = crate::model::Model::RangerMini3
+            .four_wheel()
+            .expect("a four-wheel-steered model");
+        // Dual Ackermann turning left: the front left wheel at the inner angle the command
+        // carries, the rear ones mirrored, the outer ones wider apart and faster.
+        let inner = ranger.inner_for(0.5, 0.5);
+        let [fl, fr, rl, rr] = ranger.wheels(0.5, 0.0, 0.5);
+        assert!(
+            (fl.0 - inner).abs() < 1e-12 && (rl.0 + inner).abs() < 1e-12,
+            "{fl:?} {rl:?}"
+        );
+        assert!(
+            fr.0 < fl.0 && (rr.0 + fr.0).abs() < 1e-12 && fr.1 > fl.1,
+            "{fr:?} {fl:?}"
+        );
+        // Parallel: every wheel at one angle and speed.
+        let (speed, angle) = ranger.parallel_for(0.3, 0.3);
+        for wheel in ranger.wheels(0.3, 0.3, 0.0) {
+            assert!((wheel.0 - angle).abs() < 1e-12 && (wheel.1 - speed).abs() < 1e-12);
+        }
+        // Spin: tangent to the circle about the centre, the wheels' speeds equal.
+        let spin = ranger.wheels(0.0, 0.0, 1.0);
+        let corner = (ranger.wheelbase / 2.0).hypot(ranger.track / 2.0);
+        for (angle, speed) in spin {
+            assert!((speed.abs() - corner).abs() < 1e-12, "{spin:?}");
+            assert!(angle.abs() > 0.5 && angle.abs() < 1.2, "{spin:?}");
+        }
+        assert_eq!(ranger.wheels(0.0, 0.0, 0.0), [(0.0, 0.0); 4]);
     }
 
     #[test]

@@ -54,11 +54,14 @@ pub fn state() -> Value {
     let system = nullable(json!({
         "state": string(), "control_mode": string(), "battery_voltage": number(),
         "fault_bits": integer(), "faults": { "type": "array", "items": string() },
-        "unknown_fault_bits": integer(), "age_ms": number(),
+        "unknown_fault_bits": integer(), "brake": nullable_of("string"), "age_ms": number(),
     }));
     let motion = nullable(json!({
         "linear": number(), "angular": number(), "lateral": number(), "steering": number(),
-        "mode": nullable_of("string"), "mode_changing": boolean(), "age_ms": number(),
+        "mode": nullable_of("string"), "mode_changing": boolean(),
+        "wheel_angles": { "type": ["array", "null"], "items": number() },
+        "wheel_speeds": { "type": ["array", "null"], "items": number() },
+        "age_ms": number(),
     }));
     let motor = nullable(json!({
         "motor": integer(), "current": number(), "rpm": integer(),

@@ -18,7 +18,7 @@ use serde::Serialize;
 
 use scout_protocol::Transport;
 use scout_protocol::model::{FourWheel, Model, Steering};
-use scout_protocol::v2::{MessageV2, MotionModeStateV2, MotionModeV2, MotionV2};
+use scout_protocol::v2::{MessageV2, MotionModeStateV2, MotionModeV2, MotionV2, WheelsV2};
 
 #[path = "chassis_v2.rs"]
 mod v2;
@@ -1201,7 +1201,9 @@ impl Chassis {
     }
 
     /// A Ranger's 0x221 (its wheels' speed and angle, or its spin rate) and 0x291.
-    fn four_wheel_state(&self) -> (MotionV2, MotionModeStateV2) {
+    /// A Ranger's reports: 0x221, 0x291, and each wheel's angle (0x271) and speed (0x281) as
+    /// the body moves, in [`FourWheel::wheels`]' order.
+    fn four_wheel_state(&self) -> (MotionV2, MotionModeStateV2, WheelsV2, WheelsV2) {
         let spinning = self.motion_mode == MotionModeV2::Spin;
         let motion = MotionV2 {
             linear_mm_s: to_i16(if spinning {
@@ -1218,7 +1220,18 @@ impl Chassis {
             steering_mrad: to_i16(self.steering * 1000.0),
         };
         let mode = MotionModeStateV2::new(self.motion_mode, self.changing_until.is_some());
-        (motion, mode)
+        let wheels = self.params.four_wheel().map_or([(0.0, 0.0); 4], |ranger| {
+            let Speeds {
+                linear,
+                lateral,
+                angular,
+            } = self.actual;
+            ranger.wheels(linear, lateral, angular)
+        });
+        let thousandths = |value: f64| to_i16(value * 1000.0);
+        let angles = WheelsV2(wheels.map(|(angle, _)| thousandths(angle)));
+        let speeds = WheelsV2(wheels.map(|(_, speed)| thousandths(speed)));
+        (motion, mode, angles, speeds)
     }
 
     fn step_motors(&mut self, acceleration: f64, dt: f64) {

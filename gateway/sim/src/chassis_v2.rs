@@ -411,9 +411,11 @@ impl Chassis {
         let mut frames = match ranger {
             // A Ranger reports its wheels and its mode; no wheel odometer (nothing reads it:
             // agilex-family-notes, and in parallel mode its wheels do not roll forward).
-            Some((motion, mode)) => vec![
+            Some((motion, mode, angles, speeds)) => vec![
                 MessageV2::MotionState(motion),
                 MessageV2::MotionModeState(mode),
+                MessageV2::MotorAngles(angles),
+                MessageV2::MotorSpeeds(speeds),
             ],
             None => vec![MessageV2::MotionState(MotionV2 {
                 linear_mm_s: super::to_i16(actual.linear * 1000.0 * distance_scale),

@@ -732,7 +732,7 @@ pub struct LightsRequest {
 
 /// A request from a client to the gateway's arbiter.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::ControlRequest.v13")]
+#[type_name("scout::ControlRequest.v14")]
 #[repr(C)]
 pub struct ControlRequest {
     /// [`RequestKind`] as `u8`.
@@ -778,7 +778,7 @@ pub struct ControlRequest {
 
 /// The gateway's answer to one request.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("scout::ControlResponse.v13")]
+#[type_name("scout::ControlResponse.v14")]
 #[repr(C)]
 pub struct ControlResponse {
     /// The request's `seq`.
@@ -885,7 +885,7 @@ pub struct SourcePayload {
 
 /// The arbiter's status, published on every change and at least once a second.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::StatusPayload.v13")]
+#[type_name("scout::StatusPayload.v14")]
 #[repr(C)]
 pub struct StatusPayload {
     /// Rises by one with every publication.

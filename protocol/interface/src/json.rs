@@ -258,6 +258,12 @@ pub fn state_field(state: &StatePayload, key: &str, now_ns: u64) -> Option<Value
                     "fault_bits": system.fault_bits,
                     "faults": state.faults().iter().map(|f| f.name).collect::<Vec<_>>(),
                     "unknown_fault_bits": state.unknown_fault_bits(),
+                    // A Hunter's parking brake (0x211 byte 6); null on a model without one.
+                    "brake": state
+                        .chassis
+                        .model()
+                        .filter(|model| model.parking_brake())
+                        .map(|_| system.brake().name()),
                 })
             })
         }
@@ -271,6 +277,8 @@ pub fn state_field(state: &StatePayload, key: &str, now_ns: u64) -> Option<Value
                     "steering": motion.steering(),
                     "mode": motion.mode().map(|(mode, _)| mode.name()),
                     "mode_changing": motion.mode().is_some_and(|(_, changing)| changing),
+                    "wheel_angles": motion.wheel_angles(),
+                    "wheel_speeds": motion.wheel_speeds(),
                 })
             })
         }
@@ -486,6 +494,7 @@ pub fn status_json(status: &StatusPayload, now_ns: u64) -> Value {
 mod tests {
     use super::*;
     use crate::text::FixedText;
+    use scout_protocol::model::Model;
     use scout_protocol::{ChassisState, ControlMode, FaultBits, SystemStatus};
 
     #[test]
@@ -620,5 +629,48 @@ mod tests {
             .map(String::as_str)
             .collect();
         assert_eq!(keys, STATE_KEYS);
+        // Not a Ranger, not a Hunter: no wheels, no brake.
+        assert_eq!(json["motion"]["wheel_angles"], Value::Null);
+        assert_eq!(json["system"]["brake"], Value::Null);
+    }
+
+    #[test]
+    fn a_rangers_wheels_and_a_hunters_brake_are_in_the_state() {
+        let received = Received {
+            valid: true,
+            count: 0,
+            at_ns: 1_000_000,
+        };
+        let frame = |id: u16, data: [u8; 8]| {
+            scout_protocol::v2::decode(&scout_protocol::CanFrame::new(id, &data).expect("frame"))
+                .expect("v2")
+        };
+        let mut ranger = StatePayload {
+            chassis: crate::state::ChassisPayload::new(Model::RangerMini3, 4.8),
+            ..StatePayload::default()
+        };
+        ranger.store_v2(&frame(0x221, [0; 8]), received);
+        ranger.store_v2(
+            &frame(0x271, [0x01, 0xF4, 0xFE, 0x0C, 0, 0, 0, 0]),
+            received,
+        );
+        let json = state_json(&ranger, 2_000_000);
+        assert_eq!(json["motion"]["wheel_angles"], json!([0.5, -0.5, 0.0, 0.0]));
+        assert_eq!(json["motion"]["wheel_speeds"], Value::Null, "no 0x281 yet");
+        ranger.store_v2(&frame(0x281, [0x01, 0xF4, 0, 0, 0, 0, 0, 0]), received);
+        let json = state_json(&ranger, 2_000_000);
+        assert_eq!(json["motion"]["wheel_speeds"], json!([0.5, 0.0, 0.0, 0.0]));
+        assert_eq!(json["system"], Value::Null);
+        let mut hunter = StatePayload {
+            chassis: crate::state::ChassisPayload::new(Model::Hunter2, 1.146),
+            ..StatePayload::default()
+        };
+        hunter.store_v2(&frame(0x211, [0, 1, 0x00, 0xFA, 0, 0, 1, 7]), received);
+        assert_eq!(state_json(&hunter, 2_000_000)["system"]["brake"], "locked");
+        hunter.store_v2(&frame(0x211, [0, 1, 0x00, 0xFA, 0, 0, 0, 8]), received);
+        assert_eq!(
+            state_json(&hunter, 2_000_000)["system"]["brake"],
+            "released"
+        );
     }
 }

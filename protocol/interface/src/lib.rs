@@ -38,9 +38,9 @@ pub mod state;
 pub mod stop_socket;
 pub mod text;
 
-/// The layout version in every payload's iceoryx2 type name (`scout::StatePayload.v13`). Raise it
+/// The layout version in every payload's iceoryx2 type name (`scout::StatePayload.v14`). Raise it
 /// when a payload changes: the sizes pinned below stop the build until it is raised.
-pub const LAYOUT_VERSION: u32 = 13;
+pub const LAYOUT_VERSION: u32 = 14;
 
 pub use control::{
     Accepted, Class, ControlRequest, ControlResponse, DriveMode, LightsSetting, Rejection,
@@ -67,7 +67,7 @@ macro_rules! pin_layout {
     };
 }
 
-pin_layout!(state::StatePayload, 1016, 8);
+pin_layout!(state::StatePayload, 1032, 8);
 pin_layout!(control::StatusPayload, 6840, 8);
 pin_layout!(control::ControlRequest, 216, 8);
 pin_layout!(control::ControlResponse, 200, 8);

@@ -7,7 +7,7 @@
 use iceoryx2::prelude::ZeroCopySend;
 use scout_protocol::model::Model;
 use scout_protocol::v2::{
-    ControlModeV2, DriverStateV2, ErrorBitsV2, MessageV2, MotionModeV2, SwitchPosition,
+    BrakeV2, ControlModeV2, DriverStateV2, ErrorBitsV2, MessageV2, MotionModeV2, SwitchPosition,
 };
 use scout_protocol::version::Protocol;
 use scout_protocol::{
@@ -151,6 +151,9 @@ pub struct SystemPayload {
     pub battery_decivolts: u16,
     /// The fault word (v1: 0x151 bytes 4-5; v2: 0x211 bytes 4-5).
     pub fault_bits: u16,
+    /// v2: 0x211 byte 6, reserved on a SCOUT, a Hunter's parking brake (0 released, 1 locked:
+    /// [`SystemPayload::brake`]).
+    pub byte_6: u8,
 }
 
 /// The body rates: v1's 0x131 or v2's 0x221.
@@ -173,6 +176,13 @@ pub struct MotionPayload {
     /// 0: no motion mode reported (any chassis but a Ranger), 1: settled in `mode`, 2:
     /// changing to it.
     pub mode_state: u8,
+    /// A Ranger's four steering angles as 0x271 last said them, mrad, in its order (which
+    /// wheel each is, no source says).
+    pub wheel_angles_mrad: [i16; 4],
+    /// A Ranger's four wheel speeds as 0x281 last said them, mm/s, in its order.
+    pub wheel_speeds_mm_s: [i16; 4],
+    /// Bit 0: 0x271 reported, bit 1: 0x281 reported, since the port opened.
+    pub wheels_reported: u8,
 }
 
 /// One motor: v1's 0x200..0x203, or v2's 0x251..0x254 (speed, current, encoder) and
@@ -490,7 +500,7 @@ pub struct CommandPayload {
 
 /// The chassis state a gateway publishes on every decoded feedback frame and link change.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("scout::StatePayload.v13")]
+#[type_name("scout::StatePayload.v14")]
 #[repr(C)]
 pub struct StatePayload {
     /// Increases by one with every publication.
@@ -553,6 +563,7 @@ impl StatePayload {
                     control_mode: status.control_mode.raw(),
                     battery_decivolts: status.battery_decivolts,
                     fault_bits: status.faults.0,
+                    byte_6: 0,
                 };
             }
             Message::MotionFeedback(motion) => {
@@ -562,8 +573,7 @@ impl StatePayload {
                     angular_mrad_s: motion.angular_mrad_s,
                     lateral_mm_s: 0,
                     steering_mrad: 0,
-                    mode: 0,
-                    mode_state: 0,
+                    ..MotionPayload::default()
                 };
             }
             Message::MotorFeedback(motor) => {
@@ -604,6 +614,7 @@ impl StatePayload {
                     control_mode: system.control_mode.raw(),
                     battery_decivolts: system.battery_decivolts,
                     fault_bits: system.errors.0,
+                    byte_6: system.reserved,
                 };
             }
             MessageV2::MotionState(motion) => {
@@ -708,8 +719,14 @@ impl StatePayload {
                 self.firmware.received = received;
                 self.firmware.text = FixedText::new(&text);
             }
-            // A Ranger's wheels: decoded, not kept in the state (yet).
-            MessageV2::MotorAngles(_) | MessageV2::MotorSpeeds(_) => {}
+            MessageV2::MotorAngles(wheels) => {
+                self.motion.wheel_angles_mrad = wheels.0;
+                self.motion.wheels_reported |= 1;
+            }
+            MessageV2::MotorSpeeds(wheels) => {
+                self.motion.wheel_speeds_mm_s = wheels.0;
+                self.motion.wheels_reported |= 2;
+            }
             MessageV2::MotionCommand(_)
             | MessageV2::LightCommand(_)
             | MessageV2::SetMotionMode(_)
@@ -790,6 +807,11 @@ impl StatePayload {
 }
 
 impl SystemPayload {
+    /// 0x211 byte 6 read as a Hunter's parking brake (meaningful on a model that has one).
+    pub fn brake(&self) -> BrakeV2 {
+        BrakeV2::from_raw(self.byte_6)
+    }
+
     /// The status it carries, read as protocol v1's 0x151 (for v1 tools; see
     /// [`StatePayload::faults`] for either protocol).
     pub fn status_v1(&self) -> SystemStatus {
@@ -808,6 +830,18 @@ impl SystemPayload {
 }
 
 impl MotionPayload {
+    /// A Ranger's four steering angles (rad), once 0x271 reported them.
+    pub fn wheel_angles(&self) -> Option<[f64; 4]> {
+        (self.wheels_reported & 1 != 0)
+            .then(|| self.wheel_angles_mrad.map(|mrad| f64::from(mrad) / 1000.0))
+    }
+
+    /// A Ranger's four wheel speeds (m/s), once 0x281 reported them.
+    pub fn wheel_speeds(&self) -> Option<[f64; 4]> {
+        (self.wheels_reported & 2 != 0)
+            .then(|| self.wheel_speeds_mm_s.map(|mm| f64::from(mm) / 1000.0))
+    }
+
     /// m/s.
     pub fn linear(&self) -> f64 {
         f64::from(self.linear_mm_s) / 1000.0

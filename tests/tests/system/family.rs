@@ -251,6 +251,8 @@ fn a_hunter_drives_a_rounded_square_and_its_odometry_follows() {
     let said = format!("{stdout}{stderr}");
     assert_eq!(code, Some(4), "{said}");
     assert!(said.contains("a hunter2 cannot turn in place"), "{said}");
+    // Its parking brake, locked at power-on, in the state.
+    wait_for_state(&states, LIMIT, |s| s["system"]["brake"] == "locked");
     let mut figure = Figure::start(&robot, states);
     const SPEED: f64 = 0.8;
     const RADIUS: f64 = 1.5;
@@ -380,6 +382,16 @@ fn a_ranger_drives_every_mode_and_its_odometry_follows() {
         sideways["motion"]
     );
     assert_eq!(sideways["motion"]["mode_changing"], false);
+    // Its four wheels (0x271) all point left.
+    let angles = sideways["motion"]["wheel_angles"].as_array().cloned();
+    assert!(
+        angles.is_some_and(|angles| angles.len() == 4
+            && angles.iter().all(|angle| {
+                (angle.as_f64().unwrap_or_default() - std::f64::consts::FRAC_PI_2).abs() < 0.02
+            })),
+        "{}",
+        sideways["motion"]
+    );
     figure.leg((0.0, 0.0, 0.8), &turned_to(std::f64::consts::FRAC_PI_2));
     figure.leg((0.4, 0.0, 0.4), &turned_to(std::f64::consts::PI));
     let path = 1.0 + 0.8 + std::f64::consts::FRAC_PI_2;

@@ -47,7 +47,8 @@ class System:
     """The chassis' system status (v1 0x151, v2 0x211): state, control mode, battery, faults.
 
     The control mode and fault names are the chassis protocol's: v1's control modes are rc,
-    can and serial; v2's standby, can, uart and rc.
+    can and serial; v2's standby, can, uart and rc. `brake` is a Hunter's parking brake
+    ("locked", "released"; None on a model without one).
     """
 
     state: str
@@ -56,6 +57,7 @@ class System:
     fault_bits: int
     faults: List[str]
     unknown_fault_bits: int
+    brake: Optional[str]
     age_ms: float
 
 
@@ -65,7 +67,8 @@ class Motion:
     OMNI and a Ranger; steering (rad, positive to the left) on a Hunter and a Ranger, whose
     yaw rate (and a Ranger's sideways speed) the gateway derives from it; mode, a Ranger's
     motion mode ("dual_ackermann", "parallel", "spin"...; None on any other chassis), and
-    whether it is changing to it."""
+    whether it is changing to it; wheel_angles (rad) and wheel_speeds (m/s), a Ranger's four
+    wheels as 0x271 and 0x281 report them, in their order (None on any other chassis)."""
 
     linear: float
     angular: float
@@ -73,6 +76,8 @@ class Motion:
     steering: float
     mode: Optional[str]
     mode_changing: bool
+    wheel_angles: Optional[List[float]]
+    wheel_speeds: Optional[List[float]]
     age_ms: float
 
 
