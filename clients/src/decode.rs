@@ -368,7 +368,7 @@ mod tests {
         assert_eq!(
             frame_text(&frames[0], DEFAULT_MAX_ANGULAR_SPEED),
             "0x211 system_state v2 count=0 state=estop control_mode=standby control_mode_raw=0 \
-             battery_voltage=25.600 error_bits=128 errors=none unknown_error_bits=128"
+             battery_voltage=25.600 error_bits=128 errors=none unknown_error_bits=128 byte_6=0"
         );
         let motion = decode_line("111#0096000000000000", Protocol::Auto).expect("valid");
         let json = frame_json(&motion[0], DEFAULT_MAX_ANGULAR_SPEED);

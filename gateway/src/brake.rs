@@ -21,19 +21,31 @@ pub const IDLE_FOR: Duration = Duration::from_secs(1);
 /// The parking brake as the gateway works it, sans-IO: what the chassis reports (0x211,
 /// 0x221), what was sent and whether a client drives in; whether the wheels may be driven,
 /// and what to ask for (0x131), out. A release is asked again every [`REQUEST_WAIT`] while a
-/// client wants to drive and the chassis has not reported it; a lock once an idle time (a
-/// chassis that does not take it is not asked again until the next drive, nor is one someone
-/// released by hand). Locked unasked while released for a drive is reported once: a stop.
+/// client wants to drive and the chassis has not reported it; a lock once an idle time, only
+/// with the chassis in CAN command mode (not while its RC holds it), and once (a chassis that
+/// does not take it is not asked again until the next drive, nor is one someone released by
+/// hand). A request unanswered in its wait leaves the brake in doubt: nothing is driven until
+/// the chassis answers the next one. Locked unasked during a drive, after it reported the
+/// brake released for it, is reported once: a stop.
 #[derive(Debug, Clone, Default)]
 pub struct ParkingBrake {
     /// 0x211 byte 6 as last reported, since the port opened.
     reported: Option<BrakeV2>,
+    /// Whether the chassis last said it is in CAN command mode (0x211 byte 1).
+    commanded: bool,
     /// What was asked last, and when (cleared when the chassis reports it, or the wait ends).
     pending: Option<(BrakeV2, Duration)>,
     /// What was asked last, kept.
     asked: Option<BrakeV2>,
-    /// A request went unanswered and was said so (once until the chassis answers).
-    unanswered: bool,
+    /// A request went unanswered: the brake may be on its way to what was asked, whatever
+    /// the chassis reports; cleared when it answers one.
+    doubt: bool,
+    /// An unanswered request not yet said (for the log), and whether one was said since the
+    /// chassis last answered.
+    unanswered: Option<BrakeV2>,
+    said: bool,
+    /// The chassis reported the brake released after the gateway asked it for a drive.
+    released_for_drive: bool,
     /// When a client last asked to drive.
     driven_at: Option<Duration>,
     /// Whether it stands still.
@@ -56,19 +68,34 @@ impl ParkingBrake {
         self.standstill.handle_sent(now, sent);
     }
 
-    /// 0x211 byte 6. Returns `Some(why)` when the chassis locked the brake the gateway had
-    /// released for a drive (its RC, a fault, its own doing): a stop's reason.
-    pub fn handle_report(&mut self, brake: BrakeV2) -> Option<String> {
+    /// 0x211 at `now`: byte 6 and whether the chassis is in CAN command mode. Returns
+    /// `Some(why)` when the chassis locked the brake it had reported released for a drive
+    /// while a client drives (its RC, a fault, its own doing): a stop's reason.
+    pub fn handle_report(
+        &mut self,
+        now: Duration,
+        brake: BrakeV2,
+        commanded: bool,
+    ) -> Option<String> {
+        self.expire(now);
+        self.commanded = commanded;
         let before = self.reported.replace(brake);
         if self.pending.is_some_and(|(asked, _)| asked == brake) {
             self.pending = None;
         }
+        // What was asked last, taken (late or not): no doubt left.
         if self.asked == Some(brake) {
-            self.unanswered = false;
+            self.doubt = false;
+            self.said = false;
         }
+        if brake == BrakeV2::Released && self.asked == Some(BrakeV2::Released) && !self.doubt {
+            self.released_for_drive = true;
+        }
+        let driving = self.driven_at.is_some_and(|at| now < at + IDLE_FOR);
         let locked_unasked = before == Some(BrakeV2::Released)
             && brake != BrakeV2::Released
-            && self.asked == Some(BrakeV2::Released);
+            && std::mem::replace(&mut self.released_for_drive, brake == BrakeV2::Released)
+            && driving;
         locked_unasked.then(|| {
             format!(
                 "the chassis locked its parking brake unasked (0x211 byte 6 says {brake}): check \
@@ -82,21 +109,21 @@ impl ParkingBrake {
         self.reported
     }
 
-    /// Whether the wheels may be driven at `now`: the chassis reports the brake released and
-    /// nothing is asked of it.
+    /// Whether the wheels may be driven at `now`: the chassis reports the brake released,
+    /// nothing is asked of it, and no unanswered request left it in doubt.
     pub fn released(&mut self, now: Duration) -> bool {
         self.expire(now);
-        self.pending.is_none() && self.reported == Some(BrakeV2::Released)
+        self.pending.is_none() && !self.doubt && self.reported == Some(BrakeV2::Released)
     }
 
-    /// A request the chassis has not answered in [`REQUEST_WAIT`]: `Some(why)` the first time
-    /// in a row, for the log.
+    /// A request the chassis did not answer in [`REQUEST_WAIT`]: `Some(why)` the first time
+    /// since it last answered one, for the log.
     pub fn poll_unanswered(&mut self, now: Duration) -> Option<String> {
-        let (asked, at) = self.pending?;
-        if now < at + REQUEST_WAIT || self.unanswered {
+        self.expire(now);
+        let asked = self.unanswered.take()?;
+        if std::mem::replace(&mut self.said, true) {
             return None;
         }
-        self.unanswered = true;
         let reported = self.reported.map_or("nothing", BrakeV2::name);
         Some(format!(
             "the chassis has not reported its parking brake {asked} {} ms after 0x131 (0x211 \
@@ -113,8 +140,8 @@ impl ParkingBrake {
 
     /// What to ask for now (sent as 0x131), with `output` going out and `drive` saying whether
     /// a client asks to move ([`crate::arbiter::Output::drive`]): a release for a drive, a lock
-    /// once idle and standing still; nothing before the chassis has reported its brake, nor
-    /// while a request is pending.
+    /// once idle and standing still in CAN command mode; nothing before the chassis has
+    /// reported its brake, nor while a request is pending.
     pub fn poll_request(
         &mut self,
         now: Duration,
@@ -133,6 +160,7 @@ impl ParkingBrake {
         let wanted = if drive {
             BrakeV2::Released
         } else if idle
+            && self.commanded
             && self.standstill.is_still(now, output)
             && self.asked != Some(BrakeV2::Locked)
         {
@@ -140,9 +168,12 @@ impl ParkingBrake {
         } else {
             return None;
         };
-        if reported == wanted {
-            // Already so (a chassis that starts locked): nothing to ask, and a later report of
-            // the other is someone else's doing.
+        self.released_for_drive &= wanted == BrakeV2::Released;
+        if reported == wanted && !self.doubt {
+            // Already so (a chassis that starts locked, one released before): nothing to ask.
+            if wanted == BrakeV2::Released && self.asked != Some(BrakeV2::Released) {
+                self.released_for_drive = true;
+            }
             self.asked = Some(wanted);
             return None;
         }
@@ -152,8 +183,12 @@ impl ParkingBrake {
     }
 
     fn expire(&mut self, now: Duration) {
-        if self.pending.is_some_and(|(_, at)| now >= at + REQUEST_WAIT) {
+        if let Some((asked, at)) = self.pending
+            && now >= at + REQUEST_WAIT
+        {
             self.pending = None;
+            self.doubt = true;
+            self.unanswered = Some(asked);
         }
     }
 }
@@ -169,13 +204,18 @@ mod tests {
         brake.handle_motion_state(now, &MotionV2::default());
     }
 
+    /// A 0x211 in CAN command mode.
+    fn report(brake: &mut ParkingBrake, now: Duration, state: BrakeV2) -> Option<String> {
+        brake.handle_report(now, state, true)
+    }
+
     #[test]
     fn released_only_for_a_drive_and_nothing_moves_until_reported() {
         let mut brake = ParkingBrake::default();
         // Nothing reported: nothing driven, nothing asked.
         assert!(!brake.released(Duration::ZERO));
         assert_eq!(brake.poll_request(Duration::ZERO, true, ZERO), None);
-        assert_eq!(brake.handle_report(BrakeV2::Locked), None);
+        assert_eq!(report(&mut brake, Duration::ZERO, BrakeV2::Locked), None);
         still(&mut brake, Duration::ZERO);
         // Nobody drives: a locked brake stays so, and nothing is asked.
         assert_eq!(brake.poll_request(2000 * MS, false, ZERO), None);
@@ -187,9 +227,9 @@ mod tests {
         );
         assert_eq!(brake.poll_request(2040 * MS, true, ZERO), None, "pending");
         assert!(!brake.released(2040 * MS));
-        assert_eq!(brake.handle_report(BrakeV2::Locked), None);
+        assert_eq!(report(&mut brake, 2100 * MS, BrakeV2::Locked), None);
         assert!(!brake.released(2100 * MS));
-        assert_eq!(brake.handle_report(BrakeV2::Released), None);
+        assert_eq!(report(&mut brake, 2120 * MS, BrakeV2::Released), None);
         assert!(brake.released(2120 * MS));
         brake.handle_sent(2140 * MS, (0.3, 0.0, 0.0));
         assert_eq!(brake.poll_request(2140 * MS, true, (0.3, 0.0, 0.0)), None);
@@ -203,21 +243,21 @@ mod tests {
             Some(BrakeV2::Locked)
         );
         assert!(!brake.released(3140 * MS), "a lock is pending");
-        assert_eq!(brake.handle_report(BrakeV2::Locked), None);
+        assert_eq!(report(&mut brake, 3200 * MS, BrakeV2::Locked), None);
         assert!(!brake.released(3200 * MS));
     }
 
     #[test]
     fn locked_unasked_during_a_drive_is_a_stop_and_unanswered_asks_are_said() {
         let mut brake = ParkingBrake::default();
-        brake.handle_report(BrakeV2::Locked);
+        report(&mut brake, Duration::ZERO, BrakeV2::Locked);
         still(&mut brake, Duration::ZERO);
         assert_eq!(
             brake.poll_request(20 * MS, true, ZERO),
             Some(BrakeV2::Released)
         );
-        // Not answered: said once, asked again after the wait.
-        assert_eq!(brake.poll_unanswered(519 * MS), None);
+        // Not answered: held (as the core asks first, every tick), said once, asked again.
+        assert!(!brake.released(520 * MS));
         let why = brake.poll_unanswered(520 * MS).expect("unanswered");
         assert!(
             why.starts_with("the chassis has not reported its parking brake released 500 ms"),
@@ -227,33 +267,80 @@ mod tests {
             brake.poll_request(520 * MS, true, ZERO),
             Some(BrakeV2::Released)
         );
-        assert_eq!(brake.poll_unanswered(1100 * MS), None, "said once");
-        brake.handle_report(BrakeV2::Released);
+        assert!(!brake.released(1020 * MS));
+        assert_eq!(brake.poll_unanswered(1020 * MS), None, "said once");
+        assert_eq!(
+            brake.poll_request(1020 * MS, true, ZERO),
+            Some(BrakeV2::Released)
+        );
+        report(&mut brake, 1100 * MS, BrakeV2::Released);
         assert!(brake.released(1100 * MS));
-        let why = brake.handle_report(BrakeV2::Locked).expect("unasked");
+        assert_eq!(brake.poll_request(1120 * MS, true, ZERO), None);
+        let why = report(&mut brake, 1140 * MS, BrakeV2::Locked).expect("unasked");
         assert!(
             why.starts_with("the chassis locked its parking brake unasked"),
             "{why}"
         );
-        assert!(!brake.released(1120 * MS));
+        assert!(!brake.released(1160 * MS));
+    }
+
+    #[test]
+    fn a_lock_answered_late_holds_the_next_drive_and_is_no_stop() {
+        let mut brake = ParkingBrake::default();
+        report(&mut brake, Duration::ZERO, BrakeV2::Released);
+        still(&mut brake, Duration::ZERO);
+        assert_eq!(
+            brake.poll_request(1000 * MS, false, ZERO),
+            Some(BrakeV2::Locked)
+        );
+        // A drive while the lock is pending, past its wait: in doubt, held, released asked.
+        assert_eq!(brake.poll_request(1050 * MS, true, ZERO), None);
+        assert!(!brake.released(1500 * MS), "in doubt");
+        assert_eq!(
+            brake.poll_request(1500 * MS, true, ZERO),
+            Some(BrakeV2::Released)
+        );
+        // The lock lands late: the gateway's own, no stop; then the release.
+        assert_eq!(report(&mut brake, 1600 * MS, BrakeV2::Locked), None);
+        assert!(!brake.released(1600 * MS));
+        assert_eq!(report(&mut brake, 1700 * MS, BrakeV2::Released), None);
+        assert!(brake.released(1700 * MS));
+    }
+
+    #[test]
+    fn a_lock_is_asked_only_in_command_mode_and_one_after_the_drive_is_no_stop() {
+        let mut brake = ParkingBrake::default();
+        report(&mut brake, Duration::ZERO, BrakeV2::Locked);
+        still(&mut brake, Duration::ZERO);
+        assert_eq!(
+            brake.poll_request(20 * MS, true, ZERO),
+            Some(BrakeV2::Released)
+        );
+        report(&mut brake, 100 * MS, BrakeV2::Released);
+        // The drive ended; the RC holds the chassis: no lock asked of it.
+        brake.handle_report(1500 * MS, BrakeV2::Released, false);
+        assert_eq!(brake.poll_request(1500 * MS, false, ZERO), None);
+        // Someone locks it by hand after the drive: not a stop.
+        assert_eq!(brake.handle_report(1600 * MS, BrakeV2::Locked, false), None);
     }
 
     #[test]
     fn a_lock_not_taken_or_undone_by_hand_is_not_asked_again_until_the_next_drive() {
         let mut brake = ParkingBrake::default();
-        brake.handle_report(BrakeV2::Released);
+        report(&mut brake, Duration::ZERO, BrakeV2::Released);
         still(&mut brake, Duration::ZERO);
         assert_eq!(
             brake.poll_request(1000 * MS, false, ZERO),
             Some(BrakeV2::Locked)
         );
         assert_eq!(brake.poll_request(2000 * MS, false, ZERO), None);
-        brake.handle_report(BrakeV2::Locked);
+        report(&mut brake, 2000 * MS, BrakeV2::Locked);
         // Released by someone (its RC, by hand) while nobody drives: not a stop, not fought.
-        assert_eq!(brake.handle_report(BrakeV2::Released), None);
+        assert_eq!(report(&mut brake, 2100 * MS, BrakeV2::Released), None);
         assert_eq!(brake.poll_request(5000 * MS, false, ZERO), None);
-        // A drive, then idle again: locked again.
-        assert_eq!(brake.poll_request(5020 * MS, true, ZERO), None, "released");
+        // A drive (the late lock answered the doubt; released by hand already), then idle
+        // again: locked again.
+        assert_eq!(brake.poll_request(5020 * MS, true, ZERO), None);
         assert!(brake.released(5020 * MS));
         assert_eq!(
             brake.poll_request(6020 * MS, false, ZERO),

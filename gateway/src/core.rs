@@ -24,8 +24,8 @@ use scout_protocol::link::{Outgoing, RxEvent};
 use scout_protocol::sequence::RollingCounter;
 use scout_protocol::units;
 use scout_protocol::v2::{
-    BrakeV2, ControlModeV2, ErrorClearV2, LightsV2, MessageV2, MotionModeStateV2, MotionModeV2,
-    MotionV2, SystemStateV2, VersionRequestForm,
+    ControlModeV2, ErrorClearV2, LightsV2, MessageV2, MotionModeStateV2, MotionModeV2, MotionV2,
+    SystemStateV2, VersionRequestForm,
 };
 use scout_protocol::version::Protocol;
 use scout_protocol::{
@@ -473,18 +473,20 @@ impl Core {
             self.status_due = true;
         }
         if self.model.parking_brake() {
-            self.observe_brake(now, system.brake());
+            self.observe_brake(now, system);
         }
     }
 
     /// A Hunter's 0x211 byte 6: the arbiter drives only once the chassis reports its brake
     /// released; locked unasked during a drive latches a stop.
-    fn observe_brake(&mut self, now: Duration, brake: BrakeV2) {
+    fn observe_brake(&mut self, now: Duration, system: &SystemStateV2) {
+        let brake = system.brake();
         if self.brake.reported() != Some(brake) {
             info!("the chassis' parking brake is {brake} (0x211 byte 6)");
             self.status_due = true;
         }
-        if let Some(why) = self.brake.handle_report(brake) {
+        let commanded = system.control_mode == ControlModeV2::Can;
+        if let Some(why) = self.brake.handle_report(now, brake, commanded) {
             warn!("{why}");
             self.arbiter
                 .handle_gap(now, StopCause::ChassisMode, &why, false);

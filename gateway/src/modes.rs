@@ -158,8 +158,12 @@ pub struct Handshake {
     /// The mode asked for last, and when (cleared when the chassis reports taking it, or the
     /// wait ends).
     pending: Option<(MotionModeV2, Duration)>,
-    /// The mode asked for last, kept: a late report of taking it is no surprise.
+    /// The mode asked for last, kept until the wait ends: a report of taking it meanwhile is
+    /// no surprise.
     asked: Option<MotionModeV2>,
+    /// The mode the chassis took while the gateway's request for it was pending: the
+    /// gateway's own (a park it may leave), until the chassis takes another unasked.
+    ours: Option<MotionModeV2>,
     /// Whether it stands still.
     standstill: Standstill,
 }
@@ -186,6 +190,7 @@ impl Handshake {
         let before = self.reported.replace(report);
         if self.pending.is_some_and(|(mode, _)| mode == report.mode) {
             self.pending = None;
+            self.ours = Some(report.mode);
         }
         let left = before.and_then(|before| before.settled());
         match left {
@@ -193,6 +198,7 @@ impl Handshake {
                 // Someone else's mode now: what the gateway asked before no longer holds (a
                 // park of its own the RC left and came back to is the RC's).
                 self.asked = None;
+                self.ours = None;
                 Some(format!(
                     "the chassis left {left} mode for {} mode unasked (0x291): check who \
                      changed it (its RC), then release the stop and take control again",
@@ -217,9 +223,7 @@ impl Handshake {
     /// The mode the arbiter may drive in at `now`: the one the chassis reports settled in,
     /// none while it changes, before it has said, or while a mode asked for is pending.
     pub fn settled(&mut self, now: Duration) -> Option<MotionModeV2> {
-        if self.pending.is_some_and(|(_, at)| now >= at + REQUEST_WAIT) {
-            self.pending = None;
-        }
+        self.expire(now);
         match self.pending {
             Some(_) => None,
             None => self.reported.and_then(|report| report.settled()),
@@ -236,8 +240,11 @@ impl Handshake {
         output: Velocity,
     ) -> Option<MotionModeV2> {
         let wanted = wanted?;
+        self.expire(now);
+        // Nothing asked before the chassis has said its mode: a park it is in already would
+        // pass for one the gateway asked for.
         let leavable = match self.reported {
-            None => true,
+            None => false,
             Some(report) => match report.settled() {
                 Some(mode) => mode != wanted && self.may_leave(),
                 None => false,
@@ -252,11 +259,21 @@ impl Handshake {
     }
 
     /// Whether the gateway may take the chassis out of the mode it reports settled in: one it
-    /// drives in ([`leavable`]), or park when a client asked for it through the gateway.
+    /// drives in ([`leavable`]), or park when the chassis took it at a client's request through
+    /// the gateway.
     pub fn may_leave(&self) -> bool {
         self.reported
             .and_then(|report| report.settled())
-            .is_some_and(|mode| leavable(mode) || self.asked == Some(mode))
+            .is_some_and(|mode| leavable(mode) || self.ours == Some(mode))
+    }
+
+    /// A request the chassis did not take within [`REQUEST_WAIT`] is over: taking it later
+    /// is a change unasked.
+    fn expire(&mut self, now: Duration) {
+        if self.pending.is_some_and(|(_, at)| now >= at + REQUEST_WAIT) {
+            self.pending = None;
+            self.asked = None;
+        }
     }
 }
 
@@ -458,6 +475,32 @@ mod tests {
         assert_eq!(handshake.poll_request(600 * MS, park, zero), park);
         handshake.handle_report(report(MotionModeV2::Park, false));
         assert_eq!(handshake.poll_request(800 * MS, ahead, zero), ahead);
+        handshake.handle_report(report(MotionModeV2::DualAckermann, false));
+        // A park asked and not taken within the wait, then one the RC makes: the RC's.
+        assert_eq!(handshake.poll_request(1000 * MS, park, zero), park);
+        assert_eq!(
+            handshake.settled(1500 * MS),
+            Some(MotionModeV2::DualAckermann)
+        );
+        let why = handshake
+            .handle_report(report(MotionModeV2::Park, false))
+            .expect("a park the gateway no longer waits for is unasked");
+        assert!(why.contains("for park mode unasked"), "{why}");
+        assert!(!handshake.may_leave());
+    }
+
+    #[test]
+    fn nothing_is_asked_before_the_chassis_says_its_mode() {
+        let mut handshake = Handshake::default();
+        handshake.handle_motion_state(Duration::ZERO, &still());
+        let park = Some(MotionModeV2::Park);
+        assert_eq!(
+            handshake.poll_request(200 * MS, park, (0.0, 0.0, 0.0)),
+            None
+        );
+        // The RC had parked it: not the gateway's park.
+        handshake.handle_report(report(MotionModeV2::Park, false));
+        assert!(!handshake.may_leave());
     }
 
     proptest! {

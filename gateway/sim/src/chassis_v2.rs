@@ -243,6 +243,8 @@ impl Chassis {
             return Some(Ignored::Inhibited);
         }
         if self.brake_locked && command.linear_mm_s != 0 {
+            // Not kept for after a release: the wheels move on a command received released.
+            self.target = Speeds::default();
             self.stats.ignored.brake_locked += 1;
             return Some(Ignored::BrakeLocked);
         }

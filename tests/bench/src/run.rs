@@ -265,7 +265,20 @@ impl Bench {
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
         let log = self.scratch.path("gateway.log");
         self.gateway = Some(Gateway::start(&args, &log)?);
-        let states = connect(&self.name)?.subscribe()?;
+        let states = match connect(&self.name) {
+            Ok(robot) => robot.subscribe()?,
+            // Why it did not come up is in its log: said with the error.
+            Err(error) => {
+                let exited = self.gateway.as_mut().and_then(Gateway::exited);
+                let text = std::fs::read_to_string(&log).unwrap_or_default();
+                let lines: Vec<&str> = text.lines().collect();
+                let tail = lines[lines.len().saturating_sub(20)..].join("\n");
+                anyhow::bail!(
+                    "{error}; the gateway {}; its log ends:\n{tail}",
+                    exited.map_or("still runs".to_owned(), |status| format!("ended: {status}"))
+                );
+            }
+        };
         wait_state(&states, |state| state.link.state() == LinkState::Ok)?;
         Ok(states)
     }
