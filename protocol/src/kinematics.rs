@@ -97,6 +97,24 @@ impl crate::model::Steering {
     pub fn yaw_rate_from_inner(&self, linear: f64, inner: f64) -> f64 {
         self.yaw_rate(linear, self.central_from_inner(inner))
     }
+
+    /// The front left and right wheels' angles with the inner wheel at `inner` rad: the inner
+    /// one at `inner`, the outer one on the same circle, less steered.
+    pub fn front_wheels(&self, inner: f64) -> (f64, f64) {
+        let magnitude = inner.abs();
+        if magnitude == 0.0 {
+            return (0.0, 0.0);
+        }
+        let radius = self.wheelbase / magnitude.tan() + self.track / 2.0;
+        let outer = (self.wheelbase / (radius + self.track / 2.0))
+            .atan()
+            .copysign(inner);
+        if inner > 0.0 {
+            (inner, outer)
+        } else {
+            (outer, inner)
+        }
+    }
 }
 
 /// Four-wheel steering in its modes (the Rangers), from the geometry: in dual Ackermann both
@@ -190,6 +208,21 @@ impl crate::model::FourWheel {
 mod tests {
     use super::*;
     use core::f64::consts::PI;
+
+    #[test]
+    fn a_hunters_outer_front_wheel_is_on_the_inner_ones_circle() {
+        let hunter = crate::model::Model::Hunter2
+            .steering()
+            .expect("a steered model");
+        assert_eq!(hunter.front_wheels(0.0), (0.0, 0.0));
+        let (left, right) = hunter.front_wheels(0.4);
+        assert!(left == 0.4 && right > 0.0 && right < left, "{left} {right}");
+        // Both wheels' axes meet the rear axle's line at one point (the turn's centre).
+        let centre = |angle: f64, side: f64| hunter.wheelbase / angle.tan() + side;
+        let track = hunter.track / 2.0;
+        assert!((centre(left, track) - centre(right, -track)).abs() < 1e-9);
+        assert_eq!(hunter.front_wheels(-0.4), (-right, -0.4));
+    }
 
     #[test]
     fn the_hunters_steering_is_its_vendors() {

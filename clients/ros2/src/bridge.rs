@@ -449,8 +449,11 @@ fn drive(
     halt: &dyn Fn() -> bool,
 ) -> Result<(), BridgeError> {
     // The chassis' model, for its wheelbase (an Ackermann drive's steering angle made a yaw
-    // rate): the newest state's, read when one arrives.
-    let states = gateway.subscribe()?;
+    // rate): the newest state's, read when one arrives, where a topic carries Ackermann drives.
+    let states = match config.cmd_vel.iter().any(|topic| topic.ackermann) {
+        true => Some(gateway.subscribe()?),
+        false => None,
+    };
     let mut model = None;
     let mut drivers = Vec::new();
     let topics = &config.cmd_vel;
@@ -484,11 +487,24 @@ fn drive(
         let twist = match message.command {
             Ok(Command::Twist(twist)) => twist,
             Ok(Command::Ackermann(drive)) => {
-                if let Ok(Some(state)) = states.try_latest() {
-                    model = state.chassis.model().or(model);
+                match states.as_ref().map(|states| states.try_latest()) {
+                    Some(Ok(Some(state))) => model = state.chassis.model().or(model),
+                    Some(Err(error)) => warn!("ros2: {name}: reading the gateway's state: {error}"),
+                    Some(Ok(None)) | None => {}
                 }
                 match model.and_then(Model::steering) {
-                    Some(steering) => drive.twist(steering.wheelbase),
+                    Some(_) if drive.steering_angle.abs() >= std::f64::consts::FRAC_PI_2 => {
+                        let count = Counters::add(&counters.cmd_vel_malformed);
+                        if count.is_power_of_two() {
+                            warn!(
+                                "ros2: {name}: a steering angle of {} rad is not one a wheel \
+                                 takes (radians, within a quarter turn; {count} so far)",
+                                drive.steering_angle
+                            );
+                        }
+                        continue;
+                    }
+                    Some(steering) => drive.twist(&steering),
                     None => {
                         let count = Counters::add(&counters.cmd_vel_rejected);
                         if count.is_power_of_two() {

@@ -155,6 +155,15 @@ impl<'a> Reader<'a> {
         }
     }
 
+    /// Reads a string (its terminating NUL dropped; bytes not UTF-8 replaced).
+    pub fn string(&mut self) -> Result<String, CdrError> {
+        let start = self.at + (4 - self.at % 4) % 4 + 4;
+        self.skip_string()?;
+        let bytes = &self.bytes[start.min(self.at)..self.at];
+        let text = bytes.strip_suffix(&[0]).unwrap_or(bytes);
+        Ok(String::from_utf8_lossy(text).into_owned())
+    }
+
     /// Skips a string.
     pub fn skip_string(&mut self) -> Result<(), CdrError> {
         let len = self.u32()? as usize;

@@ -93,6 +93,10 @@ pub struct Ros2Config {
     pub topics: Topics,
     /// The wheels' joint names, motor 1 to 4 (front right, front left, rear left, rear right).
     pub wheel_joints: [String; 4],
+    /// The steering joints' names, published as a JointState of their own (positions only) on
+    /// a chassis that steers: a Hunter's front left and right (the first two), a Ranger's four
+    /// in 0x271's order (which wheel each is, no source says: name them as yours are).
+    pub steering_joints: [String; 4],
     /// Motor shaft turns per wheel turn (default: the gateway's model's).
     pub gear_ratio: Option<f64>,
     /// The topics that drive, each as a class of the arbiter.
@@ -215,6 +219,12 @@ impl Default for Ros2Config {
                 "front_left_wheel".into(),
                 "rear_left_wheel".into(),
                 "rear_right_wheel".into(),
+            ],
+            steering_joints: [
+                "front_left_steering".into(),
+                "front_right_steering".into(),
+                "rear_left_steering".into(),
+                "rear_right_steering".into(),
             ],
             gear_ratio: None,
             cmd_vel: vec![CmdVelTopic {
@@ -379,10 +389,10 @@ impl Ros2Config {
                 return Err(Ros2ConfigError::Duplicate(resolved));
             }
         }
-        for joint in &self.wheel_joints {
+        for joint in self.wheel_joints.iter().chain(&self.steering_joints) {
             if joint.is_empty() {
                 return Err(Ros2ConfigError::BadName {
-                    what: "wheel joint",
+                    what: "joint",
                     name: joint.clone(),
                     why: "it is empty",
                 });

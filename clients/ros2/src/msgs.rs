@@ -1,6 +1,8 @@
 //! The ROS 2 messages the bridge publishes and receives, with their type names and RIHS01 type
 //! hashes (REP 2016; checked against rosbags' `hash_rihs01` by the tests), written as CDR.
 
+use scout_protocol::model::Steering;
+
 use crate::cdr::{CdrError, Reader, Writer};
 
 /// A ROS 2 message type as rmw_zenoh names it.
@@ -235,6 +237,30 @@ impl Joints<'_> {
     }
 }
 
+/// `sensor_msgs/JointState` of joints whose positions alone are known (the steering joints):
+/// velocity and effort empty, as the message allows.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Positions<'a> {
+    pub header: Header<'a>,
+    pub names: Vec<&'a str>,
+    /// rad.
+    pub position: Vec<f64>,
+}
+
+impl Positions<'_> {
+    pub fn encode(&self) -> Vec<u8> {
+        let mut w = Writer::new();
+        self.header.write(&mut w);
+        w.sequence(self.names.len());
+        for name in &self.names {
+            w.string(name);
+        }
+        w.sequence(self.position.len()).f64s(&self.position);
+        w.sequence(0).sequence(0);
+        w.finish()
+    }
+}
+
 /// `diagnostic_msgs/DiagnosticStatus`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Status {
@@ -307,14 +333,14 @@ pub struct AckermannDrive {
 }
 
 impl AckermannDrive {
-    /// The body velocity it asks of a chassis whose axles are `wheelbase` m apart: the speed,
-    /// and the yaw rate of a bicycle at that steering angle, `speed * tan(angle) / wheelbase`
-    /// (the inverse of the gateway's steering from a yaw rate).
-    pub fn twist(&self, wheelbase: f64) -> PlanarTwist {
+    /// The body velocity it asks of a chassis with `steering`: the speed, and the yaw rate of
+    /// a bicycle at that steering angle, `speed * tan(angle) / wheelbase` (the inverse of the
+    /// gateway's steering from a yaw rate).
+    pub fn twist(&self, steering: &Steering) -> PlanarTwist {
         PlanarTwist {
             linear: self.speed,
             lateral: 0.0,
-            angular: self.speed * self.steering_angle.tan() / wheelbase,
+            angular: steering.yaw_rate(self.speed, self.steering_angle),
         }
     }
 }
@@ -521,7 +547,10 @@ mod tests {
         assert!(decode_ackermann(&hex(ACKERMANN)[..30]).is_err());
         assert!(decode_ackermann(&hex(TWIST)).is_err());
         // The Hunter 2.0's 0.650 m wheelbase: 0.5 m/s at 0.25 rad turns at 0.196 rad/s.
-        let twist = drive.twist(0.650);
+        let hunter = scout_protocol::model::Model::Hunter2
+            .steering()
+            .expect("steered");
+        let twist = drive.twist(&hunter);
         assert_eq!((twist.linear, twist.lateral), (0.5, 0.0));
         assert!((twist.angular - 0.5 * 0.25_f64.tan() / 0.650).abs() < 1e-12);
         // Backing up with the wheels to the left turns clockwise, as a car does.
@@ -529,7 +558,7 @@ mod tests {
             speed: -0.5,
             steering_angle: 0.25,
         };
-        assert!(back.twist(0.650).angular < 0.0);
+        assert!(back.twist(&hunter).angular < 0.0);
         // The DDS reader's decoder reads the same.
         #[cfg(feature = "dds")]
         assert_eq!(

@@ -9,11 +9,12 @@ use scout_interface::StatePayload;
 use scout_interface::control::StatusPayload;
 use scout_interface::json::{state_json, status_json};
 use scout_interface::state::{BatteryLevel, BatteryPayload, BatterySource, LinkState, Received};
+use scout_protocol::model::Model;
 use scout_protocol::{ChassisState, Severity};
 use serde_json::Value;
 
 use crate::config::Ros2Config;
-use crate::msgs::{self, Battery, Header, Joints, Odometry, Status, Transform};
+use crate::msgs::{self, Battery, Header, Joints, Odometry, Positions, Status, Transform};
 
 scout_protocol::listed! {
     /// The topics the bridge publishes.
@@ -174,6 +175,7 @@ impl Messages {
         if let Some(at_ns) = fresh(state.motion.received, &mut self.last_motion) {
             self.odometry(state, clocks.stamp(at_ns), &mut out);
             self.joints(state, clocks, &mut out);
+            self.steering_joints(state, clocks.stamp(at_ns), &mut out);
         }
         if let Some(at_ns) = fresh(state.system.received, &mut self.last_system) {
             self.battery(state, clocks.stamp(at_ns), &mut out);
@@ -322,6 +324,39 @@ impl Messages {
                 position: self.wheel_angles,
                 velocity,
                 effort,
+            }
+            .encode(),
+        });
+    }
+
+    /// The steering joints' angles, a JointState of their own: a Hunter's front wheels from
+    /// the inner wheel's angle it reports (0x221), a Ranger's four as 0x271 reports them;
+    /// nothing on a chassis that does not steer.
+    fn steering_joints(&self, state: &StatePayload, stamp: Duration, out: &mut Vec<Outgoing>) {
+        let model = state.chassis.model();
+        let angles: Vec<f64> = match (model.and_then(Model::steering), state.motion.wheel_angles())
+        {
+            (Some(steering), _) => {
+                let (left, right) = steering.front_wheels(state.motion.steering());
+                vec![left, right]
+            }
+            (None, Some(angles)) => angles.to_vec(),
+            (None, None) => return,
+        };
+        let names = &self.config.steering_joints;
+        out.push(Outgoing {
+            topic: Topic::JointStates,
+            payload: Positions {
+                header: Header {
+                    stamp,
+                    frame_id: "",
+                },
+                names: names
+                    .iter()
+                    .take(angles.len())
+                    .map(String::as_str)
+                    .collect(),
+                position: angles,
             }
             .encode(),
         });
@@ -603,7 +638,6 @@ mod tests {
     use crate::cdr::Reader;
     use scout_interface::state::ChassisPayload;
     use scout_interface::state::PowerStatus;
-    use scout_protocol::model::Model;
     use scout_protocol::version::Protocol;
 
     const SECOND: u64 = 1_000_000_000;
@@ -647,6 +681,66 @@ mod tests {
 
     fn topics(out: &[Outgoing]) -> Vec<Topic> {
         out.iter().map(|o| o.topic).collect()
+    }
+
+    /// The names and positions of the steering JointState in `out`, if one went out.
+    fn steering(out: &[Outgoing]) -> Option<(Vec<String>, Vec<f64>)> {
+        out.iter()
+            .filter(|o| o.topic == Topic::JointStates)
+            .find_map(|o| {
+                let mut r = Reader::new(&o.payload).expect("CDR");
+                r.i32().ok()?;
+                r.u32().ok()?;
+                r.skip_string().ok()?;
+                let names = (0..r.u32().ok()?)
+                    .map(|_| r.string().expect("a name"))
+                    .collect::<Vec<_>>();
+                let positions = (0..r.u32().ok()?)
+                    .map(|_| r.f64().expect("a position"))
+                    .collect::<Vec<_>>();
+                (r.u32() == Ok(0) && r.u32() == Ok(0)).then_some((names, positions))
+            })
+    }
+
+    #[test]
+    fn a_steered_chassis_publishes_its_steering_joints_positions_alone() {
+        let mut hunter = state(SECOND);
+        hunter.chassis = ChassisPayload::new(Model::Hunter2, 1.146);
+        hunter.motion.steering_mrad = 400;
+        let out = Messages::new(Ros2Config::default()).handle_state(
+            &hunter,
+            None,
+            clocks(SECOND),
+            &Vec::new,
+        );
+        let (names, positions) = steering(&out).expect("the steering joints");
+        assert_eq!(names, ["front_left_steering", "front_right_steering"]);
+        let steered = Model::Hunter2
+            .steering()
+            .expect("steered")
+            .front_wheels(0.4);
+        assert_eq!(positions, [steered.0, steered.1]);
+        let mut ranger = state(SECOND);
+        ranger.chassis = ChassisPayload::new(Model::RangerMini3, 4.8);
+        ranger.motion.wheel_angles_mrad = [100, 200, -100, -200];
+        ranger.motion.wheels_reported = 1;
+        let out = Messages::new(Ros2Config::default()).handle_state(
+            &ranger,
+            None,
+            clocks(SECOND),
+            &Vec::new,
+        );
+        let (names, positions) = steering(&out).expect("the steering joints");
+        assert_eq!(names.len(), 4);
+        assert_eq!(positions, [0.1, 0.2, -0.1, -0.2]);
+        // A SCOUT steers nothing: its wheels' JointState alone.
+        let out = Messages::new(Ros2Config::default()).handle_state(
+            &state(SECOND),
+            None,
+            clocks(SECOND),
+            &Vec::new,
+        );
+        assert_eq!(steering(&out), None);
     }
 
     #[test]

@@ -392,7 +392,8 @@ fn a_ros_2_node_sees_the_graph_reads_odometry_and_drives_through_the_arbiter() {
 /// A Hunter driven by an `ackermann_msgs/AckermannDriveStamped` topic (`ackermann = true`): the
 /// bridge subscribes with the type's hash as rosbags computes it, and the chassis goes at the
 /// speed asked and turns at the yaw rate the steering angle makes with its wheelbase (the
-/// inner wheel's angle on the wire is the gateway's, from that rate).
+/// inner wheel's angle on the wire is the gateway's, from that rate); `/joint_states` carries
+/// its front wheels' steering joints.
 #[test]
 fn a_hunter_drives_from_an_ackermann_topic() {
     let test = "a_hunter_drives_from_an_ackermann_topic";
@@ -467,6 +468,20 @@ fn a_hunter_drives_from_an_ackermann_topic() {
         );
         std::thread::sleep(Duration::from_millis(50));
     }
+    // Its front wheels' steering joints, positions alone, the inner (left) one wider: rosbags
+    // reads the JointState.
+    let joints = node.echo("/joint_states", "sensor_msgs/msg/JointState", 4);
+    let steering = joints
+        .iter()
+        .find(|joints| joints["name"][0] == "front_left_steering")
+        .unwrap_or_else(|| panic!("no steering joints in {joints:?}"));
+    assert_eq!(steering["name"][1], "front_right_steering", "{steering}");
+    let (left, right) = (
+        steering["position"][0].as_f64().unwrap_or_default(),
+        steering["position"][1].as_f64().unwrap_or_default(),
+    );
+    assert!(left > right && right > 0.1, "{steering}");
+    assert_eq!(steering["velocity"], json!([]), "{steering}");
     node.ask(json!({"cmd": "quiet"}));
     comes_to_rest(&mut sim, LIMIT);
     let _ = std::fs::remove_file(&settings);
