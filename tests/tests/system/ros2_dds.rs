@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 use nix::sys::signal::Signal;
 use scout_system_tests::{
     Background, Gateway, JsonPeer, NetNs, Sim, chassis_stays_still, comes_to_rest, connect, moving,
-    robot_name, scout, skip,
+    robot_name, scout, skip, wait_for_state,
 };
 use serde_json::{Value, json};
 
@@ -506,6 +506,65 @@ fn a_v2_scout_mini_through_real_rclpy_reads_its_odometers_and_drives() {
     );
     let left = joints[0]["position"][1].as_f64().expect("a position");
     assert!(left < -0.5 / radius, "the left wheels mirrored: {joints:?}");
+    bridge.stop();
+}
+
+/// A Hunter driven over DDS by a plain Cyclone DDS writer of `ackermann_msgs/AckermannDriveStamped`
+/// (no ROS wheel on PyPI carries that package; the writer declares the type as rmw does): the
+/// bridge's topic with `ackermann = true` reads it, and the gateway's odometry goes forward
+/// turning left, as the speed and the steering angle ask.
+#[test]
+fn a_hunter_drives_from_a_cyclone_dds_ackermann_writer() {
+    let test = "ros2_dds_ackermann";
+    let Some((namespace, python)) = prerequisites(test, "SCOUT_RCLPY_KILTED") else {
+        return;
+    };
+    let name = robot_name(test);
+    let domain = domain(13);
+    let _gateway = Gateway::start(&[
+        "--sim",
+        "--protocol",
+        "v2",
+        "--model",
+        "hunter2",
+        "--name",
+        &name,
+    ]);
+    let robot = connect(&name);
+    let settings = std::env::temp_dir().join(format!("{name}-ros2.toml"));
+    std::fs::write(
+        &settings,
+        "[[cmd_vel]]\ntopic = \"ackermann_cmd\"\nclass = \"teleop\"\nackermann = true\n",
+    )
+    .expect("write the bridge's settings");
+    let bridge = DdsBridge::start(
+        &namespace,
+        &name,
+        domain,
+        &["--config", &settings.display().to_string()],
+    );
+    // A stream is new only after a pause since the bridge started.
+    std::thread::sleep(BLOCKED_PAUSE);
+    let answer = cyclone_script(
+        &namespace,
+        &python,
+        domain,
+        "cyclone_ackermann_writer.py",
+        &["/ackermann_cmd", "0.5", "0.3", "4"],
+    );
+    assert!(answer["sent"].as_u64() > Some(40), "{answer}");
+    let states = robot.subscribe().expect("state");
+    let state = wait_for_state(&states, LIMIT, |_| true);
+    let (x, yaw) = (
+        state["odometry"]["x"].as_f64().unwrap_or_default(),
+        state["odometry"]["yaw"].as_f64().unwrap_or_default(),
+    );
+    assert!(
+        x > 0.5 && yaw > 0.1,
+        "forward, turning left: {}",
+        state["odometry"]
+    );
+    let _ = std::fs::remove_file(&settings);
     bridge.stop();
 }
 
