@@ -209,29 +209,29 @@ impl Battery<'_> {
     }
 }
 
-/// `sensor_msgs/JointState` of the four wheels.
+/// `sensor_msgs/JointState` of the wheels whose motors report.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Joints<'a> {
     pub header: Header<'a>,
-    pub names: [&'a str; 4],
+    pub names: Vec<&'a str>,
     /// rad.
-    pub position: [f64; 4],
+    pub position: Vec<f64>,
     /// rad/s.
-    pub velocity: [f64; 4],
+    pub velocity: Vec<f64>,
     /// Motor current, A (the chassis gives no torque).
-    pub effort: [f64; 4],
+    pub effort: Vec<f64>,
 }
 
 impl Joints<'_> {
     pub fn encode(&self) -> Vec<u8> {
         let mut w = Writer::new();
         self.header.write(&mut w);
-        w.sequence(4);
-        for name in self.names {
+        w.sequence(self.names.len());
+        for name in &self.names {
             w.string(name);
         }
         for values in [&self.position, &self.velocity, &self.effort] {
-            w.sequence(4).f64s(values);
+            w.sequence(values.len()).f64s(values);
         }
         w.finish()
     }
@@ -465,15 +465,15 @@ mod tests {
         assert_eq!(battery.encode(), hex(BATTERY));
         let joints = Joints {
             header: header("base_link"),
-            names: [
+            names: vec![
                 "front_right_wheel",
                 "front_left_wheel",
                 "rear_left_wheel",
                 "rear_right_wheel",
             ],
-            position: [0.1, 0.2, 0.3, 0.4],
-            velocity: [1.0, -1.0, -1.0, 1.0],
-            effort: [0.8, -0.8, -0.8, 0.8],
+            position: vec![0.1, 0.2, 0.3, 0.4],
+            velocity: vec![1.0, -1.0, -1.0, 1.0],
+            effort: vec![0.8, -0.8, -0.8, 0.8],
         };
         assert_eq!(joints.encode(), hex(JOINTS));
         let statuses = [

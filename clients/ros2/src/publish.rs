@@ -312,7 +312,9 @@ impl Messages {
         if newest == 0 {
             return;
         }
-        let joints = &self.config.wheel_joints;
+        // The wheels whose motors report: four on a SCOUT, two on a Tracer or a Bunker.
+        let reported: Vec<usize> = (0..4).filter(|&i| state.motors[i].received.valid).collect();
+        let pick = |values: &[f64; 4]| reported.iter().map(|&i| values[i]).collect();
         out.push(Outgoing {
             topic: Topic::JointStates,
             payload: Joints {
@@ -320,10 +322,13 @@ impl Messages {
                     stamp: clocks.stamp(newest),
                     frame_id: "",
                 },
-                names: [&joints[0], &joints[1], &joints[2], &joints[3]],
-                position: self.wheel_angles,
-                velocity,
-                effort,
+                names: reported
+                    .iter()
+                    .map(|&i| self.config.wheel_joints[i].as_str())
+                    .collect(),
+                position: pick(&self.wheel_angles),
+                velocity: pick(&velocity),
+                effort: pick(&effort),
             }
             .encode(),
         });
@@ -700,6 +705,39 @@ mod tests {
                     .collect::<Vec<_>>();
                 (r.u32() == Ok(0) && r.u32() == Ok(0)).then_some((names, positions))
             })
+    }
+
+    #[test]
+    fn the_wheels_joints_are_those_whose_motors_report() {
+        let mut tracer = state(SECOND);
+        tracer.chassis = ChassisPayload::new(Model::Tracer, 1.0);
+        for motor in &mut tracer.motors[2..] {
+            motor.received = Received::default();
+        }
+        let out = Messages::new(Ros2Config::default()).handle_state(
+            &tracer,
+            None,
+            clocks(SECOND),
+            &Vec::new,
+        );
+        let joints = out
+            .iter()
+            .find(|o| o.topic == Topic::JointStates)
+            .expect("the wheels");
+        let mut r = Reader::new(&joints.payload).expect("CDR");
+        r.i32().expect("sec");
+        r.u32().expect("nanosec");
+        r.skip_string().expect("frame");
+        assert_eq!(r.u32(), Ok(2), "two names");
+        assert_eq!(r.string().as_deref(), Ok("front_right_wheel"));
+        assert_eq!(r.string().as_deref(), Ok("front_left_wheel"));
+        for _ in 0..3 {
+            let count = r.u32().expect("a sequence");
+            assert_eq!(count, 2, "positions, velocities, efforts");
+            (0..count).for_each(|_| {
+                r.f64().expect("a value");
+            });
+        }
     }
 
     #[test]
