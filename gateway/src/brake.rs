@@ -35,8 +35,9 @@ pub struct ParkingBrake {
     commanded: bool,
     /// What was asked last, and when (cleared when the chassis reports it, or the wait ends).
     pending: Option<(BrakeV2, Duration)>,
-    /// What was asked last, kept.
+    /// What was asked last, kept, and when it was last sent.
     asked: Option<BrakeV2>,
+    asked_at: Option<Duration>,
     /// A request went unanswered: the brake may be on its way to what was asked, whatever
     /// the chassis reports; cleared when it answers one.
     doubt: bool,
@@ -83,10 +84,15 @@ impl ParkingBrake {
         if self.pending.is_some_and(|(asked, _)| asked == brake) {
             self.pending = None;
         }
-        // What was asked last, taken (late or not): no doubt left.
-        if self.asked == Some(brake) {
+        // What was asked last, taken (late or not): no doubt left. A report that only says
+        // what the chassis said before the ask proves nothing until a whole wait has passed
+        // since it (a lock of the gateway's may still be on its way).
+        let changed = before != Some(brake);
+        let waited = self.asked_at.is_none_or(|at| now >= at + REQUEST_WAIT);
+        if self.asked == Some(brake) && (changed || waited || !self.doubt) {
             self.doubt = false;
             self.said = false;
+            self.unanswered = None;
         }
         if brake == BrakeV2::Released && self.asked == Some(BrakeV2::Released) && !self.doubt {
             self.released_for_drive = true;
@@ -156,7 +162,8 @@ impl ParkingBrake {
         if self.pending.is_some() {
             return None;
         }
-        let idle = self.driven_at.is_none_or(|at| now >= at + IDLE_FOR);
+        // Nothing about the brake before a client's first drive since the port opened.
+        let idle = self.driven_at.is_some_and(|at| now >= at + IDLE_FOR);
         let wanted = if drive {
             BrakeV2::Released
         } else if idle
@@ -179,6 +186,7 @@ impl ParkingBrake {
         }
         self.pending = Some((wanted, now));
         self.asked = Some(wanted);
+        self.asked_at = Some(now);
         Some(wanted)
     }
 
@@ -275,6 +283,8 @@ mod tests {
         );
         report(&mut brake, 1100 * MS, BrakeV2::Released);
         assert!(brake.released(1100 * MS));
+        // Answered (after a third ask's wait ran out): nothing more to say.
+        assert_eq!(brake.poll_unanswered(1100 * MS), None);
         assert_eq!(brake.poll_request(1120 * MS, true, ZERO), None);
         let why = report(&mut brake, 1140 * MS, BrakeV2::Locked).expect("unasked");
         assert!(
@@ -290,6 +300,11 @@ mod tests {
         report(&mut brake, Duration::ZERO, BrakeV2::Released);
         still(&mut brake, Duration::ZERO);
         assert_eq!(
+            brake.poll_request(Duration::ZERO, true, ZERO),
+            None,
+            "released already"
+        );
+        assert_eq!(
             brake.poll_request(1000 * MS, false, ZERO),
             Some(BrakeV2::Locked)
         );
@@ -300,6 +315,9 @@ mod tests {
             brake.poll_request(1500 * MS, true, ZERO),
             Some(BrakeV2::Released)
         );
+        // A report of released made before the chassis saw the ask proves nothing.
+        assert_eq!(report(&mut brake, 1520 * MS, BrakeV2::Released), None);
+        assert!(!brake.released(1520 * MS), "still in doubt");
         // The lock lands late: the gateway's own, no stop; then the release.
         assert_eq!(report(&mut brake, 1600 * MS, BrakeV2::Locked), None);
         assert!(!brake.released(1600 * MS));
@@ -329,6 +347,14 @@ mod tests {
         let mut brake = ParkingBrake::default();
         report(&mut brake, Duration::ZERO, BrakeV2::Released);
         still(&mut brake, Duration::ZERO);
+        // Nothing about the brake before a first drive.
+        assert_eq!(brake.poll_request(Duration::ZERO, false, ZERO), None);
+        assert_eq!(brake.poll_request(900 * MS, false, ZERO), None);
+        assert_eq!(
+            brake.poll_request(Duration::ZERO, true, ZERO),
+            None,
+            "released already"
+        );
         assert_eq!(
             brake.poll_request(1000 * MS, false, ZERO),
             Some(BrakeV2::Locked)

@@ -771,7 +771,7 @@ impl Core {
             }
             self.status_due = true;
         }
-        if let Some(why) = self.handshake.handle_report(mode) {
+        if let Some(why) = self.handshake.handle_report(now, mode) {
             warn!("{why}");
             self.arbiter
                 .handle_gap(now, StopCause::ChassisMode, &why, false);

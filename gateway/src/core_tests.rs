@@ -418,6 +418,14 @@ impl Pair {
             .collect()
     }
 
+    /// What `pick` takes of the v2 frames sent other than motion commands, with when.
+    fn v2_sent<T>(&self, pick: impl Fn(MessageV2) -> Option<T>) -> Vec<(Duration, T)> {
+        self.v2_others()
+            .into_iter()
+            .filter_map(|(at, message)| pick(message).map(|taken| (at, taken)))
+            .collect()
+    }
+
     /// The v2 frames sent other than motion commands, with when.
     fn v2_others(&self) -> Vec<(Duration, MessageV2)> {
         self.sent
@@ -1261,13 +1269,10 @@ fn a_chassis_exception_state_is_a_gap(protocol: Protocol) {
 
 /// The 0x421 frames sent, with the mode each asked for.
 fn mode_requests(pair: &Pair) -> Vec<(Duration, ControlModeV2)> {
-    pair.v2_others()
-        .into_iter()
-        .filter_map(|(at, message)| match message {
-            MessageV2::ControlMode(mode) => Some((at, mode)),
-            _ => None,
-        })
-        .collect()
+    pair.v2_sent(|message| match message {
+        MessageV2::ControlMode(mode) => Some(mode),
+        _ => None,
+    })
 }
 
 #[test]
@@ -2337,13 +2342,10 @@ fn on_every_model_a_gap_and_a_release_restart_nothing_on_any_axis() {
 
 /// The 0x131 frames sent, with when.
 fn brake_requests(pair: &Pair) -> Vec<(Duration, BrakeV2)> {
-    pair.v2_others()
-        .into_iter()
-        .filter_map(|(at, message)| match message {
-            MessageV2::Brake(brake) => Some((at, brake)),
-            _ => None,
-        })
-        .collect()
+    pair.v2_sent(|message| match message {
+        MessageV2::Brake(brake) => Some(brake),
+        _ => None,
+    })
 }
 
 /// A Hunter's parking brake (the simulated one starts locked, as the vendor's manual says a

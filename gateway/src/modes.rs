@@ -184,17 +184,27 @@ impl Handshake {
         self.standstill.handle_sent(now, sent);
     }
 
-    /// 0x291. Returns `Some(why)` when the chassis left the mode it was settled in for one the
-    /// gateway did not ask for (its RC, its own doing): a stop's reason.
-    pub fn handle_report(&mut self, report: MotionModeStateV2) -> Option<String> {
+    /// 0x291 at `now`. Returns `Some(why)` when the chassis left the mode it was in (settled
+    /// or changing to) for one the gateway did not ask for (its RC, its own doing): a stop's
+    /// reason.
+    pub fn handle_report(&mut self, now: Duration, report: MotionModeStateV2) -> Option<String> {
+        self.expire(now);
         let before = self.reported.replace(report);
         if self.pending.is_some_and(|(mode, _)| mode == report.mode) {
             self.pending = None;
             self.ours = Some(report.mode);
         }
-        let left = before.and_then(|before| before.settled());
-        match left {
-            Some(left) if left != report.mode && self.asked != Some(report.mode) => {
+        let left = before.map(|before| before.mode);
+        let unasked = match left {
+            Some(left) if left != report.mode && self.asked != Some(report.mode) => Some(left),
+            _ => None,
+        };
+        // Taken and settled: no longer asked (the same mode later, unasked, is a change).
+        if report.settled().is_some() && self.asked == Some(report.mode) && self.pending.is_none() {
+            self.asked = None;
+        }
+        match unasked {
+            Some(left) => {
                 // Someone else's mode now: what the gateway asked before no longer holds (a
                 // park of its own the RC left and came back to is the RC's).
                 self.asked = None;
@@ -310,7 +320,7 @@ mod tests {
         // Nothing reported yet: no mode to drive in; asked once standing still.
         assert_eq!(handshake.settled(Duration::ZERO), None);
         assert_eq!(
-            handshake.handle_report(report(MotionModeV2::DualAckermann, false)),
+            handshake.handle_report(Duration::ZERO, report(MotionModeV2::DualAckermann, false)),
             None
         );
         assert_eq!(
@@ -332,38 +342,38 @@ mod tests {
         assert_eq!(handshake.settled(140 * MS), None);
         assert_eq!(handshake.poll_request(140 * MS, spin, zero), None);
         assert_eq!(
-            handshake.handle_report(report(MotionModeV2::DualAckermann, false)),
+            handshake.handle_report(Duration::ZERO, report(MotionModeV2::DualAckermann, false)),
             None
         );
         assert_eq!(handshake.settled(160 * MS), None);
         // Taken: changing, then settled.
         assert_eq!(
-            handshake.handle_report(report(MotionModeV2::Spin, true)),
+            handshake.handle_report(Duration::ZERO, report(MotionModeV2::Spin, true)),
             None
         );
         assert_eq!(handshake.settled(180 * MS), None);
         assert_eq!(
-            handshake.handle_report(report(MotionModeV2::Spin, false)),
+            handshake.handle_report(Duration::ZERO, report(MotionModeV2::Spin, false)),
             None
         );
         assert_eq!(handshake.settled(200 * MS), spin);
         // Unasked: the chassis leaves spin for parallel by itself.
         let why = handshake
-            .handle_report(report(MotionModeV2::Parallel, false))
+            .handle_report(Duration::ZERO, report(MotionModeV2::Parallel, false))
             .expect("unasked");
         assert!(
             why.starts_with("the chassis left spin mode for parallel mode unasked"),
             "{why}"
         );
         // Parked by someone: never left by the gateway.
-        handshake.handle_report(report(MotionModeV2::Park, false));
+        handshake.handle_report(Duration::ZERO, report(MotionModeV2::Park, false));
         assert_eq!(handshake.poll_request(1000 * MS, spin, zero), None);
     }
 
     #[test]
     fn a_mode_the_chassis_does_not_take_is_asked_again_after_the_wait() {
         let mut handshake = Handshake::default();
-        handshake.handle_report(report(MotionModeV2::DualAckermann, false));
+        handshake.handle_report(Duration::ZERO, report(MotionModeV2::DualAckermann, false));
         handshake.handle_motion_state(Duration::ZERO, &still());
         let parallel = Some(MotionModeV2::Parallel);
         let zero = (0.0, 0.0, 0.0);
@@ -455,27 +465,27 @@ mod tests {
         let zero = (0.0, 0.0, 0.0);
         handshake.handle_motion_state(Duration::ZERO, &still());
         // Someone parked it: not left.
-        handshake.handle_report(report(MotionModeV2::Park, false));
+        handshake.handle_report(Duration::ZERO, report(MotionModeV2::Park, false));
         assert!(!handshake.may_leave());
         let ahead = Some(MotionModeV2::DualAckermann);
         assert_eq!(handshake.poll_request(200 * MS, ahead, zero), None);
         // Out of it by its RC, then parked by a client's request through the gateway: left.
-        handshake.handle_report(report(MotionModeV2::DualAckermann, false));
+        handshake.handle_report(Duration::ZERO, report(MotionModeV2::DualAckermann, false));
         assert!(handshake.may_leave());
         let park = Some(MotionModeV2::Park);
         assert_eq!(handshake.poll_request(400 * MS, park, zero), park);
-        handshake.handle_report(report(MotionModeV2::Park, false));
+        handshake.handle_report(Duration::ZERO, report(MotionModeV2::Park, false));
         assert!(handshake.may_leave());
         // Out of it by its RC and parked again by it: the RC's park, not left.
-        handshake.handle_report(report(MotionModeV2::Parallel, false));
-        handshake.handle_report(report(MotionModeV2::Park, false));
+        handshake.handle_report(Duration::ZERO, report(MotionModeV2::Parallel, false));
+        handshake.handle_report(Duration::ZERO, report(MotionModeV2::Park, false));
         assert!(!handshake.may_leave());
         // Parked by a client again: left for a drive.
-        handshake.handle_report(report(MotionModeV2::DualAckermann, false));
+        handshake.handle_report(Duration::ZERO, report(MotionModeV2::DualAckermann, false));
         assert_eq!(handshake.poll_request(600 * MS, park, zero), park);
-        handshake.handle_report(report(MotionModeV2::Park, false));
+        handshake.handle_report(Duration::ZERO, report(MotionModeV2::Park, false));
         assert_eq!(handshake.poll_request(800 * MS, ahead, zero), ahead);
-        handshake.handle_report(report(MotionModeV2::DualAckermann, false));
+        handshake.handle_report(Duration::ZERO, report(MotionModeV2::DualAckermann, false));
         // A park asked and not taken within the wait, then one the RC makes: the RC's.
         assert_eq!(handshake.poll_request(1000 * MS, park, zero), park);
         assert_eq!(
@@ -483,10 +493,49 @@ mod tests {
             Some(MotionModeV2::DualAckermann)
         );
         let why = handshake
-            .handle_report(report(MotionModeV2::Park, false))
+            .handle_report(Duration::ZERO, report(MotionModeV2::Park, false))
             .expect("a park the gateway no longer waits for is unasked");
         assert!(why.contains("for park mode unasked"), "{why}");
         assert!(!handshake.may_leave());
+    }
+
+    #[test]
+    fn a_change_the_rc_makes_mid_change_is_unasked_and_an_old_ask_is_forgotten() {
+        let mut handshake = Handshake::default();
+        let zero = (0.0, 0.0, 0.0);
+        handshake.handle_motion_state(Duration::ZERO, &still());
+        handshake.handle_report(Duration::ZERO, report(MotionModeV2::DualAckermann, false));
+        let spin = Some(MotionModeV2::Spin);
+        assert_eq!(handshake.poll_request(200 * MS, spin, zero), spin);
+        assert_eq!(
+            handshake.handle_report(220 * MS, report(MotionModeV2::Spin, true)),
+            None
+        );
+        // The RC parks it while it changes: unasked.
+        let why = handshake
+            .handle_report(240 * MS, report(MotionModeV2::Park, true))
+            .expect("unasked mid-change");
+        assert!(
+            why.contains("left spin mode for park mode unasked"),
+            "{why}"
+        );
+        // A spin taken and settled is no longer asked: the RC setting spin later is a change.
+        let mut handshake = Handshake::default();
+        handshake.handle_motion_state(Duration::ZERO, &still());
+        handshake.handle_report(Duration::ZERO, report(MotionModeV2::DualAckermann, false));
+        assert_eq!(handshake.poll_request(200 * MS, spin, zero), spin);
+        handshake.handle_report(220 * MS, report(MotionModeV2::Spin, true));
+        handshake.handle_report(400 * MS, report(MotionModeV2::Spin, false));
+        assert!(
+            handshake
+                .handle_report(600 * MS, report(MotionModeV2::DualAckermann, false))
+                .is_some()
+        );
+        assert!(
+            handshake
+                .handle_report(800 * MS, report(MotionModeV2::Spin, false))
+                .is_some()
+        );
     }
 
     #[test]
@@ -499,7 +548,7 @@ mod tests {
             None
         );
         // The RC had parked it: not the gateway's park.
-        handshake.handle_report(report(MotionModeV2::Park, false));
+        handshake.handle_report(Duration::ZERO, report(MotionModeV2::Park, false));
         assert!(!handshake.may_leave());
     }
 

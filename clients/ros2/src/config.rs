@@ -273,6 +273,10 @@ pub enum Ros2ConfigError {
     },
     #[error("topic {0} is used twice: give each publisher and cmd_vel topic a name of its own")]
     Duplicate(String),
+    #[error(
+        "joint {0} is named twice: give each of wheel_joints and steering_joints a name of its own"
+    )]
+    DuplicateJoint(String),
     #[error("gear_ratio must be a positive number, found {0}")]
     BadGearRatio(f64),
     #[error(
@@ -389,6 +393,7 @@ impl Ros2Config {
                 return Err(Ros2ConfigError::Duplicate(resolved));
             }
         }
+        let mut joints = std::collections::BTreeSet::new();
         for joint in self.wheel_joints.iter().chain(&self.steering_joints) {
             if joint.is_empty() {
                 return Err(Ros2ConfigError::BadName {
@@ -396,6 +401,9 @@ impl Ros2Config {
                     name: joint.clone(),
                     why: "it is empty",
                 });
+            }
+            if !joints.insert(joint.as_str()) {
+                return Err(Ros2ConfigError::DuplicateJoint(joint.clone()));
             }
         }
         if let Some(gear_ratio) = self.gear_ratio
@@ -516,6 +524,16 @@ mod tests {
         .expect("valid TOML");
         config.validate().expect("valid");
         assert_eq!(config.cmd_vel[0].message(), msgs::ACKERMANN_DRIVE_STAMPED);
+        let mut twice = config.clone();
+        twice.steering_joints[0] = twice.wheel_joints[1].clone();
+        assert_eq!(
+            twice.validate().map_err(|e| e.to_string()),
+            Err(
+                "joint front_left_wheel is named twice: give each of wheel_joints and \
+                 steering_joints a name of its own"
+                    .into()
+            )
+        );
         config.cmd_vel[0].stamped = true;
         assert_eq!(
             config.validate().map_err(|e| e.to_string()),

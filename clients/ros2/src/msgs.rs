@@ -209,7 +209,8 @@ impl Battery<'_> {
     }
 }
 
-/// `sensor_msgs/JointState` of the wheels whose motors report.
+/// `sensor_msgs/JointState`: the wheels whose motors report, or the steering joints (their
+/// positions alone: velocity and effort empty, as the message allows).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Joints<'a> {
     pub header: Header<'a>,
@@ -233,30 +234,6 @@ impl Joints<'_> {
         for values in [&self.position, &self.velocity, &self.effort] {
             w.sequence(values.len()).f64s(values);
         }
-        w.finish()
-    }
-}
-
-/// `sensor_msgs/JointState` of joints whose positions alone are known (the steering joints):
-/// velocity and effort empty, as the message allows.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Positions<'a> {
-    pub header: Header<'a>,
-    pub names: Vec<&'a str>,
-    /// rad.
-    pub position: Vec<f64>,
-}
-
-impl Positions<'_> {
-    pub fn encode(&self) -> Vec<u8> {
-        let mut w = Writer::new();
-        self.header.write(&mut w);
-        w.sequence(self.names.len());
-        for name in &self.names {
-            w.string(name);
-        }
-        w.sequence(self.position.len()).f64s(&self.position);
-        w.sequence(0).sequence(0);
         w.finish()
     }
 }

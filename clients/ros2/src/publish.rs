@@ -14,7 +14,7 @@ use scout_protocol::{ChassisState, Severity};
 use serde_json::Value;
 
 use crate::config::Ros2Config;
-use crate::msgs::{self, Battery, Header, Joints, Odometry, Positions, Status, Transform};
+use crate::msgs::{self, Battery, Header, Joints, Odometry, Status, Transform};
 
 scout_protocol::listed! {
     /// The topics the bridge publishes.
@@ -351,7 +351,7 @@ impl Messages {
         let names = &self.config.steering_joints;
         out.push(Outgoing {
             topic: Topic::JointStates,
-            payload: Positions {
+            payload: Joints {
                 header: Header {
                     stamp,
                     frame_id: "",
@@ -362,6 +362,8 @@ impl Messages {
                     .map(String::as_str)
                     .collect(),
                 position: angles,
+                velocity: Vec::new(),
+                effort: Vec::new(),
             }
             .encode(),
         });

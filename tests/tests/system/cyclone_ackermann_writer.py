@@ -19,22 +19,13 @@ from dataclasses import dataclass
 from cyclonedds.core import Policy, Qos
 from cyclonedds.domain import DomainParticipant
 from cyclonedds.idl import IdlStruct
-from cyclonedds.idl.types import float32, int32, uint32
+from cyclonedds.idl.types import float32
 from cyclonedds.pub import DataWriter
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
-
-@dataclass
-class Time(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
-    sec: int32
-    nanosec: uint32
-
-
-@dataclass
-class Header(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
-    stamp: Time
-    frame_id: str
+# The ROS types both scripts declare (this folder is on the path of a script run from it).
+from cyclone_tf_reader import Header, Time
 
 
 @dataclass
@@ -79,4 +70,5 @@ def main():
     print(json.dumps({"sent": sent}))
 
 
-main()
+if __name__ == "__main__":
+    main()
