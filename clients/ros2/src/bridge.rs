@@ -21,7 +21,7 @@ use tracing::{info, warn};
 
 use crate::cdr::CdrError;
 use crate::config::{Middleware, Ros2Config};
-use crate::msgs::Command;
+use crate::msgs::{Command, NoTwist};
 use crate::publish::{Clocks, Messages, Topic};
 use crate::stream::{Action, CmdVelStream, Ignored, Origin, Outcome};
 use scout_clients::client::{ClientError, Robot};
@@ -492,28 +492,31 @@ fn drive(
                     Some(Err(error)) => warn!("ros2: {name}: reading the gateway's state: {error}"),
                     Some(Ok(None)) | None => {}
                 }
-                match model.and_then(Model::steering) {
-                    Some(_) if drive.steering_angle.abs() >= std::f64::consts::FRAC_PI_2 => {
-                        let count = Counters::add(&counters.cmd_vel_malformed);
+                match drive.twist_for(model) {
+                    Ok(twist) => twist,
+                    Err(refused) => {
+                        let (counter, why) = match refused {
+                            NoTwist::NotAWheelAngle => (
+                                &counters.cmd_vel_malformed,
+                                format!(
+                                    "a steering angle of {} rad is not one a wheel takes \
+                                     (radians, within a quarter turn)",
+                                    drive.steering_angle
+                                ),
+                            ),
+                            NoTwist::NotSteered => (
+                                &counters.cmd_vel_rejected,
+                                format!(
+                                    "an AckermannDriveStamped steers a chassis by its front \
+                                     wheels (a hunter2); this {} does not: publish a Twist on \
+                                     a cmd_vel topic",
+                                    model.map_or("chassis of unknown model", Model::name)
+                                ),
+                            ),
+                        };
+                        let count = Counters::add(counter);
                         if count.is_power_of_two() {
-                            warn!(
-                                "ros2: {name}: a steering angle of {} rad is not one a wheel \
-                                 takes (radians, within a quarter turn; {count} so far)",
-                                drive.steering_angle
-                            );
-                        }
-                        continue;
-                    }
-                    Some(steering) => drive.twist(&steering),
-                    None => {
-                        let count = Counters::add(&counters.cmd_vel_rejected);
-                        if count.is_power_of_two() {
-                            let model = model.map_or("chassis of unknown model", Model::name);
-                            warn!(
-                                "ros2: {name}: an AckermannDriveStamped steers a chassis by its \
-                                 front wheels (a hunter2); this {model} does not: publish a \
-                                 Twist on a cmd_vel topic ({count} refused so far)"
-                            );
+                            warn!("ros2: {name}: {why} ({count} so far)");
                         }
                         continue;
                     }

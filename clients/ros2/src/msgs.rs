@@ -1,7 +1,7 @@
 //! The ROS 2 messages the bridge publishes and receives, with their type names and RIHS01 type
 //! hashes (REP 2016; checked against rosbags' `hash_rihs01` by the tests), written as CDR.
 
-use scout_protocol::model::Steering;
+use scout_protocol::model::{Model, Steering};
 
 use crate::cdr::{CdrError, Reader, Writer};
 
@@ -320,6 +320,26 @@ impl AckermannDrive {
             angular: steering.yaw_rate(self.speed, self.steering_angle),
         }
     }
+
+    /// [`AckermannDrive::twist`] for a chassis of `model` (`None`: not known yet), or why it
+    /// makes none: a chassis that does not steer its front wheels, or an angle no wheel takes
+    /// (a quarter turn or more: `tan` wraps, degrees sent as radians would turn the other way).
+    pub fn twist_for(&self, model: Option<Model>) -> Result<PlanarTwist, NoTwist> {
+        let steering = model.and_then(Model::steering).ok_or(NoTwist::NotSteered)?;
+        if self.steering_angle.abs() >= core::f64::consts::FRAC_PI_2 {
+            return Err(NoTwist::NotAWheelAngle);
+        }
+        Ok(self.twist(&steering))
+    }
+}
+
+/// Why an Ackermann drive makes no twist ([`AckermannDrive::twist_for`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NoTwist {
+    /// The chassis does not steer its front wheels (or its model is not known yet).
+    NotSteered,
+    /// A steering angle of a quarter turn or more.
+    NotAWheelAngle,
 }
 
 /// Reads an `ackermann_msgs/AckermannDriveStamped`.
@@ -536,6 +556,23 @@ mod tests {
             steering_angle: 0.25,
         };
         assert!(back.twist(&hunter).angular < 0.0);
+        // For a model: the Hunter's twist; a skid-steer, an unknown model or an angle of a
+        // quarter turn refused.
+        use scout_protocol::model::Model;
+        assert_eq!(drive.twist_for(Some(Model::Hunter2)), Ok(twist));
+        assert_eq!(
+            drive.twist_for(Some(Model::Scout2)),
+            Err(NoTwist::NotSteered)
+        );
+        assert_eq!(drive.twist_for(None), Err(NoTwist::NotSteered));
+        let degrees = AckermannDrive {
+            speed: 0.5,
+            steering_angle: 30.0,
+        };
+        assert_eq!(
+            degrees.twist_for(Some(Model::Hunter2)),
+            Err(NoTwist::NotAWheelAngle)
+        );
         // The DDS reader's decoder reads the same.
         #[cfg(feature = "dds")]
         assert_eq!(

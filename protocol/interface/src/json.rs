@@ -580,6 +580,12 @@ mod tests {
         assert_eq!(keys, STATE_KEYS);
     }
 
+    /// The v2 message of a frame of `id` carrying `data`.
+    fn frame(id: u16, data: [u8; 8]) -> MessageV2 {
+        scout_protocol::v2::decode(&scout_protocol::CanFrame::new(id, &data).expect("frame"))
+            .expect("v2")
+    }
+
     #[test]
     fn a_v2_state_has_the_same_keys_and_its_own_values() {
         let mut state = StatePayload::default();
@@ -588,10 +594,6 @@ mod tests {
             valid: true,
             count: 0,
             at_ns: 1_000_000,
-        };
-        let frame = |id: u16, data: [u8; 8]| {
-            scout_protocol::v2::decode(&scout_protocol::CanFrame::new(id, &data).expect("frame"))
-                .expect("v2")
         };
         state.store_v2(&frame(0x211, [0, 3, 1, 3, 0x02, 0x81, 0, 7]), received);
         state.store_v2(&frame(0x221, [0, 0x96, 0xFF, 0xCE, 0, 0, 0, 0]), received);
@@ -640,10 +642,6 @@ mod tests {
             valid: true,
             count: 0,
             at_ns: 1_000_000,
-        };
-        let frame = |id: u16, data: [u8; 8]| {
-            scout_protocol::v2::decode(&scout_protocol::CanFrame::new(id, &data).expect("frame"))
-                .expect("v2")
         };
         let mut ranger = StatePayload {
             chassis: crate::state::ChassisPayload::new(Model::RangerMini3, 4.8),

@@ -102,20 +102,10 @@ fn every_tracer_and_bunker_is_capped_at_its_limits_and_refuses_sideways() {
             limits.angular
         );
         assert_eq!(drive.wait_exit(LIMIT), Some(0), "{model}: scout drive");
-        let (code, stdout, stderr) = scout(&[
-            "drive",
-            "--name",
+        drive_refused(
             &name,
-            "--lateral",
-            "0.2",
-            "--duration",
-            "0.3",
-        ]);
-        let said = format!("{stdout}{stderr}");
-        assert_eq!(code, Some(4), "{model}: {said}");
-        assert!(
-            said.contains(&format!("a {model} does not move sideways")),
-            "{said}"
+            &["--lateral", "0.2"],
+            &format!("a {model} does not move sideways"),
         );
     }
 }
@@ -138,6 +128,15 @@ fn a_tracers_command_is_where_the_vendor_puts_it_in_0x111() {
     );
     chassis.ends_at_zero();
     drop(drive);
+}
+
+/// `scout drive --name NAME ARGS` for 0.3 s is refused whole (exit 4), saying `why`.
+fn drive_refused(name: &str, args: &[&str], why: &str) {
+    let (code, stdout, stderr) =
+        scout(&[&["drive", "--name", name], args, &["--duration", "0.3"]].concat());
+    let said = format!("{stdout}{stderr}");
+    assert_eq!(code, Some(4), "{args:?}: {said}");
+    assert!(said.contains(why), "{said}");
 }
 
 /// The newest state's odometry: x, y, yaw and distance, waiting up to 2 s for a first one.
@@ -239,18 +238,11 @@ fn a_hunter_drives_a_rounded_square_and_its_odometry_follows() {
     let states = robot.subscribe().expect("state");
     wait_for_state(&states, LIMIT, |s| s["link"]["state"] == "ok");
     // Turning standing still is refused whole, with the reason.
-    let (code, stdout, stderr) = scout(&[
-        "drive",
-        "--name",
+    drive_refused(
         &name,
-        "--angular",
-        "0.3",
-        "--duration",
-        "0.3",
-    ]);
-    let said = format!("{stdout}{stderr}");
-    assert_eq!(code, Some(4), "{said}");
-    assert!(said.contains("a hunter2 cannot turn in place"), "{said}");
+        &["--angular", "0.3"],
+        "a hunter2 cannot turn in place",
+    );
     // Its parking brake, locked at power-on, in the state.
     wait_for_state(&states, LIMIT, |s| s["system"]["brake"] == "locked");
     let mut figure = Figure::start(&robot, states);
@@ -347,20 +339,11 @@ fn a_ranger_drives_every_mode_and_its_odometry_follows() {
     wait_for_state(&states, LIMIT, |s| s["link"]["state"] == "ok");
     // A mode named on the command line: what it does not carry is refused whole, with the
     // reason; park parks it (and the figure's first leg takes it out of the park it asked for).
-    let (code, stdout, stderr) = scout(&[
-        "drive",
-        "--name",
+    drive_refused(
         &name,
-        "--mode",
-        "parallel",
-        "--angular",
-        "0.3",
-        "--duration",
-        "0.3",
-    ]);
-    let said = format!("{stdout}{stderr}");
-    assert_eq!(code, Some(4), "{said}");
-    assert!(said.contains("parallel mode does not turn"), "{said}");
+        &["--mode", "parallel", "--angular", "0.3"],
+        "parallel mode does not turn",
+    );
     let (code, stdout, stderr) = scout(&[
         "drive",
         "--name",
