@@ -582,8 +582,7 @@ impl GatewayConfig {
     }
 }
 
-/// A model by its name, refused with [`Model::parse`]'s message (which says what a known model
-/// not driven yet needs).
+/// A model by its name, refused with [`Model::parse`]'s message (which lists every name).
 fn model_by_name<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<Model>, D::Error> {
     let name: Option<String> = serde::Deserialize::deserialize(d)?;
     name.map(|name| Model::parse(&name).map_err(serde::de::Error::custom))
@@ -766,6 +765,7 @@ mod tests {
         for (name, model) in [
             ("scout2", Model::Scout2),
             ("scout-mini-omni", Model::ScoutMiniOmni),
+            ("hunter-se", Model::HunterSe),
         ] {
             let config: GatewayConfig =
                 toml::from_str(&format!("model = \"{name}\"")).expect("model names");
@@ -774,12 +774,12 @@ mod tests {
     }
 
     #[test]
-    fn a_model_not_driven_yet_or_on_a_protocol_it_does_not_speak_is_refused() {
-        let refused = toml::from_str::<GatewayConfig>("model = \"hunter-se\"")
-            .expect_err("not driven yet")
+    fn an_unknown_model_or_one_on_a_protocol_it_does_not_speak_is_refused() {
+        let refused = toml::from_str::<GatewayConfig>("model = \"hunter3\"")
+            .expect_err("no such model")
             .to_string();
         assert!(
-            refused.contains("does not drive a hunter-se yet"),
+            refused.contains("not a model: give one of scout,"),
             "{refused}"
         );
         let tracer = |transport: &str, protocol: &str| {

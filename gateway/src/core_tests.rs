@@ -15,7 +15,7 @@ use scout_interface::services::Way;
 use scout_interface::state::{BatteryLevel, LinkState};
 use scout_interface::{Class, LightsSetting, StatePayload, StatusPayload, Transport};
 use scout_protocol::link::{Outgoing, RxEvent};
-use scout_protocol::model::Model;
+use scout_protocol::model::{Drive, Model};
 use scout_protocol::units::MAX_LINEAR_SPEED;
 use scout_protocol::v2::{
     BrakeV2, ControlModeV2, ErrorBitsV2, MessageV2, MotionModeV2, MotionV2, SystemStateV2,
@@ -2163,13 +2163,22 @@ fn no_model_receives_more_than_its_limits_and_a_stop_is_zero_on_every_field() {
     }
 }
 
-/// A Hunter driven round a circle: the wire carries its speed and inner wheel's angle, it
+/// Each Hunter driven round a circle: the wire carries its speed and inner wheel's angle, it
 /// refuses to turn in place, and the gateway's odometry (the yaw rate it derives from the
 /// steering angle the chassis reports) follows the chassis' pose.
 #[test]
-fn a_hunter_steers_by_its_wheels_and_its_odometry_follows() {
+fn each_hunter_steers_by_its_wheels_and_its_odometry_follows() {
+    for model in Model::ALL
+        .into_iter()
+        .filter(|model| model.drive() == Drive::Ackermann)
+    {
+        a_hunter_steers_by_its_wheels_and_its_odometry_follows(model);
+    }
+}
+
+fn a_hunter_steers_by_its_wheels_and_its_odometry_follows(model: Model) {
     let hunter = GatewayConfig {
-        model: Some(Model::Hunter2),
+        model: Some(model),
         ..config(Protocol::V2)
     };
     let mut pair = Pair::with_firmware(Protocol::V2, Transport::Can, &hunter, Start::Clean);
@@ -2186,7 +2195,9 @@ fn a_hunter_steers_by_its_wheels_and_its_odometry_follows() {
     let refused = pair.request(TELEOP, &turn(0.0, 0.3)).expect_err("in place");
     assert_eq!(refused.kind, Some(RejectionKind::NotAllowed));
     assert!(
-        refused.reason.starts_with("a hunter2 cannot turn in place"),
+        refused
+            .reason
+            .starts_with(&format!("a {model} cannot turn in place")),
         "{}",
         refused.reason
     );
@@ -2199,22 +2210,28 @@ fn a_hunter_steers_by_its_wheels_and_its_odometry_follows() {
         }
     }
     let sent = pair.chassis.stats().last_command.expect("commands");
-    let steering = Model::Hunter2.steering().expect("steered");
+    let steering = model.steering().expect("steered");
     let inner = steering.inner_from_central((0.25_f64 * steering.wheelbase / 0.5).atan());
-    assert_eq!(sent.angular, 0.0, "no yaw rate in the yaw-rate field");
-    assert!((sent.steering - inner).abs() < 0.001, "{sent:?}: {inner}");
+    assert_eq!(
+        sent.angular, 0.0,
+        "{model}: no yaw rate in the yaw-rate field"
+    );
+    assert!(
+        (sent.steering - inner).abs() < 0.001,
+        "{model}: {sent:?}: {inner}"
+    );
     let state = pair.last_state();
     assert!(
         (state.motion.angular() - 0.25).abs() < 0.005,
-        "the yaw rate derived from the reported angle: {:?}",
+        "{model}: the yaw rate derived from the reported angle: {:?}",
         state.motion
     );
     let (odometry, truth) = (state.odometry, pair.chassis.pose());
-    assert!(truth.yaw.abs() > 1.0 || truth.y > 1.0, "{truth:?}");
+    assert!(truth.yaw.abs() > 1.0 || truth.y > 1.0, "{model}: {truth:?}");
     let error = (odometry.x - truth.x).hypot(odometry.y - truth.y);
     assert!(
         error < 0.02 * 5.0,
-        "odometry {odometry:?} against the chassis' {truth:?}"
+        "{model}: odometry {odometry:?} against the chassis' {truth:?}"
     );
     // Straight on at once, then the other way at its tightest: the wheels take their time to
     // turn, which is no runaway.
@@ -2230,7 +2247,7 @@ fn a_hunter_steers_by_its_wheels_and_its_odometry_follows() {
     }
     assert!(
         pair.chassis.actual().linear < -0.4,
-        "{:?}",
+        "{model}: {:?}",
         pair.chassis.actual()
     );
 }

@@ -253,6 +253,25 @@ mod tests {
     }
 
     #[test]
+    fn the_hunter_ses_steering_is_its_manuals() {
+        let model = crate::model::Model::HunterSe;
+        let se = model.steering().expect("a steered model");
+        // Its widest central angle is its manual's widest inner one (0.4 rad), within a mrad
+        // and never beyond.
+        let inner = se.inner_from_central(se.max_central);
+        assert!(inner <= se.max_inner && inner > 0.399, "{inner}");
+        // 1.571 m at the tightest; 3.054 rad/s at 4.8 m/s there.
+        assert!(
+            (se.min_radius() - 1.571).abs() < 0.001,
+            "{}",
+            se.min_radius()
+        );
+        let limits = model.limits();
+        assert!((se.max_yaw_rate(limits.linear) - limits.angular).abs() < 0.001);
+        assert!(se.max_yaw_rate(limits.linear) >= limits.angular);
+    }
+
+    #[test]
     fn each_rangers_wheel_points_where_its_mode_says() {
         let ranger = crate::model::Model::RangerMini3
             .four_wheel()

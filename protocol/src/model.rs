@@ -29,6 +29,9 @@ pub enum Model {
     BunkerPro,
     /// Hunter 2.0, Ackermann steering (v2 only).
     Hunter2,
+    /// Hunter SE, Ackermann steering (v2 only): smaller and faster than the 2.0, no parking
+    /// brake the host works.
+    HunterSe,
     /// Ranger Mini 2.0, four steered wheels with motion modes (v2 only).
     RangerMini2,
     /// Ranger Mini 3.0, four steered wheels with motion modes (v2 only).
@@ -64,6 +67,10 @@ const BUNKER_MAX_ANGULAR: f64 = 0.7853;
 /// The Hunter 2.0's fastest turn: its top speed on its tightest circle, 1.5 m/s x
 /// tan(0.461) / 0.650 m (`Model::steering`; a unit test recomputes it).
 const HUNTER2_MAX_YAW_RATE: f64 = 1.146;
+
+/// The Hunter SE's fastest turn: its top speed on its tightest circle, 4.8 m/s x
+/// tan(0.3367) / 0.55 m (`Model::steering`; a unit test recomputes it).
+const HUNTER_SE_MAX_YAW_RATE: f64 = 3.054;
 
 /// How fast a model may be commanded.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -137,6 +144,7 @@ impl Model {
             Self::BunkerMini => "bunker-mini",
             Self::BunkerPro => "bunker-pro",
             Self::Hunter2 => "hunter2",
+            Self::HunterSe => "hunter-se",
             Self::RangerMini2 => "ranger-mini-2",
             Self::RangerMini3 => "ranger-mini-3",
         }
@@ -149,7 +157,7 @@ impl Model {
             Self::ScoutMiniOmni => Drive::Mecanum,
             Self::Tracer | Self::TracerMini => Drive::Differential,
             Self::Bunker | Self::BunkerMini | Self::BunkerPro => Drive::Tracked,
-            Self::Hunter2 => Drive::Ackermann,
+            Self::Hunter2 | Self::HunterSe => Drive::Ackermann,
             Self::RangerMini2 | Self::RangerMini3 => Drive::FourWheelSteering,
         }
     }
@@ -157,8 +165,23 @@ impl Model {
     /// Its steering, for a model that steers ([`Drive::Ackermann`]). Hunter 2.0: wheelbase
     /// 0.650 m, track 0.605 m, the central (bicycle) angle at most 0.461 rad and the inner
     /// wheel's at most 0.58 rad, checked against agilexrobotics/hunter_ros2 `hunter_params.hpp`
-    /// `HunterV2Params` (commit 583d2e0; "from user manual v1.2.6_S P4"). The rate at which
-    /// the wheels turn is in no source: 1.0 rad/s is assumed (the simulator's).
+    /// `HunterV2Params` (commit 583d2e0; "from user manual v1.2.6_S P4").
+    ///
+    /// Hunter SE: the inner wheel at most 0.4 rad, checked against the vendor's HUNTER SE user
+    /// manual (table 3.3, 0x111 bytes 6-7: "effective value +-400" in 0.001 rad; read in a
+    /// public mirror of the manual). Wheelbase 0.55 m and track 0.54 m, measured between the
+    /// wheel centres of the vendor's dimension drawing (in TrossenRobotics/agilex_hunter_se_docs
+    /// `specifications/_images/hunter_se_major_dimensions.jpg`, commit a302eb2: 0.549 m front to
+    /// rear at the drawing's own scale; the front wheels 0.54 m apart, the rear 0.55 m, as its
+    /// 644 mm width less an 89 mm wheel gives). The drawing's 608.54 mm is the top rails'
+    /// length, not the wheelbase, which agilexrobotics/ugv_gazebo_sim's `hunter_se` controller
+    /// configuration takes for it (0.608 m); that repository's URDF says 0.55 m, and its track
+    /// (0.46 m) is narrower than the body. The widest central angle is the inner one's with this
+    /// geometry (0.3367 rad, 1.571 m at the tightest): a 2 cm error in the track moves it by
+    /// less than 1 %.
+    ///
+    /// The rate at which the wheels turn is in no source for either: 1.0 rad/s is assumed (the
+    /// simulator's).
     pub const fn steering(self) -> Option<Steering> {
         match self {
             Self::Hunter2 => Some(Steering {
@@ -166,6 +189,13 @@ impl Model {
                 track: 0.605,
                 max_central: 0.461,
                 max_inner: 0.58,
+                rate: 1.0,
+            }),
+            Self::HunterSe => Some(Steering {
+                wheelbase: 0.55,
+                track: 0.54,
+                max_central: 0.3367,
+                max_inner: 0.4,
                 rate: 1.0,
             }),
             Self::Scout
@@ -212,17 +242,20 @@ impl Model {
             | Self::Bunker
             | Self::BunkerMini
             | Self::BunkerPro
-            | Self::Hunter2 => None,
+            | Self::Hunter2
+            | Self::HunterSe => None,
         }
     }
 
     /// Whether it has a parking brake the host locks and releases (0x131, reported in 0x211
     /// byte 6): the Hunter 2.0 (its protocol sheet and manual; a maintainer: "none of the
-    /// other vehicles has a brake function", westonrobot/ugv_sdk PR 10).
+    /// other vehicles has a brake function", westonrobot/ugv_sdk PR 10). Not the Hunter SE:
+    /// its manual lists no 0x131 and has 0x211 byte 6 "reserved".
     pub const fn parking_brake(self) -> bool {
         match self {
             Self::Hunter2 => true,
-            Self::Scout
+            Self::HunterSe
+            | Self::Scout
             | Self::Scout2
             | Self::ScoutMini
             | Self::ScoutMiniOmni
@@ -256,6 +289,7 @@ impl Model {
                 Self::Tracer
                 | Self::TracerMini
                 | Self::Hunter2
+                | Self::HunterSe
                 | Self::RangerMini2
                 | Self::RangerMini3,
                 crate::version::Protocol::V1,
@@ -271,6 +305,7 @@ impl Model {
                 | Self::BunkerMini
                 | Self::BunkerPro
                 | Self::Hunter2
+                | Self::HunterSe
                 | Self::RangerMini2
                 | Self::RangerMini3,
                 _,
@@ -286,8 +321,7 @@ impl Model {
     /// The model called `name`, or an error that lists every name: the one parser of
     /// `--model` and the configuration's `model`.
     pub fn parse(name: &str) -> Result<Self, UnknownModel> {
-        Self::from_name(name)
-            .ok_or_else(|| UnknownModel(NotYet::ALL.into_iter().find(|model| model.name() == name)))
+        Self::from_name(name).ok_or(UnknownModel)
     }
 
     /// The byte that stands for it in shared memory.
@@ -305,6 +339,7 @@ impl Model {
             Self::Hunter2 => 10,
             Self::RangerMini2 => 11,
             Self::RangerMini3 => 12,
+            Self::HunterSe => 13,
         }
     }
 
@@ -365,6 +400,13 @@ impl Model {
                 angular: HUNTER2_MAX_YAW_RATE,
                 lateral: 0.0,
             },
+            // Its manual's table 3.3 (0x111 bytes 0-1, "effective value +-4800" mm/s) and
+            // spec sheet (4.8 m/s unladen, TrossenRobotics/agilex_hunter_se_docs).
+            Self::HunterSe => Limits {
+                linear: 4.8,
+                angular: HUNTER_SE_MAX_YAW_RATE,
+                lateral: 0.0,
+            },
             // ranger_ros2 `ranger_params.hpp`: 1.5 m/s (the wheels' speed, so sideways too in
             // parallel mode) and 4.8 rad/s spinning.
             Self::RangerMini2 | Self::RangerMini3 => Limits {
@@ -420,6 +462,13 @@ impl Model {
                 wheel_radius: 0.165,
                 gear_ratio: 30.0,
             },
+            // The dimension drawing's track and 275 mm wheel (`Model::steering`); its gearbox
+            // is in no source (the Hunter 2.0's assumed).
+            Self::HunterSe => Geometry {
+                track: 0.54,
+                wheel_radius: 0.1375,
+                gear_ratio: 30.0,
+            },
             // The track is ranger_ros2's; the wheel and gearbox are in no source (assumed).
             Self::RangerMini2 | Self::RangerMini3 => Geometry {
                 track: 0.364,
@@ -442,6 +491,7 @@ impl Model {
             | Self::BunkerMini
             | Self::BunkerPro
             | Self::Hunter2
+            | Self::HunterSe
             | Self::RangerMini2
             | Self::RangerMini3 => crate::battery::UNKNOWN_BATTERY,
         }
@@ -535,51 +585,13 @@ impl Model {
     }
 }
 
-listed! {
-/// AgileX models this gateway knows by name but does not drive yet: driving one as another
-/// model would be wrong (issue 48).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum NotYet {
-    /// Hunter SE, Ackermann steering.
-    HunterSe,
-}
-}
-
-impl NotYet {
-    /// The name on the command line.
-    pub const fn name(self) -> &'static str {
-        match self {
-            Self::HunterSe => "hunter-se",
-        }
-    }
-
-    /// What it needs that the gateway does not do yet.
-    pub const fn needs(self) -> &'static str {
-        match self {
-            Self::HunterSe => {
-                "its steering geometry (no source this project has gives its wheelbase, track \
-                 and steering limits)"
-            }
-        }
-    }
-}
-
-/// A name that is no model's, or a model not driven yet ([`Model::parse`]).
+/// A name that is no model's ([`Model::parse`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct UnknownModel(pub Option<NotYet>);
+pub struct UnknownModel;
 
 impl core::fmt::Display for UnknownModel {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match self.0 {
-            Some(model) => write!(
-                f,
-                "the gateway does not drive a {} yet: it needs {}, which is not built; \
-                 driving it as another model would be unsafe. Models it drives: {Names}",
-                model.name(),
-                model.needs()
-            ),
-            None => write!(f, "not a model: give one of {Names}"),
-        }
+        write!(f, "not a model: give one of {Names}")
     }
 }
 
@@ -633,20 +645,9 @@ mod tests {
         assert_eq!(
             refused,
             "not a model: give one of scout, scout2, scout-mini, scout-mini-omni, tracer, \
-             tracer-mini, bunker, bunker-mini, bunker-pro, hunter2, ranger-mini-2, ranger-mini-3"
+             tracer-mini, bunker, bunker-mini, bunker-pro, hunter2, hunter-se, ranger-mini-2, \
+             ranger-mini-3"
         );
-        let hunter = Model::parse("hunter-se").expect_err("not driven yet");
-        assert_eq!(hunter, UnknownModel(Some(NotYet::HunterSe)));
-        assert!(
-            hunter.to_string().starts_with(
-                "the gateway does not drive a hunter-se yet: it needs its steering geometry"
-            ),
-            "{hunter}"
-        );
-        for model in NotYet::ALL {
-            assert_eq!(Model::from_name(model.name()), None, "{}", model.name());
-            assert_eq!(Model::parse(model.name()), Err(UnknownModel(Some(model))));
-        }
         assert_eq!(Model::Scout2.limits().linear, 1.5);
         assert_eq!(Model::ScoutMini.limits().angular, 2.5235);
         assert_eq!(Model::ScoutMiniOmni.limits().lateral, 2.0);

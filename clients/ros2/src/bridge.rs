@@ -508,8 +508,8 @@ fn drive(
                                 &counters.cmd_vel_rejected,
                                 format!(
                                     "an AckermannDriveStamped steers a chassis by its front \
-                                     wheels (a hunter2); this {} does not: publish a Twist on \
-                                     a cmd_vel topic",
+                                     wheels (a hunter2 or a hunter-se); this {} does not: \
+                                     publish a Twist on a cmd_vel topic",
                                     model.map_or("chassis of unknown model", Model::name)
                                 ),
                             ),

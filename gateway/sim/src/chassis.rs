@@ -1246,7 +1246,8 @@ impl Chassis {
         let ambient = self.params.ambient_temperature;
         let mut total_current = 0.5; // electronics
         // Wheels dragged sideways to turn (skid-steer, tracks) draw most; steered ones do not.
-        let scrub = if self.params.motion_modes { 0.0 } else { 5.0 };
+        let steered = self.params.motion_modes || self.params.steering().is_some();
+        let scrub = if steered { 0.0 } else { 5.0 };
         for motor in Motor::ALL {
             // 1 front-right, 2 front-left, 3 rear-left, 4 rear-right; left shafts turn the other
             // way for forward motion (vendor SDK; unverified on hardware).

@@ -265,6 +265,13 @@ fn commands_are_clamped_to_the_models_limits() {
         assert_eq!(target.linear, linear, "{model}");
         assert_eq!(target.angular, -model.limits().angular, "{model}");
     }
+    // A Hunter SE (no brake to release): its speed and its steering field, each to its own.
+    let mut se = chassis(Model::HunterSe);
+    se.handle_v2(ms(0), TAKE);
+    let wide = MotionV2::from_si(9.0, 0.0).with_steering(-1.5);
+    drive(&mut se, MessageV2::MotionCommand(wide), ms(0), ms(3000));
+    assert_eq!(se.target_at(ms(3000)).linear, 4.8);
+    assert_eq!(se.stats().steering, -0.4);
 }
 
 #[test]

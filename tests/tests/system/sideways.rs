@@ -167,9 +167,9 @@ impl EmulatedChassis {
     }
 
     /// Reads what it prints until it has printed `wanted` (other than a motion command), or
-    /// `LIMIT` passes; returns whether it did.
-    pub(crate) fn wait_event(&self, wanted: &serde_json::Value) -> bool {
-        let deadline = std::time::Instant::now() + LIMIT;
+    /// `within` passes; returns whether it did.
+    pub(crate) fn wait_event(&self, wanted: &serde_json::Value, within: Duration) -> bool {
+        let deadline = std::time::Instant::now() + within;
         while !self.events.borrow().contains(wanted) {
             let Ok(line) = self
                 .lines

@@ -18,7 +18,8 @@ With --motion-modes it is a Ranger (`SetMotionModeFrame`, `MotionModeStateFrame`
 With --brake it is a Hunter (`BrakeModeConfigFrame`; the Hunter 2.0 manual's 0x211 byte 6):
 its parking brake starts locked (1) and is reported in 0x211 byte 6; a 0x131 is printed as
 {"brake": byte 0} and sets it (0 released, 1 locked); a 0x111 with a speed while it is locked
-is printed as {"moved_while_locked": [...]} and moves nothing.
+is printed as {"moved_while_locked": [...]} and moves nothing. Without it, a 0x131 is printed
+all the same (and changes nothing): a chassis without a brake should never be sent one.
 """
 
 import json
@@ -103,9 +104,9 @@ def main() -> None:
                     still = not fresh or command == (0, 0, 0, 0)
                     if still and now >= changing_until and data[0] != mode:
                         mode, changing_until = data[0], now + MODE_CHANGE
-                elif has_brake and can_id == BRAKE_COMMAND and len(data) == 8:
-                    print(json.dumps({"brake": data[0]}), flush=True)
-                    if data[0] in (0, 1):
+                elif can_id == BRAKE_COMMAND:
+                    print(json.dumps({"brake": data[0] if data else None}), flush=True)
+                    if has_brake and len(data) == 8 and data[0] in (0, 1):
                         brake = data[0]
                 elif can_id == MOTION_COMMAND and len(data) == 8:
                     fields = struct.unpack(">hhhh", data)
