@@ -426,6 +426,17 @@ impl Pair {
             .collect()
     }
 
+    /// The v2 motion commands (0x111) sent, with when.
+    fn v2_motion_commands(&self) -> Vec<(Duration, MotionV2)> {
+        self.sent
+            .iter()
+            .filter_map(|(at, frame)| match frame {
+                Outgoing::V2(MessageV2::MotionCommand(command)) => Some((*at, *command)),
+                Outgoing::V1(_) | Outgoing::V2(_) => None,
+            })
+            .collect()
+    }
+
     /// The v2 frames sent other than motion commands, with when.
     fn v2_others(&self) -> Vec<(Duration, MessageV2)> {
         self.sent
@@ -2160,6 +2171,132 @@ fn no_model_receives_more_than_its_limits_and_a_stop_is_zero_on_every_field() {
             }
         }
         stops_at_once_on_every_field(&mut pair, model);
+    }
+}
+
+/// What a client does to a chassis of any model, for the property test below.
+#[derive(Debug, Clone)]
+enum Ask {
+    /// Nothing for this long, ms.
+    Wait(u64),
+    /// Streams a velocity (forward, sideways, yaw rate), perhaps in a named mode, for so many
+    /// ticks; takes control first when it holds none.
+    Drive((f64, f64, f64), Option<DriveMode>, u32),
+    /// A person's stop.
+    Stop,
+    /// The operator releases every stop.
+    Release,
+}
+
+fn ask() -> impl Strategy<Value = Ask> {
+    let speed = -8.0f64..8.0;
+    let sideways = prop_oneof![3 => Just(0.0), 1 => -8.0f64..8.0];
+    let mode = prop_oneof![
+        3 => Just(None),
+        1 => prop::sample::select(DriveMode::ALL).prop_map(Some),
+    ];
+    prop_oneof![
+        1 => (1u64..400).prop_map(Ask::Wait),
+        4 => ((speed.clone(), sideways, speed), mode, 1u32..80)
+            .prop_map(|(velocity, mode, ticks)| Ask::Drive(velocity, mode, ticks)),
+        1 => Just(Ask::Stop),
+        1 => Just(Ask::Release),
+    ]
+}
+
+/// The most each field of 0x111 may carry on `model`, as its mapping lays the fields out
+/// (forward, yaw-rate field, sideways field, steering field): its limits where they go, zero
+/// where nothing does.
+fn wire_limits(model: Model) -> [f64; 4] {
+    let limits = model.limits();
+    match (model.drive(), model.steering(), model.four_wheel()) {
+        (Drive::Ackermann, Some(steering), _) => [limits.linear, 0.0, 0.0, steering.max_inner],
+        (Drive::FourWheelSteering, _, Some(four)) => {
+            let widest = four.max_inner.max(four.max_parallel);
+            match four.spin_in_lateral {
+                true => [limits.linear, 0.0, limits.angular, widest],
+                false => [limits.linear, limits.angular, 0.0, widest],
+            }
+        }
+        (Drive::Mecanum, ..) => [limits.linear, limits.angular, limits.lateral, 0.0],
+        (Drive::SkidSteer | Drive::Differential | Drive::Tracked, ..) => {
+            [limits.linear, limits.angular, 0.0, 0.0]
+        }
+        (Drive::Ackermann | Drive::FourWheelSteering, ..) => {
+            unreachable!("{model}: a steered model without its steering")
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(96))]
+
+    /// For every model on v2, whatever a client asks (any velocity on every axis, far beyond
+    /// the limits, in any named mode, with stops and releases between): no 0x111 carries more
+    /// than the model's limits in any field as its mapping lays them out (a steered one no yaw
+    /// rate in the yaw-rate field), the frame a stop is sent with is zero on every field, a
+    /// Ranger gets no motion while it changes mode and a Hunter none while its brake is locked.
+    #[test]
+    fn no_model_receives_more_than_its_limits_whatever_a_client_asks(
+        model in prop::sample::select(Model::ALL.to_vec()),
+        asks in prop::collection::vec(ask(), 1..30),
+    ) {
+        let gateway = GatewayConfig { model: Some(model), ..config(Protocol::V2) };
+        let mut pair = Pair::with_firmware(Protocol::V2, Transport::Can, &gateway, Start::Clean);
+        pair.run(ms(200));
+        let mut stops = Vec::new();
+        for ask in asks {
+            match ask {
+                Ask::Wait(millis) => pair.run(ms(millis)),
+                Ask::Drive((linear, lateral, angular), mode, ticks) => {
+                    let lease = match pair.leases.get(&TELEOP.1) {
+                        Some(lease) => *lease,
+                        None => match pair.take(TELEOP, Class::Teleop) {
+                            Ok(lease) => lease,
+                            Err(_) => continue,
+                        },
+                    };
+                    for _ in 0..ticks {
+                        let drive = Request::Drive { lease, linear, lateral, angular, ttl: None, mode };
+                        let answer = pair.request(TELEOP, &drive);
+                        if answer.is_err_and(|r| matches!(r.kind, Some(RejectionKind::Revoked | RejectionKind::NoControl))) {
+                            pair.leases.remove(&TELEOP.1);
+                            break;
+                        }
+                        let next = pair.now + TICK;
+                        while pair.now < next {
+                            pair.step();
+                        }
+                    }
+                }
+                Ask::Stop => {
+                    stops.push(pair.now);
+                    pair.request(TELEOP, &Request::Stop { reason: "person".into() }).expect("a stop is never refused");
+                }
+                Ask::Release => {
+                    let _ = pair.request(OPERATOR, &Request::Release { target: ReleaseTarget::All, through: u64::MAX });
+                }
+            }
+        }
+        pair.run(ms(100));
+        let most = wire_limits(model);
+        let sent = pair.v2_motion_commands();
+        for (at, command) in &sent {
+            let fields = [command.linear_mm_s, command.angular_mrad_s, command.lateral_mm_s, command.steering_mrad];
+            for (field, (value, most)) in fields.into_iter().zip(most).enumerate() {
+                prop_assert!(
+                    f64::from(value).abs() / 1000.0 <= most,
+                    "{}: field {} of {:?} at {:?} beyond {:?}", model, field, command, at, most
+                );
+            }
+        }
+        for stop in &stops {
+            let at_stop = sent.iter().find(|(at, _)| at == stop).map(|(_, command)| *command);
+            prop_assert_eq!(at_stop, Some(MotionV2::default()), "{}: the stop at {:?}", model, stop);
+        }
+        let ignored = pair.chassis.stats().ignored;
+        prop_assert_eq!(ignored.mode_changing, 0, "{}: motion while changing mode", model);
+        prop_assert_eq!(ignored.brake_locked, 0, "{}: motion while braked", model);
     }
 }
 
