@@ -362,18 +362,21 @@ fn steers_in_0x111(model: Model, angular: f64, inner: f64) -> (EmulatedChassis, 
 /// mode change asked while it moved and no motion while it changed.
 #[test]
 fn a_ranger_drives_every_mode_and_its_odometry_follows() {
-    let name = robot_name("ranger-figure");
+    every_mode_figure(Model::RangerMini2);
+}
+
+/// The same figure on a Ranger Mini 3.0, whose spin rate goes in the yaw-rate field.
+#[test]
+fn a_ranger_mini_3_drives_every_mode_and_its_odometry_follows() {
+    every_mode_figure(Model::RangerMini3);
+}
+
+fn every_mode_figure(model: Model) {
+    let name = robot_name(&format!("{model}-figure"));
     let _dir = TempDir::new(&name);
-    let mut sim = Sim::start(&["--slcan", "--protocol", "v2", "--model", "ranger-mini-2"]);
+    let mut sim = Sim::start(&["--slcan", "--protocol", "v2", "--model", model.name()]);
     let port = sim.port().to_owned();
-    let _gateway = Gateway::start(&[
-        "--slcan",
-        &port,
-        "--model",
-        "ranger-mini-2",
-        "--name",
-        &name,
-    ]);
+    let _gateway = Gateway::start(&["--slcan", &port, "--model", model.name(), "--name", &name]);
     let robot = connect(&name);
     let states = robot.subscribe().expect("state");
     wait_for_state(&states, LIMIT, |s| s["link"]["state"] == "ok");
@@ -418,7 +421,7 @@ fn a_ranger_drives_every_mode_and_its_odometry_follows() {
     figure.leg((0.0, 0.0, 0.8), &turned_to(std::f64::consts::FRAC_PI_2));
     figure.leg((0.4, 0.0, 0.4), &turned_to(std::f64::consts::PI));
     let path = 1.0 + 0.8 + std::f64::consts::FRAC_PI_2;
-    let stats = figure.closes(&mut sim, "ranger-mini-2", path);
+    let stats = figure.closes(&mut sim, model.name(), path);
     let true_yaw = stats["pose"]["yaw"].as_f64().expect("a pose");
     // It went where the legs say: about 1 m ahead and 0.8 m to the left before the turns
     // (the last quarter circle of 1 m radius adds about 1 m each way), facing backwards.
