@@ -36,7 +36,8 @@ pub struct GatewayConfig {
     #[serde(deserialize_with = "model_by_name")]
     pub model: Option<Model>,
     /// The fastest the chassis may turn, rad/s; on protocol v1 also the rate at 100 % angular
-    /// command (protocol-notes 4.1; firmware differs). Default: the model's.
+    /// command (protocol-notes 4.1; firmware differs). Default: the model's. On v2 the wire
+    /// gets no more than the model's, whatever this says.
     pub max_angular: Option<f64>,
     /// Periods and limits of the control loop.
     pub timing: Timing,

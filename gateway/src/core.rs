@@ -1260,12 +1260,15 @@ impl Core {
                 )
             }
             Protocol::V2 => {
+                // No yaw rate beyond the model's, whatever the configuration says (a larger
+                // `max_angular` is the v1 percent scale of a firmware that differs).
+                let max_angular = self.max_angular.min(self.model.limits().angular);
                 // The arbiter caps in floating point; on the wire a cap that is not a whole
                 // unit would round up past the model's limit (0.5235 rad/s to 524 mrad/s).
                 let within = |command: MotionV2, steering: f64| {
                     command.within(
                         self.max_linear,
-                        self.max_angular,
+                        max_angular,
                         self.model.limits().lateral,
                         steering,
                     )
@@ -1273,9 +1276,7 @@ impl Core {
                 match (self.model.four_wheel(), self.model.steering()) {
                     (Some(ranger), _) => {
                         let settled = self.handshake.settled(now);
-                        // No spin beyond the model's rate, whatever the configuration says.
-                        let angular = self.max_angular.min(self.model.limits().angular);
-                        let limits = (self.max_linear, angular);
+                        let limits = (self.max_linear, max_angular);
                         let (command, sent) = four_wheel_command(&ranger, settled, output, limits);
                         self.handshake.handle_sent(now, sent);
                         (Outgoing::V2(MessageV2::MotionCommand(command)), sent)

@@ -2232,7 +2232,8 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(96))]
 
     /// For every model on v2, whatever a client asks (any velocity on every axis, far beyond
-    /// the limits, in any named mode, with stops and releases between): no 0x111 carries more
+    /// the limits, in any named mode, with stops and releases between) and whatever the
+    /// configuration's `max_angular`: no 0x111 carries more
     /// than the model's limits in any field as its mapping lays them out (a steered one no yaw
     /// rate in the yaw-rate field), the frame a stop is sent with is zero on every field, a
     /// Ranger gets no motion while it changes mode and a Hunter none while its brake is locked.
@@ -2240,8 +2241,11 @@ proptest! {
     fn no_model_receives_more_than_its_limits_whatever_a_client_asks(
         model in prop::sample::select(Model::ALL.to_vec()),
         asks in prop::collection::vec(ask(), 1..30),
+        generous in any::<bool>(),
     ) {
-        let gateway = GatewayConfig { model: Some(model), ..config(Protocol::V2) };
+        // A configured `max_angular` beyond the model's (v1's percent scale) changes nothing.
+        let max_angular = generous.then_some(model.limits().angular * 3.0);
+        let gateway = GatewayConfig { model: Some(model), max_angular, ..config(Protocol::V2) };
         let mut pair = Pair::with_firmware(Protocol::V2, Transport::Can, &gateway, Start::Clean);
         pair.run(ms(200));
         let mut stops = Vec::new();
