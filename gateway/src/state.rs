@@ -1143,12 +1143,23 @@ mod tests {
                 ..MotionV2::default()
             }))
         };
+        // A Hunter 2.0's brake as it starts: locked.
+        let braked = || {
+            let RxEvent::V2(MessageV2::SystemState(system)) = system_v2(7) else {
+                unreachable!()
+            };
+            RxEvent::V2(MessageV2::SystemState(SystemStateV2 {
+                reserved: 1,
+                ..system
+            }))
+        };
         for model in Model::ALL {
             for (event, sign) in [
                 (unknown(0x271), Sign::SteeringAngles),
                 (unknown(0x291), Sign::MotionMode),
                 (motion(0, 200), Sign::Steering),
                 (motion(-150, 0), Sign::Lateral),
+                (braked(), Sign::ParkingBrake),
             ] {
                 let mut tracker = on_v2(model);
                 tracker.handle_rx(&event, ms(30));
@@ -1185,6 +1196,12 @@ mod tests {
         // Only the OMNI moves sideways; nothing of the SCOUT family steers.
         assert!(Model::ScoutMiniOmni.may_send(Sign::Lateral));
         assert!(!Model::ScoutMiniOmni.may_send(Sign::Steering));
+        // A brake reported tells a Hunter 2.0 from a Hunter SE, and is judged nowhere else
+        // (0x211 byte 6 is reserved there).
+        assert!(Model::Hunter2.may_send(Sign::ParkingBrake));
+        assert!(!Model::HunterSe.may_send(Sign::ParkingBrake));
+        assert!(Model::Scout2.may_send(Sign::ParkingBrake));
+        assert!(!Model::Scout2.sends(Sign::ParkingBrake));
     }
 
     #[test]

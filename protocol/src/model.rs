@@ -515,6 +515,8 @@ pub enum Sign {
     Steering,
     /// 0x221 with a sideways speed other than zero.
     Lateral,
+    /// 0x211 with byte 6 other than zero: a parking brake reported locked.
+    ParkingBrake,
 }
 }
 
@@ -528,10 +530,16 @@ impl Sign {
         }
     }
 
-    /// What a decoded v2 message says: its id, or a motion state's fields.
+    /// What a decoded v2 message says: its id, or a motion or system state's fields.
     pub const fn of_v2_message(message: &crate::v2::MessageV2) -> Option<Self> {
         match message {
             crate::v2::MessageV2::MotionState(motion) => Self::of_motion_state(motion),
+            crate::v2::MessageV2::SystemState(system) => match system.brake() {
+                crate::v2::BrakeV2::Released => None,
+                crate::v2::BrakeV2::Locked | crate::v2::BrakeV2::Unknown(_) => {
+                    Some(Self::ParkingBrake)
+                }
+            },
             other => Self::of_v2_id(other.can_id()),
         }
     }
@@ -554,6 +562,7 @@ impl Sign {
             Self::MotionMode => "a motion mode (0x291)",
             Self::Steering => "a steering angle (0x221)",
             Self::Lateral => "a sideways speed (0x221)",
+            Self::ParkingBrake => "a parking brake (0x211 byte 6)",
         }
     }
 
@@ -565,22 +574,52 @@ impl Sign {
             }
             Self::MotionMode => "a Ranger Mini (four-wheel steering with motion modes)",
             Self::Lateral => "a SCOUT MINI OMNI or a Ranger Mini (it moves sideways)",
+            Self::ParkingBrake => "a Hunter 2.0 (a Hunter SE has no parking brake to report)",
         }
     }
 }
 
 impl Model {
-    /// Whether a chassis of this model may send what `sign` says, by how its wheels move it:
-    /// mecanum wheels move sideways, steered wheels report their angles, and the Rangers
-    /// alone have motion modes.
-    pub const fn may_send(self, sign: Sign) -> bool {
+    /// Whether a chassis of this model sends what `sign` says, by how its wheels move it:
+    /// mecanum wheels move sideways, steered wheels report their angles, the Rangers alone have
+    /// motion modes, and a Hunter 2.0 alone reports a parking brake.
+    pub const fn sends(self, sign: Sign) -> bool {
         match (self.drive(), sign) {
+            (_, Sign::ParkingBrake) => self.parking_brake(),
             (Drive::Mecanum, Sign::Lateral)
             | (Drive::Ackermann, Sign::Steering | Sign::SteeringAngles)
-            | (Drive::FourWheelSteering, _) => true,
-            (Drive::SkidSteer | Drive::Differential | Drive::Tracked, _)
+            | (
+                Drive::FourWheelSteering,
+                Sign::Lateral | Sign::Steering | Sign::SteeringAngles | Sign::MotionMode,
+            ) => true,
+            (
+                Drive::SkidSteer | Drive::Differential | Drive::Tracked,
+                Sign::Lateral | Sign::Steering | Sign::SteeringAngles | Sign::MotionMode,
+            )
             | (Drive::Mecanum, Sign::Steering | Sign::SteeringAngles | Sign::MotionMode)
             | (Drive::Ackermann, Sign::Lateral | Sign::MotionMode) => false,
+        }
+    }
+
+    /// Whether the gateway drives a chassis of this model that sends what `sign` says: what
+    /// it sends, and on any model but a Hunter a parking brake in 0x211 byte 6. That byte is
+    /// reserved on the others and what their firmware puts there no capture shows (a Bunker
+    /// Mini's and a Hunter SE's: 0), so it is judged only where it tells one Hunter from the
+    /// other: a Hunter 2.0 starts with its brake locked, a Hunter SE has none to report.
+    pub const fn may_send(self, sign: Sign) -> bool {
+        match (self.drive(), sign) {
+            (
+                Drive::SkidSteer
+                | Drive::Mecanum
+                | Drive::Differential
+                | Drive::Tracked
+                | Drive::FourWheelSteering,
+                Sign::ParkingBrake,
+            ) => true,
+            (Drive::Ackermann, _)
+            | (_, Sign::Lateral | Sign::Steering | Sign::SteeringAngles | Sign::MotionMode) => {
+                self.sends(sign)
+            }
         }
     }
 }
@@ -685,6 +724,17 @@ mod tests {
                 assert_eq!(model.may_send(sign), steers || modes, "{model}");
             }
             assert_eq!(model.may_send(Sign::MotionMode), modes, "{model}");
+            assert_eq!(
+                model.sends(Sign::ParkingBrake),
+                model.parking_brake(),
+                "{model}"
+            );
+            for sign in Sign::ALL {
+                assert!(
+                    !model.sends(sign) || model.may_send(sign),
+                    "{model} {sign:?}"
+                );
+            }
             let geometry = model.geometry();
             assert!(
                 geometry.track > 0.0 && geometry.wheel_radius > 0.0,

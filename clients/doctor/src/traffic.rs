@@ -122,11 +122,20 @@ impl Traffic {
             sent.join(", "),
             first.suggests()
         );
-        let models: Vec<&str> = Model::ALL
-            .into_iter()
-            .filter(|model| self.signs.iter().all(|sign| model.may_send(*sign)))
-            .map(Model::name)
-            .collect();
+        // The models that send all of it; else those the gateway would drive all the same (a
+        // parking brake is judged on a Hunter alone: 0x211 byte 6 is reserved elsewhere).
+        let models = |fits: fn(Model, Sign) -> bool| -> Vec<&str> {
+            Model::ALL
+                .into_iter()
+                .filter(|model| self.signs.iter().all(|sign| fits(*model, *sign)))
+                .map(Model::name)
+                .collect()
+        };
+        let sending = models(Model::sends);
+        let models = match sending.is_empty() {
+            true => models(Model::may_send),
+            false => sending,
+        };
         if !models.is_empty() {
             return Check::warn(
                 "model",
@@ -672,6 +681,25 @@ mod tests {
         let fix = check.fix.as_deref().unwrap_or_default();
         assert!(
             fix.contains("--model ranger-mini-2 or --model ranger-mini-3") && !fix.contains("omni"),
+            "{check:?}"
+        );
+        // A parking brake reported locked: a Hunter 2.0, not a Hunter SE.
+        let mut traffic = Traffic::new();
+        let braked = SystemStateV2 {
+            state: ChassisState::Normal,
+            control_mode: ControlModeV2::Standby,
+            battery_decivolts: 259,
+            errors: scout_protocol::v2::ErrorBitsV2(0),
+            reserved: 1,
+            count: 0,
+        };
+        traffic.handle(&RxEvent::V2(MessageV2::SystemState(braked)), Duration::ZERO);
+        let check = find(&traffic);
+        assert_eq!(check.verdict, Verdict::Warn, "{check:?}");
+        assert!(check.detail.contains("a Hunter 2.0"), "{check:?}");
+        let fix = check.fix.as_deref().unwrap_or_default();
+        assert!(
+            fix.contains("--model hunter2:") && !fix.contains("hunter-se"),
             "{check:?}"
         );
     }

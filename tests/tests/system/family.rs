@@ -13,7 +13,7 @@ use scout_system_tests::{Sim, TempDir};
 use scout_protocol::kinematics;
 use scout_protocol::model::{Drive, Model};
 use scout_protocol::version::Protocol;
-use scout_system_tests::{Gateway, connect, robot_name, scout, wait_for_state};
+use scout_system_tests::{Gateway, connect, robot_name, scout, wait_for_state, wait_for_status};
 
 use crate::odometry::{assert_within, exact_factors, square};
 use crate::sideways::EmulatedChassis;
@@ -243,6 +243,43 @@ fn a_hunter_drives_a_rounded_square_and_its_odometry_follows() {
 fn a_hunter_se_drives_a_rounded_square_faster_and_its_odometry_follows() {
     let stats = rounded_square(Model::HunterSe, 1.6, 2.0);
     assert_eq!(stats["rejected"], 0, "{stats}");
+}
+
+/// A Hunter 2.0 (its brake locked, as it powers up) behind a gateway told it is a Hunter SE is
+/// not driven: the gateway stops at the first 0x211 and says why, and a drive is refused.
+#[test]
+fn a_hunter_2_is_not_driven_as_a_hunter_se() {
+    let name = robot_name("hunter2-as-se");
+    let _dir = TempDir::new(&name);
+    let mut sim = Sim::start(&["--slcan", "--protocol", "v2", "--model", "hunter2"]);
+    let port = sim.port().to_owned();
+    let gateway = Gateway::start(&["--slcan", &port, "--model", "hunter-se", "--name", &name]);
+    let robot = connect(&name);
+    let states = robot.subscribe().expect("state");
+    wait_for_state(&states, LIMIT, |s| {
+        s["link"]["state"] == "protocol_mismatch"
+    });
+    let status = robot.status().expect("status");
+    let status = wait_for_status(&status, LIMIT, |s| {
+        s["stops"].as_array().is_some_and(|stops| !stops.is_empty())
+    });
+    let reason = status["stops"][0]["reason"].as_str().unwrap_or_default();
+    assert!(
+        reason.contains("not a hunter-se") && reason.contains("0x211 byte 6"),
+        "{status}"
+    );
+    let (code, stdout, stderr) = scout(&[
+        "drive",
+        "--name",
+        &name,
+        "--linear",
+        "0.5",
+        "--duration",
+        "0.5",
+    ]);
+    assert_eq!(code, Some(4), "{stdout}{stderr}");
+    assert_eq!(sim.stats()["actual"]["linear"], 0.0);
+    assert!(gateway.log().contains("a Hunter 2.0"), "{}", gateway.log());
 }
 
 /// `model` drives a rounded square at `speed` m/s on its simulator: four sides of 1 m, each
