@@ -1,7 +1,8 @@
 //! `scout calibrate`: the odometry's calibration, guided. The robot drives a straight distance
-//! and turns in place by its own odometry, each leg under a teleop lease taken when the operator
-//! presses Enter (`scout estop` or Ctrl-C stops it at any time); the operator says what was
-//! measured on the floor; the factors go into the gateway's configuration, comments kept.
+//! and turns in place (a Hunter, which cannot, on a circle) by its own odometry, each leg under
+//! a teleop lease taken when the operator presses Enter (`scout estop` or Ctrl-C stops it at any
+//! time); the operator says what was measured on the floor; the factors go into the gateway's
+//! configuration, comments kept.
 
 use std::f64::consts::TAU;
 use std::io::{BufRead, Write};
@@ -18,6 +19,7 @@ use scout_clients::client::{Robot, StateSubscriber};
 use scout_clients::control::{ControlError, Controller};
 use scout_clients::interface::state::ODOMETRY_SCALE_RANGE;
 use scout_protocol::kinematics::wrap_angle;
+use scout_protocol::model::Model;
 
 use crate::RobotArgs;
 use crate::control::{DRIVE_PERIOD, ctrl_c};
@@ -39,13 +41,14 @@ pub struct CalibrateArgs {
     /// How far to drive straight, m (by the odometry).
     #[arg(long, default_value_t = 2.0, value_name = "M")]
     distance: f64,
-    /// How many turns in place (by the odometry).
+    /// How many turns in place, or on a circle for a chassis that turns only while moving (by
+    /// the odometry).
     #[arg(long, default_value_t = 2.0, value_name = "N")]
     turns: f64,
-    /// The speed straight ahead, m/s.
+    /// The speed straight ahead (and round the circle), m/s.
     #[arg(long, default_value_t = 0.3, value_name = "M_S")]
     speed: f64,
-    /// The speed of the turns, rad/s.
+    /// The speed of the turns, rad/s (round a circle: at most what its tightest allows).
     #[arg(long, default_value_t = 0.4, value_name = "RAD_S")]
     turn_speed: f64,
     /// Say the factors, write nothing.
@@ -137,21 +140,41 @@ fn newest(
     }
 }
 
-/// One leg: drives (linear, angular) until `progress` (from the odometry) reaches `target`,
-/// then zero until the robot stands still; returns the progress then. Ends on a lost control
-/// (`scout estop`), Ctrl-C, an odometry reset, or twice the time the leg should take, with an
-/// error, the robot stopped.
+/// How the turns are driven: in place at `turn_speed`, or, on a model that turns only while
+/// moving (a Hunter), forward at `speed` on a circle a little wider than its tightest (or wider
+/// still, for a `turn_speed` below what that circle takes). Returns (linear, angular) and what
+/// to tell the operator.
+pub fn turning(model: Option<Model>, speed: f64, turn_speed: f64) -> ((f64, f64), String) {
+    match model.and_then(Model::steering) {
+        Some(steering) => {
+            let angular = turn_speed.min(0.95 * steering.max_yaw_rate(speed));
+            let radius = speed / angular;
+            let how = format!(
+                "on a circle of {radius:.1} m radius at {speed} m/s (a {} turns only while \
+                 moving: clear {:.0} m all round)",
+                model.map_or("chassis", Model::name),
+                2.0 * radius + 1.0
+            );
+            ((speed, angular), how)
+        }
+        None => ((0.0, turn_speed), "in place".to_owned()),
+    }
+}
+
+/// One leg: drives `speeds` (linear, angular) until `progress` (from the odometry, going at
+/// `rate` a second) reaches `target`, then zero until the robot stands still; returns the
+/// progress then. Ends on a lost control (`scout estop`), Ctrl-C, an odometry reset, or twice
+/// the time the leg should take, with an error, the robot stopped.
 fn leg(
     controller: &mut Controller,
     states: &StateSubscriber,
-    speeds: (f64, f64),
+    (speeds, rate): ((f64, f64), f64),
     target: f64,
     mut progress: impl FnMut(&StatePayload) -> f64,
     stop: &AtomicBool,
 ) -> anyhow::Result<f64> {
     let mut last = None;
-    let speed = speeds.0.abs().max(speeds.1.abs());
-    let expected = Duration::from_secs_f64(target / speed);
+    let expected = Duration::from_secs_f64(target / rate);
     let limit = Instant::now() + expected * 2 + Duration::from_secs(5);
     let resets = newest(states, &mut last)?.odometry.resets;
     let mut next = Instant::now();
@@ -266,10 +289,11 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<ExitCode> {
     let mut last = None;
     let state = newest(&states, &mut last)?;
     let (distance_scale, yaw_scale) = (state.odometry.distance_scale, state.odometry.yaw_scale);
+    let (turn, how) = turning(state.chassis.model(), args.speed, args.turn_speed);
     println!(
         "calibrating {}'s odometry (factors in force: distance_scale {distance_scale}, \
          yaw_scale {yaw_scale}): it drives {:.2} m straight ahead at {} m/s, then turns {} \
-         time(s) in place. Clear the way, and mark the floor at its front edge.",
+         time(s) {how}. Clear the way, and mark the floor at its front edge.",
         args.robot.name, args.distance, args.speed, args.turns
     );
 
@@ -278,7 +302,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<ExitCode> {
     let reported = leg(
         &mut controller,
         &states,
-        (args.speed, 0.0),
+        ((args.speed, 0.0), args.speed),
         args.distance,
         |state| state.odometry.distance - start,
         &stop,
@@ -291,13 +315,13 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<ExitCode> {
     let new_distance = factor(distance_scale, reported, measured)?;
 
     println!("now mark its heading on the floor (a line along its side)");
-    let mut controller = take(&robot, &mut operator, "turn in place")?;
+    let mut controller = take(&robot, &mut operator, &format!("turn {how}"))?;
     let mut previous = newest(&states, &mut None)?.odometry.yaw;
     let mut turned = 0.0;
     let reported_turn = leg(
         &mut controller,
         &states,
-        (0.0, args.turn_speed),
+        (turn, turn.1),
         args.turns * TAU,
         |state| {
             turned += wrap_angle(state.odometry.yaw - previous);
@@ -359,6 +383,26 @@ fn restart_command(cgroup: &str) -> Option<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_chassis_that_turns_only_while_moving_turns_on_a_circle() {
+        assert_eq!(
+            turning(Some(Model::Scout2), 0.3, 0.4),
+            ((0.0, 0.4), "in place".to_owned())
+        );
+        assert_eq!(turning(None, 0.3, 0.4).0, (0.0, 0.4));
+        let ((linear, angular), how) = turning(Some(Model::HunterSe), 0.3, 0.4);
+        // A little wider than its tightest circle (1.571 m), which the gateway would hold it to.
+        let radius = linear / angular;
+        assert!(
+            linear == 0.3 && (radius - 1.571 / 0.95).abs() < 0.001,
+            "{radius}"
+        );
+        assert!(how.starts_with("on a circle of 1.7 m radius"), "{how}");
+        // A slower turn asked: a wider circle.
+        let ((_, angular), _) = turning(Some(Model::Hunter2), 0.3, 0.1);
+        assert_eq!(angular, 0.1);
+    }
 
     #[test]
     fn the_restart_command_comes_from_the_control_group() {
