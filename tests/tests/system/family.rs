@@ -268,16 +268,7 @@ fn a_hunter_2_is_not_driven_as_a_hunter_se() {
         reason.contains("not a hunter-se") && reason.contains("0x211 byte 6"),
         "{status}"
     );
-    let (code, stdout, stderr) = scout(&[
-        "drive",
-        "--name",
-        &name,
-        "--linear",
-        "0.5",
-        "--duration",
-        "0.5",
-    ]);
-    assert_eq!(code, Some(4), "{stdout}{stderr}");
+    drive_refused(&name, &["--linear", "0.5"], "not a hunter-se");
     assert_eq!(sim.stats()["actual"]["linear"], 0.0);
     assert!(gateway.log().contains("a Hunter 2.0"), "{}", gateway.log());
 }
