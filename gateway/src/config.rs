@@ -543,6 +543,21 @@ impl GatewayConfig {
             .unwrap_or(self.limits_model().limits().angular)
     }
 
+    /// What to warn of a `max_angular` above the model's: on protocol v2 the wire gets no
+    /// more than the model's, so the arbiter takes asks up to it that the chassis never gets.
+    pub fn max_angular_beyond_model(&self) -> Option<String> {
+        let (configured, model) = (self.max_angular?, self.limits_model());
+        let limit = model.limits().angular;
+        (configured > limit).then(|| {
+            format!(
+                "max_angular {configured} rad/s is above the {model}'s {limit}: on protocol v2 \
+                 the chassis gets at most {limit} rad/s (a client asking more is answered as \
+                 taken and gets that); on v1 it is the rate of 100 % angular command. Remove it \
+                 unless your v1 firmware turns faster"
+            )
+        })
+    }
+
     /// The fastest the chassis may go, m/s: the model's.
     pub fn max_linear(&self) -> f64 {
         self.limits_model().limits().linear
@@ -763,6 +778,15 @@ mod tests {
         assert_eq!(serial.fixed_protocol(), Some(Protocol::V1), "RS232 is v1");
         assert_eq!(GatewayConfig::default().fixed_protocol(), None);
         assert_eq!(GatewayConfig::default().max_linear(), 1.5);
+        let faster = GatewayConfig {
+            max_angular: Some(0.7),
+            ..Default::default()
+        };
+        let warned = faster
+            .max_angular_beyond_model()
+            .expect("above the SCOUT's");
+        assert!(warned.starts_with("max_angular 0.7 rad/s is above the scout's 0.5235"));
+        assert_eq!(GatewayConfig::default().max_angular_beyond_model(), None);
         for (name, model) in [
             ("scout2", Model::Scout2),
             ("scout-mini-omni", Model::ScoutMiniOmni),

@@ -234,6 +234,9 @@ fn serve(config: GatewayConfig, spec: DeviceSpec, endpoint: StopEndpoint) -> any
             config.name
         );
     }
+    if let Some(why) = config.max_angular_beyond_model() {
+        tracing::warn!("{why}");
+    }
     let mut driver = Driver::new(&config, spec, start, endpoint)?;
     // After the driver's services exist; dropped (stopped and joined) after it ends.
     let _bridge = if bridge_config.enabled {
