@@ -1198,9 +1198,10 @@ mod tests {
         assert!(!Model::ScoutMiniOmni.may_send(Sign::Steering));
         // A brake reported tells a Hunter 2.0 from a Hunter SE, and is judged nowhere else
         // (0x211 byte 6 is reserved there).
-        assert!(Model::Hunter2.may_send(Sign::ParkingBrake));
-        assert!(!Model::HunterSe.may_send(Sign::ParkingBrake));
-        assert!(Model::Scout2.may_send(Sign::ParkingBrake));
+        for model in Model::ALL {
+            let se = model == Model::HunterSe;
+            assert_eq!(model.may_send(Sign::ParkingBrake), !se, "{model}");
+        }
         assert!(!Model::Scout2.sends(Sign::ParkingBrake));
     }
 

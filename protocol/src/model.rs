@@ -515,7 +515,8 @@ pub enum Sign {
     Steering,
     /// 0x221 with a sideways speed other than zero.
     Lateral,
-    /// 0x211 with byte 6 other than zero: a parking brake reported locked.
+    /// 0x211 with byte 6 other than zero: a parking brake reported (locked, or a value no
+    /// Hunter sends).
     ParkingBrake,
 }
 }
@@ -574,7 +575,10 @@ impl Sign {
             }
             Self::MotionMode => "a Ranger Mini (four-wheel steering with motion modes)",
             Self::Lateral => "a SCOUT MINI OMNI or a Ranger Mini (it moves sideways)",
-            Self::ParkingBrake => "a Hunter 2.0 (a Hunter SE has no parking brake to report)",
+            Self::ParkingBrake => {
+                "a Hunter 2.0 (a Hunter SE has no parking brake to report; on any other model \
+                 the byte is reserved: if this is not a Hunter, its firmware uses it otherwise)"
+            }
         }
     }
 }

@@ -150,10 +150,11 @@ pub fn turning(model: Option<Model>, speed: f64, turn_speed: f64) -> ((f64, f64)
             let angular = turn_speed.min(0.95 * steering.max_yaw_rate(speed));
             let radius = speed / angular;
             let how = format!(
-                "on a circle of {radius:.1} m radius at {speed} m/s (a {} turns only while \
-                 moving: clear {:.0} m all round)",
+                "on a circle of {radius:.1} m radius to its left at {speed} m/s, {:.0} s a \
+                 turn (a {} turns only while moving: clear a circle of {:.0} m across)",
+                std::f64::consts::TAU / angular,
                 model.map_or("chassis", Model::name),
-                2.0 * radius + 1.0
+                (2.0 * radius + 1.0).ceil()
             );
             ((speed, angular), how)
         }
@@ -398,7 +399,11 @@ mod tests {
             linear == 0.3 && (radius - 1.571 / 0.95).abs() < 0.001,
             "{radius}"
         );
-        assert!(how.starts_with("on a circle of 1.7 m radius"), "{how}");
+        assert!(
+            how.starts_with("on a circle of 1.7 m radius to its left at 0.3 m/s, 35 s a turn"),
+            "{how}"
+        );
+        assert!(how.ends_with("clear a circle of 5 m across)"), "{how}");
         // A slower turn asked: a wider circle.
         let ((_, angular), _) = turning(Some(Model::Hunter2), 0.3, 0.1);
         assert_eq!(angular, 0.1);
