@@ -145,15 +145,15 @@ fn newest(
 /// still, for a `turn_speed` below what that circle takes). Returns (linear, angular) and what
 /// to tell the operator.
 pub fn turning(model: Option<Model>, speed: f64, turn_speed: f64) -> ((f64, f64), String) {
-    match model.and_then(Model::steering) {
-        Some(steering) => {
+    match model.and_then(|model| Some((model, model.steering()?))) {
+        Some((model, steering)) => {
             let angular = turn_speed.min(0.95 * steering.max_yaw_rate(speed));
             let radius = speed / angular;
             let how = format!(
                 "on a circle of {radius:.1} m radius to its left at {speed} m/s, {:.0} s a \
                  turn (a {} turns only while moving: clear a circle of {:.0} m across)",
                 std::f64::consts::TAU / angular,
-                model.map_or("chassis", Model::name),
+                model.name(),
                 (2.0 * radius + 1.0).ceil()
             );
             ((speed, angular), how)

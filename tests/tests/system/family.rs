@@ -329,9 +329,7 @@ fn rounded_square(model: Model, speed: f64, radius: f64) -> serde_json::Value {
 /// has ended and the chassis stands still.
 #[test]
 fn a_hunters_command_is_its_speed_and_steering_angle_in_0x111() {
-    let steering = Model::Hunter2.steering().expect("steered");
-    let inner = steering.inner_from_central(steering.central_for(0.3, 0.2));
-    let (chassis, _gateway) = steers_in_0x111(Model::Hunter2, 0.2, inner);
+    let (chassis, _gateway) = a_hunter_steers_in_0x111(Model::Hunter2);
     let locked = serde_json::json!({ "brake": 1 });
     assert!(chassis.wait_event(&locked, LIMIT), "{:?}", chassis.events());
     let events = chassis.events();
@@ -347,9 +345,7 @@ fn a_hunters_command_is_its_speed_and_steering_angle_in_0x111() {
 /// or in the 3 s after it (a Hunter 2.0 is locked about a second after its drive).
 #[test]
 fn a_hunter_ses_command_is_its_speed_and_steering_angle_and_no_brake() {
-    let steering = Model::HunterSe.steering().expect("steered");
-    let inner = steering.inner_from_central(steering.central_for(0.3, 0.2));
-    let (chassis, _gateway) = steers_in_0x111(Model::HunterSe, 0.2, inner);
+    let (chassis, _gateway) = a_hunter_steers_in_0x111(Model::HunterSe);
     let locked = serde_json::json!({ "brake": 1 });
     let after = Duration::from_secs(3);
     assert!(
@@ -358,6 +354,14 @@ fn a_hunter_ses_command_is_its_speed_and_steering_angle_and_no_brake() {
         chassis.events()
     );
     assert_eq!(chassis.events(), [] as [serde_json::Value; 0]);
+}
+
+/// Hunter `model` driven at 0.3 m/s turning at 0.2 rad/s ([`steers_in_0x111`]): its inner
+/// wheel's angle for that turn, by its geometry.
+fn a_hunter_steers_in_0x111(model: Model) -> (EmulatedChassis, Gateway) {
+    let steering = model.steering().expect("steered");
+    let inner = steering.inner_from_central(steering.central_for(0.3, 0.2));
+    steers_in_0x111(model, 0.2, inner)
 }
 
 /// `model` driven at 0.3 m/s turning at `angular` rad/s, on the emulated chassis: 0x111 carries
